@@ -1,0 +1,34 @@
+//! GPU memory the SDK holds, by kind.
+
+/// Bytes of GPU memory held by an [`crate::ExecuteContext`], by kind. Memory of destroyed handles
+/// counts until it is actually released (see [`crate::ExecuteContext::destroy_geometry_handle`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ResourceAllocations {
+    /// Copies of the application's vertex and index data.
+    pub vertex_copies: u64,
+    /// Direct lighting cache.
+    pub cache: u64,
+    /// Bottom-level BVHs.
+    pub blas: u64,
+    /// Top-level BVH and the per-instance data table.
+    pub tlas: u64,
+    /// Build scratch.
+    pub scratch: u64,
+    /// Denoiser history and intermediates.
+    pub denoiser: u64,
+    /// Upload staging owned by working sets.
+    pub staging: u64,
+}
+
+impl ResourceAllocations {
+    /// Sum of every kind.
+    pub fn total(&self) -> u64 {
+        self.vertex_copies
+            + self.cache
+            + self.blas
+            + self.tlas
+            + self.scratch
+            + self.denoiser
+            + self.staging
+    }
+}

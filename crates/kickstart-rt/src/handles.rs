@@ -1,0 +1,179 @@
+//! Generational handles: a destroyed or foreign handle is always detected, never aliased.
+
+use crate::error::{Error, Result};
+
+/// The kinds of handle an [`crate::ExecuteContext`] hands out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum HandleKind {
+    /// [`GeometryHandle`].
+    Geometry,
+    /// [`InstanceHandle`].
+    Instance,
+    /// [`DenoisingContextHandle`].
+    DenoisingContext,
+}
+
+macro_rules! handle_type {
+    ($(#[$doc:meta])* $name:ident, $kind:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub struct $name {
+            pub(crate) index: u32,
+            pub(crate) generation: u32,
+            pub(crate) context: u32,
+        }
+
+        impl $name {
+            /// The slot index of this handle. For instances it is also the index of the
+            /// instance's data on the GPU, which a ray hit reports.
+            pub fn index(&self) -> u32 {
+                self.index
+            }
+        }
+
+        impl RawHandle for $name {
+            const KIND: HandleKind = $kind;
+            fn from_parts(index: u32, generation: u32, context: u32) -> Self {
+                $name { index, generation, context }
+            }
+            fn parts(&self) -> (u32, u32, u32) {
+                (self.index, self.generation, self.context)
+            }
+        }
+    };
+}
+
+handle_type!(
+    /// A geometry (one BLAS) registered with a [`crate::GeometryTask`].
+    GeometryHandle,
+    HandleKind::Geometry
+);
+handle_type!(
+    /// An instance of a geometry placed in the TLAS with an [`crate::InstanceTask`].
+    InstanceHandle,
+    HandleKind::Instance
+);
+handle_type!(
+    /// The history and intermediate targets of one denoiser.
+    DenoisingContextHandle,
+    HandleKind::DenoisingContext
+);
+
+pub(crate) trait RawHandle: Copy {
+    const KIND: HandleKind;
+    fn from_parts(index: u32, generation: u32, context: u32) -> Self;
+    fn parts(&self) -> (u32, u32, u32);
+}
+
+struct Slot<T> {
+    generation: u32,
+    value: Option<T>,
+}
+
+/// A slot map: freed slots are reused with a bumped generation.
+pub(crate) struct HandlePool<H: RawHandle, T> {
+    context: u32,
+    slots: Vec<Slot<T>>,
+    free: Vec<u32>,
+    _marker: std::marker::PhantomData<H>,
+}
+
+impl<H: RawHandle, T> HandlePool<H, T> {
+    pub(crate) fn new(context: u32) -> Self {
+        HandlePool {
+            context,
+            slots: Vec::new(),
+            free: Vec::new(),
+            _marker: std::marker::PhantomData,
+        }
+    }
+
+    pub(crate) fn insert(&mut self, value: T) -> H {
+        // Reuse the lowest free slot, so instance data stays dense.
+        if let Some(pos) = self
+            .free
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, i)| **i)
+            .map(|(p, _)| p)
+        {
+            let index = self.free.swap_remove(pos);
+            let slot = &mut self.slots[index as usize];
+            slot.value = Some(value);
+            return H::from_parts(index, slot.generation, self.context);
+        }
+        let index = self.slots.len() as u32;
+        self.slots.push(Slot {
+            generation: 1,
+            value: Some(value),
+        });
+        H::from_parts(index, 1, self.context)
+    }
+
+    fn invalid(h: H) -> Error {
+        let (index, generation, _) = h.parts();
+        Error::InvalidHandle {
+            kind: H::KIND,
+            index,
+            generation,
+        }
+    }
+
+    pub(crate) fn get(&self, h: H) -> Result<&T> {
+        let (index, generation, ctx) = h.parts();
+        if ctx != self.context {
+            return Err(Self::invalid(h));
+        }
+        match self.slots.get(index as usize) {
+            Some(Slot {
+                generation: g,
+                value: Some(v),
+            }) if *g == generation => Ok(v),
+            _ => Err(Self::invalid(h)),
+        }
+    }
+
+    pub(crate) fn get_mut(&mut self, h: H) -> Result<&mut T> {
+        let (index, generation, ctx) = h.parts();
+        if ctx != self.context {
+            return Err(Self::invalid(h));
+        }
+        match self.slots.get_mut(index as usize) {
+            Some(Slot {
+                generation: g,
+                value: Some(v),
+            }) if *g == generation => Ok(v),
+            _ => Err(Self::invalid(h)),
+        }
+    }
+
+    pub(crate) fn remove(&mut self, h: H) -> Result<T> {
+        self.get(h)?;
+        let (index, _, _) = h.parts();
+        let slot = &mut self.slots[index as usize];
+        let value = slot.value.take().ok_or_else(|| Self::invalid(h))?;
+        slot.generation = slot.generation.wrapping_add(1).max(1);
+        self.free.push(index);
+        Ok(value)
+    }
+
+    pub(crate) fn handles(&self) -> Vec<H> {
+        self.slots
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.value.is_some())
+            .map(|(i, s)| H::from_parts(i as u32, s.generation, self.context))
+            .collect()
+    }
+}
+
+/// Identifies one built GPU task until it is marked completed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GpuTaskHandle(pub(crate) u64);
+
+impl GpuTaskHandle {
+    /// The serial number of the task (1 for the first built by a context).
+    pub fn serial(&self) -> u64 {
+        self.0
+    }
+}

@@ -1,0 +1,127 @@
+//! # kickstart-rt
+//!
+//! Ray-traced reflections, diffuse GI, ambient occlusion and shadows for game engines on wgpu,
+//! from the G-buffer the engine already renders — on any GPU wgpu runs on (all ray tracing is
+//! WGSL compute; no ray-tracing hardware needed).
+//!
+//! ## Execution model
+//!
+//! 1. [`ExecuteContext::new`] on the engine's device and queue (request
+//!    [`required_features`] and [`required_limits`], plus any of [`optional_features`]).
+//! 2. Each frame, fill one or more [`TaskContainer`]s (on any threads) with BVH tasks
+//!    ([`GeometryTask`], [`InstanceTask`], [`BvhBuildTask`]) and render tasks ([`RenderTask`]).
+//! 3. [`ExecuteContext::build_gpu_task`] validates the whole container and records compute passes
+//!    and copies into the engine's `CommandEncoder`. It never submits and never waits.
+//! 4. After the GPU has run the submission, [`ExecuteContext::mark_gpu_task_completed`].
+//!    [`InitSettings::supported_working_sets`] bounds how many built tasks may be outstanding.
+//!
+//! ```no_run
+//! # fn frame(device: &wgpu::Device, queue: &wgpu::Queue, vertices: wgpu::Buffer) -> kickstart_rt::Result<()> {
+//! use kickstart_rt::*;
+//! let ctx = ExecuteContext::new(device, queue, InitSettings::default())?;
+//! let geometry = ctx.create_geometry_handle();
+//! let mut container = ctx.create_task_container();
+//! container.schedule_bvh_task(GeometryTask {
+//!     operation: TaskOperation::Register,
+//!     handle: geometry,
+//!     input: GeometryInput {
+//!         name: "triangle".into(),
+//!         components: vec![GeometryComponent {
+//!             vertex_buffer: VertexBufferInput { buffer: vertices, offset: 0, stride: 12, count: 3, format: VertexFormat::Float32x3 },
+//!             index_buffer: None, transform: None, index_range: None,
+//!         }],
+//!         ..Default::default()
+//!     },
+//! });
+//! let mut encoder = device.create_command_encoder(&Default::default());
+//! let task = ctx.build_gpu_task(container, &mut encoder)?;
+//! queue.submit([encoder.finish()]);
+//! // …once the GPU has executed it (a fence, or queue.on_submitted_work_done):
+//! ctx.mark_gpu_task_completed(task)?;
+//! # Ok(()) }
+//! ```
+//!
+//! ## Status of this version
+//!
+//! The API, handles, working sets, lazy destruction, validation and geometry/instance data
+//! ingestion work. BLAS/TLAS builds, the lighting cache, trace tasks and denoisers are not
+//! implemented yet: a container holding a [`BvhBuildTask`] or any [`RenderTask`] is fully
+//! validated and then refused with [`Error::Unsupported`] naming the task — never a silent no-op.
+//! Geometry copies are one buffer per component for now; the shared sub-allocated pools arrive
+//! with the BVH builder.
+//!
+//! ## Validation rules
+//!
+//! `build_gpu_task` checks every rule before recording anything; a failure returns
+//! [`Error::InvalidInput`] naming the task, the field and the value, and the context is unchanged.
+//!
+//! | task | field | valid | error when |
+//! | --- | --- | --- | --- |
+//! | `InitSettings` | `supported_working_sets` | ≥ 1 | 0 |
+//! | `TaskContainer` | `context` | made by this context | made by another context |
+//! | `GeometryTask` | `handle` | live handle of this context | destroyed/foreign: [`Error::InvalidHandle`] |
+//! | `GeometryTask` | `operation` | `Register` once; `Update` only after it, with `allow_update` | re-register, update of unregistered or non-updatable |
+//! | `GeometryTask` | `input.components` | ≥ 1 | empty |
+//! | `GeometryTask` | `input.tile_unit_length` | finite, > 0 | ≤ 0, NaN, ∞ |
+//! | `GeometryTask` | `input.tile_resolution_limit` | ≥ 1 | 0 |
+//! | `GeometryTask` | `input.direct_tile_mapping_threshold` | [0, 1] | outside |
+//! | `GeometryTask` | `…vertex_buffer.buffer` | has `COPY_SRC` | lacks it (wgpu would panic at `finish()`) |
+//! | `GeometryTask` | `…vertex_buffer.stride` | ≥ format size | smaller |
+//! | `GeometryTask` | `…vertex_buffer.count` | ≥ 1; multiple of 3 when non-indexed | 0; not a multiple |
+//! | `GeometryTask` | `…vertex_buffer.offset` | range inside the buffer | past its end |
+//! | `GeometryTask` | `…transform` | finite | NaN/∞ |
+//! | `GeometryTask` | `…index_buffer.buffer` | has `COPY_SRC` | lacks it |
+//! | `GeometryTask` | `…index_buffer.offset` | multiple of the index size, range inside the buffer | misaligned, past the end |
+//! | `GeometryTask` | `…index_buffer.count` | non-zero multiple of 3 | otherwise |
+//! | `GeometryTask` | `…index_range` | multiples of 3 inside the component | otherwise |
+//! | `InstanceTask` | `handle`, `input.geometry` | live handles; geometry registered | stale: [`Error::InvalidHandle`]; unregistered |
+//! | `InstanceTask` | `input.transform` | finite | NaN/∞ |
+//! | `InstanceTask` | `input.inclusion_mask` | bits 0–1 | other bits |
+//! | `InstanceTask` | `input.initial_tile_color` | finite, ≥ 0 | otherwise |
+//! | `BvhBuildTask` | `max_blas_build_count` | ≥ 1 | 0 |
+//! | trace tasks | `output` | `STORAGE_BINDING`, a format of [`WRITABLE_OUTPUT_FORMATS`] | otherwise |
+//! | trace tasks | `common.depth.texture`, `common.normal.texture`, optional inputs | `TEXTURE_BINDING`, not a depth format | otherwise |
+//! | trace tasks | `common.roughness.*` | global/min/max in [0, 1], min ≤ max, finite multiplier | otherwise |
+//! | trace tasks | `common.specular.global_metalness` | [0, 1] | outside |
+//! | trace tasks | `common.view.*` | finite, invertible matrices | otherwise |
+//! | trace tasks | `common.max_ray_length` | > 0 (∞ allowed) | ≤ 0, NaN |
+//! | trace tasks | `common.ray_offset.*` | finite | NaN/∞ |
+//! | trace/denoise/injection | `viewport` | non-empty, inside every texture it addresses | otherwise |
+//! | `TraceSpecularTask` | `demodulation_output` | present when `demodulate_specular` | missing |
+//! | `TraceAmbientOcclusionTask` | `ao_radius` | finite, > 0 | otherwise |
+//! | shadow tasks | `light.*` | unit directions, finite positions, radius ≥ 0, range > 0, apex in (0, π/2], extent in [0, π] | otherwise |
+//! | `TraceMultiShadowTask` | `lights` | 1..=32 | 0 or > 32 |
+//! | `DirectLightingInjectionTask` | `average_window` | finite, ≥ 1 | otherwise |
+//! | `DirectLightingInjectionTask` | `injection_resolution_stride` | 1..=8 | otherwise |
+//! | `DirectLightTransferTask` | `source`, `target` | live, different instances | same or stale |
+//! | denoise tasks | `common.context` | live denoising context | stale: [`Error::InvalidHandle`] |
+//! | denoise tasks | `common.motion.scale` | finite | NaN/∞ |
+//! | `DenoisingContextInput` | `max_width/max_height` | 1..=16384 | otherwise |
+
+#![warn(missing_docs)]
+
+mod allocations;
+mod container;
+mod context;
+mod device;
+mod error;
+mod handles;
+mod logging;
+mod staging;
+mod tasks;
+mod validate;
+mod version;
+
+pub use allocations::ResourceAllocations;
+pub use container::TaskContainer;
+pub use context::{
+    DenoisingContextInput, DenoisingMethod, ExecuteContext, InitSettings, RecordedTaskCounts,
+    SignalType, INSTANCE_RECORD_SIZE,
+};
+pub use device::{optional_features, optional_features_supported, required_features, required_limits};
+pub use error::{Error, Result};
+pub use handles::{DenoisingContextHandle, GeometryHandle, GpuTaskHandle, HandleKind, InstanceHandle};
+pub use logging::{LogCallback, Severity};
+pub use tasks::*;
+pub use validate::WRITABLE_OUTPUT_FORMATS;
+pub use version::{Version, VERSION};

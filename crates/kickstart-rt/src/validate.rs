@@ -1,0 +1,463 @@
+//! Field validation run by `build_gpu_task` before anything is recorded. The rules are listed in
+//! the crate documentation's validation table; each returns [`Error::InvalidInput`] naming the
+//! task, field and value.
+
+use crate::error::{Error, Result};
+use crate::tasks::*;
+
+/// wgpu's copy alignment: buffer copies need 4-byte offsets and sizes.
+pub(crate) const COPY_ALIGN: u64 = wgpu::COPY_BUFFER_ALIGNMENT;
+
+/// The aligned byte range `[start, end)` to copy for `len` bytes at `offset`, or an error when it
+/// does not fit the buffer. Unaligned inputs are widened to 4 bytes (the shader skips the slack).
+pub(crate) fn copy_range(
+    task: &'static str,
+    field: &str,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    len: u64,
+) -> Result<(u64, u64)> {
+    if !buffer.usage().contains(wgpu::BufferUsages::COPY_SRC) {
+        return Err(Error::input(
+            task,
+            format!("{field}.buffer"),
+            buffer.usage(),
+            "the SDK copies from this buffer inside your encoder: create it with BufferUsages::COPY_SRC",
+        ));
+    }
+    let end = offset.checked_add(len).filter(|&e| e <= buffer.size());
+    let Some(end) = end else {
+        return Err(Error::input(
+            task,
+            format!("{field}.offset"),
+            offset,
+            format!("{len} bytes from this offset exceed the buffer's {} bytes", buffer.size()),
+        ));
+    };
+    let start = offset - offset % COPY_ALIGN;
+    let aligned_end = end.div_ceil(COPY_ALIGN) * COPY_ALIGN;
+    if aligned_end > buffer.size() {
+        return Err(Error::input(
+            task,
+            format!("{field}.count"),
+            len,
+            "the data ends within 4 bytes of the buffer's end at an unaligned position; pad the buffer to a multiple of 4 bytes",
+        ));
+    }
+    Ok((start, aligned_end))
+}
+
+fn finite(task: &'static str, field: &str, v: f32) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::input(task, field, v, "must be finite"))
+    }
+}
+
+fn in_range(task: &'static str, field: &str, v: f32, lo: f32, hi: f32) -> Result<()> {
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(Error::input(task, field, v, format!("must be in [{lo}, {hi}]")))
+    }
+}
+
+/// Bytes a component reads from its vertex buffer, and the triangles it contributes.
+pub(crate) struct ComponentExtent {
+    pub vertex_bytes: (u64, u64),
+    pub index_bytes: Option<(u64, u64)>,
+    pub triangles: u32,
+}
+
+/// Validates a geometry input; returns each component's copy ranges.
+pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExtent>> {
+    const T: &str = "GeometryTask";
+    if input.components.is_empty() {
+        return Err(Error::input(T, "input.components", "[]", "needs at least one component"));
+    }
+    finite(T, "input.tile_unit_length", input.tile_unit_length)?;
+    if input.tile_unit_length <= 0.0 {
+        return Err(Error::input(T, "input.tile_unit_length", input.tile_unit_length, "must be > 0 (world units)"));
+    }
+    if input.tile_resolution_limit == 0 {
+        return Err(Error::input(T, "input.tile_resolution_limit", 0, "must be ≥ 1"));
+    }
+    if !(0.0..=1.0).contains(&input.direct_tile_mapping_threshold) {
+        return Err(Error::input(
+            T,
+            "input.direct_tile_mapping_threshold",
+            input.direct_tile_mapping_threshold,
+            "must be in [0, 1]",
+        ));
+    }
+    let mut out = Vec::with_capacity(input.components.len());
+    for (i, c) in input.components.iter().enumerate() {
+        let f = format!("input.components[{i}]");
+        let vb = &c.vertex_buffer;
+        if vb.stride < vb.format.size() {
+            return Err(Error::input(
+                T,
+                format!("{f}.vertex_buffer.stride"),
+                vb.stride,
+                format!("must be ≥ {} bytes for {:?}", vb.format.size(), vb.format),
+            ));
+        }
+        if vb.count == 0 {
+            return Err(Error::input(T, format!("{f}.vertex_buffer.count"), 0, "must be ≥ 1"));
+        }
+        let vlen = vb.stride * (vb.count as u64 - 1) + vb.format.size();
+        let vertex_bytes = copy_range(T, &format!("{f}.vertex_buffer"), &vb.buffer, vb.offset, vlen)?;
+        if let Some(t) = c.transform {
+            if !t.is_finite() {
+                return Err(Error::input(T, format!("{f}.transform"), t, "must be finite"));
+            }
+        }
+        let (total, index_bytes) = match &c.index_buffer {
+            Some(ib) => {
+                if ib.offset % ib.format.size() != 0 {
+                    return Err(Error::input(
+                        T,
+                        format!("{f}.index_buffer.offset"),
+                        ib.offset,
+                        format!("must be a multiple of the index size ({} bytes)", ib.format.size()),
+                    ));
+                }
+                if ib.count % 3 != 0 || ib.count == 0 {
+                    return Err(Error::input(T, format!("{f}.index_buffer.count"), ib.count, "must be a non-zero multiple of 3"));
+                }
+                let len = ib.count as u64 * ib.format.size();
+                let r = copy_range(T, &format!("{f}.index_buffer"), &ib.buffer, ib.offset, len)?;
+                (ib.count, Some(r))
+            }
+            None => {
+                if vb.count % 3 != 0 {
+                    return Err(Error::input(
+                        T,
+                        format!("{f}.vertex_buffer.count"),
+                        vb.count,
+                        "a non-indexed triangle list needs a multiple of 3 vertices",
+                    ));
+                }
+                (vb.count, None)
+            }
+        };
+        let triangles = match c.index_range {
+            Some((first, count)) => {
+                if first % 3 != 0 || count % 3 != 0 || count == 0 {
+                    return Err(Error::input(T, format!("{f}.index_range"), (first, count), "first and count must be multiples of 3, count > 0"));
+                }
+                if first.checked_add(count).is_none_or(|e| e > total) {
+                    return Err(Error::input(T, format!("{f}.index_range"), (first, count), format!("exceeds the component's {total} indices")));
+                }
+                count / 3
+            }
+            None => total / 3,
+        };
+        out.push(ComponentExtent {
+            vertex_bytes,
+            index_bytes,
+            triangles,
+        });
+    }
+    Ok(out)
+}
+
+/// Validates an instance input's own fields (the geometry handle is checked by the context).
+pub(crate) fn instance_input(input: &InstanceInput) -> Result<()> {
+    const T: &str = "InstanceTask";
+    if !input.transform.is_finite() {
+        return Err(Error::input(T, "input.transform", input.transform, "must be finite"));
+    }
+    if input.inclusion_mask.0 & !InstanceInclusionMask::ALL.0 != 0 {
+        return Err(Error::input(
+            T,
+            "input.inclusion_mask",
+            format!("{:#x}", input.inclusion_mask.0),
+            "only DIRECT_LIGHT_INJECTION_TARGET (1) and VISIBLE_IN_RT (2) are defined",
+        ));
+    }
+    let c = input.initial_tile_color;
+    if !c.is_finite() || c.min_element() < 0.0 {
+        return Err(Error::input(T, "input.initial_tile_color", c, "must be finite and ≥ 0"));
+    }
+    Ok(())
+}
+
+/// Validates a BVH build task.
+pub(crate) fn bvh_build(task: &BvhBuildTask) -> Result<()> {
+    if task.max_blas_build_count == 0 {
+        return Err(Error::input("BvhBuildTask", "max_blas_build_count", 0, "must be ≥ 1"));
+    }
+    Ok(())
+}
+
+fn texture_size(t: &TextureInput) -> (u32, u32) {
+    let s = t.texture().size();
+    (s.width, s.height)
+}
+
+fn readable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
+    if !t.texture().usage().contains(wgpu::TextureUsages::TEXTURE_BINDING) {
+        return Err(Error::input(task, field, t.texture().usage(), "the SDK reads this texture in a shader: it needs TextureUsages::TEXTURE_BINDING"));
+    }
+    if t.texture().format().is_depth_stencil_format() {
+        return Err(Error::input(task, field, t.texture().format(), "depth/stencil formats cannot be read by compute shaders on every backend: copy depth to an R32Float texture"));
+    }
+    Ok(())
+}
+
+/// Output formats the trace and denoise tasks can write.
+pub const WRITABLE_OUTPUT_FORMATS: [wgpu::TextureFormat; 4] = [
+    wgpu::TextureFormat::Rgba16Float,
+    wgpu::TextureFormat::Rgba32Float,
+    wgpu::TextureFormat::R32Float,
+    wgpu::TextureFormat::Rg32Float,
+];
+
+fn writable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
+    if !t.texture().usage().contains(wgpu::TextureUsages::STORAGE_BINDING) {
+        return Err(Error::input(task, field, t.texture().usage(), "the SDK writes this texture from a compute shader: it needs TextureUsages::STORAGE_BINDING"));
+    }
+    if !WRITABLE_OUTPUT_FORMATS.contains(&t.texture().format()) {
+        return Err(Error::input(task, field, t.texture().format(), format!("output formats are {WRITABLE_OUTPUT_FORMATS:?}")));
+    }
+    Ok(())
+}
+
+/// Checks a viewport against the textures it addresses; returns the effective one.
+fn viewport(task: &'static str, vp: Option<Viewport>, textures: &[(&str, &TextureInput)]) -> Result<Viewport> {
+    let Some((_, first)) = textures.first() else {
+        return Ok(vp.unwrap_or_default());
+    };
+    let (w, h) = texture_size(first);
+    let vp = vp.unwrap_or(Viewport { x: 0, y: 0, width: w, height: h });
+    if vp.width == 0 || vp.height == 0 {
+        return Err(Error::input(task, "viewport", vp, "width and height must be > 0"));
+    }
+    for (name, t) in textures {
+        let (tw, th) = texture_size(t);
+        if vp.x as u64 + vp.width as u64 > tw as u64 || vp.y as u64 + vp.height as u64 > th as u64 {
+            return Err(Error::input(task, "viewport", vp, format!("exceeds `{name}` ({tw}×{th})")));
+        }
+    }
+    Ok(vp)
+}
+
+fn matrices(task: &'static str, field: &str, v: &ViewInfo) -> Result<()> {
+    for (n, m) in [
+        ("world_to_view", v.world_to_view),
+        ("view_to_clip", v.view_to_clip),
+        ("prev_world_to_view", v.prev_world_to_view),
+        ("prev_view_to_clip", v.prev_view_to_clip),
+    ] {
+        if !m.is_finite() || m.determinant() == 0.0 {
+            return Err(Error::input(task, format!("{field}.{n}"), m, "must be finite and invertible"));
+        }
+    }
+    if !v.jitter.is_finite() {
+        return Err(Error::input(task, format!("{field}.jitter"), v.jitter, "must be finite"));
+    }
+    Ok(())
+}
+
+fn roughness(task: &'static str, r: &RoughnessInput, field: &str) -> Result<()> {
+    if let Some(t) = &r.texture {
+        readable(task, &format!("{field}.texture"), t)?;
+    }
+    if !r.roughness_mask.is_finite() {
+        return Err(Error::input(task, format!("{field}.roughness_mask"), r.roughness_mask, "must be finite"));
+    }
+    in_range(task, &format!("{field}.global_roughness"), r.global_roughness, 0.0, 1.0)?;
+    finite(task, &format!("{field}.roughness_multiplier"), r.roughness_multiplier)?;
+    in_range(task, &format!("{field}.min_roughness"), r.min_roughness, 0.0, 1.0)?;
+    in_range(task, &format!("{field}.max_roughness"), r.max_roughness, r.min_roughness, 1.0)
+}
+
+fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) -> Result<()> {
+    readable(task, "common.depth.texture", &c.depth.texture)?;
+    readable(task, "common.normal.texture", &c.normal.texture)?;
+    if !c.normal.normal_to_world.is_finite() {
+        return Err(Error::input(task, "common.normal.normal_to_world", c.normal.normal_to_world, "must be finite"));
+    }
+    roughness(task, &c.roughness, "common.roughness")?;
+    if let Some(t) = &c.specular.texture {
+        readable(task, "common.specular.texture", t)?;
+    }
+    in_range(task, "common.specular.global_metalness", c.specular.global_metalness, 0.0, 1.0)?;
+    for (n, t) in [
+        ("common.input_mask", &c.input_mask),
+        ("common.direct_lighting", &c.direct_lighting),
+        ("common.environment_map", &c.environment_map),
+    ] {
+        if let Some(t) = t {
+            readable(task, n, t)?;
+        }
+    }
+    matrices(task, "common.view", &c.view)?;
+    if c.max_ray_length.is_nan() || c.max_ray_length <= 0.0 {
+        return Err(Error::input(task, "common.max_ray_length", c.max_ray_length, "must be > 0 (∞ allowed)"));
+    }
+    let o = &c.ray_offset;
+    for (n, v) in [
+        ("world_position_threshold", o.world_position_threshold),
+        ("world_position_float_scale", o.world_position_float_scale),
+        ("world_position_int_scale", o.world_position_int_scale),
+        ("cam_distance_constant", o.cam_distance_constant),
+        ("cam_distance_linear", o.cam_distance_linear),
+        ("cam_distance_quadratic", o.cam_distance_quadratic),
+    ] {
+        finite(task, &format!("common.ray_offset.{n}"), v)?;
+    }
+    let mut tex: Vec<(&str, &TextureInput)> = vec![("output", output), ("common.depth.texture", &c.depth.texture), ("common.normal.texture", &c.normal.texture)];
+    if let Some(m) = &c.input_mask {
+        tex.push(("common.input_mask", m));
+    }
+    viewport(task, c.viewport, &tex)?;
+    Ok(())
+}
+
+fn denoise_common(task: &'static str, c: &DenoiseTaskCommon, io: &[(&str, &TextureInput, bool)]) -> Result<()> {
+    readable(task, "common.depth.texture", &c.depth.texture)?;
+    readable(task, "common.normal.texture", &c.normal.texture)?;
+    roughness(task, &c.roughness, "common.roughness")?;
+    if let Some(m) = &c.motion {
+        readable(task, "common.motion.texture", &m.texture)?;
+        if !m.scale.is_finite() {
+            return Err(Error::input(task, "common.motion.scale", m.scale, "must be finite"));
+        }
+    }
+    matrices(task, "common.view", &c.view)?;
+    let mut tex = Vec::new();
+    for (n, t, write) in io {
+        if *write {
+            writable(task, n, t)?;
+        } else {
+            readable(task, n, t)?;
+        }
+        tex.push((*n, *t));
+    }
+    tex.push(("common.depth.texture", &c.depth.texture));
+    viewport(task, c.viewport, &tex)?;
+    Ok(())
+}
+
+fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
+    let unit = |n: &str, v: glam::Vec3| {
+        if !v.is_finite() || (v.length() - 1.0).abs() > 1e-3 {
+            Err(Error::input(task, format!("{field}.{n}"), v, "must be a finite unit vector"))
+        } else {
+            Ok(())
+        }
+    };
+    match *l {
+        LightInfo::Directional { direction, angular_extent } => {
+            unit("direction", direction)?;
+            in_range(task, &format!("{field}.angular_extent"), angular_extent, 0.0, std::f32::consts::PI)
+        }
+        LightInfo::Point { position, radius, range } => {
+            if !position.is_finite() {
+                return Err(Error::input(task, format!("{field}.position"), position, "must be finite"));
+            }
+            in_range(task, &format!("{field}.radius"), radius, 0.0, f32::MAX)?;
+            if range.is_nan() || range <= 0.0 {
+                return Err(Error::input(task, format!("{field}.range"), range, "must be > 0"));
+            }
+            Ok(())
+        }
+        LightInfo::Spot { position, direction, radius, range, apex_angle } => {
+            if !position.is_finite() {
+                return Err(Error::input(task, format!("{field}.position"), position, "must be finite"));
+            }
+            unit("direction", direction)?;
+            in_range(task, &format!("{field}.radius"), radius, 0.0, f32::MAX)?;
+            if range.is_nan() || range <= 0.0 {
+                return Err(Error::input(task, format!("{field}.range"), range, "must be > 0"));
+            }
+            if !(apex_angle > 0.0 && apex_angle <= std::f32::consts::FRAC_PI_2) {
+                return Err(Error::input(task, format!("{field}.apex_angle"), apex_angle, "must be in (0, π/2]"));
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Validates a render task's own fields (handles are checked by the context).
+pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
+    let name = task.name();
+    match task {
+        RenderTask::DirectLightingInjection(t) => {
+            readable(name, "depth.texture", &t.depth.texture)?;
+            readable(name, "direct_lighting", &t.direct_lighting)?;
+            matrices(name, "view", &t.view)?;
+            if t.average_window.is_nan() || t.average_window < 1.0 || t.average_window.is_infinite() {
+                return Err(Error::input(name, "average_window", t.average_window, "must be finite and ≥ 1"));
+            }
+            if !(1..=8).contains(&t.injection_resolution_stride) {
+                return Err(Error::input(name, "injection_resolution_stride", t.injection_resolution_stride, "must be in 1..=8"));
+            }
+            viewport(name, t.viewport, &[("direct_lighting", &t.direct_lighting), ("depth.texture", &t.depth.texture)])?;
+        }
+        RenderTask::DirectLightTransfer(t) => {
+            if t.source == t.target {
+                return Err(Error::input(name, "target", t.target, "source and target must differ"));
+            }
+        }
+        RenderTask::TraceSpecular(t) => {
+            writable(name, "output", &t.output)?;
+            trace_common(name, &t.common, &t.output)?;
+            match (&t.demodulation_output, t.demodulate_specular) {
+                (Some(o), _) => writable(name, "demodulation_output", o)?,
+                (None, true) => return Err(Error::input(name, "demodulation_output", "None", "demodulate_specular needs a demodulation output")),
+                (None, false) => {}
+            }
+        }
+        RenderTask::TraceDiffuse(t) => {
+            writable(name, "output", &t.output)?;
+            trace_common(name, &t.common, &t.output)?;
+        }
+        RenderTask::TraceAmbientOcclusion(t) => {
+            writable(name, "output", &t.output)?;
+            trace_common(name, &t.common, &t.output)?;
+            if !t.ao_radius.is_finite() || t.ao_radius <= 0.0 {
+                return Err(Error::input(name, "ao_radius", t.ao_radius, "must be finite and > 0 (world units)"));
+            }
+        }
+        RenderTask::TraceShadow(t) => {
+            writable(name, "output", &t.output)?;
+            trace_common(name, &t.common, &t.output)?;
+            light(name, "light", &t.light)?;
+        }
+        RenderTask::TraceMultiShadow(t) => {
+            writable(name, "output0", &t.output0)?;
+            writable(name, "output1", &t.output1)?;
+            trace_common(name, &t.common, &t.output0)?;
+            if t.lights.is_empty() || t.lights.len() > MAX_MULTI_SHADOW_LIGHTS {
+                return Err(Error::input(name, "lights", t.lights.len(), format!("needs 1..={MAX_MULTI_SHADOW_LIGHTS} lights")));
+            }
+            for (i, l) in t.lights.iter().enumerate() {
+                light(name, &format!("lights[{i}]"), l)?;
+            }
+        }
+        RenderTask::DenoiseSpecular(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
+        RenderTask::DenoiseDiffuse(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
+        RenderTask::DenoiseSpecularAndDiffuse(t) => denoise_common(
+            name,
+            &t.common,
+            &[
+                ("input_specular", &t.input_specular, false),
+                ("input_diffuse", &t.input_diffuse, false),
+                ("output_specular", &t.output_specular, true),
+                ("output_diffuse", &t.output_diffuse, true),
+            ],
+        )?,
+        RenderTask::DenoiseDiffuseOcclusion(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
+        RenderTask::DenoiseShadow(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
+        RenderTask::DenoiseMultiShadow(t) => denoise_common(
+            name,
+            &t.common,
+            &[("input0", &t.input0, false), ("input1", &t.input1, false), ("output", &t.output, true)],
+        )?,
+    }
+    Ok(())
+}
