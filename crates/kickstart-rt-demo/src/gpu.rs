@@ -6,7 +6,7 @@ use wgpu::util::DeviceExt;
 type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
 
 fn adapter() -> AnyResult<wgpu::Adapter> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::from_env_or_default());
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
         power_preference: wgpu::PowerPreference::HighPerformance,
         ..Default::default()

@@ -1,0 +1,344 @@
+//! The execution model: handles, working sets, lazy destruction, threading, GPU data.
+
+mod common;
+use common::*;
+use glam::{Affine3A, Vec3};
+use kickstart_rt::*;
+
+fn field_of(e: &Error) -> String {
+    match e {
+        Error::InvalidInput { field, .. } => field.clone(),
+        other => panic!("expected InvalidInput, got {other:?}"),
+    }
+}
+
+#[test]
+fn vertex_and_index_bytes_reach_sdk_memory() {
+    let ctx = context(2);
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 2.0);
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    assert_eq!(ctx.geometry_triangle_count(g).unwrap(), Some(2));
+    // 4 vertices × 12 bytes + 6 indices × 4 bytes.
+    assert_eq!(ctx.resource_allocations().vertex_copies, 48 + 24);
+}
+
+#[test]
+fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
+    let ctx = context(2);
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let d = ctx
+        .create_denoising_context_handle(DenoisingContextInput { max_width: 64, max_height: 64, signal_type: SignalType::Diffuse, method: DenoisingMethod::Fast })
+        .unwrap();
+    ctx.destroy_geometry_handle(g).unwrap();
+    ctx.destroy_instance_handle(i).unwrap();
+    ctx.destroy_denoising_context_handle(d).unwrap();
+    assert!(matches!(ctx.destroy_geometry_handle(g), Err(Error::InvalidHandle { kind: HandleKind::Geometry, .. })));
+    assert!(matches!(ctx.destroy_instance_handle(i), Err(Error::InvalidHandle { kind: HandleKind::Instance, .. })));
+    assert!(matches!(ctx.destroy_denoising_context_handle(d), Err(Error::InvalidHandle { kind: HandleKind::DenoisingContext, .. })));
+
+    // The slot is reused with a new generation: the old handle stays invalid.
+    let g2 = ctx.create_geometry_handle();
+    assert_eq!(g2.index(), g.index());
+    assert_ne!(g2, g);
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    let mut e = encoder();
+    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::InvalidHandle { kind: HandleKind::Geometry, .. })));
+    submit(e); // nothing recorded: finishing the encoder must not fail
+
+    // A stale instance handle in a task.
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g2, 1.0);
+    c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: i, input: InstanceInput::new(g2, Affine3A::IDENTITY) });
+    let mut e = encoder();
+    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::InvalidHandle { kind: HandleKind::Instance, .. })));
+    submit(e);
+
+    // The context still works, and the failed container registered nothing.
+    let i2 = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g2, 1.0);
+    c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: i2, input: InstanceInput::new(g2, Affine3A::IDENTITY) });
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    assert_eq!(ctx.recorded_task_counts().geometry_tasks, 1);
+
+    // Handles from another context are foreign.
+    let other = context(1);
+    assert!(matches!(other.destroy_geometry_handle(g2), Err(Error::InvalidHandle { .. })));
+}
+
+#[test]
+fn gpu_task_handles_unknown_or_completed_are_errors() {
+    let ctx = context(2);
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    assert_eq!(ctx.mark_gpu_task_completed(t), Err(Error::InvalidGpuTaskHandle(t.serial())));
+    // A handle this context never issued (serial 2 exists only in `other`).
+    let other = context(2);
+    let mut e = encoder();
+    let _u1 = other.build_gpu_task(other.create_task_container(), &mut e).unwrap();
+    let u2 = other.build_gpu_task(other.create_task_container(), &mut e).unwrap();
+    submit(e);
+    assert_eq!(u2.serial(), 2);
+    assert_eq!(ctx.mark_gpu_task_completed(u2), Err(Error::InvalidGpuTaskHandle(2)));
+}
+
+#[test]
+fn building_past_supported_working_sets_errors_without_blocking() {
+    let ctx = context(2);
+    let mut e = encoder();
+    let a = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    let _b = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    let start = std::time::Instant::now();
+    // Not submitted yet: the GPU can't finish, so a blocking build would hang here.
+    assert_eq!(ctx.build_gpu_task(ctx.create_task_container(), &mut e), Err(Error::WorkingSetsExhausted { supported: 2 }));
+    assert!(start.elapsed().as_secs() < 10, "build blocked");
+    submit(e);
+    ctx.mark_gpu_task_completed(a).unwrap();
+    let mut e = encoder();
+    assert!(ctx.build_gpu_task(ctx.create_task_container(), &mut e).is_ok());
+    submit(e);
+}
+
+#[test]
+fn destroyed_geometry_keeps_memory_until_first_build_after_completion() {
+    let ctx = context(4);
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    let bytes = ctx.resource_allocations().vertex_copies;
+    assert_eq!(bytes, 72);
+    ctx.destroy_geometry_handle(g).unwrap();
+    // In flight: kept, even across another build.
+    let mut e2 = encoder();
+    let t2 = ctx.build_gpu_task(ctx.create_task_container(), &mut e2).unwrap();
+    assert_eq!(ctx.resource_allocations().vertex_copies, bytes);
+    submit(e);
+    submit(e2);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    // Completed, but not released before the next build.
+    assert_eq!(ctx.resource_allocations().vertex_copies, bytes);
+    ctx.mark_gpu_task_completed(t2).unwrap();
+    let mut e = encoder();
+    let t3 = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    assert_eq!(ctx.resource_allocations().vertex_copies, 0);
+    submit(e);
+    ctx.mark_gpu_task_completed(t3).unwrap();
+}
+
+#[test]
+fn release_immediately_refuses_while_in_flight() {
+    let ctx = context(2);
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    ctx.destroy_geometry_handle(g).unwrap();
+    assert_eq!(ctx.release_device_resources_immediately(), Err(Error::TasksInFlight { operation: "release_device_resources_immediately", in_flight: 1 }));
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    ctx.release_device_resources_immediately().unwrap();
+    assert_eq!(ctx.resource_allocations().vertex_copies, 0);
+    assert_eq!(ctx.resource_allocations().staging, 0);
+}
+
+#[test]
+fn eight_threads_fill_containers_then_several_build_each_task_once() {
+    let ctx = context(16);
+    let handles = ctx.create_geometry_handles(8 * 5);
+    let containers: Vec<TaskContainer> = std::thread::scope(|s| {
+        let jobs: Vec<_> = handles
+            .chunks(5)
+            .map(|chunk| {
+                let ctx = &ctx;
+                s.spawn(move || {
+                    let mut c = ctx.create_task_container();
+                    for (k, h) in chunk.iter().enumerate() {
+                        register_geometry(&mut c, *h, 1.0 + k as f32);
+                    }
+                    c
+                })
+            })
+            .collect();
+        jobs.into_iter().map(|j| j.join().unwrap()).collect()
+    });
+    let built: Vec<GpuTaskHandle> = std::thread::scope(|s| {
+        let mut rest = containers;
+        let mut jobs = Vec::new();
+        while !rest.is_empty() {
+            let batch: Vec<TaskContainer> = rest.drain(..rest.len().min(2)).collect();
+            let ctx = &ctx;
+            jobs.push(s.spawn(move || {
+                batch
+                    .into_iter()
+                    .map(|c| {
+                        let mut e = encoder();
+                        let t = ctx.build_gpu_task(c, &mut e).unwrap();
+                        gpu().queue.submit([e.finish()]);
+                        t
+                    })
+                    .collect::<Vec<_>>()
+            }));
+        }
+        jobs.into_iter().flat_map(|j| j.join().unwrap()).collect()
+    });
+    gpu().device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    let mut serials: Vec<u64> = built.iter().map(|t| t.serial()).collect();
+    serials.sort();
+    serials.dedup();
+    assert_eq!(serials.len(), 8);
+    assert_eq!(ctx.recorded_task_counts(), RecordedTaskCounts { geometry_tasks: 40, instance_tasks: 0, gpu_tasks: 8 });
+    for h in &handles {
+        assert_eq!(ctx.geometry_triangle_count(*h).unwrap(), Some(2));
+    }
+    for t in built {
+        ctx.mark_gpu_task_completed(t).unwrap();
+    }
+}
+
+/// The instance-id bug report's invariant: instance data lives at the handle's index, with
+/// out-of-order registration, destruction and re-registration, and a table that grows.
+#[test]
+fn instance_data_is_at_the_instance_index() {
+    let ctx = context(4);
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+
+    let mut live: Vec<(InstanceHandle, f32)> = Vec::new();
+    let handles = ctx.create_instance_handles(100);
+    // Register in reverse order, in two containers.
+    for (n, chunk) in handles.iter().rev().collect::<Vec<_>>().chunks(50).enumerate() {
+        let mut c = ctx.create_task_container();
+        for h in chunk {
+            let x = h.index() as f32 * 10.0 + n as f32;
+            c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: **h, input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))) });
+            live.push((**h, x));
+        }
+        let mut e = encoder();
+        let t = ctx.build_gpu_task(c, &mut e).unwrap();
+        submit(e);
+        ctx.mark_gpu_task_completed(t).unwrap();
+    }
+    // Destroy every third, re-create (slots reused) and register with new data.
+    for k in (0..100).step_by(3) {
+        ctx.destroy_instance_handle(handles[k]).unwrap();
+        live.retain(|(h, _)| *h != handles[k]);
+    }
+    let again = ctx.create_instance_handles(40); // 34 reused slots, 6 new (table grows past 64? no: 106)
+    let mut c = ctx.create_task_container();
+    for h in &again {
+        let x = -(h.index() as f32) - 0.5;
+        c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: *h, input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))) });
+        live.push((*h, x));
+    }
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+
+    let table = read_buffer(&ctx.instance_table().unwrap());
+    let words: &[f32] = bytemuck::cast_slice(&table);
+    let stride = (INSTANCE_RECORD_SIZE / 4) as usize;
+    assert!(table.len() as u64 >= 106 * INSTANCE_RECORD_SIZE, "table grew to hold index 105");
+    for (h, x) in live {
+        let rec = &words[h.index() as usize * stride..][..stride];
+        // Row-major 3x4: translation in column 3 of each row.
+        assert_eq!((rec[3], rec[7], rec[11]), (x, 1.0, 2.0), "instance {}", h.index());
+        assert_eq!(rec[12].to_bits(), g.index());
+        assert_eq!(rec[13].to_bits(), 3, "default inclusion mask");
+    }
+}
+
+#[test]
+fn invoke_gpu_task_completes_by_itself() {
+    let ctx = context(1);
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    ctx.invoke_gpu_task(c).unwrap();
+    gpu().device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    assert_eq!(ctx.in_flight_task_count(), 0);
+    // With one working set, a second invoke only works if the first was marked complete.
+    ctx.invoke_gpu_task(ctx.create_task_container()).unwrap();
+}
+
+#[test]
+fn input_buffer_without_copy_src_gets_our_error_not_a_wgpu_panic() {
+    let ctx = context(2);
+    let g = ctx.create_geometry_handle();
+    let vb = buffer(&[0u8; 48], wgpu::BufferUsages::VERTEX);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask { operation: TaskOperation::Register, handle: g, input: geometry_input(vb, None) });
+    let mut e = encoder();
+    let err = ctx.build_gpu_task(c, &mut e).unwrap_err();
+    assert_eq!(field_of(&err), "input.components[0].vertex_buffer.buffer");
+    submit(e); // finish() must succeed: nothing invalid was recorded
+}
+
+#[test]
+fn unimplemented_tasks_are_refused_by_name() {
+    let ctx = context(2);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask::default());
+    let mut e = encoder();
+    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::Unsupported { task }) if task.starts_with("BvhBuildTask")));
+    submit(e);
+}
+
+#[test]
+fn version_and_settings_checks() {
+    let g = gpu();
+    let bad_major = InitSettings { version: Version { major: VERSION.major + 1, ..VERSION }, ..Default::default() };
+    assert!(matches!(ExecuteContext::new(&g.device, &g.queue, bad_major), Err(Error::IncompatibleVersion { .. })));
+    let warned = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+    let w = warned.clone();
+    let minor = InitSettings {
+        version: Version { minor: VERSION.minor + 1, ..VERSION },
+        log_callback: Some(std::sync::Arc::new(move |s, m: &str| {
+            if s == Severity::Warning {
+                w.lock().unwrap().push(m.to_string());
+            }
+        })),
+        ..Default::default()
+    };
+    assert!(ExecuteContext::new(&g.device, &g.queue, minor).is_ok());
+    assert_eq!(warned.lock().unwrap().len(), 1);
+    let zero = InitSettings { supported_working_sets: 0, ..Default::default() };
+    assert_eq!(field_of(&ExecuteContext::new(&g.device, &g.queue, zero).unwrap_err()), "supported_working_sets");
+}
+
+#[test]
+fn device_below_required_limits_is_named() {
+    let g = gpu();
+    let (device, queue) = pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: wgpu::Limits::downlevel_webgl2_defaults(),
+        ..Default::default()
+    }))
+    .unwrap();
+    match ExecuteContext::new(&device, &queue, InitSettings::default()) {
+        Err(Error::InsufficientLimit { name, actual, required }) => {
+            assert!(!name.is_empty());
+            assert!(actual < required);
+        }
+        other => panic!("expected InsufficientLimit, got {other:?}"),
+    }
+}
