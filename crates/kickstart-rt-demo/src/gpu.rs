@@ -6,12 +6,15 @@ use wgpu::util::DeviceExt;
 type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
 
 fn adapter() -> AnyResult<wgpu::Adapter> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
         power_preference: wgpu::PowerPreference::HighPerformance,
         ..Default::default()
     }))
-    .map_err(|e| format!("no GPU adapter found ({e}); install a GPU driver or mesa-vulkan-drivers"))?;
+    .map_err(|e| {
+        format!("no GPU adapter found ({e}); install a GPU driver or mesa-vulkan-drivers")
+    })?;
     Ok(adapter)
 }
 
@@ -30,17 +33,33 @@ pub fn info() -> AnyResult<()> {
     let adapter = adapter()?;
     let i = adapter.get_info();
     println!("kickstart-rt {}", ksrt::VERSION);
-    println!("adapter:  {} ({:?}, {:?})", i.name, i.device_type, i.backend);
+    println!(
+        "adapter:  {} ({:?}, {:?})",
+        i.name, i.device_type, i.backend
+    );
     println!("driver:   {} {}", i.driver, i.driver_info);
     let have = adapter.features();
     let required = ksrt::required_features();
-    println!("required features: {}", if required.is_empty() { "none".to_string() } else { format!("{required:?}") });
+    println!(
+        "required features: {}",
+        if required.is_empty() {
+            "none".to_string()
+        } else {
+            format!("{required:?}")
+        }
+    );
     for (name, f) in ksrt::required_features().iter_names() {
-        println!("  {name:<44} {}", if have.contains(f) { "yes" } else { "MISSING" });
+        println!(
+            "  {name:<44} {}",
+            if have.contains(f) { "yes" } else { "MISSING" }
+        );
     }
     println!("optional features (used when present):");
     for (name, f) in ksrt::optional_features().iter_names() {
-        println!("  {name:<44} {}", if have.contains(f) { "yes" } else { "no" });
+        println!(
+            "  {name:<44} {}",
+            if have.contains(f) { "yes" } else { "no" }
+        );
     }
     println!("required limits (WebGPU defaults):");
     let limits = adapter.limits();
@@ -69,7 +88,12 @@ pub fn render() -> AnyResult<()> {
     let (device, queue) = device(&adapter)?;
     let ctx = ksrt::ExecuteContext::new(&device, &queue, ksrt::InitSettings::default())?;
     // A floor quad: the first mesh of the default scene.
-    let positions: [[f32; 3]; 4] = [[-5.0, 0.0, -5.0], [5.0, 0.0, -5.0], [5.0, 0.0, 5.0], [-5.0, 0.0, 5.0]];
+    let positions: [[f32; 3]; 4] = [
+        [-5.0, 0.0, -5.0],
+        [5.0, 0.0, -5.0],
+        [5.0, 0.0, 5.0],
+        [-5.0, 0.0, 5.0],
+    ];
     let indices: [u32; 6] = [0, 2, 1, 0, 3, 2];
     let vb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("floor vertices"),
@@ -90,8 +114,19 @@ pub fn render() -> AnyResult<()> {
         input: ksrt::GeometryInput {
             name: "floor".into(),
             components: vec![ksrt::GeometryComponent {
-                vertex_buffer: ksrt::VertexBufferInput { buffer: vb, offset: 0, stride: 12, count: 4, format: ksrt::VertexFormat::Float32x3 },
-                index_buffer: Some(ksrt::IndexBufferInput { buffer: ib, offset: 0, count: 6, format: ksrt::IndexFormat::Uint32 }),
+                vertex_buffer: ksrt::VertexBufferInput {
+                    buffer: vb,
+                    offset: 0,
+                    stride: 12,
+                    count: 4,
+                    format: ksrt::VertexFormat::Float32x3,
+                },
+                index_buffer: Some(ksrt::IndexBufferInput {
+                    buffer: ib,
+                    offset: 0,
+                    count: 6,
+                    format: ksrt::IndexFormat::Uint32,
+                }),
                 transform: None,
                 index_range: None,
             }],
@@ -105,8 +140,12 @@ pub fn render() -> AnyResult<()> {
     });
     ctx.invoke_gpu_task(c)?;
     device.poll(wgpu::PollType::wait_indefinitely())?;
-    println!("registered 1 geometry, 1 instance; SDK memory: {:?}", ctx.resource_allocations());
-    println!("note: images need the ray tracing core (BVH build and trace tasks), not in this version");
+    println!(
+        "registered 1 geometry, 1 instance; SDK memory: {:?}",
+        ctx.resource_allocations()
+    );
+    println!(
+        "note: images need the ray tracing core (BVH build and trace tasks), not in this version"
+    );
     Ok(())
 }
-

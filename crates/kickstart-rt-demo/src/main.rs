@@ -6,7 +6,11 @@ use clap::{Parser, Subcommand};
 
 /// kickstart-rt's demo and tool.
 #[derive(Parser)]
-#[command(name = "ksrt", version, about = "kickstart-rt: ray-traced effects on wgpu — demo and tools")]
+#[command(
+    name = "ksrt",
+    version,
+    about = "kickstart-rt: ray-traced effects on wgpu — demo and tools"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -271,7 +271,9 @@ impl ExecuteContext {
     /// `count` new geometry handles.
     pub fn create_geometry_handles(&self, count: usize) -> Vec<GeometryHandle> {
         let mut s = self.state();
-        (0..count).map(|_| s.geometries.insert(GeometrySlot::default())).collect()
+        (0..count)
+            .map(|_| s.geometries.insert(GeometrySlot::default()))
+            .collect()
     }
 
     /// A new instance handle; place it with an [`InstanceTask`]. Its slot index is the instance
@@ -283,7 +285,9 @@ impl ExecuteContext {
     /// `count` new instance handles.
     pub fn create_instance_handles(&self, count: usize) -> Vec<InstanceHandle> {
         let mut s = self.state();
-        (0..count).map(|_| s.instances.insert(InstanceSlot::default())).collect()
+        (0..count)
+            .map(|_| s.instances.insert(InstanceSlot::default()))
+            .collect()
     }
 
     /// A new denoising context; its history is created lazily by the next `build_gpu_task`.
@@ -291,7 +295,11 @@ impl ExecuteContext {
         &self,
         input: DenoisingContextInput,
     ) -> Result<DenoisingContextHandle> {
-        if input.max_width == 0 || input.max_height == 0 || input.max_width > 16384 || input.max_height > 16384 {
+        if input.max_width == 0
+            || input.max_height == 0
+            || input.max_width > 16384
+            || input.max_height > 16384
+        {
             return Err(Error::input(
                 "DenoisingContextInput",
                 "max_width/max_height",
@@ -320,7 +328,9 @@ impl ExecuteContext {
     /// Destroys several geometries; stops at the first invalid handle (those before it are
     /// destroyed, the rest untouched).
     pub fn destroy_geometry_handles(&self, handles: &[GeometryHandle]) -> Result<()> {
-        handles.iter().try_for_each(|h| self.destroy_geometry_handle(*h))
+        handles
+            .iter()
+            .try_for_each(|h| self.destroy_geometry_handle(*h))
     }
 
     /// Destroys every geometry.
@@ -338,7 +348,9 @@ impl ExecuteContext {
 
     /// Destroys several instances; stops at the first invalid handle.
     pub fn destroy_instance_handles(&self, handles: &[InstanceHandle]) -> Result<()> {
-        handles.iter().try_for_each(|h| self.destroy_instance_handle(*h))
+        handles
+            .iter()
+            .try_for_each(|h| self.destroy_instance_handle(*h))
     }
 
     /// Destroys every instance.
@@ -355,8 +367,13 @@ impl ExecuteContext {
     }
 
     /// Destroys several denoising contexts; stops at the first invalid handle.
-    pub fn destroy_denoising_context_handles(&self, handles: &[DenoisingContextHandle]) -> Result<()> {
-        handles.iter().try_for_each(|h| self.destroy_denoising_context_handle(*h))
+    pub fn destroy_denoising_context_handles(
+        &self,
+        handles: &[DenoisingContextHandle],
+    ) -> Result<()> {
+        handles
+            .iter()
+            .try_for_each(|h| self.destroy_denoising_context_handle(*h))
     }
 
     /// Destroys every denoising context.
@@ -564,15 +581,27 @@ impl ExecuteContext {
 
         // 3. Instance data: written through this task's staging at the instance's slot index.
         if !plan.instances.is_empty() {
-            let max_index = plan.instances.iter().map(|t| t.handle.index).max().unwrap_or(0);
+            let max_index = plan
+                .instances
+                .iter()
+                .map(|t| t.handle.index)
+                .max()
+                .unwrap_or(0);
             self.ensure_instance_table(&mut s, encoder, max_index as u64 + 1, serial);
-            let mut bytes = Vec::with_capacity(plan.instances.len() * INSTANCE_RECORD_SIZE as usize);
+            let mut bytes =
+                Vec::with_capacity(plan.instances.len() * INSTANCE_RECORD_SIZE as usize);
             for t in &plan.instances {
-                bytes.extend_from_slice(&instance_record(&t.input, s.geometries.get(t.input.geometry)?));
+                bytes.extend_from_slice(&instance_record(
+                    &t.input,
+                    s.geometries.get(t.input.geometry)?,
+                ));
             }
             let staging = s.staging.acquire(&self.device, bytes.len() as u64);
             if !staging.write(0, &bytes) {
-                self.logger.message(Severity::Error, "kickstart-rt: staging buffer was not mapped; instance data not uploaded");
+                self.logger.message(
+                    Severity::Error,
+                    "kickstart-rt: staging buffer was not mapped; instance data not uploaded",
+                );
             }
             staging.buffer.unmap();
             if let Some(table) = &s.instance_table {
@@ -627,8 +656,17 @@ impl ExecuteContext {
     /// Grows the instance table to hold `needed` records, carrying old records over in the
     /// encoder. The check counts records of the real size (see the instance-id bug report's
     /// growth bug).
-    fn ensure_instance_table(&self, s: &mut State, encoder: &mut wgpu::CommandEncoder, needed: u64, serial: u64) {
-        let have = s.instance_table.as_ref().map_or(0, |b| b.size() / INSTANCE_RECORD_SIZE);
+    fn ensure_instance_table(
+        &self,
+        s: &mut State,
+        encoder: &mut wgpu::CommandEncoder,
+        needed: u64,
+        serial: u64,
+    ) {
+        let have = s
+            .instance_table
+            .as_ref()
+            .map_or(0, |b| b.size() / INSTANCE_RECORD_SIZE);
         if have >= needed {
             return;
         }
@@ -655,6 +693,7 @@ impl ExecuteContext {
     fn validate<'c>(&self, s: &State, c: &'c TaskContainer) -> Result<Plan<'c>> {
         let mut plan = Plan::default();
         let mut registered_here = std::collections::HashSet::new();
+        let mut instances_here = std::collections::HashSet::new();
         let mut unsupported = None;
         for task in &c.bvh_tasks {
             match task {
@@ -662,13 +701,35 @@ impl ExecuteContext {
                     let slot = s.geometries.get(t.handle)?;
                     let extents = validate::geometry_input(&t.input)?;
                     match t.operation {
-                        TaskOperation::Register if slot.data.is_some() || registered_here.contains(&t.handle) => {
-                            return Err(Error::input("GeometryTask", "operation", t.operation, "this geometry is already registered; use TaskOperation::Update"));
+                        TaskOperation::Register
+                            if slot.data.is_some() || registered_here.contains(&t.handle) =>
+                        {
+                            return Err(Error::input(
+                                "GeometryTask",
+                                "operation",
+                                t.operation,
+                                "this geometry is already registered; use TaskOperation::Update",
+                            ));
                         }
                         TaskOperation::Update => match &slot.data {
-                            None => return Err(Error::input("GeometryTask", "operation", t.operation, "the geometry was never registered")),
+                            None => {
+                                return Err(Error::input(
+                                    "GeometryTask",
+                                    "operation",
+                                    t.operation,
+                                    "the geometry was never registered",
+                                ))
+                            }
                             Some(d) if !d.allow_update => {
-                                return Err(Error::input("GeometryTask", "operation", t.operation, format!("geometry `{}` was registered without allow_update", d.name)));
+                                return Err(Error::input(
+                                    "GeometryTask",
+                                    "operation",
+                                    t.operation,
+                                    format!(
+                                        "geometry `{}` was registered without allow_update",
+                                        d.name
+                                    ),
+                                ));
                             }
                             _ => {}
                         },
@@ -678,13 +739,42 @@ impl ExecuteContext {
                     plan.geometries.push((t, extents));
                 }
                 BvhTask::Instance(t) => {
-                    s.instances.get(t.handle)?;
+                    let slot = s.instances.get(t.handle)?;
+                    let known = slot.input.is_some() || instances_here.contains(&t.handle);
+                    match t.operation {
+                        TaskOperation::Register if known => {
+                            return Err(Error::input(
+                                "InstanceTask",
+                                "operation",
+                                t.operation,
+                                "this instance is already registered; use TaskOperation::Update",
+                            ));
+                        }
+                        TaskOperation::Update if !known => {
+                            return Err(Error::input(
+                                "InstanceTask",
+                                "operation",
+                                t.operation,
+                                "the instance was never registered",
+                            ));
+                        }
+                        _ => {}
+                    }
+                    instances_here.insert(t.handle);
                     let g = s.geometries.get(t.input.geometry)?;
                     if g.data.is_none() && !registered_here.contains(&t.input.geometry) {
-                        return Err(Error::input("InstanceTask", "input.geometry", t.input.geometry, "the geometry has no registered mesh: schedule its GeometryTask first"));
+                        return Err(Error::input(
+                            "InstanceTask",
+                            "input.geometry",
+                            t.input.geometry,
+                            "the geometry has no registered mesh: schedule its GeometryTask first",
+                        ));
                     }
                     validate::instance_input(&t.input)?;
-                    plan.instances.push(InstancePlan { handle: t.handle, input: t.input.clone() });
+                    plan.instances.push(InstancePlan {
+                        handle: t.handle,
+                        input: t.input.clone(),
+                    });
                 }
                 BvhTask::Build(t) => {
                     validate::bvh_build(t)?;
@@ -733,9 +823,14 @@ struct Plan<'c> {
     instances: Vec<InstancePlan>,
 }
 
-fn instance_record(input: &InstanceInput, geometry: &GeometrySlot) -> [u8; INSTANCE_RECORD_SIZE as usize] {
+fn instance_record(
+    input: &InstanceInput,
+    geometry: &GeometrySlot,
+) -> [u8; INSTANCE_RECORD_SIZE as usize] {
     let _ = geometry;
-    let m = glam::Mat4::from(input.transform).transpose().to_cols_array();
+    let m = glam::Mat4::from(input.transform)
+        .transpose()
+        .to_cols_array();
     let mut words = [0u32; 16];
     for i in 0..12 {
         words[i] = m[i].to_bits();

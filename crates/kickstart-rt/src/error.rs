@@ -60,7 +60,9 @@ pub enum Error {
         required: u64,
     },
     /// The application was built against an incompatible major version of the SDK.
-    #[error("application built against kickstart-rt {app}, library is {library}: major versions differ")]
+    #[error(
+        "application built against kickstart-rt {app}, library is {library}: major versions differ"
+    )]
     IncompatibleVersion {
         /// The version in `InitSettings`.
         app: crate::Version,

@@ -75,6 +75,7 @@
 //! | `GeometryTask` | `…index_buffer.count` | non-zero multiple of 3 | otherwise |
 //! | `GeometryTask` | `…index_range` | multiples of 3 inside the component | otherwise |
 //! | `InstanceTask` | `handle`, `input.geometry` | live handles; geometry registered | stale: [`Error::InvalidHandle`]; unregistered |
+//! | `InstanceTask` | `operation` | `Register` once; `Update` only after it | re-register, update of unregistered |
 //! | `InstanceTask` | `input.transform` | finite | NaN/∞ |
 //! | `InstanceTask` | `input.inclusion_mask` | bits 0–1 | other bits |
 //! | `InstanceTask` | `input.initial_tile_color` | finite, ≥ 0 | otherwise |
@@ -118,9 +119,13 @@ pub use context::{
     DenoisingContextInput, DenoisingMethod, ExecuteContext, InitSettings, RecordedTaskCounts,
     SignalType, INSTANCE_RECORD_SIZE,
 };
-pub use device::{optional_features, optional_features_supported, required_features, required_limits};
+pub use device::{
+    optional_features, optional_features_supported, required_features, required_limits,
+};
 pub use error::{Error, Result};
-pub use handles::{DenoisingContextHandle, GeometryHandle, GpuTaskHandle, HandleKind, InstanceHandle};
+pub use handles::{
+    DenoisingContextHandle, GeometryHandle, GpuTaskHandle, HandleKind, InstanceHandle,
+};
 pub use logging::{LogCallback, Severity};
 pub use tasks::*;
 pub use validate::WRITABLE_OUTPUT_FORMATS;

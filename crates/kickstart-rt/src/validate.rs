@@ -31,7 +31,10 @@ pub(crate) fn copy_range(
             task,
             format!("{field}.offset"),
             offset,
-            format!("{len} bytes from this offset exceed the buffer's {} bytes", buffer.size()),
+            format!(
+                "{len} bytes from this offset exceed the buffer's {} bytes",
+                buffer.size()
+            ),
         ));
     };
     let start = offset - offset % COPY_ALIGN;
@@ -59,7 +62,12 @@ fn in_range(task: &'static str, field: &str, v: f32, lo: f32, hi: f32) -> Result
     if v >= lo && v <= hi {
         Ok(())
     } else {
-        Err(Error::input(task, field, v, format!("must be in [{lo}, {hi}]")))
+        Err(Error::input(
+            task,
+            field,
+            v,
+            format!("must be in [{lo}, {hi}]"),
+        ))
     }
 }
 
@@ -74,14 +82,29 @@ pub(crate) struct ComponentExtent {
 pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExtent>> {
     const T: &str = "GeometryTask";
     if input.components.is_empty() {
-        return Err(Error::input(T, "input.components", "[]", "needs at least one component"));
+        return Err(Error::input(
+            T,
+            "input.components",
+            "[]",
+            "needs at least one component",
+        ));
     }
     finite(T, "input.tile_unit_length", input.tile_unit_length)?;
     if input.tile_unit_length <= 0.0 {
-        return Err(Error::input(T, "input.tile_unit_length", input.tile_unit_length, "must be > 0 (world units)"));
+        return Err(Error::input(
+            T,
+            "input.tile_unit_length",
+            input.tile_unit_length,
+            "must be > 0 (world units)",
+        ));
     }
     if input.tile_resolution_limit == 0 {
-        return Err(Error::input(T, "input.tile_resolution_limit", 0, "must be ≥ 1"));
+        return Err(Error::input(
+            T,
+            "input.tile_resolution_limit",
+            0,
+            "must be ≥ 1",
+        ));
     }
     if !(0.0..=1.0).contains(&input.direct_tile_mapping_threshold) {
         return Err(Error::input(
@@ -104,13 +127,29 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
             ));
         }
         if vb.count == 0 {
-            return Err(Error::input(T, format!("{f}.vertex_buffer.count"), 0, "must be ≥ 1"));
+            return Err(Error::input(
+                T,
+                format!("{f}.vertex_buffer.count"),
+                0,
+                "must be ≥ 1",
+            ));
         }
         let vlen = vb.stride * (vb.count as u64 - 1) + vb.format.size();
-        let vertex_bytes = copy_range(T, &format!("{f}.vertex_buffer"), &vb.buffer, vb.offset, vlen)?;
+        let vertex_bytes = copy_range(
+            T,
+            &format!("{f}.vertex_buffer"),
+            &vb.buffer,
+            vb.offset,
+            vlen,
+        )?;
         if let Some(t) = c.transform {
             if !t.is_finite() {
-                return Err(Error::input(T, format!("{f}.transform"), t, "must be finite"));
+                return Err(Error::input(
+                    T,
+                    format!("{f}.transform"),
+                    t,
+                    "must be finite",
+                ));
             }
         }
         let (total, index_bytes) = match &c.index_buffer {
@@ -120,11 +159,19 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
                         T,
                         format!("{f}.index_buffer.offset"),
                         ib.offset,
-                        format!("must be a multiple of the index size ({} bytes)", ib.format.size()),
+                        format!(
+                            "must be a multiple of the index size ({} bytes)",
+                            ib.format.size()
+                        ),
                     ));
                 }
                 if ib.count % 3 != 0 || ib.count == 0 {
-                    return Err(Error::input(T, format!("{f}.index_buffer.count"), ib.count, "must be a non-zero multiple of 3"));
+                    return Err(Error::input(
+                        T,
+                        format!("{f}.index_buffer.count"),
+                        ib.count,
+                        "must be a non-zero multiple of 3",
+                    ));
                 }
                 let len = ib.count as u64 * ib.format.size();
                 let r = copy_range(T, &format!("{f}.index_buffer"), &ib.buffer, ib.offset, len)?;
@@ -145,10 +192,20 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
         let triangles = match c.index_range {
             Some((first, count)) => {
                 if first % 3 != 0 || count % 3 != 0 || count == 0 {
-                    return Err(Error::input(T, format!("{f}.index_range"), (first, count), "first and count must be multiples of 3, count > 0"));
+                    return Err(Error::input(
+                        T,
+                        format!("{f}.index_range"),
+                        (first, count),
+                        "first and count must be multiples of 3, count > 0",
+                    ));
                 }
                 if first.checked_add(count).is_none_or(|e| e > total) {
-                    return Err(Error::input(T, format!("{f}.index_range"), (first, count), format!("exceeds the component's {total} indices")));
+                    return Err(Error::input(
+                        T,
+                        format!("{f}.index_range"),
+                        (first, count),
+                        format!("exceeds the component's {total} indices"),
+                    ));
                 }
                 count / 3
             }
@@ -167,7 +224,12 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
 pub(crate) fn instance_input(input: &InstanceInput) -> Result<()> {
     const T: &str = "InstanceTask";
     if !input.transform.is_finite() {
-        return Err(Error::input(T, "input.transform", input.transform, "must be finite"));
+        return Err(Error::input(
+            T,
+            "input.transform",
+            input.transform,
+            "must be finite",
+        ));
     }
     if input.inclusion_mask.0 & !InstanceInclusionMask::ALL.0 != 0 {
         return Err(Error::input(
@@ -179,7 +241,12 @@ pub(crate) fn instance_input(input: &InstanceInput) -> Result<()> {
     }
     let c = input.initial_tile_color;
     if !c.is_finite() || c.min_element() < 0.0 {
-        return Err(Error::input(T, "input.initial_tile_color", c, "must be finite and ≥ 0"));
+        return Err(Error::input(
+            T,
+            "input.initial_tile_color",
+            c,
+            "must be finite and ≥ 0",
+        ));
     }
     Ok(())
 }
@@ -187,7 +254,12 @@ pub(crate) fn instance_input(input: &InstanceInput) -> Result<()> {
 /// Validates a BVH build task.
 pub(crate) fn bvh_build(task: &BvhBuildTask) -> Result<()> {
     if task.max_blas_build_count == 0 {
-        return Err(Error::input("BvhBuildTask", "max_blas_build_count", 0, "must be ≥ 1"));
+        return Err(Error::input(
+            "BvhBuildTask",
+            "max_blas_build_count",
+            0,
+            "must be ≥ 1",
+        ));
     }
     Ok(())
 }
@@ -198,8 +270,17 @@ fn texture_size(t: &TextureInput) -> (u32, u32) {
 }
 
 fn readable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
-    if !t.texture().usage().contains(wgpu::TextureUsages::TEXTURE_BINDING) {
-        return Err(Error::input(task, field, t.texture().usage(), "the SDK reads this texture in a shader: it needs TextureUsages::TEXTURE_BINDING"));
+    if !t
+        .texture()
+        .usage()
+        .contains(wgpu::TextureUsages::TEXTURE_BINDING)
+    {
+        return Err(Error::input(
+            task,
+            field,
+            t.texture().usage(),
+            "the SDK reads this texture in a shader: it needs TextureUsages::TEXTURE_BINDING",
+        ));
     }
     if t.texture().format().is_depth_stencil_format() {
         return Err(Error::input(task, field, t.texture().format(), "depth/stencil formats cannot be read by compute shaders on every backend: copy depth to an R32Float texture"));
@@ -216,29 +297,57 @@ pub const WRITABLE_OUTPUT_FORMATS: [wgpu::TextureFormat; 4] = [
 ];
 
 fn writable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
-    if !t.texture().usage().contains(wgpu::TextureUsages::STORAGE_BINDING) {
+    if !t
+        .texture()
+        .usage()
+        .contains(wgpu::TextureUsages::STORAGE_BINDING)
+    {
         return Err(Error::input(task, field, t.texture().usage(), "the SDK writes this texture from a compute shader: it needs TextureUsages::STORAGE_BINDING"));
     }
     if !WRITABLE_OUTPUT_FORMATS.contains(&t.texture().format()) {
-        return Err(Error::input(task, field, t.texture().format(), format!("output formats are {WRITABLE_OUTPUT_FORMATS:?}")));
+        return Err(Error::input(
+            task,
+            field,
+            t.texture().format(),
+            format!("output formats are {WRITABLE_OUTPUT_FORMATS:?}"),
+        ));
     }
     Ok(())
 }
 
 /// Checks a viewport against the textures it addresses; returns the effective one.
-fn viewport(task: &'static str, vp: Option<Viewport>, textures: &[(&str, &TextureInput)]) -> Result<Viewport> {
+fn viewport(
+    task: &'static str,
+    vp: Option<Viewport>,
+    textures: &[(&str, &TextureInput)],
+) -> Result<Viewport> {
     let Some((_, first)) = textures.first() else {
         return Ok(vp.unwrap_or_default());
     };
     let (w, h) = texture_size(first);
-    let vp = vp.unwrap_or(Viewport { x: 0, y: 0, width: w, height: h });
+    let vp = vp.unwrap_or(Viewport {
+        x: 0,
+        y: 0,
+        width: w,
+        height: h,
+    });
     if vp.width == 0 || vp.height == 0 {
-        return Err(Error::input(task, "viewport", vp, "width and height must be > 0"));
+        return Err(Error::input(
+            task,
+            "viewport",
+            vp,
+            "width and height must be > 0",
+        ));
     }
     for (name, t) in textures {
         let (tw, th) = texture_size(t);
         if vp.x as u64 + vp.width as u64 > tw as u64 || vp.y as u64 + vp.height as u64 > th as u64 {
-            return Err(Error::input(task, "viewport", vp, format!("exceeds `{name}` ({tw}×{th})")));
+            return Err(Error::input(
+                task,
+                "viewport",
+                vp,
+                format!("exceeds `{name}` ({tw}×{th})"),
+            ));
         }
     }
     Ok(vp)
@@ -252,11 +361,21 @@ fn matrices(task: &'static str, field: &str, v: &ViewInfo) -> Result<()> {
         ("prev_view_to_clip", v.prev_view_to_clip),
     ] {
         if !m.is_finite() || m.determinant() == 0.0 {
-            return Err(Error::input(task, format!("{field}.{n}"), m, "must be finite and invertible"));
+            return Err(Error::input(
+                task,
+                format!("{field}.{n}"),
+                m,
+                "must be finite and invertible",
+            ));
         }
     }
     if !v.jitter.is_finite() {
-        return Err(Error::input(task, format!("{field}.jitter"), v.jitter, "must be finite"));
+        return Err(Error::input(
+            task,
+            format!("{field}.jitter"),
+            v.jitter,
+            "must be finite",
+        ));
     }
     Ok(())
 }
@@ -266,25 +385,63 @@ fn roughness(task: &'static str, r: &RoughnessInput, field: &str) -> Result<()> 
         readable(task, &format!("{field}.texture"), t)?;
     }
     if !r.roughness_mask.is_finite() {
-        return Err(Error::input(task, format!("{field}.roughness_mask"), r.roughness_mask, "must be finite"));
+        return Err(Error::input(
+            task,
+            format!("{field}.roughness_mask"),
+            r.roughness_mask,
+            "must be finite",
+        ));
     }
-    in_range(task, &format!("{field}.global_roughness"), r.global_roughness, 0.0, 1.0)?;
-    finite(task, &format!("{field}.roughness_multiplier"), r.roughness_multiplier)?;
-    in_range(task, &format!("{field}.min_roughness"), r.min_roughness, 0.0, 1.0)?;
-    in_range(task, &format!("{field}.max_roughness"), r.max_roughness, r.min_roughness, 1.0)
+    in_range(
+        task,
+        &format!("{field}.global_roughness"),
+        r.global_roughness,
+        0.0,
+        1.0,
+    )?;
+    finite(
+        task,
+        &format!("{field}.roughness_multiplier"),
+        r.roughness_multiplier,
+    )?;
+    in_range(
+        task,
+        &format!("{field}.min_roughness"),
+        r.min_roughness,
+        0.0,
+        1.0,
+    )?;
+    in_range(
+        task,
+        &format!("{field}.max_roughness"),
+        r.max_roughness,
+        r.min_roughness,
+        1.0,
+    )
 }
 
 fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) -> Result<()> {
     readable(task, "common.depth.texture", &c.depth.texture)?;
     readable(task, "common.normal.texture", &c.normal.texture)?;
     if !c.normal.normal_to_world.is_finite() {
-        return Err(Error::input(task, "common.normal.normal_to_world", c.normal.normal_to_world, "must be finite"));
+        return Err(Error::input(
+            task,
+            "common.normal.normal_to_world",
+            c.normal.normal_to_world,
+            "must be finite",
+        ));
     }
     roughness(task, &c.roughness, "common.roughness")?;
     if let Some(t) = &c.specular.texture {
         readable(task, "common.specular.texture", t)?;
     }
-    in_range(task, "common.specular.global_metalness", c.specular.global_metalness, 0.0, 1.0)?;
+    in_range(
+        task,
+        "common.specular.global_metalness",
+        c.specular.global_metalness,
+        0.0,
+        1.0,
+    )?;
     for (n, t) in [
         ("common.input_mask", &c.input_mask),
         ("common.direct_lighting", &c.direct_lighting),
@@ -296,7 +453,12 @@ fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) 
     }
     matrices(task, "common.view", &c.view)?;
     if c.max_ray_length.is_nan() || c.max_ray_length <= 0.0 {
-        return Err(Error::input(task, "common.max_ray_length", c.max_ray_length, "must be > 0 (∞ allowed)"));
+        return Err(Error::input(
+            task,
+            "common.max_ray_length",
+            c.max_ray_length,
+            "must be > 0 (∞ allowed)",
+        ));
     }
     let o = &c.ray_offset;
     for (n, v) in [
@@ -309,7 +471,11 @@ fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) 
     ] {
         finite(task, &format!("common.ray_offset.{n}"), v)?;
     }
-    let mut tex: Vec<(&str, &TextureInput)> = vec![("output", output), ("common.depth.texture", &c.depth.texture), ("common.normal.texture", &c.normal.texture)];
+    let mut tex: Vec<(&str, &TextureInput)> = vec![
+        ("output", output),
+        ("common.depth.texture", &c.depth.texture),
+        ("common.normal.texture", &c.normal.texture),
+    ];
     if let Some(m) = &c.input_mask {
         tex.push(("common.input_mask", m));
     }
@@ -317,14 +483,23 @@ fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) 
     Ok(())
 }
 
-fn denoise_common(task: &'static str, c: &DenoiseTaskCommon, io: &[(&str, &TextureInput, bool)]) -> Result<()> {
+fn denoise_common(
+    task: &'static str,
+    c: &DenoiseTaskCommon,
+    io: &[(&str, &TextureInput, bool)],
+) -> Result<()> {
     readable(task, "common.depth.texture", &c.depth.texture)?;
     readable(task, "common.normal.texture", &c.normal.texture)?;
     roughness(task, &c.roughness, "common.roughness")?;
     if let Some(m) = &c.motion {
         readable(task, "common.motion.texture", &m.texture)?;
         if !m.scale.is_finite() {
-            return Err(Error::input(task, "common.motion.scale", m.scale, "must be finite"));
+            return Err(Error::input(
+                task,
+                "common.motion.scale",
+                m.scale,
+                "must be finite",
+            ));
         }
     }
     matrices(task, "common.view", &c.view)?;
@@ -345,37 +520,86 @@ fn denoise_common(task: &'static str, c: &DenoiseTaskCommon, io: &[(&str, &Textu
 fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
     let unit = |n: &str, v: glam::Vec3| {
         if !v.is_finite() || (v.length() - 1.0).abs() > 1e-3 {
-            Err(Error::input(task, format!("{field}.{n}"), v, "must be a finite unit vector"))
+            Err(Error::input(
+                task,
+                format!("{field}.{n}"),
+                v,
+                "must be a finite unit vector",
+            ))
         } else {
             Ok(())
         }
     };
     match *l {
-        LightInfo::Directional { direction, angular_extent } => {
+        LightInfo::Directional {
+            direction,
+            angular_extent,
+        } => {
             unit("direction", direction)?;
-            in_range(task, &format!("{field}.angular_extent"), angular_extent, 0.0, std::f32::consts::PI)
+            in_range(
+                task,
+                &format!("{field}.angular_extent"),
+                angular_extent,
+                0.0,
+                std::f32::consts::PI,
+            )
         }
-        LightInfo::Point { position, radius, range } => {
+        LightInfo::Point {
+            position,
+            radius,
+            range,
+        } => {
             if !position.is_finite() {
-                return Err(Error::input(task, format!("{field}.position"), position, "must be finite"));
+                return Err(Error::input(
+                    task,
+                    format!("{field}.position"),
+                    position,
+                    "must be finite",
+                ));
             }
             in_range(task, &format!("{field}.radius"), radius, 0.0, f32::MAX)?;
             if range.is_nan() || range <= 0.0 {
-                return Err(Error::input(task, format!("{field}.range"), range, "must be > 0"));
+                return Err(Error::input(
+                    task,
+                    format!("{field}.range"),
+                    range,
+                    "must be > 0",
+                ));
             }
             Ok(())
         }
-        LightInfo::Spot { position, direction, radius, range, apex_angle } => {
+        LightInfo::Spot {
+            position,
+            direction,
+            radius,
+            range,
+            apex_angle,
+        } => {
             if !position.is_finite() {
-                return Err(Error::input(task, format!("{field}.position"), position, "must be finite"));
+                return Err(Error::input(
+                    task,
+                    format!("{field}.position"),
+                    position,
+                    "must be finite",
+                ));
             }
             unit("direction", direction)?;
             in_range(task, &format!("{field}.radius"), radius, 0.0, f32::MAX)?;
             if range.is_nan() || range <= 0.0 {
-                return Err(Error::input(task, format!("{field}.range"), range, "must be > 0"));
+                return Err(Error::input(
+                    task,
+                    format!("{field}.range"),
+                    range,
+                    "must be > 0",
+                ));
             }
             if !(apex_angle > 0.0 && apex_angle <= std::f32::consts::FRAC_PI_2) {
-                return Err(Error::input(task, format!("{field}.apex_angle"), apex_angle, "must be in (0, π/2]"));
+                return Err(Error::input(
+                    task,
+                    format!("{field}.apex_angle"),
+                    apex_angle,
+                    "must be in (0, π/2]",
+                ));
             }
             Ok(())
         }
@@ -390,17 +614,40 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             readable(name, "depth.texture", &t.depth.texture)?;
             readable(name, "direct_lighting", &t.direct_lighting)?;
             matrices(name, "view", &t.view)?;
-            if t.average_window.is_nan() || t.average_window < 1.0 || t.average_window.is_infinite() {
-                return Err(Error::input(name, "average_window", t.average_window, "must be finite and ≥ 1"));
+            if t.average_window.is_nan() || t.average_window < 1.0 || t.average_window.is_infinite()
+            {
+                return Err(Error::input(
+                    name,
+                    "average_window",
+                    t.average_window,
+                    "must be finite and ≥ 1",
+                ));
             }
             if !(1..=8).contains(&t.injection_resolution_stride) {
-                return Err(Error::input(name, "injection_resolution_stride", t.injection_resolution_stride, "must be in 1..=8"));
+                return Err(Error::input(
+                    name,
+                    "injection_resolution_stride",
+                    t.injection_resolution_stride,
+                    "must be in 1..=8",
+                ));
             }
-            viewport(name, t.viewport, &[("direct_lighting", &t.direct_lighting), ("depth.texture", &t.depth.texture)])?;
+            viewport(
+                name,
+                t.viewport,
+                &[
+                    ("direct_lighting", &t.direct_lighting),
+                    ("depth.texture", &t.depth.texture),
+                ],
+            )?;
         }
         RenderTask::DirectLightTransfer(t) => {
             if t.source == t.target {
-                return Err(Error::input(name, "target", t.target, "source and target must differ"));
+                return Err(Error::input(
+                    name,
+                    "target",
+                    t.target,
+                    "source and target must differ",
+                ));
             }
         }
         RenderTask::TraceSpecular(t) => {
@@ -408,7 +655,14 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             trace_common(name, &t.common, &t.output)?;
             match (&t.demodulation_output, t.demodulate_specular) {
                 (Some(o), _) => writable(name, "demodulation_output", o)?,
-                (None, true) => return Err(Error::input(name, "demodulation_output", "None", "demodulate_specular needs a demodulation output")),
+                (None, true) => {
+                    return Err(Error::input(
+                        name,
+                        "demodulation_output",
+                        "None",
+                        "demodulate_specular needs a demodulation output",
+                    ))
+                }
                 (None, false) => {}
             }
         }
@@ -420,7 +674,12 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             writable(name, "output", &t.output)?;
             trace_common(name, &t.common, &t.output)?;
             if !t.ao_radius.is_finite() || t.ao_radius <= 0.0 {
-                return Err(Error::input(name, "ao_radius", t.ao_radius, "must be finite and > 0 (world units)"));
+                return Err(Error::input(
+                    name,
+                    "ao_radius",
+                    t.ao_radius,
+                    "must be finite and > 0 (world units)",
+                ));
             }
         }
         RenderTask::TraceShadow(t) => {
@@ -433,14 +692,27 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             writable(name, "output1", &t.output1)?;
             trace_common(name, &t.common, &t.output0)?;
             if t.lights.is_empty() || t.lights.len() > MAX_MULTI_SHADOW_LIGHTS {
-                return Err(Error::input(name, "lights", t.lights.len(), format!("needs 1..={MAX_MULTI_SHADOW_LIGHTS} lights")));
+                return Err(Error::input(
+                    name,
+                    "lights",
+                    t.lights.len(),
+                    format!("needs 1..={MAX_MULTI_SHADOW_LIGHTS} lights"),
+                ));
             }
             for (i, l) in t.lights.iter().enumerate() {
                 light(name, &format!("lights[{i}]"), l)?;
             }
         }
-        RenderTask::DenoiseSpecular(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
-        RenderTask::DenoiseDiffuse(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
+        RenderTask::DenoiseSpecular(t) => denoise_common(
+            name,
+            &t.common,
+            &[("input", &t.input, false), ("output", &t.output, true)],
+        )?,
+        RenderTask::DenoiseDiffuse(t) => denoise_common(
+            name,
+            &t.common,
+            &[("input", &t.input, false), ("output", &t.output, true)],
+        )?,
         RenderTask::DenoiseSpecularAndDiffuse(t) => denoise_common(
             name,
             &t.common,
@@ -451,12 +723,24 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
                 ("output_diffuse", &t.output_diffuse, true),
             ],
         )?,
-        RenderTask::DenoiseDiffuseOcclusion(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
-        RenderTask::DenoiseShadow(t) => denoise_common(name, &t.common, &[("input", &t.input, false), ("output", &t.output, true)])?,
+        RenderTask::DenoiseDiffuseOcclusion(t) => denoise_common(
+            name,
+            &t.common,
+            &[("input", &t.input, false), ("output", &t.output, true)],
+        )?,
+        RenderTask::DenoiseShadow(t) => denoise_common(
+            name,
+            &t.common,
+            &[("input", &t.input, false), ("output", &t.output, true)],
+        )?,
         RenderTask::DenoiseMultiShadow(t) => denoise_common(
             name,
             &t.common,
-            &[("input0", &t.input0, false), ("input1", &t.input1, false), ("output", &t.output, true)],
+            &[
+                ("input0", &t.input0, false),
+                ("input1", &t.input1, false),
+                ("output", &t.output, true),
+            ],
         )?,
     }
     Ok(())

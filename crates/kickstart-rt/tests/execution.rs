@@ -33,14 +33,37 @@ fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
     let g = ctx.create_geometry_handle();
     let i = ctx.create_instance_handle();
     let d = ctx
-        .create_denoising_context_handle(DenoisingContextInput { max_width: 64, max_height: 64, signal_type: SignalType::Diffuse, method: DenoisingMethod::Fast })
+        .create_denoising_context_handle(DenoisingContextInput {
+            max_width: 64,
+            max_height: 64,
+            signal_type: SignalType::Diffuse,
+            method: DenoisingMethod::Fast,
+        })
         .unwrap();
     ctx.destroy_geometry_handle(g).unwrap();
     ctx.destroy_instance_handle(i).unwrap();
     ctx.destroy_denoising_context_handle(d).unwrap();
-    assert!(matches!(ctx.destroy_geometry_handle(g), Err(Error::InvalidHandle { kind: HandleKind::Geometry, .. })));
-    assert!(matches!(ctx.destroy_instance_handle(i), Err(Error::InvalidHandle { kind: HandleKind::Instance, .. })));
-    assert!(matches!(ctx.destroy_denoising_context_handle(d), Err(Error::InvalidHandle { kind: HandleKind::DenoisingContext, .. })));
+    assert!(matches!(
+        ctx.destroy_geometry_handle(g),
+        Err(Error::InvalidHandle {
+            kind: HandleKind::Geometry,
+            ..
+        })
+    ));
+    assert!(matches!(
+        ctx.destroy_instance_handle(i),
+        Err(Error::InvalidHandle {
+            kind: HandleKind::Instance,
+            ..
+        })
+    ));
+    assert!(matches!(
+        ctx.destroy_denoising_context_handle(d),
+        Err(Error::InvalidHandle {
+            kind: HandleKind::DenoisingContext,
+            ..
+        })
+    ));
 
     // The slot is reused with a new generation: the old handle stays invalid.
     let g2 = ctx.create_geometry_handle();
@@ -49,22 +72,42 @@ fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
     let mut e = encoder();
-    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::InvalidHandle { kind: HandleKind::Geometry, .. })));
+    assert!(matches!(
+        ctx.build_gpu_task(c, &mut e),
+        Err(Error::InvalidHandle {
+            kind: HandleKind::Geometry,
+            ..
+        })
+    ));
     submit(e); // nothing recorded: finishing the encoder must not fail
 
     // A stale instance handle in a task.
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g2, 1.0);
-    c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: i, input: InstanceInput::new(g2, Affine3A::IDENTITY) });
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: i,
+        input: InstanceInput::new(g2, Affine3A::IDENTITY),
+    });
     let mut e = encoder();
-    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::InvalidHandle { kind: HandleKind::Instance, .. })));
+    assert!(matches!(
+        ctx.build_gpu_task(c, &mut e),
+        Err(Error::InvalidHandle {
+            kind: HandleKind::Instance,
+            ..
+        })
+    ));
     submit(e);
 
     // The context still works, and the failed container registered nothing.
     let i2 = ctx.create_instance_handle();
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g2, 1.0);
-    c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: i2, input: InstanceInput::new(g2, Affine3A::IDENTITY) });
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: i2,
+        input: InstanceInput::new(g2, Affine3A::IDENTITY),
+    });
     let mut e = encoder();
     let t = ctx.build_gpu_task(c, &mut e).unwrap();
     submit(e);
@@ -73,41 +116,65 @@ fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
 
     // Handles from another context are foreign.
     let other = context(1);
-    assert!(matches!(other.destroy_geometry_handle(g2), Err(Error::InvalidHandle { .. })));
+    assert!(matches!(
+        other.destroy_geometry_handle(g2),
+        Err(Error::InvalidHandle { .. })
+    ));
 }
 
 #[test]
 fn gpu_task_handles_unknown_or_completed_are_errors() {
     let ctx = context(2);
     let mut e = encoder();
-    let t = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    let t = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .unwrap();
     submit(e);
     ctx.mark_gpu_task_completed(t).unwrap();
-    assert_eq!(ctx.mark_gpu_task_completed(t), Err(Error::InvalidGpuTaskHandle(t.serial())));
+    assert_eq!(
+        ctx.mark_gpu_task_completed(t),
+        Err(Error::InvalidGpuTaskHandle(t.serial()))
+    );
     // A handle this context never issued (serial 2 exists only in `other`).
     let other = context(2);
     let mut e = encoder();
-    let _u1 = other.build_gpu_task(other.create_task_container(), &mut e).unwrap();
-    let u2 = other.build_gpu_task(other.create_task_container(), &mut e).unwrap();
+    let _u1 = other
+        .build_gpu_task(other.create_task_container(), &mut e)
+        .unwrap();
+    let u2 = other
+        .build_gpu_task(other.create_task_container(), &mut e)
+        .unwrap();
     submit(e);
     assert_eq!(u2.serial(), 2);
-    assert_eq!(ctx.mark_gpu_task_completed(u2), Err(Error::InvalidGpuTaskHandle(2)));
+    assert_eq!(
+        ctx.mark_gpu_task_completed(u2),
+        Err(Error::InvalidGpuTaskHandle(2))
+    );
 }
 
 #[test]
 fn building_past_supported_working_sets_errors_without_blocking() {
     let ctx = context(2);
     let mut e = encoder();
-    let a = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
-    let _b = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    let a = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .unwrap();
+    let _b = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .unwrap();
     let start = std::time::Instant::now();
     // Not submitted yet: the GPU can't finish, so a blocking build would hang here.
-    assert_eq!(ctx.build_gpu_task(ctx.create_task_container(), &mut e), Err(Error::WorkingSetsExhausted { supported: 2 }));
+    assert_eq!(
+        ctx.build_gpu_task(ctx.create_task_container(), &mut e),
+        Err(Error::WorkingSetsExhausted { supported: 2 })
+    );
     assert!(start.elapsed().as_secs() < 10, "build blocked");
     submit(e);
     ctx.mark_gpu_task_completed(a).unwrap();
     let mut e = encoder();
-    assert!(ctx.build_gpu_task(ctx.create_task_container(), &mut e).is_ok());
+    assert!(ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .is_ok());
     submit(e);
 }
 
@@ -124,7 +191,9 @@ fn destroyed_geometry_keeps_memory_until_first_build_after_completion() {
     ctx.destroy_geometry_handle(g).unwrap();
     // In flight: kept, even across another build.
     let mut e2 = encoder();
-    let t2 = ctx.build_gpu_task(ctx.create_task_container(), &mut e2).unwrap();
+    let t2 = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e2)
+        .unwrap();
     assert_eq!(ctx.resource_allocations().vertex_copies, bytes);
     submit(e);
     submit(e2);
@@ -133,7 +202,9 @@ fn destroyed_geometry_keeps_memory_until_first_build_after_completion() {
     assert_eq!(ctx.resource_allocations().vertex_copies, bytes);
     ctx.mark_gpu_task_completed(t2).unwrap();
     let mut e = encoder();
-    let t3 = ctx.build_gpu_task(ctx.create_task_container(), &mut e).unwrap();
+    let t3 = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .unwrap();
     assert_eq!(ctx.resource_allocations().vertex_copies, 0);
     submit(e);
     ctx.mark_gpu_task_completed(t3).unwrap();
@@ -148,7 +219,13 @@ fn release_immediately_refuses_while_in_flight() {
     let mut e = encoder();
     let t = ctx.build_gpu_task(c, &mut e).unwrap();
     ctx.destroy_geometry_handle(g).unwrap();
-    assert_eq!(ctx.release_device_resources_immediately(), Err(Error::TasksInFlight { operation: "release_device_resources_immediately", in_flight: 1 }));
+    assert_eq!(
+        ctx.release_device_resources_immediately(),
+        Err(Error::TasksInFlight {
+            operation: "release_device_resources_immediately",
+            in_flight: 1
+        })
+    );
     submit(e);
     ctx.mark_gpu_task_completed(t).unwrap();
     ctx.release_device_resources_immediately().unwrap();
@@ -196,12 +273,22 @@ fn eight_threads_fill_containers_then_several_build_each_task_once() {
         }
         jobs.into_iter().flat_map(|j| j.join().unwrap()).collect()
     });
-    gpu().device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    gpu()
+        .device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .unwrap();
     let mut serials: Vec<u64> = built.iter().map(|t| t.serial()).collect();
     serials.sort();
     serials.dedup();
     assert_eq!(serials.len(), 8);
-    assert_eq!(ctx.recorded_task_counts(), RecordedTaskCounts { geometry_tasks: 40, instance_tasks: 0, gpu_tasks: 8 });
+    assert_eq!(
+        ctx.recorded_task_counts(),
+        RecordedTaskCounts {
+            geometry_tasks: 40,
+            instance_tasks: 0,
+            gpu_tasks: 8
+        }
+    );
     for h in &handles {
         assert_eq!(ctx.geometry_triangle_count(*h).unwrap(), Some(2));
     }
@@ -226,11 +313,21 @@ fn instance_data_is_at_the_instance_index() {
     let mut live: Vec<(InstanceHandle, f32)> = Vec::new();
     let handles = ctx.create_instance_handles(100);
     // Register in reverse order, in two containers.
-    for (n, chunk) in handles.iter().rev().collect::<Vec<_>>().chunks(50).enumerate() {
+    for (n, chunk) in handles
+        .iter()
+        .rev()
+        .collect::<Vec<_>>()
+        .chunks(50)
+        .enumerate()
+    {
         let mut c = ctx.create_task_container();
         for h in chunk {
             let x = h.index() as f32 * 10.0 + n as f32;
-            c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: **h, input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))) });
+            c.schedule_bvh_task(InstanceTask {
+                operation: TaskOperation::Register,
+                handle: **h,
+                input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))),
+            });
             live.push((**h, x));
         }
         let mut e = encoder();
@@ -247,7 +344,11 @@ fn instance_data_is_at_the_instance_index() {
     let mut c = ctx.create_task_container();
     for h in &again {
         let x = -(h.index() as f32) - 0.5;
-        c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: *h, input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))) });
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: *h,
+            input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))),
+        });
         live.push((*h, x));
     }
     let mut e = encoder();
@@ -258,11 +359,19 @@ fn instance_data_is_at_the_instance_index() {
     let table = read_buffer(&ctx.instance_table().unwrap());
     let words: &[f32] = bytemuck::cast_slice(&table);
     let stride = (INSTANCE_RECORD_SIZE / 4) as usize;
-    assert!(table.len() as u64 >= 106 * INSTANCE_RECORD_SIZE, "table grew to hold index 105");
+    assert!(
+        table.len() as u64 >= 106 * INSTANCE_RECORD_SIZE,
+        "table grew to hold index 105"
+    );
     for (h, x) in live {
         let rec = &words[h.index() as usize * stride..][..stride];
         // Row-major 3x4: translation in column 3 of each row.
-        assert_eq!((rec[3], rec[7], rec[11]), (x, 1.0, 2.0), "instance {}", h.index());
+        assert_eq!(
+            (rec[3], rec[7], rec[11]),
+            (x, 1.0, 2.0),
+            "instance {}",
+            h.index()
+        );
         assert_eq!(rec[12].to_bits(), g.index());
         assert_eq!(rec[13].to_bits(), 3, "default inclusion mask");
     }
@@ -275,7 +384,10 @@ fn invoke_gpu_task_completes_by_itself() {
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
     ctx.invoke_gpu_task(c).unwrap();
-    gpu().device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    gpu()
+        .device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .unwrap();
     assert_eq!(ctx.in_flight_task_count(), 0);
     // With one working set, a second invoke only works if the first was marked complete.
     ctx.invoke_gpu_task(ctx.create_task_container()).unwrap();
@@ -287,7 +399,11 @@ fn input_buffer_without_copy_src_gets_our_error_not_a_wgpu_panic() {
     let g = ctx.create_geometry_handle();
     let vb = buffer(&[0u8; 48], wgpu::BufferUsages::VERTEX);
     let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(GeometryTask { operation: TaskOperation::Register, handle: g, input: geometry_input(vb, None) });
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: g,
+        input: geometry_input(vb, None),
+    });
     let mut e = encoder();
     let err = ctx.build_gpu_task(c, &mut e).unwrap_err();
     assert_eq!(field_of(&err), "input.components[0].vertex_buffer.buffer");
@@ -300,19 +416,33 @@ fn unimplemented_tasks_are_refused_by_name() {
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(BvhBuildTask::default());
     let mut e = encoder();
-    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::Unsupported { task }) if task.starts_with("BvhBuildTask")));
+    assert!(
+        matches!(ctx.build_gpu_task(c, &mut e), Err(Error::Unsupported { task }) if task.starts_with("BvhBuildTask"))
+    );
     submit(e);
 }
 
 #[test]
 fn version_and_settings_checks() {
     let g = gpu();
-    let bad_major = InitSettings { version: Version { major: VERSION.major + 1, ..VERSION }, ..Default::default() };
-    assert!(matches!(ExecuteContext::new(&g.device, &g.queue, bad_major), Err(Error::IncompatibleVersion { .. })));
+    let bad_major = InitSettings {
+        version: Version {
+            major: VERSION.major + 1,
+            ..VERSION
+        },
+        ..Default::default()
+    };
+    assert!(matches!(
+        ExecuteContext::new(&g.device, &g.queue, bad_major),
+        Err(Error::IncompatibleVersion { .. })
+    ));
     let warned = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
     let w = warned.clone();
     let minor = InitSettings {
-        version: Version { minor: VERSION.minor + 1, ..VERSION },
+        version: Version {
+            minor: VERSION.minor + 1,
+            ..VERSION
+        },
         log_callback: Some(std::sync::Arc::new(move |s, m: &str| {
             if s == Severity::Warning {
                 w.lock().unwrap().push(m.to_string());
@@ -322,8 +452,14 @@ fn version_and_settings_checks() {
     };
     assert!(ExecuteContext::new(&g.device, &g.queue, minor).is_ok());
     assert_eq!(warned.lock().unwrap().len(), 1);
-    let zero = InitSettings { supported_working_sets: 0, ..Default::default() };
-    assert_eq!(field_of(&ExecuteContext::new(&g.device, &g.queue, zero).unwrap_err()), "supported_working_sets");
+    let zero = InitSettings {
+        supported_working_sets: 0,
+        ..Default::default()
+    };
+    assert_eq!(
+        field_of(&ExecuteContext::new(&g.device, &g.queue, zero).unwrap_err()),
+        "supported_working_sets"
+    );
 }
 
 #[test]
@@ -335,10 +471,54 @@ fn device_below_required_limits_is_named() {
     }))
     .unwrap();
     match ExecuteContext::new(&device, &queue, InitSettings::default()) {
-        Err(Error::InsufficientLimit { name, actual, required }) => {
+        Err(Error::InsufficientLimit {
+            name,
+            actual,
+            required,
+        }) => {
             assert!(!name.is_empty());
             assert!(actual < required);
         }
         other => panic!("expected InsufficientLimit, got {other:?}"),
     }
+}
+
+/// Per-task upload staging returns to the pool on completion and is reused, so memory stays
+/// bounded over many frames; data written in each frame reaches GPU memory.
+#[test]
+fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
+    let ctx = context(2);
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: i,
+        input: InstanceInput::new(g, Affine3A::IDENTITY),
+    });
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    let mut peak = 0;
+    for frame in 0..30 {
+        let mut c = ctx.create_task_container();
+        let x = frame as f32;
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Update,
+            handle: i,
+            input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0))),
+        });
+        let mut e = encoder();
+        let t = ctx.build_gpu_task(c, &mut e).unwrap();
+        submit(e);
+        ctx.mark_gpu_task_completed(t).unwrap();
+        peak = peak.max(ctx.resource_allocations().staging);
+        let table = read_buffer(&ctx.instance_table().unwrap());
+        let words: &[f32] = bytemuck::cast_slice(&table);
+        assert_eq!(words[i.index() as usize * 16 + 3], x, "frame {frame}");
+    }
+    // Each frame needs one 256-byte buffer; a leak would reach 30 of them.
+    assert!(peak <= 3 * 256, "staging grew to {peak} bytes");
 }

@@ -13,7 +13,12 @@ fn expect_field(ctx: &ExecuteContext, c: TaskContainer, task: &str, field: &str)
     let before = ctx.recorded_task_counts();
     let mut e = encoder();
     match ctx.build_gpu_task(c, &mut e) {
-        Err(Error::InvalidInput { task: t, field: f, value, reason }) => {
+        Err(Error::InvalidInput {
+            task: t,
+            field: f,
+            value,
+            reason,
+        }) => {
             assert_eq!((t, f.as_str()), (task, field), "value {value}: {reason}");
         }
         other => panic!("expected InvalidInput for {task}.{field}, got {other:?}"),
@@ -21,7 +26,9 @@ fn expect_field(ctx: &ExecuteContext, c: TaskContainer, task: &str, field: &str)
     submit(e);
     assert_eq!(ctx.recorded_task_counts(), before, "nothing recorded");
     let mut e = encoder();
-    let t = ctx.build_gpu_task(ctx.create_task_container(), &mut e).expect("context still usable");
+    let t = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .expect("context still usable");
     submit(e);
     ctx.mark_gpu_task_completed(t).unwrap();
 }
@@ -29,7 +36,11 @@ fn expect_field(ctx: &ExecuteContext, c: TaskContainer, task: &str, field: &str)
 fn geometry_case(f: impl FnOnce(&mut GeometryTask)) -> (ExecuteContext, TaskContainer) {
     let ctx = context(2);
     let (vb, ib) = quad(1.0);
-    let mut t = GeometryTask { operation: TaskOperation::Register, handle: ctx.create_geometry_handle(), input: geometry_input(vb, Some(ib)) };
+    let mut t = GeometryTask {
+        operation: TaskOperation::Register,
+        handle: ctx.create_geometry_handle(),
+        input: geometry_input(vb, Some(ib)),
+    };
     f(&mut t);
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(t);
@@ -44,7 +55,15 @@ fn geometry_row(field: &str, f: impl FnOnce(&mut GeometryTask)) {
 #[test]
 fn row_supported_working_sets() {
     let g = gpu();
-    let err = ExecuteContext::new(&g.device, &g.queue, InitSettings { supported_working_sets: 0, ..Default::default() }).unwrap_err();
+    let err = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            supported_working_sets: 0,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
     assert!(matches!(err, Error::InvalidInput { field, .. } if field == "supported_working_sets"));
 }
 
@@ -75,7 +94,11 @@ fn row_geometry_operation() {
     ctx.mark_gpu_task_completed(t).unwrap();
     let (vb, ib) = quad(2.0);
     let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(GeometryTask { operation: TaskOperation::Update, handle: h, input: geometry_input(vb, Some(ib)) });
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Update,
+        handle: h,
+        input: geometry_input(vb, Some(ib)),
+    });
     expect_field(&ctx, c, "GeometryTask", "operation");
 }
 
@@ -88,7 +111,11 @@ fn geometry_update_with_allow_update_replaces_data() {
         let mut input = geometry_input(vb, Some(ib));
         input.allow_update = true;
         let mut c = ctx.create_task_container();
-        c.schedule_bvh_task(GeometryTask { operation: op, handle: h, input });
+        c.schedule_bvh_task(GeometryTask {
+            operation: op,
+            handle: h,
+            input,
+        });
         let mut e = encoder();
         let t = ctx.build_gpu_task(c, &mut e).unwrap();
         submit(e);
@@ -105,17 +132,23 @@ fn row_components_empty() {
 #[test]
 fn row_tile_unit_length() {
     geometry_row("input.tile_unit_length", |t| t.input.tile_unit_length = 0.0);
-    geometry_row("input.tile_unit_length", |t| t.input.tile_unit_length = f32::NAN);
+    geometry_row("input.tile_unit_length", |t| {
+        t.input.tile_unit_length = f32::NAN
+    });
 }
 
 #[test]
 fn row_tile_resolution_limit() {
-    geometry_row("input.tile_resolution_limit", |t| t.input.tile_resolution_limit = 0);
+    geometry_row("input.tile_resolution_limit", |t| {
+        t.input.tile_resolution_limit = 0
+    });
 }
 
 #[test]
 fn row_direct_tile_mapping_threshold() {
-    geometry_row("input.direct_tile_mapping_threshold", |t| t.input.direct_tile_mapping_threshold = 1.5);
+    geometry_row("input.direct_tile_mapping_threshold", |t| {
+        t.input.direct_tile_mapping_threshold = 1.5
+    });
 }
 
 #[test]
@@ -127,50 +160,73 @@ fn row_vertex_buffer_usage() {
 
 #[test]
 fn row_vertex_stride() {
-    geometry_row("input.components[0].vertex_buffer.stride", |t| t.input.components[0].vertex_buffer.stride = 8);
+    geometry_row("input.components[0].vertex_buffer.stride", |t| {
+        t.input.components[0].vertex_buffer.stride = 8
+    });
 }
 
 #[test]
 fn row_vertex_count() {
-    geometry_row("input.components[0].vertex_buffer.count", |t| t.input.components[0].vertex_buffer.count = 0);
+    geometry_row("input.components[0].vertex_buffer.count", |t| {
+        t.input.components[0].vertex_buffer.count = 0
+    });
     // Non-indexed with 4 vertices: not a multiple of 3.
-    geometry_row("input.components[0].vertex_buffer.count", |t| t.input.components[0].index_buffer = None);
+    geometry_row("input.components[0].vertex_buffer.count", |t| {
+        t.input.components[0].index_buffer = None
+    });
 }
 
 #[test]
 fn row_vertex_offset_past_end() {
-    geometry_row("input.components[0].vertex_buffer.offset", |t| t.input.components[0].vertex_buffer.offset = 16);
+    geometry_row("input.components[0].vertex_buffer.offset", |t| {
+        t.input.components[0].vertex_buffer.offset = 16
+    });
 }
 
 #[test]
 fn row_component_transform() {
     geometry_row("input.components[0].transform", |t| {
-        t.input.components[0].transform = Some(Affine3A::from_translation(Vec3::new(f32::INFINITY, 0.0, 0.0)))
+        t.input.components[0].transform = Some(Affine3A::from_translation(Vec3::new(
+            f32::INFINITY,
+            0.0,
+            0.0,
+        )))
     });
 }
 
 #[test]
 fn row_index_buffer_usage() {
     geometry_row("input.components[0].index_buffer.buffer", |t| {
-        t.input.components[0].index_buffer.as_mut().unwrap().buffer = buffer(&[0; 24], wgpu::BufferUsages::INDEX)
+        t.input.components[0].index_buffer.as_mut().unwrap().buffer =
+            buffer(&[0; 24], wgpu::BufferUsages::INDEX)
     });
 }
 
 #[test]
 fn row_index_offset() {
-    geometry_row("input.components[0].index_buffer.offset", |t| t.input.components[0].index_buffer.as_mut().unwrap().offset = 2);
-    geometry_row("input.components[0].index_buffer.offset", |t| t.input.components[0].index_buffer.as_mut().unwrap().offset = 4);
+    geometry_row("input.components[0].index_buffer.offset", |t| {
+        t.input.components[0].index_buffer.as_mut().unwrap().offset = 2
+    });
+    geometry_row("input.components[0].index_buffer.offset", |t| {
+        t.input.components[0].index_buffer.as_mut().unwrap().offset = 4
+    });
 }
 
 #[test]
 fn row_index_count() {
-    geometry_row("input.components[0].index_buffer.count", |t| t.input.components[0].index_buffer.as_mut().unwrap().count = 4);
+    geometry_row("input.components[0].index_buffer.count", |t| {
+        t.input.components[0].index_buffer.as_mut().unwrap().count = 4
+    });
 }
 
 #[test]
 fn row_index_range() {
-    geometry_row("input.components[0].index_range", |t| t.input.components[0].index_range = Some((3, 6)));
-    geometry_row("input.components[0].index_range", |t| t.input.components[0].index_range = Some((1, 3)));
+    geometry_row("input.components[0].index_range", |t| {
+        t.input.components[0].index_range = Some((3, 6))
+    });
+    geometry_row("input.components[0].index_range", |t| {
+        t.input.components[0].index_range = Some((1, 3))
+    });
 }
 
 #[test]
@@ -179,12 +235,24 @@ fn index_range_and_u16_indices_count_triangles() {
     let h = ctx.create_geometry_handle();
     let (vb, _) = quad(1.0);
     let idx: [u16; 8] = [0, 1, 2, 0, 2, 3, 0, 0];
-    let ib = buffer(bytemuck::cast_slice(&idx), wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC);
+    let ib = buffer(
+        bytemuck::cast_slice(&idx),
+        wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC,
+    );
     let mut input = geometry_input(vb, None);
-    input.components[0].index_buffer = Some(IndexBufferInput { buffer: ib, offset: 0, count: 6, format: IndexFormat::Uint16 });
+    input.components[0].index_buffer = Some(IndexBufferInput {
+        buffer: ib,
+        offset: 0,
+        count: 6,
+        format: IndexFormat::Uint16,
+    });
     input.components[0].index_range = Some((3, 3));
     let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(GeometryTask { operation: TaskOperation::Register, handle: h, input });
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: h,
+        input,
+    });
     let mut e = encoder();
     let t = ctx.build_gpu_task(c, &mut e).unwrap();
     submit(e);
@@ -199,7 +267,11 @@ fn instance_row(field: &str, f: impl FnOnce(&mut InstanceInput)) {
     register_geometry(&mut c, g, 1.0);
     let mut input = InstanceInput::new(g, Affine3A::IDENTITY);
     f(&mut input);
-    c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: ctx.create_instance_handle(), input });
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: ctx.create_instance_handle(),
+        input,
+    });
     expect_field(&ctx, c, "InstanceTask", field);
 }
 
@@ -208,30 +280,43 @@ fn row_instance_geometry_unregistered() {
     let ctx = context(2);
     let g = ctx.create_geometry_handle();
     let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(InstanceTask { operation: TaskOperation::Register, handle: ctx.create_instance_handle(), input: InstanceInput::new(g, Affine3A::IDENTITY) });
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: ctx.create_instance_handle(),
+        input: InstanceInput::new(g, Affine3A::IDENTITY),
+    });
     expect_field(&ctx, c, "InstanceTask", "input.geometry");
 }
 
 #[test]
 fn row_instance_transform() {
-    instance_row("input.transform", |i| i.transform = Affine3A::from_translation(Vec3::splat(f32::NAN)));
+    instance_row("input.transform", |i| {
+        i.transform = Affine3A::from_translation(Vec3::splat(f32::NAN))
+    });
 }
 
 #[test]
 fn row_instance_inclusion_mask() {
-    instance_row("input.inclusion_mask", |i| i.inclusion_mask = InstanceInclusionMask(8));
+    instance_row("input.inclusion_mask", |i| {
+        i.inclusion_mask = InstanceInclusionMask(8)
+    });
 }
 
 #[test]
 fn row_instance_initial_tile_color() {
-    instance_row("input.initial_tile_color", |i| i.initial_tile_color = Vec4::new(-1.0, 0.0, 0.0, 1.0));
+    instance_row("input.initial_tile_color", |i| {
+        i.initial_tile_color = Vec4::new(-1.0, 0.0, 0.0, 1.0)
+    });
 }
 
 #[test]
 fn row_max_blas_build_count() {
     let ctx = context(2);
     let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(BvhBuildTask { max_blas_build_count: 0, build_tlas: true });
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 0,
+        build_tlas: true,
+    });
     expect_field(&ctx, c, "BvhBuildTask", "max_blas_build_count");
 }
 
@@ -245,13 +330,24 @@ fn output(w: u32, h: u32) -> wgpu::TextureView {
 
 fn common(w: u32, h: u32) -> TraceTaskCommon {
     TraceTaskCommon::new(
-        DepthInput { texture: sampled(w, h), depth_type: DepthType::RClipSpace },
-        NormalInput { texture: texture(F::Rgba8Unorm, w, h, U::TEXTURE_BINDING), normal_type: NormalType::RgbNormalizedVector, normal_to_world: Mat4::IDENTITY },
+        DepthInput {
+            texture: sampled(w, h),
+            depth_type: DepthType::RClipSpace,
+        },
+        NormalInput {
+            texture: texture(F::Rgba8Unorm, w, h, U::TEXTURE_BINDING),
+            normal_type: NormalType::RgbNormalizedVector,
+            normal_to_world: Mat4::IDENTITY,
+        },
     )
 }
 
 fn ao_task() -> TraceAmbientOcclusionTask {
-    TraceAmbientOcclusionTask { common: common(16, 16), output: output(16, 16), ao_radius: 1.0 }
+    TraceAmbientOcclusionTask {
+        common: common(16, 16),
+        output: output(16, 16),
+        ao_radius: 1.0,
+    }
 }
 
 fn render_row(task: RenderTask, name: &str, field: &str) {
@@ -267,7 +363,12 @@ fn valid_render_task_is_refused_as_unsupported_by_name() {
     let mut c = ctx.create_task_container();
     c.schedule_render_task(RenderTask::TraceAmbientOcclusion(ao_task()));
     let mut e = encoder();
-    assert_eq!(ctx.build_gpu_task(c, &mut e), Err(Error::Unsupported { task: "TraceAmbientOcclusionTask" }));
+    assert_eq!(
+        ctx.build_gpu_task(c, &mut e),
+        Err(Error::Unsupported {
+            task: "TraceAmbientOcclusionTask"
+        })
+    );
     submit(e);
 }
 
@@ -275,119 +376,246 @@ fn valid_render_task_is_refused_as_unsupported_by_name() {
 fn row_trace_output() {
     let mut t = ao_task();
     t.output = texture(F::Rgba8Unorm, 16, 16, U::STORAGE_BINDING);
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "output");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "output",
+    );
     let mut t = ao_task();
     t.output = texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING);
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "output");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "output",
+    );
 }
 
 #[test]
 fn row_trace_inputs_readable() {
     let mut t = ao_task();
     t.common.depth.texture = texture(F::R32Float, 16, 16, U::STORAGE_BINDING);
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.depth.texture");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.depth.texture",
+    );
     let mut t = ao_task();
     t.common.depth.texture = texture(F::Depth32Float, 16, 16, U::TEXTURE_BINDING);
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.depth.texture");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.depth.texture",
+    );
     let mut t = ao_task();
     t.common.environment_map = Some(texture(F::Rgba16Float, 16, 16, U::STORAGE_BINDING));
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.environment_map");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.environment_map",
+    );
 }
 
 #[test]
 fn row_trace_roughness() {
     let mut t = ao_task();
     t.common.roughness.global_roughness = 2.0;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.roughness.global_roughness");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.roughness.global_roughness",
+    );
     let mut t = ao_task();
     t.common.roughness.min_roughness = 0.5;
     t.common.roughness.max_roughness = 0.2;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.roughness.max_roughness");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.roughness.max_roughness",
+    );
     let mut t = ao_task();
     t.common.roughness.roughness_multiplier = f32::NAN;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.roughness.roughness_multiplier");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.roughness.roughness_multiplier",
+    );
 }
 
 #[test]
 fn row_trace_metalness() {
     let mut t = ao_task();
     t.common.specular.global_metalness = -0.1;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.specular.global_metalness");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.specular.global_metalness",
+    );
 }
 
 #[test]
 fn row_trace_view_matrices() {
     let mut t = ao_task();
     t.common.view.view_to_clip = Mat4::ZERO;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.view.view_to_clip");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.view.view_to_clip",
+    );
 }
 
 #[test]
 fn row_trace_max_ray_length() {
     let mut t = ao_task();
     t.common.max_ray_length = 0.0;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.max_ray_length");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.max_ray_length",
+    );
 }
 
 #[test]
 fn row_trace_ray_offset() {
     let mut t = ao_task();
     t.common.ray_offset.cam_distance_linear = f32::INFINITY;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "common.ray_offset.cam_distance_linear");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "common.ray_offset.cam_distance_linear",
+    );
 }
 
 #[test]
 fn row_viewport() {
     let mut t = ao_task();
-    t.common.viewport = Some(Viewport { x: 8, y: 0, width: 16, height: 16 });
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "viewport");
+    t.common.viewport = Some(Viewport {
+        x: 8,
+        y: 0,
+        width: 16,
+        height: 16,
+    });
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "viewport",
+    );
     let mut t = ao_task();
-    t.common.viewport = Some(Viewport { x: 0, y: 0, width: 0, height: 16 });
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "viewport");
+    t.common.viewport = Some(Viewport {
+        x: 0,
+        y: 0,
+        width: 0,
+        height: 16,
+    });
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "viewport",
+    );
     // Mismatched sizes: output smaller than the G-buffer's full extent.
     let mut t = ao_task();
     t.common.depth.texture = sampled(8, 8);
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "viewport");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "viewport",
+    );
 }
 
 #[test]
 fn row_demodulation_output() {
-    let t = TraceSpecularTask { common: common(16, 16), output: output(16, 16), demodulate_specular: true, demodulation_output: None };
-    render_row(RenderTask::TraceSpecular(t), "TraceSpecularTask", "demodulation_output");
+    let t = TraceSpecularTask {
+        common: common(16, 16),
+        output: output(16, 16),
+        demodulate_specular: true,
+        demodulation_output: None,
+    };
+    render_row(
+        RenderTask::TraceSpecular(t),
+        "TraceSpecularTask",
+        "demodulation_output",
+    );
 }
 
 #[test]
 fn row_ao_radius() {
     let mut t = ao_task();
     t.ao_radius = -1.0;
-    render_row(RenderTask::TraceAmbientOcclusion(t), "TraceAmbientOcclusionTask", "ao_radius");
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        "ao_radius",
+    );
 }
 
 #[test]
 fn row_shadow_light() {
     let bad = [
-        (LightInfo::Directional { direction: Vec3::new(0.0, 2.0, 0.0), angular_extent: 0.01 }, "light.direction"),
-        (LightInfo::Point { position: Vec3::ZERO, radius: 0.1, range: 0.0 }, "light.range"),
-        (LightInfo::Spot { position: Vec3::ZERO, direction: Vec3::Y, radius: 0.1, range: 5.0, apex_angle: 2.0 }, "light.apex_angle"),
+        (
+            LightInfo::Directional {
+                direction: Vec3::new(0.0, 2.0, 0.0),
+                angular_extent: 0.01,
+            },
+            "light.direction",
+        ),
+        (
+            LightInfo::Point {
+                position: Vec3::ZERO,
+                radius: 0.1,
+                range: 0.0,
+            },
+            "light.range",
+        ),
+        (
+            LightInfo::Spot {
+                position: Vec3::ZERO,
+                direction: Vec3::Y,
+                radius: 0.1,
+                range: 5.0,
+                apex_angle: 2.0,
+            },
+            "light.apex_angle",
+        ),
     ];
     for (light, field) in bad {
-        let t = TraceShadowTask { common: common(16, 16), output: output(16, 16), light, enable_first_hit_and_end_search: true };
+        let t = TraceShadowTask {
+            common: common(16, 16),
+            output: output(16, 16),
+            light,
+            enable_first_hit_and_end_search: true,
+        };
         render_row(RenderTask::TraceShadow(t), "TraceShadowTask", field);
     }
 }
 
 #[test]
 fn row_multi_shadow_lights() {
-    let light = LightInfo::Point { position: Vec3::ZERO, radius: 0.1, range: 5.0 };
+    let light = LightInfo::Point {
+        position: Vec3::ZERO,
+        radius: 0.1,
+        range: 5.0,
+    };
     for n in [0, 33] {
-        let t = TraceMultiShadowTask { common: common(16, 16), output0: output(16, 16), output1: output(16, 16), lights: vec![light; n], enable_first_hit_and_end_search: true };
-        render_row(RenderTask::TraceMultiShadow(t), "TraceMultiShadowTask", "lights");
+        let t = TraceMultiShadowTask {
+            common: common(16, 16),
+            output0: output(16, 16),
+            output1: output(16, 16),
+            lights: vec![light; n],
+            enable_first_hit_and_end_search: true,
+        };
+        render_row(
+            RenderTask::TraceMultiShadow(t),
+            "TraceMultiShadowTask",
+            "lights",
+        );
     }
 }
 
 fn injection() -> DirectLightingInjectionTask {
     DirectLightingInjectionTask::new(
-        DepthInput { texture: sampled(16, 16), depth_type: DepthType::RClipSpace },
+        DepthInput {
+            texture: sampled(16, 16),
+            depth_type: DepthType::RClipSpace,
+        },
         texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING),
         ViewInfo::default(),
     )
@@ -397,14 +625,22 @@ fn injection() -> DirectLightingInjectionTask {
 fn row_injection_average_window() {
     let mut t = injection();
     t.average_window = 0.5;
-    render_row(RenderTask::DirectLightingInjection(t), "DirectLightingInjectionTask", "average_window");
+    render_row(
+        RenderTask::DirectLightingInjection(t),
+        "DirectLightingInjectionTask",
+        "average_window",
+    );
 }
 
 #[test]
 fn row_injection_stride() {
     let mut t = injection();
     t.injection_resolution_stride = 9;
-    render_row(RenderTask::DirectLightingInjection(t), "DirectLightingInjectionTask", "injection_resolution_stride");
+    render_row(
+        RenderTask::DirectLightingInjection(t),
+        "DirectLightingInjectionTask",
+        "injection_resolution_stride",
+    );
 }
 
 #[test]
@@ -412,7 +648,10 @@ fn row_transfer_same_instance() {
     let ctx = context(2);
     let i = ctx.create_instance_handle();
     let mut c = ctx.create_task_container();
-    c.schedule_render_task(RenderTask::DirectLightTransfer(DirectLightTransferTask { source: i, target: i }));
+    c.schedule_render_task(RenderTask::DirectLightTransfer(DirectLightTransferTask {
+        source: i,
+        target: i,
+    }));
     expect_field(&ctx, c, "DirectLightTransferTask", "target");
 }
 
@@ -420,7 +659,12 @@ fn denoise_common(ctx: &ExecuteContext) -> DenoiseTaskCommon {
     let c = common(16, 16);
     DenoiseTaskCommon {
         context: ctx
-            .create_denoising_context_handle(DenoisingContextInput { max_width: 16, max_height: 16, signal_type: SignalType::Diffuse, method: DenoisingMethod::Fast })
+            .create_denoising_context_handle(DenoisingContextInput {
+                max_width: 16,
+                max_height: 16,
+                signal_type: SignalType::Diffuse,
+                method: DenoisingMethod::Fast,
+            })
             .unwrap(),
         viewport: None,
         depth: c.depth,
@@ -437,11 +681,22 @@ fn denoise_common(ctx: &ExecuteContext) -> DenoiseTaskCommon {
 fn row_denoise_context_stale() {
     let ctx = context(2);
     let common = denoise_common(&ctx);
-    ctx.destroy_denoising_context_handle(common.context).unwrap();
+    ctx.destroy_denoising_context_handle(common.context)
+        .unwrap();
     let mut c = ctx.create_task_container();
-    c.schedule_render_task(RenderTask::DenoiseDiffuse(DenoiseDiffuseTask { common, input: texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING), output: output(16, 16) }));
+    c.schedule_render_task(RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+        common,
+        input: texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING),
+        output: output(16, 16),
+    }));
     let mut e = encoder();
-    assert!(matches!(ctx.build_gpu_task(c, &mut e), Err(Error::InvalidHandle { kind: HandleKind::DenoisingContext, .. })));
+    assert!(matches!(
+        ctx.build_gpu_task(c, &mut e),
+        Err(Error::InvalidHandle {
+            kind: HandleKind::DenoisingContext,
+            ..
+        })
+    ));
     submit(e);
 }
 
@@ -449,9 +704,17 @@ fn row_denoise_context_stale() {
 fn row_denoise_motion_scale() {
     let ctx = context(2);
     let mut common = denoise_common(&ctx);
-    common.motion = Some(MotionInput { texture: texture(F::Rg32Float, 16, 16, U::TEXTURE_BINDING), motion_type: MotionType::RgViewSpace, scale: Vec3::splat(f32::NAN) });
+    common.motion = Some(MotionInput {
+        texture: texture(F::Rg32Float, 16, 16, U::TEXTURE_BINDING),
+        motion_type: MotionType::RgViewSpace,
+        scale: Vec3::splat(f32::NAN),
+    });
     let mut c = ctx.create_task_container();
-    c.schedule_render_task(RenderTask::DenoiseDiffuse(DenoiseDiffuseTask { common, input: texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING), output: output(16, 16) }));
+    c.schedule_render_task(RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+        common,
+        input: texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING),
+        output: output(16, 16),
+    }));
     expect_field(&ctx, c, "DenoiseDiffuseTask", "common.motion.scale");
 }
 
@@ -459,7 +722,12 @@ fn row_denoise_motion_scale() {
 fn row_denoising_context_size() {
     let ctx = context(1);
     let err = ctx
-        .create_denoising_context_handle(DenoisingContextInput { max_width: 0, max_height: 16, signal_type: SignalType::Shadow, method: DenoisingMethod::HighQuality })
+        .create_denoising_context_handle(DenoisingContextInput {
+            max_width: 0,
+            max_height: 16,
+            signal_type: SignalType::Shadow,
+            method: DenoisingMethod::HighQuality,
+        })
         .unwrap_err();
     assert!(matches!(err, Error::InvalidInput { field, .. } if field == "max_width/max_height"));
 }
@@ -467,27 +735,74 @@ fn row_denoising_context_size() {
 #[test]
 fn defaults_match_the_reference() {
     let g = GeometryInput::default();
-    assert_eq!((g.tile_unit_length, g.tile_resolution_limit, g.direct_tile_mapping_threshold), (1.0, 64, 0.7));
-    assert_eq!((g.surfel_type, g.build_hint), (SurfelType::MeshColors, BuildHint::Auto));
-    assert_eq!(BvhBuildTask::default(), BvhBuildTask { max_blas_build_count: 4, build_tlas: true });
+    assert_eq!(
+        (
+            g.tile_unit_length,
+            g.tile_resolution_limit,
+            g.direct_tile_mapping_threshold
+        ),
+        (1.0, 64, 0.7)
+    );
+    assert_eq!(
+        (g.surfel_type, g.build_hint),
+        (SurfelType::MeshColors, BuildHint::Auto)
+    );
+    assert_eq!(
+        BvhBuildTask::default(),
+        BvhBuildTask {
+            max_blas_build_count: 4,
+            build_tlas: true
+        }
+    );
     let r = RoughnessInput::default();
-    assert_eq!((r.global_roughness, r.roughness_multiplier, r.min_roughness, r.max_roughness), (0.3, 1.0, 0.0, 1.0));
+    assert_eq!(
+        (
+            r.global_roughness,
+            r.roughness_multiplier,
+            r.min_roughness,
+            r.max_roughness
+        ),
+        (0.3, 1.0, 0.0, 1.0)
+    );
     assert_eq!(r.roughness_mask, Vec4::new(0.0, 0.0, 0.0, 1.0));
     assert_eq!(SpecularInput::default().global_metalness, 1.0);
     let o = RayOffset::default();
     assert_eq!(o.offset_type, RayOffsetType::Disabled);
-    assert_eq!((o.world_position_threshold, o.world_position_float_scale, o.world_position_int_scale), (1.0 / 32.0, 1.0 / 65536.0, 256.0));
-    assert_eq!((o.cam_distance_constant, o.cam_distance_linear, o.cam_distance_quadratic), (0.00174, -0.0001547, 0.0000996));
+    assert_eq!(
+        (
+            o.world_position_threshold,
+            o.world_position_float_scale,
+            o.world_position_int_scale
+        ),
+        (1.0 / 32.0, 1.0 / 65536.0, 256.0)
+    );
+    assert_eq!(
+        (
+            o.cam_distance_constant,
+            o.cam_distance_linear,
+            o.cam_distance_quadratic
+        ),
+        (0.00174, -0.0001547, 0.0000996)
+    );
     let i = InstanceInput::new(GeometryHandleForDefaults::get(), Affine3A::IDENTITY);
-    assert_eq!(i.inclusion_mask, InstanceInclusionMask::DIRECT_LIGHT_INJECTION_TARGET | InstanceInclusionMask::VISIBLE_IN_RT);
+    assert_eq!(
+        i.inclusion_mask,
+        InstanceInclusionMask::DIRECT_LIGHT_INJECTION_TARGET | InstanceInclusionMask::VISIBLE_IN_RT
+    );
     assert!(i.participating_in_tlas);
     assert_eq!(i.initial_tile_color, Vec4::ZERO);
     let inj = injection();
-    assert_eq!((inj.average_window, inj.injection_resolution_stride), (200.0, 4));
+    assert_eq!(
+        (inj.average_window, inj.injection_resolution_stride),
+        (200.0, 4)
+    );
     let c = common(4, 4);
     assert!(c.use_bilinear_sampling && c.max_ray_length.is_infinite());
     assert_eq!(c.half_resolution_mode, HalfResolutionMode::Off);
-    assert_eq!(c.debug_parameters.random_number_generator, RandomNumberGenerator::BlueNoise);
+    assert_eq!(
+        c.debug_parameters.random_number_generator,
+        RandomNumberGenerator::BlueNoise
+    );
     assert_eq!(DenoiseMode::default(), DenoiseMode::Continue);
     assert_eq!(DiffuseBrdf::default(), DiffuseBrdf::Lambertian);
     assert_eq!(MAX_MULTI_SHADOW_LIGHTS, 32);
@@ -502,8 +817,41 @@ impl GeometryHandleForDefaults {
 
 #[test]
 fn row_major_conversion_helper() {
-    let a = affine_from_row_major_3x4([[1.0, 0.0, 0.0, 5.0], [0.0, 1.0, 0.0, 6.0], [0.0, 0.0, 1.0, 7.0]]);
+    let a = affine_from_row_major_3x4([
+        [1.0, 0.0, 0.0, 5.0],
+        [0.0, 1.0, 0.0, 6.0],
+        [0.0, 0.0, 1.0, 7.0],
+    ]);
     assert_eq!(a.translation, glam::Vec3A::new(5.0, 6.0, 7.0));
-    let b = affine_from_row_major_3x4([[0.0, -1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]);
+    let b = affine_from_row_major_3x4([
+        [0.0, -1.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+    ]);
     assert!((b.transform_vector3(Vec3::X) - Vec3::Y).length() < 1e-6);
+}
+
+#[test]
+fn row_instance_operation() {
+    let ctx = context(2);
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Update,
+        handle: i,
+        input: InstanceInput::new(g, Affine3A::IDENTITY),
+    });
+    expect_field(&ctx, c, "InstanceTask", "operation");
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    for _ in 0..2 {
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: i,
+            input: InstanceInput::new(g, Affine3A::IDENTITY),
+        });
+    }
+    expect_field(&ctx, c, "InstanceTask", "operation");
 }

@@ -27,7 +27,9 @@ pub fn gpu() -> &'static Gpu {
         }
         let instance = wgpu::Instance::new(desc);
         let adapter = pollster::block_on(instance.request_adapter(&Default::default()))
-            .unwrap_or_else(|e| panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}"));
+            .unwrap_or_else(|e| {
+                panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")
+            });
         let (features, limits) = if minimal() {
             (wgpu::Features::empty(), wgpu::Limits::default())
         } else {
@@ -40,8 +42,16 @@ pub fn gpu() -> &'static Gpu {
             ..Default::default()
         }))
         .expect("request_device");
-        eprintln!("test device: {:?} (minimal: {})", adapter.get_info().name, minimal());
-        Gpu { adapter, device, queue }
+        eprintln!(
+            "test device: {:?} (minimal: {})",
+            adapter.get_info().name,
+            minimal()
+        );
+        Gpu {
+            adapter,
+            device,
+            queue,
+        }
     })
 }
 
@@ -59,19 +69,32 @@ pub fn context(working_sets: u32) -> kickstart_rt::ExecuteContext {
 }
 
 pub fn buffer(bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
-    gpu().device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: None,
-        contents: bytes,
-        usage,
-    })
+    gpu()
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytes,
+            usage,
+        })
 }
 
 /// A unit quad (2 triangles) as f32x3 vertices and u32 indices, with COPY_SRC.
 pub fn quad(scale: f32) -> (wgpu::Buffer, wgpu::Buffer) {
-    let p: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [scale, 0.0, 0.0], [scale, scale, 0.0], [0.0, scale, 0.0]];
+    let p: [[f32; 3]; 4] = [
+        [0.0, 0.0, 0.0],
+        [scale, 0.0, 0.0],
+        [scale, scale, 0.0],
+        [0.0, scale, 0.0],
+    ];
     let i: [u32; 6] = [0, 1, 2, 0, 2, 3];
     let u = wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_SRC;
-    (buffer(bytemuck::cast_slice(&p), u), buffer(bytemuck::cast_slice(&i), wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC))
+    (
+        buffer(bytemuck::cast_slice(&p), u),
+        buffer(
+            bytemuck::cast_slice(&i),
+            wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC,
+        ),
+    )
 }
 
 pub fn geometry_input(vb: wgpu::Buffer, ib: Option<wgpu::Buffer>) -> kickstart_rt::GeometryInput {
@@ -79,8 +102,19 @@ pub fn geometry_input(vb: wgpu::Buffer, ib: Option<wgpu::Buffer>) -> kickstart_r
     GeometryInput {
         name: "quad".into(),
         components: vec![GeometryComponent {
-            vertex_buffer: VertexBufferInput { buffer: vb, offset: 0, stride: 12, count: 4, format: VertexFormat::Float32x3 },
-            index_buffer: ib.map(|b| IndexBufferInput { buffer: b, offset: 0, count: 6, format: IndexFormat::Uint32 }),
+            vertex_buffer: VertexBufferInput {
+                buffer: vb,
+                offset: 0,
+                stride: 12,
+                count: 4,
+                format: VertexFormat::Float32x3,
+            },
+            index_buffer: ib.map(|b| IndexBufferInput {
+                buffer: b,
+                offset: 0,
+                count: 6,
+                format: IndexFormat::Uint32,
+            }),
             transform: None,
             index_range: None,
         }],
@@ -88,7 +122,11 @@ pub fn geometry_input(vb: wgpu::Buffer, ib: Option<wgpu::Buffer>) -> kickstart_r
     }
 }
 
-pub fn register_geometry(c: &mut kickstart_rt::TaskContainer, h: kickstart_rt::GeometryHandle, scale: f32) {
+pub fn register_geometry(
+    c: &mut kickstart_rt::TaskContainer,
+    h: kickstart_rt::GeometryHandle,
+    scale: f32,
+) {
     let (vb, ib) = quad(scale);
     c.schedule_bvh_task(kickstart_rt::GeometryTask {
         operation: kickstart_rt::TaskOperation::Register,
@@ -105,7 +143,9 @@ pub fn encoder() -> wgpu::CommandEncoder {
 pub fn submit(e: wgpu::CommandEncoder) {
     let g = gpu();
     g.queue.submit([e.finish()]);
-    g.device.poll(wgpu::PollType::wait_indefinitely()).expect("poll");
+    g.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
 }
 
 pub fn read_buffer(src: &wgpu::Buffer) -> Vec<u8> {
@@ -120,16 +160,27 @@ pub fn read_buffer(src: &wgpu::Buffer) -> Vec<u8> {
     e.copy_buffer_to_buffer(src, 0, &dst, 0, src.size());
     submit(e);
     dst.map_async(wgpu::MapMode::Read, .., |_| {});
-    g.device.poll(wgpu::PollType::wait_indefinitely()).expect("poll");
-    let v = dst.get_mapped_range(..).expect("mapped").to_vec();
-    v
+    g.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    dst.get_mapped_range(..).expect("mapped").to_vec()
 }
 
-pub fn texture(format: wgpu::TextureFormat, w: u32, h: u32, usage: wgpu::TextureUsages) -> wgpu::TextureView {
-    gpu().device
+pub fn texture(
+    format: wgpu::TextureFormat,
+    w: u32,
+    h: u32,
+    usage: wgpu::TextureUsages,
+) -> wgpu::TextureView {
+    gpu()
+        .device
         .create_texture(&wgpu::TextureDescriptor {
             label: None,
-            size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
