@@ -840,3 +840,11 @@ fn instance_record(
     words[14] = input.participating_in_tlas as u32;
     bytemuck::cast(words)
 }
+
+// The threading contract of DESIGN.md, checked by the compiler.
+const _: () = {
+    const fn send_sync<T: Send + Sync>() {}
+    const fn send<T: Send>() {}
+    send_sync::<ExecuteContext>();
+    send::<TaskContainer>();
+};

@@ -104,6 +104,7 @@
 mod allocations;
 mod container;
 mod context;
+pub mod cpu;
 mod device;
 mod error;
 mod handles;
