@@ -282,8 +282,11 @@ fn readable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
             "the SDK reads this texture in a shader: it needs TextureUsages::TEXTURE_BINDING",
         ));
     }
-    if t.texture().format().is_depth_stencil_format() {
-        return Err(Error::input(task, field, t.texture().format(), "depth/stencil formats cannot be read by compute shaders on every backend: copy depth to an R32Float texture"));
+    // Depth formats are fine (WGSL compute reads them as texture_depth_2d with textureLoad),
+    // but a combined depth-stencil view must select one aspect.
+    let format = t.texture().format();
+    if format.is_combined_depth_stencil_format() {
+        return Err(Error::input(task, field, format, "combined depth-stencil textures cannot be bound whole: pass a view with TextureAspect::DepthOnly of a Depth32Float texture, or copy depth to R32Float"));
     }
     Ok(())
 }

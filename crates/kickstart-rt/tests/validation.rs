@@ -400,12 +400,26 @@ fn row_trace_inputs_readable() {
         "common.depth.texture",
     );
     let mut t = ao_task();
-    t.common.depth.texture = texture(F::Depth32Float, 16, 16, U::TEXTURE_BINDING);
+    t.common.depth.texture = texture(F::Depth24PlusStencil8, 16, 16, U::TEXTURE_BINDING);
     render_row(
         RenderTask::TraceAmbientOcclusion(t),
         "TraceAmbientOcclusionTask",
         "common.depth.texture",
     );
+    // An engine's Depth32Float depth buffer is accepted as is.
+    let ctx = context(1);
+    let mut t = ao_task();
+    t.common.depth.texture = texture(F::Depth32Float, 16, 16, U::TEXTURE_BINDING);
+    let mut c = ctx.create_task_container();
+    c.schedule_render_task(RenderTask::TraceAmbientOcclusion(t));
+    let mut e = encoder();
+    assert_eq!(
+        ctx.build_gpu_task(c, &mut e),
+        Err(Error::Unsupported {
+            task: "TraceAmbientOcclusionTask"
+        })
+    );
+    submit(e);
     let mut t = ao_task();
     t.common.environment_map = Some(texture(F::Rgba16Float, 16, 16, U::STORAGE_BINDING));
     render_row(
