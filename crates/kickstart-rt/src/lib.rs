@@ -81,7 +81,7 @@
 //! | `InstanceTask` | `input.initial_tile_color` | finite, ≥ 0 | otherwise |
 //! | `BvhBuildTask` | `max_blas_build_count` | ≥ 1 | 0 |
 //! | trace tasks | `output` | `STORAGE_BINDING`, a format of [`WRITABLE_OUTPUT_FORMATS`] | otherwise |
-//! | trace tasks | `common.depth.texture`, `common.normal.texture`, optional inputs | `TEXTURE_BINDING`; depth formats allowed, combined depth-stencil only as a depth-only view | otherwise |
+//! | trace tasks | `common.depth.texture`, `common.normal.texture`, optional inputs | `TEXTURE_BINDING`; depth formats allowed | missing usage; combined depth-stencil format |
 //! | trace tasks | `common.roughness.*` | global/min/max in [0, 1], min ≤ max, finite multiplier | otherwise |
 //! | trace tasks | `common.specular.global_metalness` | [0, 1] | outside |
 //! | trace tasks | `common.view.*` | finite, invertible matrices | otherwise |

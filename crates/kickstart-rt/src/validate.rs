@@ -282,11 +282,12 @@ fn readable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
             "the SDK reads this texture in a shader: it needs TextureUsages::TEXTURE_BINDING",
         ));
     }
-    // Depth formats are fine (WGSL compute reads them as texture_depth_2d with textureLoad),
-    // but a combined depth-stencil view must select one aspect.
+    // Depth formats are fine (WGSL compute reads them as texture_depth_2d with textureLoad).
+    // Combined depth-stencil formats are refused: wgpu does not expose a view's aspect, so we
+    // cannot check that a view selects depth only.
     let format = t.texture().format();
     if format.is_combined_depth_stencil_format() {
-        return Err(Error::input(task, field, format, "combined depth-stencil textures cannot be bound whole: pass a view with TextureAspect::DepthOnly of a Depth32Float texture, or copy depth to R32Float"));
+        return Err(Error::input(task, field, format, "combined depth-stencil formats are not accepted: use a Depth32Float depth buffer, or copy depth to R32Float"));
     }
     Ok(())
 }
