@@ -1,7 +1,6 @@
 //! Adapter selection and the `info` / `render` commands.
 
 use kickstart_rt as ksrt;
-use wgpu::util::DeviceExt;
 
 type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -82,70 +81,21 @@ pub fn info() -> AnyResult<()> {
     Ok(())
 }
 
-/// `ksrt render`: for now registers the default scene's meshes and prints what the SDK holds.
-pub fn render() -> AnyResult<()> {
+/// `ksrt render`.
+pub fn render(size: &str, out: std::path::PathBuf) -> AnyResult<()> {
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+        .ok_or_else(|| format!("--size {size:?}: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
     let adapter = adapter()?;
     let (device, queue) = device(&adapter)?;
-    let ctx = ksrt::ExecuteContext::new(&device, &queue, ksrt::InitSettings::default())?;
-    // A floor quad: the first mesh of the default scene.
-    let positions: [[f32; 3]; 4] = [
-        [-5.0, 0.0, -5.0],
-        [5.0, 0.0, -5.0],
-        [5.0, 0.0, 5.0],
-        [-5.0, 0.0, 5.0],
-    ];
-    let indices: [u32; 6] = [0, 2, 1, 0, 3, 2];
-    let vb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("floor vertices"),
-        contents: bytemuck::cast_slice(&positions),
-        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_SRC,
-    });
-    let ib = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("floor indices"),
-        contents: bytemuck::cast_slice(&indices),
-        usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC,
-    });
-    let geometry = ctx.create_geometry_handle();
-    let instance = ctx.create_instance_handle();
-    let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(ksrt::GeometryTask {
-        operation: ksrt::TaskOperation::Register,
-        handle: geometry,
-        input: ksrt::GeometryInput {
-            name: "floor".into(),
-            components: vec![ksrt::GeometryComponent {
-                vertex_buffer: ksrt::VertexBufferInput {
-                    buffer: vb,
-                    offset: 0,
-                    stride: 12,
-                    count: 4,
-                    format: ksrt::VertexFormat::Float32x3,
-                },
-                index_buffer: Some(ksrt::IndexBufferInput {
-                    buffer: ib,
-                    offset: 0,
-                    count: 6,
-                    format: ksrt::IndexFormat::Uint32,
-                }),
-                transform: None,
-                index_range: None,
-            }],
-            ..Default::default()
+    crate::render::render(
+        &device,
+        &queue,
+        &crate::render::RenderOptions {
+            width: w,
+            height: h,
+            out,
         },
-    });
-    c.schedule_bvh_task(ksrt::InstanceTask {
-        operation: ksrt::TaskOperation::Register,
-        handle: instance,
-        input: ksrt::InstanceInput::new(geometry, glam::Affine3A::IDENTITY),
-    });
-    ctx.invoke_gpu_task(c)?;
-    device.poll(wgpu::PollType::wait_indefinitely())?;
-    println!(
-        "registered 1 geometry, 1 instance; SDK memory: {:?}",
-        ctx.resource_allocations()
-    );
-    println!(
-        "note: images need the ray tracing core (BVH build and trace tasks), not in this version"
-    );
-    Ok(())
+    )
 }

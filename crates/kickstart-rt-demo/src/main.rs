@@ -1,6 +1,8 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
 mod gpu;
+mod render;
+mod scene;
 
 use clap::{Parser, Subcommand};
 
@@ -20,9 +22,15 @@ struct Cli {
 enum Command {
     /// Print the adapter, backend, and the features/limits the SDK needs or can use.
     Info,
-    /// Register the built-in scene's geometry with the SDK and report what it holds
-    /// (the image output arrives with the ray tracing core).
-    Render,
+    /// Render the built-in default scene and write PNG images.
+    Render {
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1280x720")]
+        size: String,
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: std::path::PathBuf,
+    },
 }
 
 fn main() {
@@ -30,7 +38,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info => gpu::info(),
-        Command::Render => gpu::render(),
+        Command::Render { size, out } => gpu::render(&size, out),
     };
     if let Err(e) = result {
         eprintln!("ksrt: {e}");
