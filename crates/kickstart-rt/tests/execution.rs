@@ -18,10 +18,7 @@ fn vertex_and_index_bytes_reach_sdk_memory() {
     let g = ctx.create_geometry_handle();
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 2.0);
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
     assert_eq!(ctx.geometry_triangle_count(g).unwrap(), Some(2));
     // 4 vertices × 12 bytes + 6 indices × 4 bytes.
     assert_eq!(ctx.resource_allocations().vertex_copies, 48 + 24);
@@ -108,10 +105,7 @@ fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
         handle: i2,
         input: InstanceInput::new(g2, Affine3A::IDENTITY),
     });
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
     assert_eq!(ctx.recorded_task_counts().geometry_tasks, 1);
 
     // Handles from another context are foreign.
@@ -305,10 +299,7 @@ fn instance_data_is_at_the_instance_index() {
     let g = ctx.create_geometry_handle();
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
 
     let mut live: Vec<(InstanceHandle, f32)> = Vec::new();
     let handles = ctx.create_instance_handles(100);
@@ -330,10 +321,7 @@ fn instance_data_is_at_the_instance_index() {
             });
             live.push((**h, x));
         }
-        let mut e = encoder();
-        let t = ctx.build_gpu_task(c, &mut e).unwrap();
-        submit(e);
-        ctx.mark_gpu_task_completed(t).unwrap();
+        build_submit_complete(&ctx, c);
     }
     // Destroy every third, re-create (slots reused) and register with new data.
     for k in (0..100).step_by(3) {
@@ -351,10 +339,7 @@ fn instance_data_is_at_the_instance_index() {
         });
         live.push((*h, x));
     }
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
 
     let table = read_buffer(&ctx.instance_table().unwrap());
     let words: &[f32] = bytemuck::cast_slice(&table);
@@ -497,10 +482,7 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
         handle: i,
         input: InstanceInput::new(g, Affine3A::IDENTITY),
     });
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
     let mut peak = 0;
     for frame in 0..30 {
         let mut c = ctx.create_task_container();
@@ -510,10 +492,7 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
             handle: i,
             input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0))),
         });
-        let mut e = encoder();
-        let t = ctx.build_gpu_task(c, &mut e).unwrap();
-        submit(e);
-        ctx.mark_gpu_task_completed(t).unwrap();
+        build_submit_complete(&ctx, c);
         peak = peak.max(ctx.resource_allocations().staging);
         let table = read_buffer(&ctx.instance_table().unwrap());
         let words: &[f32] = bytemuck::cast_slice(&table);

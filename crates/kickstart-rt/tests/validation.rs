@@ -88,10 +88,7 @@ fn row_geometry_operation() {
     // Update without allow_update.
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, h, 1.0);
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
     let (vb, ib) = quad(2.0);
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(GeometryTask {
@@ -116,10 +113,7 @@ fn geometry_update_with_allow_update_replaces_data() {
             handle: h,
             input,
         });
-        let mut e = encoder();
-        let t = ctx.build_gpu_task(c, &mut e).unwrap();
-        submit(e);
-        ctx.mark_gpu_task_completed(t).unwrap();
+        build_submit_complete(&ctx, c);
     }
     assert_eq!(ctx.recorded_task_counts().geometry_tasks, 2);
 }
@@ -253,10 +247,7 @@ fn index_range_and_u16_indices_count_triangles() {
         handle: h,
         input,
     });
-    let mut e = encoder();
-    let t = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(t).unwrap();
+    build_submit_complete(&ctx, c);
     assert_eq!(ctx.geometry_triangle_count(h).unwrap(), Some(1));
 }
 

@@ -190,3 +190,12 @@ pub fn texture(
         })
         .create_view(&Default::default())
 }
+
+/// Builds `c`, submits it, waits for the GPU and marks the task completed.
+pub fn build_submit_complete(ctx: &kickstart_rt::ExecuteContext, c: kickstart_rt::TaskContainer) {
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).expect("build_gpu_task");
+    submit(e);
+    ctx.mark_gpu_task_completed(t)
+        .expect("mark_gpu_task_completed");
+}
