@@ -114,7 +114,7 @@ struct GeometryData {
     name: String,
     allow_update: bool,
     triangles: u32,
-    /// SDK-owned copies of vertex and index bytes, one pair per component.
+    /// SDK-owned copies: per component, its vertex bytes and, when indexed, its index bytes.
     buffers: Vec<wgpu::Buffer>,
 }
 
@@ -404,10 +404,8 @@ impl ExecuteContext {
     pub fn resource_allocations(&self) -> ResourceAllocations {
         let s = self.state();
         let mut a = ResourceAllocations::default();
-        for h in s.geometries.handles() {
-            if let Ok(GeometrySlot { data: Some(d), .. }) = s.geometries.get(h) {
-                a.vertex_copies += d.buffers.iter().map(|b| b.size()).sum::<u64>();
-            }
+        for d in s.geometries.values().filter_map(|g| g.data.as_ref()) {
+            a.vertex_copies += d.buffers.iter().map(|b| b.size()).sum::<u64>();
         }
         for r in &s.retired {
             let bytes: u64 = r.buffers.iter().map(|b| b.size()).sum();
@@ -487,10 +485,9 @@ impl ExecuteContext {
         Ok(())
     }
 
+    /// Polls the device once without waiting, which runs wgpu's callbacks (submission-done for
+    /// invoked tasks, re-maps of recycled staging), then retires the invoked tasks that finished.
     fn collect_invoked(&self, s: &mut State) {
-        if s.invoked.is_empty() {
-            return;
-        }
         let _ = self.device.poll(wgpu::PollType::Poll);
         let mut done = Vec::new();
         s.invoked.retain(|(serial, flag)| {
@@ -533,7 +530,6 @@ impl ExecuteContext {
                 supported: self.working_sets,
             });
         }
-        let _ = self.device.poll(wgpu::PollType::Poll);
         let plan = self.validate(&s, &container)?;
 
         // 1. Deferred destruction: release what no in-flight task can still read.
@@ -560,7 +556,10 @@ impl ExecuteContext {
                 }
             }
             let triangles = extents.iter().map(|e| e.triangles).sum();
-            let slot = s.geometries.get_mut(task.handle)?;
+            // Validated above: the handle is live.
+            let Ok(slot) = s.geometries.get_mut(task.handle) else {
+                continue;
+            };
             let old = slot.data.replace(GeometryData {
                 name: task.input.name.clone(),
                 allow_update: task.input.allow_update,
@@ -591,10 +590,7 @@ impl ExecuteContext {
             let mut bytes =
                 Vec::with_capacity(plan.instances.len() * INSTANCE_RECORD_SIZE as usize);
             for t in &plan.instances {
-                bytes.extend_from_slice(&instance_record(
-                    &t.input,
-                    s.geometries.get(t.input.geometry)?,
-                ));
+                bytes.extend_from_slice(&instance_record(&t.input));
             }
             let staging = s.staging.acquire(&self.device, bytes.len() as u64);
             if !staging.write(0, &bytes) {
@@ -616,15 +612,15 @@ impl ExecuteContext {
                 }
             }
             ws.staging.push(staging);
+            // Handles were validated above: these lookups cannot fail.
             for t in plan.instances {
-                let handle = t.handle;
-                let geometry = t.input.geometry;
-                if let Ok(g) = s.geometries.get_mut(geometry) {
+                if let Ok(g) = s.geometries.get_mut(t.input.geometry) {
                     g.last_used = serial;
                 }
-                let slot = s.instances.get_mut(handle)?;
-                slot.input = Some(t.input);
-                slot.last_used = serial;
+                if let Ok(slot) = s.instances.get_mut(t.handle) {
+                    slot.input = Some(t.input.clone());
+                    slot.last_used = serial;
+                }
                 s.counts.instance_tasks += 1;
             }
         }
@@ -771,10 +767,7 @@ impl ExecuteContext {
                         ));
                     }
                     validate::instance_input(&t.input)?;
-                    plan.instances.push(InstancePlan {
-                        handle: t.handle,
-                        input: t.input.clone(),
-                    });
+                    plan.instances.push(t);
                 }
                 BvhTask::Build(t) => {
                     validate::bvh_build(t)?;
@@ -794,40 +787,24 @@ impl ExecuteContext {
     }
 
     fn render_handles(&self, s: &State, task: &RenderTask) -> Result<()> {
-        let denoiser = |c: &DenoiseTaskCommon| s.denoisers.get(c.context).map(|_| ());
-        match task {
-            RenderTask::DirectLightTransfer(t) => {
-                s.instances.get(t.source)?;
-                s.instances.get(t.target)?;
-                Ok(())
-            }
-            RenderTask::DenoiseSpecular(t) => denoiser(&t.common),
-            RenderTask::DenoiseDiffuse(t) => denoiser(&t.common),
-            RenderTask::DenoiseSpecularAndDiffuse(t) => denoiser(&t.common),
-            RenderTask::DenoiseDiffuseOcclusion(t) => denoiser(&t.common),
-            RenderTask::DenoiseShadow(t) => denoiser(&t.common),
-            RenderTask::DenoiseMultiShadow(t) => denoiser(&t.common),
-            _ => Ok(()),
+        if let RenderTask::DirectLightTransfer(t) = task {
+            s.instances.get(t.source)?;
+            s.instances.get(t.target)?;
         }
+        if let Some(c) = task.denoise_common() {
+            s.denoisers.get(c.context)?;
+        }
+        Ok(())
     }
-}
-
-struct InstancePlan {
-    handle: InstanceHandle,
-    input: InstanceInput,
 }
 
 #[derive(Default)]
 struct Plan<'c> {
     geometries: Vec<(&'c GeometryTask, Vec<validate::ComponentExtent>)>,
-    instances: Vec<InstancePlan>,
+    instances: Vec<&'c InstanceTask>,
 }
 
-fn instance_record(
-    input: &InstanceInput,
-    geometry: &GeometrySlot,
-) -> [u8; INSTANCE_RECORD_SIZE as usize] {
-    let _ = geometry;
+fn instance_record(input: &InstanceInput) -> [u8; INSTANCE_RECORD_SIZE as usize] {
     let m = glam::Mat4::from(input.transform)
         .transpose()
         .to_cols_array();

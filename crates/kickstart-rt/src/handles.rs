@@ -1,5 +1,8 @@
 //! Generational handles: a destroyed or foreign handle is always detected, never aliased.
 
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
 use crate::error::{Error, Result};
 
 /// The kinds of handle an [`crate::ExecuteContext`] hands out.
@@ -74,7 +77,8 @@ struct Slot<T> {
 pub(crate) struct HandlePool<H: RawHandle, T> {
     context: u32,
     slots: Vec<Slot<T>>,
-    free: Vec<u32>,
+    /// Free slot indices; the lowest is reused first, so instance data stays dense.
+    free: BinaryHeap<Reverse<u32>>,
     _marker: std::marker::PhantomData<H>,
 }
 
@@ -83,21 +87,13 @@ impl<H: RawHandle, T> HandlePool<H, T> {
         HandlePool {
             context,
             slots: Vec::new(),
-            free: Vec::new(),
+            free: BinaryHeap::new(),
             _marker: std::marker::PhantomData,
         }
     }
 
     pub(crate) fn insert(&mut self, value: T) -> H {
-        // Reuse the lowest free slot, so instance data stays dense.
-        if let Some(pos) = self
-            .free
-            .iter()
-            .enumerate()
-            .min_by_key(|(_, i)| **i)
-            .map(|(p, _)| p)
-        {
-            let index = self.free.swap_remove(pos);
+        if let Some(Reverse(index)) = self.free.pop() {
             let slot = &mut self.slots[index as usize];
             slot.value = Some(value);
             return H::from_parts(index, slot.generation, self.context);
@@ -119,41 +115,38 @@ impl<H: RawHandle, T> HandlePool<H, T> {
         }
     }
 
+    /// The slot of `h` if it names a live value of this pool.
+    fn live_slot(&mut self, h: H) -> Result<&mut Slot<T>> {
+        let (index, generation, ctx) = h.parts();
+        match self.slots.get_mut(index as usize) {
+            Some(slot) if ctx == self.context && slot.generation == generation => Ok(slot),
+            _ => Err(Self::invalid(h)),
+        }
+    }
+
     pub(crate) fn get(&self, h: H) -> Result<&T> {
         let (index, generation, ctx) = h.parts();
-        if ctx != self.context {
-            return Err(Self::invalid(h));
-        }
         match self.slots.get(index as usize) {
-            Some(Slot {
-                generation: g,
-                value: Some(v),
-            }) if *g == generation => Ok(v),
+            Some(slot) if ctx == self.context && slot.generation == generation => {
+                slot.value.as_ref().ok_or_else(|| Self::invalid(h))
+            }
             _ => Err(Self::invalid(h)),
         }
     }
 
     pub(crate) fn get_mut(&mut self, h: H) -> Result<&mut T> {
-        let (index, generation, ctx) = h.parts();
-        if ctx != self.context {
-            return Err(Self::invalid(h));
-        }
-        match self.slots.get_mut(index as usize) {
-            Some(Slot {
-                generation: g,
-                value: Some(v),
-            }) if *g == generation => Ok(v),
-            _ => Err(Self::invalid(h)),
-        }
+        self.live_slot(h)?
+            .value
+            .as_mut()
+            .ok_or_else(|| Self::invalid(h))
     }
 
     pub(crate) fn remove(&mut self, h: H) -> Result<T> {
-        self.get(h)?;
-        let (index, _, _) = h.parts();
-        let slot = &mut self.slots[index as usize];
+        let slot = self.live_slot(h)?;
         let value = slot.value.take().ok_or_else(|| Self::invalid(h))?;
         slot.generation = slot.generation.wrapping_add(1).max(1);
-        self.free.push(index);
+        let (index, _, _) = h.parts();
+        self.free.push(Reverse(index));
         Ok(value)
     }
 
@@ -164,6 +157,11 @@ impl<H: RawHandle, T> HandlePool<H, T> {
             .filter(|(_, s)| s.value.is_some())
             .map(|(i, s)| H::from_parts(i as u32, s.generation, self.context))
             .collect()
+    }
+
+    /// The live values, in slot order.
+    pub(crate) fn values(&self) -> impl Iterator<Item = &T> {
+        self.slots.iter().filter_map(|s| s.value.as_ref())
     }
 }
 

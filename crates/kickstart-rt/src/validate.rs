@@ -50,23 +50,51 @@ pub(crate) fn copy_range(
     Ok((start, aligned_end))
 }
 
-fn finite(task: &'static str, field: &str, v: f32) -> Result<()> {
+// Scalar checks take the field as `prefix` + `name` and join them only on error, so validating a
+// good task (every frame) formats no field names.
+
+fn finite(task: &'static str, (prefix, name): (&str, &str), v: f32) -> Result<()> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(Error::input(task, field, v, "must be finite"))
+        Err(Error::input(
+            task,
+            format!("{prefix}{name}"),
+            v,
+            "must be finite",
+        ))
     }
 }
 
-fn in_range(task: &'static str, field: &str, v: f32, lo: f32, hi: f32) -> Result<()> {
+fn in_range(
+    task: &'static str,
+    (prefix, name): (&str, &str),
+    v: f32,
+    lo: f32,
+    hi: f32,
+) -> Result<()> {
     if v >= lo && v <= hi {
         Ok(())
     } else {
         Err(Error::input(
             task,
-            field,
+            format!("{prefix}{name}"),
             v,
             format!("must be in [{lo}, {hi}]"),
+        ))
+    }
+}
+
+/// `> 0`; NaN fails, +∞ passes (callers that forbid ∞ check `finite` too).
+fn positive(task: &'static str, (prefix, name): (&str, &str), v: f32) -> Result<()> {
+    if v > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::input(
+            task,
+            format!("{prefix}{name}"),
+            v,
+            "must be > 0",
         ))
     }
 }
@@ -89,7 +117,7 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
             "needs at least one component",
         ));
     }
-    finite(T, "input.tile_unit_length", input.tile_unit_length)?;
+    finite(T, ("input.", "tile_unit_length"), input.tile_unit_length)?;
     if input.tile_unit_length <= 0.0 {
         return Err(Error::input(
             T,
@@ -398,33 +426,33 @@ fn roughness(task: &'static str, r: &RoughnessInput, field: &str) -> Result<()> 
     }
     in_range(
         task,
-        &format!("{field}.global_roughness"),
+        (field, ".global_roughness"),
         r.global_roughness,
         0.0,
         1.0,
     )?;
     finite(
         task,
-        &format!("{field}.roughness_multiplier"),
+        (field, ".roughness_multiplier"),
         r.roughness_multiplier,
     )?;
+    in_range(task, (field, ".min_roughness"), r.min_roughness, 0.0, 1.0)?;
     in_range(
         task,
-        &format!("{field}.min_roughness"),
-        r.min_roughness,
-        0.0,
-        1.0,
-    )?;
-    in_range(
-        task,
-        &format!("{field}.max_roughness"),
+        (field, ".max_roughness"),
         r.max_roughness,
         r.min_roughness,
         1.0,
     )
 }
 
-fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) -> Result<()> {
+/// The checks every trace task shares, starting with its (first) output `(field, texture)`.
+fn trace_common(
+    task: &'static str,
+    c: &TraceTaskCommon,
+    (output_field, output): (&str, &TextureInput),
+) -> Result<()> {
+    writable(task, output_field, output)?;
     readable(task, "common.depth.texture", &c.depth.texture)?;
     readable(task, "common.normal.texture", &c.normal.texture)?;
     if !c.normal.normal_to_world.is_finite() {
@@ -441,7 +469,7 @@ fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) 
     }
     in_range(
         task,
-        "common.specular.global_metalness",
+        ("common.specular.", "global_metalness"),
         c.specular.global_metalness,
         0.0,
         1.0,
@@ -456,14 +484,7 @@ fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) 
         }
     }
     matrices(task, "common.view", &c.view)?;
-    if c.max_ray_length.is_nan() || c.max_ray_length <= 0.0 {
-        return Err(Error::input(
-            task,
-            "common.max_ray_length",
-            c.max_ray_length,
-            "must be > 0 (∞ allowed)",
-        ));
-    }
+    positive(task, ("common.", "max_ray_length"), c.max_ray_length)?;
     let o = &c.ray_offset;
     for (n, v) in [
         ("world_position_threshold", o.world_position_threshold),
@@ -473,10 +494,10 @@ fn trace_common(task: &'static str, c: &TraceTaskCommon, output: &TextureInput) 
         ("cam_distance_linear", o.cam_distance_linear),
         ("cam_distance_quadratic", o.cam_distance_quadratic),
     ] {
-        finite(task, &format!("common.ray_offset.{n}"), v)?;
+        finite(task, ("common.ray_offset.", n), v)?;
     }
     let mut tex: Vec<(&str, &TextureInput)> = vec![
-        ("output", output),
+        (output_field, output),
         ("common.depth.texture", &c.depth.texture),
         ("common.normal.texture", &c.normal.texture),
     ];
@@ -523,16 +544,29 @@ fn denoise_common(
 
 fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
     let unit = |n: &str, v: glam::Vec3| {
-        if !v.is_finite() || (v.length() - 1.0).abs() > 1e-3 {
+        if v.is_finite() && (v.length() - 1.0).abs() <= 1e-3 {
+            Ok(())
+        } else {
             Err(Error::input(
                 task,
                 format!("{field}.{n}"),
                 v,
                 "must be a finite unit vector",
             ))
-        } else {
-            Ok(())
         }
+    };
+    // Point and spot lights: a finite position, a radius ≥ 0 and a range > 0.
+    let emitter = |position: glam::Vec3, radius: f32, range: f32| {
+        if !position.is_finite() {
+            return Err(Error::input(
+                task,
+                format!("{field}.position"),
+                position,
+                "must be finite",
+            ));
+        }
+        in_range(task, (field, ".radius"), radius, 0.0, f32::MAX)?;
+        positive(task, (field, ".range"), range)
     };
     match *l {
         LightInfo::Directional {
@@ -542,7 +576,7 @@ fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
             unit("direction", direction)?;
             in_range(
                 task,
-                &format!("{field}.angular_extent"),
+                (field, ".angular_extent"),
                 angular_extent,
                 0.0,
                 std::f32::consts::PI,
@@ -552,26 +586,7 @@ fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
             position,
             radius,
             range,
-        } => {
-            if !position.is_finite() {
-                return Err(Error::input(
-                    task,
-                    format!("{field}.position"),
-                    position,
-                    "must be finite",
-                ));
-            }
-            in_range(task, &format!("{field}.radius"), radius, 0.0, f32::MAX)?;
-            if range.is_nan() || range <= 0.0 {
-                return Err(Error::input(
-                    task,
-                    format!("{field}.range"),
-                    range,
-                    "must be > 0",
-                ));
-            }
-            Ok(())
-        }
+        } => emitter(position, radius, range),
         LightInfo::Spot {
             position,
             direction,
@@ -579,33 +594,18 @@ fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
             range,
             apex_angle,
         } => {
-            if !position.is_finite() {
-                return Err(Error::input(
-                    task,
-                    format!("{field}.position"),
-                    position,
-                    "must be finite",
-                ));
-            }
+            emitter(position, radius, range)?;
             unit("direction", direction)?;
-            in_range(task, &format!("{field}.radius"), radius, 0.0, f32::MAX)?;
-            if range.is_nan() || range <= 0.0 {
-                return Err(Error::input(
-                    task,
-                    format!("{field}.range"),
-                    range,
-                    "must be > 0",
-                ));
-            }
-            if !(apex_angle > 0.0 && apex_angle <= std::f32::consts::FRAC_PI_2) {
-                return Err(Error::input(
+            if apex_angle > 0.0 && apex_angle <= std::f32::consts::FRAC_PI_2 {
+                Ok(())
+            } else {
+                Err(Error::input(
                     task,
                     format!("{field}.apex_angle"),
                     apex_angle,
                     "must be in (0, π/2]",
-                ));
+                ))
             }
-            Ok(())
         }
     }
 }
@@ -613,6 +613,13 @@ fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
 /// Validates a render task's own fields (handles are checked by the context).
 pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
     let name = task.name();
+    let one_in_one_out = |c: &DenoiseTaskCommon, input: &TextureInput, output: &TextureInput| {
+        denoise_common(
+            name,
+            c,
+            &[("input", input, false), ("output", output, true)],
+        )
+    };
     match task {
         RenderTask::DirectLightingInjection(t) => {
             readable(name, "depth.texture", &t.depth.texture)?;
@@ -655,8 +662,7 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             }
         }
         RenderTask::TraceSpecular(t) => {
-            writable(name, "output", &t.output)?;
-            trace_common(name, &t.common, &t.output)?;
+            trace_common(name, &t.common, ("output", &t.output))?;
             match (&t.demodulation_output, t.demodulate_specular) {
                 (Some(o), _) => writable(name, "demodulation_output", o)?,
                 (None, true) => {
@@ -671,12 +677,10 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             }
         }
         RenderTask::TraceDiffuse(t) => {
-            writable(name, "output", &t.output)?;
-            trace_common(name, &t.common, &t.output)?;
+            trace_common(name, &t.common, ("output", &t.output))?;
         }
         RenderTask::TraceAmbientOcclusion(t) => {
-            writable(name, "output", &t.output)?;
-            trace_common(name, &t.common, &t.output)?;
+            trace_common(name, &t.common, ("output", &t.output))?;
             if !t.ao_radius.is_finite() || t.ao_radius <= 0.0 {
                 return Err(Error::input(
                     name,
@@ -687,14 +691,12 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
             }
         }
         RenderTask::TraceShadow(t) => {
-            writable(name, "output", &t.output)?;
-            trace_common(name, &t.common, &t.output)?;
+            trace_common(name, &t.common, ("output", &t.output))?;
             light(name, "light", &t.light)?;
         }
         RenderTask::TraceMultiShadow(t) => {
-            writable(name, "output0", &t.output0)?;
+            trace_common(name, &t.common, ("output0", &t.output0))?;
             writable(name, "output1", &t.output1)?;
-            trace_common(name, &t.common, &t.output0)?;
             if t.lights.is_empty() || t.lights.len() > MAX_MULTI_SHADOW_LIGHTS {
                 return Err(Error::input(
                     name,
@@ -707,16 +709,8 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
                 light(name, &format!("lights[{i}]"), l)?;
             }
         }
-        RenderTask::DenoiseSpecular(t) => denoise_common(
-            name,
-            &t.common,
-            &[("input", &t.input, false), ("output", &t.output, true)],
-        )?,
-        RenderTask::DenoiseDiffuse(t) => denoise_common(
-            name,
-            &t.common,
-            &[("input", &t.input, false), ("output", &t.output, true)],
-        )?,
+        RenderTask::DenoiseSpecular(t) => one_in_one_out(&t.common, &t.input, &t.output)?,
+        RenderTask::DenoiseDiffuse(t) => one_in_one_out(&t.common, &t.input, &t.output)?,
         RenderTask::DenoiseSpecularAndDiffuse(t) => denoise_common(
             name,
             &t.common,
@@ -727,16 +721,8 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
                 ("output_diffuse", &t.output_diffuse, true),
             ],
         )?,
-        RenderTask::DenoiseDiffuseOcclusion(t) => denoise_common(
-            name,
-            &t.common,
-            &[("input", &t.input, false), ("output", &t.output, true)],
-        )?,
-        RenderTask::DenoiseShadow(t) => denoise_common(
-            name,
-            &t.common,
-            &[("input", &t.input, false), ("output", &t.output, true)],
-        )?,
+        RenderTask::DenoiseDiffuseOcclusion(t) => one_in_one_out(&t.common, &t.input, &t.output)?,
+        RenderTask::DenoiseShadow(t) => one_in_one_out(&t.common, &t.input, &t.output)?,
         RenderTask::DenoiseMultiShadow(t) => denoise_common(
             name,
             &t.common,

@@ -597,6 +597,19 @@ pub enum RenderTask {
 }
 
 impl RenderTask {
+    /// The shared inputs of a denoise task; `None` for other tasks.
+    pub fn denoise_common(&self) -> Option<&DenoiseTaskCommon> {
+        match self {
+            RenderTask::DenoiseSpecular(t) => Some(&t.common),
+            RenderTask::DenoiseDiffuse(t) => Some(&t.common),
+            RenderTask::DenoiseSpecularAndDiffuse(t) => Some(&t.common),
+            RenderTask::DenoiseDiffuseOcclusion(t) => Some(&t.common),
+            RenderTask::DenoiseShadow(t) => Some(&t.common),
+            RenderTask::DenoiseMultiShadow(t) => Some(&t.common),
+            _ => None,
+        }
+    }
+
     /// The task type's name, as errors report it.
     pub fn name(&self) -> &'static str {
         match self {
