@@ -81,11 +81,7 @@ fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
     // A stale instance handle in a task.
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g2, 1.0);
-    c.schedule_bvh_task(InstanceTask {
-        operation: TaskOperation::Register,
-        handle: i,
-        input: InstanceInput::new(g2, Affine3A::IDENTITY),
-    });
+    register_instance(&mut c, i, g2, Affine3A::IDENTITY);
     let mut e = encoder();
     assert!(matches!(
         ctx.build_gpu_task(c, &mut e),
@@ -100,11 +96,7 @@ fn stale_handles_of_every_kind_are_errors_and_context_keeps_working() {
     let i2 = ctx.create_instance_handle();
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g2, 1.0);
-    c.schedule_bvh_task(InstanceTask {
-        operation: TaskOperation::Register,
-        handle: i2,
-        input: InstanceInput::new(g2, Affine3A::IDENTITY),
-    });
+    register_instance(&mut c, i2, g2, Affine3A::IDENTITY);
     build_submit_complete(&ctx, c);
     assert_eq!(ctx.recorded_task_counts().geometry_tasks, 1);
 
@@ -314,11 +306,12 @@ fn instance_data_is_at_the_instance_index() {
         let mut c = ctx.create_task_container();
         for h in chunk {
             let x = h.index() as f32 * 10.0 + n as f32;
-            c.schedule_bvh_task(InstanceTask {
-                operation: TaskOperation::Register,
-                handle: **h,
-                input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))),
-            });
+            register_instance(
+                &mut c,
+                **h,
+                g,
+                Affine3A::from_translation(Vec3::new(x, 1.0, 2.0)),
+            );
             live.push((**h, x));
         }
         build_submit_complete(&ctx, c);
@@ -332,11 +325,12 @@ fn instance_data_is_at_the_instance_index() {
     let mut c = ctx.create_task_container();
     for h in &again {
         let x = -(h.index() as f32) - 0.5;
-        c.schedule_bvh_task(InstanceTask {
-            operation: TaskOperation::Register,
-            handle: *h,
-            input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 1.0, 2.0))),
-        });
+        register_instance(
+            &mut c,
+            *h,
+            g,
+            Affine3A::from_translation(Vec3::new(x, 1.0, 2.0)),
+        );
         live.push((*h, x));
     }
     build_submit_complete(&ctx, c);
@@ -477,11 +471,7 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
     let i = ctx.create_instance_handle();
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
-    c.schedule_bvh_task(InstanceTask {
-        operation: TaskOperation::Register,
-        handle: i,
-        input: InstanceInput::new(g, Affine3A::IDENTITY),
-    });
+    register_instance(&mut c, i, g, Affine3A::IDENTITY);
     build_submit_complete(&ctx, c);
     let mut peak = 0;
     for frame in 0..30 {

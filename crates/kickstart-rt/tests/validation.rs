@@ -271,11 +271,7 @@ fn row_instance_geometry_unregistered() {
     let ctx = context(2);
     let g = ctx.create_geometry_handle();
     let mut c = ctx.create_task_container();
-    c.schedule_bvh_task(InstanceTask {
-        operation: TaskOperation::Register,
-        handle: ctx.create_instance_handle(),
-        input: InstanceInput::new(g, Affine3A::IDENTITY),
-    });
+    register_instance(&mut c, ctx.create_instance_handle(), g, Affine3A::IDENTITY);
     expect_field(&ctx, c, "InstanceTask", "input.geometry");
 }
 
@@ -341,6 +337,17 @@ fn ao_task() -> TraceAmbientOcclusionTask {
     }
 }
 
+/// A trace-AO task with one field made bad by `f` must be refused naming `field`.
+fn ao_row(field: &str, f: impl FnOnce(&mut TraceAmbientOcclusionTask)) {
+    let mut t = ao_task();
+    f(&mut t);
+    render_row(
+        RenderTask::TraceAmbientOcclusion(t),
+        "TraceAmbientOcclusionTask",
+        field,
+    );
+}
+
 fn render_row(task: RenderTask, name: &str, field: &str) {
     let ctx = context(2);
     let mut c = ctx.create_task_container();
@@ -365,38 +372,22 @@ fn valid_render_task_is_refused_as_unsupported_by_name() {
 
 #[test]
 fn row_trace_output() {
-    let mut t = ao_task();
-    t.output = texture(F::Rgba8Unorm, 16, 16, U::STORAGE_BINDING);
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "output",
-    );
-    let mut t = ao_task();
-    t.output = texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING);
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "output",
-    );
+    ao_row("output", |t| {
+        t.output = texture(F::Rgba8Unorm, 16, 16, U::STORAGE_BINDING)
+    });
+    ao_row("output", |t| {
+        t.output = texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING)
+    });
 }
 
 #[test]
 fn row_trace_inputs_readable() {
-    let mut t = ao_task();
-    t.common.depth.texture = texture(F::R32Float, 16, 16, U::STORAGE_BINDING);
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.depth.texture",
-    );
-    let mut t = ao_task();
-    t.common.depth.texture = texture(F::Depth24PlusStencil8, 16, 16, U::TEXTURE_BINDING);
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.depth.texture",
-    );
+    ao_row("common.depth.texture", |t| {
+        t.common.depth.texture = texture(F::R32Float, 16, 16, U::STORAGE_BINDING)
+    });
+    ao_row("common.depth.texture", |t| {
+        t.common.depth.texture = texture(F::Depth24PlusStencil8, 16, 16, U::TEXTURE_BINDING)
+    });
     // An engine's Depth32Float depth buffer is accepted as is.
     let ctx = context(1);
     let mut t = ao_task();
@@ -411,24 +402,16 @@ fn row_trace_inputs_readable() {
         })
     );
     submit(e);
-    let mut t = ao_task();
-    t.common.environment_map = Some(texture(F::Rgba16Float, 16, 16, U::STORAGE_BINDING));
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.environment_map",
-    );
+    ao_row("common.environment_map", |t| {
+        t.common.environment_map = Some(texture(F::Rgba16Float, 16, 16, U::STORAGE_BINDING))
+    });
 }
 
 #[test]
 fn row_trace_roughness() {
-    let mut t = ao_task();
-    t.common.roughness.global_roughness = 2.0;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.roughness.global_roughness",
-    );
+    ao_row("common.roughness.global_roughness", |t| {
+        t.common.roughness.global_roughness = 2.0
+    });
     let mut t = ao_task();
     t.common.roughness.min_roughness = 0.5;
     t.common.roughness.max_roughness = 0.2;
@@ -437,93 +420,57 @@ fn row_trace_roughness() {
         "TraceAmbientOcclusionTask",
         "common.roughness.max_roughness",
     );
-    let mut t = ao_task();
-    t.common.roughness.roughness_multiplier = f32::NAN;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.roughness.roughness_multiplier",
-    );
+    ao_row("common.roughness.roughness_multiplier", |t| {
+        t.common.roughness.roughness_multiplier = f32::NAN
+    });
 }
 
 #[test]
 fn row_trace_metalness() {
-    let mut t = ao_task();
-    t.common.specular.global_metalness = -0.1;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.specular.global_metalness",
-    );
+    ao_row("common.specular.global_metalness", |t| {
+        t.common.specular.global_metalness = -0.1
+    });
 }
 
 #[test]
 fn row_trace_view_matrices() {
-    let mut t = ao_task();
-    t.common.view.view_to_clip = Mat4::ZERO;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.view.view_to_clip",
-    );
+    ao_row("common.view.view_to_clip", |t| {
+        t.common.view.view_to_clip = Mat4::ZERO
+    });
 }
 
 #[test]
 fn row_trace_max_ray_length() {
-    let mut t = ao_task();
-    t.common.max_ray_length = 0.0;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.max_ray_length",
-    );
+    ao_row("common.max_ray_length", |t| t.common.max_ray_length = 0.0);
 }
 
 #[test]
 fn row_trace_ray_offset() {
-    let mut t = ao_task();
-    t.common.ray_offset.cam_distance_linear = f32::INFINITY;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "common.ray_offset.cam_distance_linear",
-    );
+    ao_row("common.ray_offset.cam_distance_linear", |t| {
+        t.common.ray_offset.cam_distance_linear = f32::INFINITY
+    });
 }
 
 #[test]
 fn row_viewport() {
-    let mut t = ao_task();
-    t.common.viewport = Some(Viewport {
-        x: 8,
-        y: 0,
-        width: 16,
-        height: 16,
+    ao_row("viewport", |t| {
+        t.common.viewport = Some(Viewport {
+            x: 8,
+            y: 0,
+            width: 16,
+            height: 16,
+        })
     });
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "viewport",
-    );
-    let mut t = ao_task();
-    t.common.viewport = Some(Viewport {
-        x: 0,
-        y: 0,
-        width: 0,
-        height: 16,
+    ao_row("viewport", |t| {
+        t.common.viewport = Some(Viewport {
+            x: 0,
+            y: 0,
+            width: 0,
+            height: 16,
+        })
     });
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "viewport",
-    );
     // Mismatched sizes: output smaller than the G-buffer's full extent.
-    let mut t = ao_task();
-    t.common.depth.texture = sampled(8, 8);
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "viewport",
-    );
+    ao_row("viewport", |t| t.common.depth.texture = sampled(8, 8));
 }
 
 #[test]
@@ -543,13 +490,7 @@ fn row_demodulation_output() {
 
 #[test]
 fn row_ao_radius() {
-    let mut t = ao_task();
-    t.ao_radius = -1.0;
-    render_row(
-        RenderTask::TraceAmbientOcclusion(t),
-        "TraceAmbientOcclusionTask",
-        "ao_radius",
-    );
+    ao_row("ao_radius", |t| t.ao_radius = -1.0);
 }
 
 #[test]
@@ -852,11 +793,7 @@ fn row_instance_operation() {
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
     for _ in 0..2 {
-        c.schedule_bvh_task(InstanceTask {
-            operation: TaskOperation::Register,
-            handle: i,
-            input: InstanceInput::new(g, Affine3A::IDENTITY),
-        });
+        register_instance(&mut c, i, g, Affine3A::IDENTITY);
     }
     expect_field(&ctx, c, "InstanceTask", "operation");
 }

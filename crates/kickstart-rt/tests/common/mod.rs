@@ -199,3 +199,17 @@ pub fn build_submit_complete(ctx: &kickstart_rt::ExecuteContext, c: kickstart_rt
     ctx.mark_gpu_task_completed(t)
         .expect("mark_gpu_task_completed");
 }
+
+/// Schedules the registration of instance `handle` of `geometry` at `transform`.
+pub fn register_instance(
+    c: &mut kickstart_rt::TaskContainer,
+    handle: kickstart_rt::InstanceHandle,
+    geometry: kickstart_rt::GeometryHandle,
+    transform: glam::Affine3A,
+) {
+    c.schedule_bvh_task(kickstart_rt::InstanceTask {
+        operation: kickstart_rt::TaskOperation::Register,
+        handle,
+        input: kickstart_rt::InstanceInput::new(geometry, transform),
+    });
+}
