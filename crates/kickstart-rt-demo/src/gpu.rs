@@ -2,7 +2,7 @@
 
 use kickstart_rt as ksrt;
 
-type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
+use crate::AnyResult;
 
 fn adapter() -> AnyResult<wgpu::Adapter> {
     let instance =

@@ -6,6 +6,9 @@ mod scene;
 
 use clap::{Parser, Subcommand};
 
+/// Result of the `ksrt` commands: any error, printed by `main`.
+pub type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
+
 /// kickstart-rt's demo and tool.
 #[derive(Parser)]
 #[command(

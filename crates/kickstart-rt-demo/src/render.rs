@@ -11,7 +11,7 @@ use wgpu::util::DeviceExt;
 
 use crate::scene::{default_scene, Mesh};
 
-type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
+use crate::AnyResult;
 
 /// Options of `ksrt render`.
 pub struct RenderOptions {
