@@ -107,10 +107,13 @@ mod context;
 pub mod cpu;
 mod device;
 mod error;
+mod gpu;
 mod handles;
 mod logging;
+mod scene;
 mod staging;
 mod tasks;
+mod trace;
 mod validate;
 mod version;
 

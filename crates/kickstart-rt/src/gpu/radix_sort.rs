@@ -1,0 +1,1 @@
+//! GPU radix sort (filled by its module's author).

@@ -1,0 +1,178 @@
+//! Records compute dispatches into the engine's encoder. Every SDK dispatch goes through
+//! [`Recorder`], so GPU timing (timestamp queries around each pass) is one switch.
+
+use bytemuck::Pod;
+use wgpu::util::DeviceExt;
+
+/// Largest workgroup count of one dispatch dimension (WebGPU default limit).
+pub(crate) const MAX_DISPATCH_DIM: u32 = 65535;
+
+/// Splits a 1-D workgroup count into `(x, y)` with `x ≤ 65535`. Shaders rebuild the linear index
+/// as `wid.y * nwg.x + wid.x` and return past their element count.
+pub(crate) fn split_workgroups(count: u32) -> (u32, u32) {
+    if count <= MAX_DISPATCH_DIM {
+        (count.max(1), 1)
+    } else {
+        let y = count.div_ceil(MAX_DISPATCH_DIM);
+        (count.div_ceil(y), y)
+    }
+}
+
+/// One timed pass: its label and the query indices of its begin/end timestamps.
+#[derive(Debug, Clone)]
+pub(crate) struct TimedPass {
+    pub label: &'static str,
+    pub begin: u32,
+    pub end: u32,
+}
+
+/// Timestamp queries of one GPU task (present only when GPU timing is enabled).
+pub(crate) struct Timestamps {
+    pub query_set: wgpu::QuerySet,
+    pub capacity: u32,
+    pub passes: Vec<TimedPass>,
+}
+
+impl Timestamps {
+    /// Queries of one task: two per pass.
+    pub const CAPACITY: u32 = 1024;
+
+    pub fn new(device: &wgpu::Device) -> Self {
+        Timestamps {
+            query_set: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("kickstart-rt timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: Self::CAPACITY,
+            }),
+            capacity: Self::CAPACITY,
+            passes: Vec::new(),
+        }
+    }
+
+    fn next(&mut self, label: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        let begin = self.passes.len() as u32 * 2;
+        if begin + 2 > self.capacity {
+            return None;
+        }
+        self.passes.push(TimedPass {
+            label,
+            begin,
+            end: begin + 1,
+        });
+        Some(wgpu::ComputePassTimestampWrites {
+            query_set: &self.query_set,
+            beginning_of_pass_write_index: Some(begin),
+            end_of_pass_write_index: Some(begin + 1),
+        })
+    }
+}
+
+/// Records compute work for one GPU task into the engine's encoder.
+pub(crate) struct Recorder<'a> {
+    pub device: &'a wgpu::Device,
+    pub encoder: &'a mut wgpu::CommandEncoder,
+    pub timestamps: Option<&'a mut Timestamps>,
+}
+
+impl<'a> Recorder<'a> {
+    /// A recorder without timing.
+    pub fn new(device: &'a wgpu::Device, encoder: &'a mut wgpu::CommandEncoder) -> Self {
+        Recorder {
+            device,
+            encoder,
+            timestamps: None,
+        }
+    }
+
+    /// One compute pass with one dispatch of `workgroups` (1-D, split into 2-D when large).
+    /// `bind_groups[i]` binds to group `i`.
+    pub fn dispatch(
+        &mut self,
+        label: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        bind_groups: &[&wgpu::BindGroup],
+        workgroups: u32,
+    ) {
+        if workgroups == 0 {
+            return;
+        }
+        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(label));
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes,
+            });
+        pass.set_pipeline(pipeline);
+        for (i, bg) in bind_groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, Some(*bg), &[]);
+        }
+        let (x, y) = split_workgroups(workgroups);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+
+    /// A uniform buffer holding `data` (written at creation: safe to use in this encoder).
+    pub fn uniform<T: Pod>(&self, label: &str, data: &T) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::bytes_of(data),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
+    /// A storage buffer initialised with `data` (read-only use; written at creation).
+    pub fn storage_init(&self, label: &str, data: &[u8]) -> wgpu::Buffer {
+        let mut padded;
+        let contents = if data.len() % 4 != 0 || data.is_empty() {
+            padded = data.to_vec();
+            padded.resize(data.len().div_ceil(4).max(1) * 4, 0);
+            &padded[..]
+        } else {
+            data
+        };
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            })
+    }
+
+    /// A bind group for `pipeline`'s group `index` with `buffers` at bindings 0, 1, 2, … in order.
+    pub fn bind_buffers(
+        &self,
+        label: &str,
+        pipeline: &wgpu::ComputePipeline,
+        index: u32,
+        buffers: &[wgpu::BindingResource<'_>],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, r)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: r.clone(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(index),
+            entries: &entries,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn workgroup_split_covers_the_count_within_limits() {
+        for n in [1u32, 65535, 65536, 200_000, 16_000_000] {
+            let (x, y) = split_workgroups(n);
+            assert!(x <= MAX_DISPATCH_DIM && y <= MAX_DISPATCH_DIM);
+            assert!(x as u64 * y as u64 >= n as u64, "{n}: {x}x{y}");
+        }
+    }
+}

@@ -1,0 +1,28 @@
+//! WGSL assembly and compute pipeline creation. WGSL has no `#include`: shared snippets (the
+//! traversal module, packing helpers) are concatenated in front of a pass's source.
+
+/// A compute pipeline from WGSL `source` with an automatic layout (groups as the shader declares).
+pub(crate) fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    entry_point: &str,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some(entry_point),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// Concatenates WGSL sources (shared modules first).
+pub(crate) fn assemble(parts: &[&str]) -> String {
+    parts.join("\n")
+}

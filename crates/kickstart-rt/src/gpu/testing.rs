@@ -1,0 +1,103 @@
+//! One GPU device for the crate's unit tests (device creation is slow on lavapipe). A missing
+//! adapter fails the test: GPU tests never skip. `KSRT_TEST_MINIMAL_DEVICE=1` requests
+//! `Features::empty()` and `Limits::default()`, as CI's second run.
+
+use std::sync::OnceLock;
+
+pub(crate) struct TestGpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+}
+
+pub(crate) fn gpu() -> &'static TestGpu {
+    static GPU: OnceLock<TestGpu> = OnceLock::new();
+    GPU.get_or_init(|| {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        if std::env::var("WGPU_BACKEND").is_err() {
+            desc.backends = wgpu::Backends::PRIMARY;
+        }
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pollster::block_on(instance.request_adapter(&Default::default()))
+            .unwrap_or_else(|e| {
+                panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")
+            });
+        let minimal = std::env::var("KSRT_TEST_MINIMAL_DEVICE").is_ok_and(|v| v == "1");
+        let (features, limits) = if minimal {
+            (wgpu::Features::empty(), wgpu::Limits::default())
+        } else {
+            (adapter.features(), adapter.limits())
+        };
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("kickstart-rt unit tests"),
+            required_features: features,
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .expect("request_device");
+        TestGpu { device, queue }
+    })
+}
+
+/// Reads `size` bytes of `buffer` from `offset` back to the CPU (waits; tests only).
+pub(crate) fn read_back(buffer: &wgpu::Buffer, offset: u64, size: u64) -> Vec<u8> {
+    let g = gpu();
+    let staging = g.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("test read-back"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
+    g.queue.submit([enc.finish()]);
+    staging.map_async(wgpu::MapMode::Read, .., |r| r.expect("map"));
+    g.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    let data = staging
+        .slice(..)
+        .get_mapped_range()
+        .expect("mapped")
+        .to_vec();
+    data
+}
+
+/// A storage buffer (STORAGE | COPY_SRC | COPY_DST) with `data` in it.
+pub(crate) fn buffer_with(data: &[u8]) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    gpu()
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("test data"),
+            contents: data,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        })
+}
+
+/// An empty storage buffer (STORAGE | COPY_SRC | COPY_DST) of `size` bytes.
+pub(crate) fn buffer(size: u64) -> wgpu::Buffer {
+    gpu().device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("test buffer"),
+        size,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// Submits `f`'s recording and waits for it (tests only).
+pub(crate) fn run(f: impl FnOnce(&mut super::Recorder<'_>)) {
+    let g = gpu();
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    {
+        let mut rec = super::Recorder::new(&g.device, &mut enc);
+        f(&mut rec);
+    }
+    g.queue.submit([enc.finish()]);
+    g.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+}

@@ -1,0 +1,1 @@
+//! Vertex pulling (filled by its module's author).

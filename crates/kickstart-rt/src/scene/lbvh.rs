@@ -1,0 +1,1 @@
+//! GPU LBVH (filled by its module's author).

@@ -1,0 +1,5 @@
+//! The scene on the GPU: shared pools, ingestion, BLAS/TLAS builds. Layouts:
+//! `docs/ray-tracing-core.md`.
+
+pub(crate) mod ingest;
+pub(crate) mod lbvh;

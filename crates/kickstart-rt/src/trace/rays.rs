@@ -1,0 +1,1 @@
+//! Ray batches (filled by its module's author).
