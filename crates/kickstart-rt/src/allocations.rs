@@ -18,6 +18,8 @@ pub struct ResourceAllocations {
     pub denoiser: u64,
     /// Upload staging owned by working sets.
     pub staging: u64,
+    /// Capacity of the shared pools (vertex copies, BLAS) not handed out yet.
+    pub pool_reserve: u64,
 }
 
 impl ResourceAllocations {
@@ -30,5 +32,6 @@ impl ResourceAllocations {
             + self.scratch
             + self.denoiser
             + self.staging
+            + self.pool_reserve
     }
 }

@@ -1,6 +1,6 @@
 //! The SDK instance: handles, working sets, and recording GPU tasks into the engine's encoder.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -8,8 +8,15 @@ use crate::allocations::ResourceAllocations;
 use crate::container::TaskContainer;
 use crate::error::{Error, Result};
 use crate::handles::*;
+use crate::gpu::recorder::Timestamps;
+use crate::gpu::Recorder;
 use crate::logging::{LogCallback, Logger, Severity};
+use crate::scene::gpu_scene::{
+    GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE, INSTANCE_RECORD_BYTES,
+};
+use crate::scene::stubs::ComponentIngest;
 use crate::staging::{StagingBuffer, StagingPool};
+use crate::timing::{GpuTimings, TimingReadback};
 use crate::tasks::*;
 use crate::validate;
 use crate::version::Version;
@@ -17,8 +24,10 @@ use crate::version::Version;
 static NEXT_CONTEXT_ID: AtomicU32 = AtomicU32::new(1);
 
 /// Bytes of one instance's record in the instance data table. The table is indexed by the
-/// instance handle's slot index, which is the instance index a ray hit reports.
-pub const INSTANCE_RECORD_SIZE: u64 = 64;
+/// instance handle's slot index, which is the instance index a ray hit reports. Layout (32-bit
+/// words): 0–11 object-to-world 3×4 (three rows), 12–23 world-to-object 3×4 (rows), 24 geometry
+/// slot index, 25 inclusion mask, 26 flags (bit 0: live and participating in the TLAS).
+pub const INSTANCE_RECORD_SIZE: u64 = INSTANCE_RECORD_BYTES;
 
 /// Settings of [`ExecuteContext::new`].
 #[derive(Clone)]
@@ -33,6 +42,10 @@ pub struct InitSettings {
     pub log_callback: Option<LogCallback>,
     /// Least severe message delivered.
     pub min_log_severity: Severity,
+    /// Measure every SDK pass with GPU timestamp queries (read them with
+    /// [`ExecuteContext::wait_for_gpu_timings`]). Needs `Features::TIMESTAMP_QUERY` on the
+    /// device; without it a warning is logged and timing stays off. Default off.
+    pub gpu_timing: bool,
 }
 
 impl Default for InitSettings {
@@ -42,6 +55,7 @@ impl Default for InitSettings {
             version: crate::VERSION,
             log_callback: None,
             min_log_severity: Severity::Warning,
+            gpu_timing: false,
         }
     }
 }
@@ -53,6 +67,7 @@ impl std::fmt::Debug for InitSettings {
             .field("version", &self.version)
             .field("log_callback", &self.log_callback.is_some())
             .field("min_log_severity", &self.min_log_severity)
+            .field("gpu_timing", &self.gpu_timing)
             .finish()
     }
 }
@@ -97,25 +112,29 @@ pub enum DenoisingMethod {
     HighQuality,
 }
 
-/// GPU memory of a destroyed object, waiting for the tasks that used it.
-struct Retired {
-    last_used: u64,
-    kind: AllocKind,
-    buffers: Vec<wgpu::Buffer>,
-}
-
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum AllocKind {
-    VertexCopies,
-    Tlas,
-}
-
 struct GeometryData {
     name: String,
     allow_update: bool,
     triangles: u32,
-    /// SDK-owned copies: per component, its vertex bytes and, when indexed, its index bytes.
-    buffers: Vec<wgpu::Buffer>,
+    gpu: GeometryGpu,
+    dropped: Option<DroppedTriangles>,
+}
+
+/// Triangles ingestion dropped from a geometry (they are never hit); also logged as a warning
+/// naming the geometry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DroppedTriangles {
+    /// Triangles with an index ≥ the component's vertex count.
+    pub out_of_range_indices: u32,
+    /// Triangles with a NaN or infinite position (as given, or after the component transform).
+    pub non_finite_positions: u32,
+}
+
+/// Dropped-triangle counters of one task's ingestions, read back after it completes.
+struct DroppedReadback {
+    buffer: wgpu::Buffer,
+    mapped: Arc<AtomicBool>,
+    geometries: Vec<(GeometryHandle, String)>,
 }
 
 #[derive(Default)]
@@ -138,8 +157,9 @@ struct DenoisingSlot {
 /// Resources one in-flight GPU task holds until it is marked complete.
 struct WorkingSet {
     staging: Vec<StagingBuffer>,
-    /// Inputs the task reads, kept alive while the GPU may read them.
+    /// Inputs the task reads and the raw copies it made, kept alive while the GPU may read them.
     _inputs: Vec<wgpu::Buffer>,
+    dropped: Option<DroppedReadback>,
 }
 
 /// Counts of what `build_gpu_task` has recorded, since the context was created.
@@ -157,11 +177,24 @@ struct State {
     geometries: HandlePool<GeometryHandle, GeometrySlot>,
     instances: HandlePool<InstanceHandle, InstanceSlot>,
     denoisers: HandlePool<DenoisingContextHandle, DenoisingSlot>,
-    retired: Vec<Retired>,
     in_flight: BTreeMap<u64, WorkingSet>,
     invoked: Vec<(u64, Arc<AtomicBool>)>,
     staging: StagingPool,
-    instance_table: Option<wgpu::Buffer>,
+    scene: GpuScene,
+    /// Geometries waiting for a BLAS build or refit, in the order they were scheduled.
+    blas_queue: VecDeque<GeometryHandle>,
+    /// Instance slots whose records must be rewritten as dead (destroyed instances, instances of
+    /// destroyed geometry).
+    dead_instance_slots: Vec<u32>,
+    /// Geometry slots whose table record must be cleared (destroyed geometry).
+    dead_geometry_slots: Vec<u32>,
+    /// The set of TLAS leaves changed (instances added/removed, participation, a BLAS built).
+    tlas_rebuild: bool,
+    /// Only instance transforms (or refitted BLASes) changed since the last TLAS update.
+    tlas_refit: bool,
+    any_instance: bool,
+    dropped_readbacks: Vec<DroppedReadback>,
+    timings: BTreeMap<u64, TimingReadback>,
     next_serial: u64,
     counts: RecordedTaskCounts,
 }
@@ -174,6 +207,7 @@ pub struct ExecuteContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
     working_sets: u32,
+    gpu_timing: bool,
     logger: Logger,
     state: Mutex<State>,
 }
@@ -221,22 +255,38 @@ impl ExecuteContext {
             ));
         }
         crate::device::check_device(device)?;
+        let gpu_timing = settings.gpu_timing
+            && device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        if settings.gpu_timing && !gpu_timing {
+            logger.message(
+                Severity::Warning,
+                "InitSettings::gpu_timing needs Features::TIMESTAMP_QUERY on the device; timing is off",
+            );
+        }
         let id = NEXT_CONTEXT_ID.fetch_add(1, Ordering::Relaxed);
         Ok(ExecuteContext {
             id,
             device: device.clone(),
             queue: queue.clone(),
             working_sets: settings.supported_working_sets,
+            gpu_timing,
             logger,
             state: Mutex::new(State {
                 geometries: HandlePool::new(id),
                 instances: HandlePool::new(id),
                 denoisers: HandlePool::new(id),
-                retired: Vec::new(),
                 in_flight: BTreeMap::new(),
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
-                instance_table: None,
+                scene: GpuScene::new(device),
+                blas_queue: VecDeque::new(),
+                dead_instance_slots: Vec::new(),
+                dead_geometry_slots: Vec::new(),
+                tlas_rebuild: false,
+                tlas_refit: false,
+                any_instance: false,
+                dropped_readbacks: Vec::new(),
+                timings: BTreeMap::new(),
                 next_serial: 1,
                 counts: RecordedTaskCounts::default(),
             }),
@@ -315,13 +365,10 @@ impl ExecuteContext {
     pub fn destroy_geometry_handle(&self, handle: GeometryHandle) -> Result<()> {
         let mut s = self.state();
         let slot = s.geometries.remove(handle)?;
-        if let Some(d) = slot.data {
-            s.retired.push(Retired {
-                last_used: slot.last_used,
-                kind: AllocKind::VertexCopies,
-                buffers: d.buffers,
-            });
+        if let Some(mut d) = slot.data {
+            d.gpu.free_after(&mut s.scene, slot.last_used);
         }
+        s.dead_geometry_slots.push(handle.index);
         Ok(())
     }
 
@@ -341,9 +388,15 @@ impl ExecuteContext {
         }
     }
 
-    /// Destroys an instance (lazily released, as geometries).
+    /// Destroys an instance (lazily released, as geometries). It leaves the TLAS in the next
+    /// GPU task with a [`BvhBuildTask`].
     pub fn destroy_instance_handle(&self, handle: InstanceHandle) -> Result<()> {
-        self.state().instances.remove(handle).map(|_| ())
+        let mut s = self.state();
+        let slot = s.instances.remove(handle)?;
+        if slot.input.is_some() {
+            s.dead_instance_slots.push(handle.index);
+        }
+        Ok(())
     }
 
     /// Destroys several instances; stops at the first invalid handle.
@@ -395,7 +448,7 @@ impl ExecuteContext {
                 in_flight: s.in_flight.len(),
             });
         }
-        s.retired.clear();
+        s.scene.collect(u64::MAX);
         s.staging.clear();
         Ok(())
     }
@@ -403,18 +456,21 @@ impl ExecuteContext {
     /// GPU memory held, by kind.
     pub fn resource_allocations(&self) -> ResourceAllocations {
         let s = self.state();
-        let mut a = ResourceAllocations::default();
-        for d in s.geometries.values().filter_map(|g| g.data.as_ref()) {
-            a.vertex_copies += d.buffers.iter().map(|b| b.size()).sum::<u64>();
-        }
-        for r in &s.retired {
-            let bytes: u64 = r.buffers.iter().map(|b| b.size()).sum();
-            match r.kind {
-                AllocKind::VertexCopies => a.vertex_copies += bytes,
-                AllocKind::Tlas => a.tlas += bytes,
-            }
-        }
-        a.tlas += s.instance_table.as_ref().map_or(0, |b| b.size());
+        let sc = &s.scene;
+        let mut a = ResourceAllocations {
+            vertex_copies: sc.staged.used_bytes(),
+            blas: sc.triangles.used_bytes()
+                + sc.nodes.used_bytes()
+                + sc.words.used_bytes()
+                + sc.geometry_table.buffer.size(),
+            tlas: sc.tlas_bytes() + sc.instance_table.buffer.size(),
+            scratch: sc.scratch_bytes(),
+            pool_reserve: sc.staged.reserve_bytes()
+                + sc.triangles.reserve_bytes()
+                + sc.nodes.reserve_bytes()
+                + sc.words.reserve_bytes(),
+            ..Default::default()
+        };
         a.staging = s.staging.bytes()
             + s.in_flight
                 .values()
@@ -446,7 +502,8 @@ impl ExecuteContext {
     /// object-to-world 3×4 row-major, then geometry slot, inclusion mask, flags), for tools and
     /// tests that read it back. `None` before the first instance is registered.
     pub fn instance_table(&self) -> Option<wgpu::Buffer> {
-        self.state().instance_table.clone()
+        let s = self.state();
+        s.any_instance.then(|| s.scene.instance_table.buffer.clone())
     }
 
     /// Marks a GPU task built by [`Self::build_gpu_task`] as executed by the GPU, so its working
@@ -458,10 +515,111 @@ impl ExecuteContext {
             .in_flight
             .remove(&handle.0)
             .ok_or(Error::InvalidGpuTaskHandle(handle.0))?;
+        Self::retire(&mut s, ws);
+        Ok(())
+    }
+
+    /// Returns a completed task's staging to the pool and starts reading back its counters.
+    fn retire(s: &mut State, ws: WorkingSet) {
         for b in ws.staging {
             s.staging.release(b);
         }
-        Ok(())
+        if let Some(r) = ws.dropped {
+            let flag = r.mapped.clone();
+            r.buffer.map_async(wgpu::MapMode::Read, .., move |res| {
+                if res.is_ok() {
+                    flag.store(true, Ordering::Release);
+                }
+            });
+            s.dropped_readbacks.push(r);
+        }
+    }
+
+    /// Logs and records the dropped-triangle counts whose read-back has arrived.
+    fn collect_dropped(&self, s: &mut State) {
+        let mut i = 0;
+        while i < s.dropped_readbacks.len() {
+            if !s.dropped_readbacks[i].mapped.load(Ordering::Acquire) {
+                i += 1;
+                continue;
+            }
+            let r = s.dropped_readbacks.swap_remove(i);
+            let words: Vec<u32> = match r.buffer.slice(..).get_mapped_range() {
+                Ok(view) => bytemuck::pod_collect_to_vec(&view),
+                Err(_) => continue,
+            };
+            for (k, (handle, name)) in r.geometries.iter().enumerate() {
+                let d = DroppedTriangles {
+                    out_of_range_indices: words.get(2 * k).copied().unwrap_or(0),
+                    non_finite_positions: words.get(2 * k + 1).copied().unwrap_or(0),
+                };
+                if d != DroppedTriangles::default() {
+                    self.logger.message(
+                        Severity::Warning,
+                        &format!(
+                            "GeometryTask: geometry `{name}` ({handle:?}): dropped {} triangle(s) with out-of-range indices and {} with NaN/infinite positions; they are never hit",
+                            d.out_of_range_indices, d.non_finite_positions
+                        ),
+                    );
+                }
+                if let Ok(GeometrySlot { data: Some(g), .. }) = s.geometries.get_mut(*handle) {
+                    g.dropped = Some(d);
+                }
+            }
+        }
+    }
+
+    /// Triangles ingestion dropped from a geometry: `None` until the GPU task that ingested it
+    /// has been marked complete and its counters have been read back (asynchronously; any later
+    /// call to the context after a device poll picks them up). Also logged as a warning.
+    pub fn geometry_dropped_triangles(
+        &self,
+        handle: GeometryHandle,
+    ) -> Result<Option<DroppedTriangles>> {
+        let mut s = self.state();
+        self.collect_invoked(&mut s);
+        Ok(s.geometries.get(handle)?.data.as_ref().and_then(|d| d.dropped))
+    }
+
+    /// Whether a geometry's BLAS is built and not waiting for a rebuild or refit.
+    pub fn geometry_is_built(&self, handle: GeometryHandle) -> Result<bool> {
+        let s = self.state();
+        Ok(s.geometries
+            .get(handle)?
+            .data
+            .as_ref()
+            .is_some_and(|d| d.gpu.blas.is_some() && d.gpu.pending.is_none()))
+    }
+
+    /// Reads a built BLAS back to the CPU: its nodes, its triangles in leaf order, and its SAH
+    /// cost. **Blocks** until the device is idle: for tools, benchmarks and tests, not frames.
+    /// Submit the task that built it first.
+    pub fn read_back_blas(&self, handle: GeometryHandle) -> Result<crate::cpu::BlasReadback> {
+        let s = self.state();
+        let g = s.geometries.get(handle)?;
+        let Some(d) = &g.data else {
+            return Err(Error::ReadBack("the geometry is not registered".into()));
+        };
+        let (nodes, tris) = s.scene.read_back_blas(&self.queue, &d.gpu)?;
+        Ok(crate::cpu::BlasReadback::new(nodes, tris))
+    }
+
+    /// Creates every compute pipeline now, so the first frame that needs one does not stall.
+    pub fn prepare_pipelines(&self) {
+        self.state().scene.prepare_pipelines();
+    }
+
+    /// The GPU time of each SDK pass of `task` (built with [`InitSettings::gpu_timing`]).
+    /// **Blocks** until the device has executed it: for tools and benchmarks. Submit the task's
+    /// encoder first. Each task's timings can be read once.
+    pub fn wait_for_gpu_timings(&self, task: GpuTaskHandle) -> Result<GpuTimings> {
+        let readback = self.state().timings.remove(&task.0).ok_or_else(|| {
+            Error::ReadBack(format!(
+                "no GPU timings for task {}: InitSettings::gpu_timing off, no timestamp support, or already read",
+                task.0
+            ))
+        })?;
+        readback.wait(&self.device, self.queue.get_timestamp_period())
     }
 
     /// For applications that don't manage encoders: builds the container into a new encoder,
@@ -499,11 +657,10 @@ impl ExecuteContext {
         });
         for serial in done {
             if let Some(ws) = s.in_flight.remove(&serial) {
-                for b in ws.staging {
-                    s.staging.release(b);
-                }
+                Self::retire(s, ws);
             }
         }
+        self.collect_dropped(s);
     }
 
     /// Validates the whole container, then records its GPU work into the engine's `encoder`.
@@ -531,158 +688,379 @@ impl ExecuteContext {
             });
         }
         let plan = self.validate(&s, &container)?;
+        let s = &mut *s;
 
         // 1. Deferred destruction: release what no in-flight task can still read.
         let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
-        s.retired.retain(|r| r.last_used >= oldest);
+        s.scene.collect(oldest);
 
         let serial = s.next_serial;
         s.next_serial += 1;
         let mut ws = WorkingSet {
             staging: Vec::new(),
             _inputs: Vec::new(),
+            dropped: None,
         };
+        let mut timestamps = self.gpu_timing.then(|| Timestamps::new(&self.device));
 
-        // 2. Geometry ingestion: copy the application's bytes into SDK memory.
-        for (task, extents) in plan.geometries {
-            let mut buffers = Vec::new();
-            for (c, e) in task.input.components.iter().zip(&extents) {
-                let vb = &c.vertex_buffer.buffer;
-                buffers.push(self.copy_in(encoder, vb, e.vertex_bytes, "vertices"));
-                ws._inputs.push(vb.clone());
-                if let (Some(ib), Some(r)) = (&c.index_buffer, e.index_bytes) {
-                    buffers.push(self.copy_in(encoder, &ib.buffer, r, "indices"));
-                    ws._inputs.push(ib.buffer.clone());
-                }
-            }
-            let triangles = extents.iter().map(|e| e.triangles).sum();
-            // Validated above: the handle is live.
+        // Tables large enough for every live slot; staged space for every registration.
+        s.scene.ensure_tables(
+            encoder,
+            s.geometries.slot_count(),
+            s.instances.slot_count(),
+        )?;
+        let mut uploads = Uploads::default();
+        let mut ingestions = Vec::new();
+        for (task, extents) in &plan.geometries {
+            let triangles: u32 = extents.iter().map(|e| e.triangles).sum();
             let Ok(slot) = s.geometries.get_mut(task.handle) else {
                 continue;
             };
-            let old = slot.data.replace(GeometryData {
+            let staged = match (&mut slot.data, task.operation) {
+                (Some(d), TaskOperation::Update) => d.gpu.staged,
+                _ => None,
+            };
+            let staged = match staged {
+                Some(r) => r,
+                None => s
+                    .scene
+                    .alloc_staged(encoder, triangles, &task.input.name)?,
+            };
+            ingestions.push((*task, extents, staged, triangles));
+        }
+
+        // 2. Destroyed objects leave the tables; registrations reset their geometry record.
+        if !s.dead_geometry_slots.is_empty() {
+            for slot in std::mem::take(&mut s.dead_geometry_slots) {
+                uploads.push(
+                    &s.scene.geometry_table.buffer,
+                    slot as u64 * GEOMETRY_RECORD_SIZE,
+                    bytemuck::bytes_of(&[0u32; 4]),
+                );
+            }
+            // Instances of destroyed geometry must not trace a geometry that reuses its slot.
+            let dead: Vec<u32> = s
+                .instances
+                .handles()
+                .into_iter()
+                .filter(|h| {
+                    s.instances
+                        .get(*h)
+                        .ok()
+                        .and_then(|i| i.input.as_ref())
+                        .is_some_and(|i| s.geometries.get(i.geometry).is_err())
+                })
+                .map(|h| h.index)
+                .collect();
+            s.dead_instance_slots.extend(dead);
+        }
+        if !s.dead_instance_slots.is_empty() {
+            for slot in std::mem::take(&mut s.dead_instance_slots) {
+                uploads.push(
+                    &s.scene.instance_table.buffer,
+                    slot as u64 * INSTANCE_RECORD_SIZE,
+                    &[0u8; INSTANCE_RECORD_SIZE as usize],
+                );
+            }
+            s.tlas_rebuild = true;
+        }
+        for (task, _, _, _) in &ingestions {
+            if task.operation == TaskOperation::Register {
+                uploads.push(
+                    &s.scene.geometry_table.buffer,
+                    task.handle.index as u64 * GEOMETRY_RECORD_SIZE,
+                    bytemuck::bytes_of(&[0u32; 4]),
+                );
+            }
+        }
+
+        // 3. Instance records, at the instance's slot index (the invariant of the instance-id
+        //    bug report: the index a hit reports is the index of the instance's data).
+        for t in &plan.instances {
+            let old = s
+                .instances
+                .get(t.handle)
+                .ok()
+                .and_then(|i| i.input.clone());
+            match old {
+                Some(o)
+                    if o.geometry == t.input.geometry
+                        && o.participating_in_tlas == t.input.participating_in_tlas =>
+                {
+                    s.tlas_refit = true;
+                }
+                _ => s.tlas_rebuild = true,
+            }
+            uploads.push(
+                &s.scene.instance_table.buffer,
+                t.handle.index as u64 * INSTANCE_RECORD_SIZE,
+                &instance_record(&t.input),
+            );
+        }
+        ws.staging
+            .extend(uploads.flush(&self.device, &mut s.staging, encoder));
+
+        // 4. Geometry ingestion: copy the application's bytes (inside its encoder), then decode
+        //    them into the shared staged-triangle pool.
+        if !ingestions.is_empty() {
+            let raw_bytes: u64 = ingestions
+                .iter()
+                .flat_map(|(_, e, _, _)| e.iter())
+                .map(|e| {
+                    (e.vertex_bytes.1 - e.vertex_bytes.0)
+                        + e.index_bytes.map_or(0, |(a, b)| b - a)
+                })
+                .sum();
+            let raw = crate::scene::gpu_scene::storage(
+                &self.device,
+                "kickstart-rt raw geometry copy",
+                raw_bytes,
+            );
+            s.scene.reset_counters(encoder, ingestions.len() as u32);
+            let mut cursor = 0u64;
+            let mut plans = Vec::new();
+            for (task, extents, _, _) in &ingestions {
+                let mut comps = Vec::new();
+                let mut prim_base = 0u32;
+                for (c, e) in task.input.components.iter().zip(extents.iter()) {
+                    let vb = &c.vertex_buffer;
+                    let (vs, ve) = e.vertex_bytes;
+                    encoder.copy_buffer_to_buffer(&vb.buffer, vs, &raw, cursor, ve - vs);
+                    ws._inputs.push(vb.buffer.clone());
+                    let vertex_byte_offset = cursor + (vb.offset - vs);
+                    cursor += ve - vs;
+                    let index = match (&c.index_buffer, e.index_bytes) {
+                        (Some(ib), Some((is, ie))) => {
+                            encoder.copy_buffer_to_buffer(&ib.buffer, is, &raw, cursor, ie - is);
+                            ws._inputs.push(ib.buffer.clone());
+                            let off = cursor + (ib.offset - is);
+                            cursor += ie - is;
+                            Some((off, ib.format))
+                        }
+                        _ => None,
+                    };
+                    comps.push(ComponentIngest {
+                        vertex_byte_offset,
+                        vertex_stride: vb.stride,
+                        vertex_format: vb.format,
+                        vertex_count: vb.count,
+                        index,
+                        first_index: c.index_range.map_or(0, |(first, _)| first),
+                        triangle_count: e.triangles,
+                        transform: c.transform,
+                        primitive_base: prim_base,
+                    });
+                    prim_base += e.triangles;
+                }
+                plans.push(comps);
+            }
+            let mut rec = Recorder {
+                device: &self.device,
+                encoder,
+                timestamps: timestamps.as_mut(),
+                scope: "ingest",
+            };
+            for (i, ((_, _, staged, _), comps)) in ingestions.iter().zip(&plans).enumerate() {
+                s.scene.record_ingest(&mut rec, &raw, comps, *staged, i as u32);
+            }
+            ws._inputs.push(raw);
+            let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("kickstart-rt ingestion counters read-back"),
+                size: ingestions.len() as u64 * 8,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            encoder.copy_buffer_to_buffer(
+                &s.scene.counters,
+                0,
+                &readback,
+                0,
+                ingestions.len() as u64 * 8,
+            );
+            ws.dropped = Some(DroppedReadback {
+                buffer: readback,
+                mapped: Arc::new(AtomicBool::new(false)),
+                geometries: ingestions
+                    .iter()
+                    .map(|(t, _, _, _)| (t.handle, t.input.name.clone()))
+                    .collect(),
+            });
+        }
+        for (task, _, staged, triangles) in ingestions {
+            let Ok(slot) = s.geometries.get_mut(task.handle) else {
+                continue;
+            };
+            slot.last_used = serial;
+            let pending = match (&slot.data, task.operation) {
+                (Some(d), TaskOperation::Update) if d.gpu.blas.is_some() => PendingBvh::Refit,
+                _ => PendingBvh::Build,
+            };
+            let data = slot.data.get_or_insert_with(|| GeometryData {
                 name: task.input.name.clone(),
                 allow_update: task.input.allow_update,
                 triangles,
-                buffers,
+                gpu: GeometryGpu::default(),
+                dropped: None,
             });
-            let last_used = slot.last_used;
-            slot.last_used = serial;
-            if let Some(old) = old {
-                s.retired.push(Retired {
-                    last_used,
-                    kind: AllocKind::VertexCopies,
-                    buffers: old.buffers,
-                });
+            data.gpu.triangles = triangles;
+            data.gpu.staged = Some(staged);
+            if data.gpu.pending.is_none() {
+                s.blas_queue.push_back(task.handle);
+            }
+            // A queued build stays a build (the refit needs a built tree).
+            if data.gpu.pending != Some(PendingBvh::Build) {
+                data.gpu.pending = Some(pending);
             }
             s.counts.geometry_tasks += 1;
         }
 
-        // 3. Instance data: written through this task's staging at the instance's slot index.
-        if !plan.instances.is_empty() {
-            let max_index = plan
-                .instances
-                .iter()
-                .map(|t| t.handle.index)
-                .max()
-                .unwrap_or(0);
-            self.ensure_instance_table(&mut s, encoder, max_index as u64 + 1, serial);
-            let mut bytes =
-                Vec::with_capacity(plan.instances.len() * INSTANCE_RECORD_SIZE as usize);
-            for t in &plan.instances {
-                bytes.extend_from_slice(&instance_record(&t.input));
+        // 5. BLAS builds and refits, at most max_blas_build_count, in queue order.
+        if let Some(build) = plan.build {
+            let mut headers = Uploads::default();
+            let mut rec = Recorder {
+                device: &self.device,
+                encoder,
+                timestamps: timestamps.as_mut(),
+                scope: "blas build",
+            };
+            let mut done = 0;
+            while done < build.max_blas_build_count {
+                let Some(h) = s.blas_queue.pop_front() else {
+                    break;
+                };
+                let Ok(slot) = s.geometries.get_mut(h) else {
+                    continue; // destroyed while queued
+                };
+                let Some(d) = slot.data.as_mut() else {
+                    continue;
+                };
+                slot.last_used = serial;
+                match d.gpu.pending.take() {
+                    Some(PendingBvh::Build) => {
+                        if let Some(old) = d.gpu.blas.take() {
+                            let mut previous = GeometryGpu {
+                                blas: Some(old),
+                                ..Default::default()
+                            };
+                            previous.free_after(&mut s.scene, serial);
+                        }
+                        let header = s.scene.build_blas(
+                            &mut rec,
+                            h.index,
+                            &mut d.gpu,
+                            d.allow_update,
+                            &d.name,
+                        )?;
+                        headers.push(
+                            &s.scene.geometry_table.buffer,
+                            h.index as u64 * GEOMETRY_RECORD_SIZE,
+                            bytemuck::bytes_of(&header),
+                        );
+                        if !d.allow_update {
+                            // Static geometry: its staged copy is not needed after the build.
+                            if let Some(r) = d.gpu.staged.take() {
+                                s.scene.staged.free_after(r, serial);
+                            }
+                        }
+                        s.tlas_rebuild = true;
+                    }
+                    Some(PendingBvh::Refit) => {
+                        s.scene.refit_blas(&mut rec, h.index, &d.gpu);
+                        s.tlas_refit = true;
+                    }
+                    None => continue,
+                }
+                done += 1;
             }
-            let staging = s.staging.acquire(&self.device, bytes.len() as u64);
-            if !staging.write(0, &bytes) {
-                self.logger.message(
-                    Severity::Error,
-                    "kickstart-rt: staging buffer was not mapped; instance data not uploaded",
-                );
+            drop(rec);
+            ws.staging
+                .extend(headers.flush(&self.device, &mut s.staging, encoder));
+
+            // 6. TLAS over every instance slot, when something it depends on changed.
+            if build.build_tlas && (s.tlas_rebuild || s.tlas_refit) {
+                let slots = s.instances.slot_count();
+                let refit = !s.tlas_rebuild
+                    && match build.tlas_update {
+                        TlasUpdate::Rebuild => false,
+                        TlasUpdate::Refit => true,
+                        TlasUpdate::Auto => {
+                            s.scene.tlas_refits_since_rebuild()
+                                < TlasUpdate::AUTO_REBUILD_AFTER_REFITS
+                        }
+                    };
+                let mut rec = Recorder {
+                    device: &self.device,
+                    encoder,
+                    timestamps: timestamps.as_mut(),
+                    scope: "tlas build",
+                };
+                s.scene.update_tlas(&mut rec, slots, refit)?;
+                s.tlas_rebuild = false;
+                s.tlas_refit = false;
             }
-            staging.buffer.unmap();
-            if let Some(table) = &s.instance_table {
-                for (i, t) in plan.instances.iter().enumerate() {
-                    encoder.copy_buffer_to_buffer(
-                        &staging.buffer,
-                        i as u64 * INSTANCE_RECORD_SIZE,
-                        table,
-                        t.handle.index as u64 * INSTANCE_RECORD_SIZE,
-                        INSTANCE_RECORD_SIZE,
-                    );
+        }
+
+        // Instance bookkeeping (after the records are recorded).
+        for t in plan.instances {
+            if let Ok(g) = s.geometries.get_mut(t.input.geometry) {
+                g.last_used = serial;
+            }
+            if let Ok(slot) = s.instances.get_mut(t.handle) {
+                slot.input = Some(t.input.clone());
+                slot.last_used = serial;
+            }
+            s.any_instance = true;
+            s.counts.instance_tasks += 1;
+        }
+
+        // 7. Render tasks, in the order scheduled.
+        for task in &container.render_tasks {
+            let mut rec = Recorder {
+                device: &self.device,
+                encoder,
+                timestamps: timestamps.as_mut(),
+                scope: "",
+            };
+            match task {
+                RenderTask::TraceRays(t) => {
+                    ws._inputs.push(t.rays.clone());
+                    ws._inputs.push(t.hits.clone());
+                    s.scene.trace_rays(&mut rec, t);
+                }
+                other => {
+                    if let Some((common, output)) = other.trace_common() {
+                        let size = output.texture().size();
+                        let vp = common.viewport.unwrap_or(Viewport {
+                            x: 0,
+                            y: 0,
+                            width: size.width,
+                            height: size.height,
+                        });
+                        s.scene.debug_view_pass(
+                            &mut rec,
+                            output,
+                            (vp.x, vp.y, vp.width, vp.height),
+                            &common.view,
+                            common.debug_parameters.debug_output_type,
+                        );
+                    }
                 }
             }
-            ws.staging.push(staging);
-            // Handles were validated above: these lookups cannot fail.
-            for t in plan.instances {
-                if let Ok(g) = s.geometries.get_mut(t.input.geometry) {
-                    g.last_used = serial;
+        }
+
+        if let Some(ts) = timestamps {
+            if let Some(r) = TimingReadback::record(&self.device, encoder, ts) {
+                s.timings.insert(serial, r);
+                // Timings nobody reads must not accumulate.
+                while s.timings.len() > 64 {
+                    s.timings.pop_first();
                 }
-                if let Ok(slot) = s.instances.get_mut(t.handle) {
-                    slot.input = Some(t.input.clone());
-                    slot.last_used = serial;
-                }
-                s.counts.instance_tasks += 1;
             }
         }
 
         s.counts.gpu_tasks += 1;
         s.in_flight.insert(serial, ws);
         Ok(GpuTaskHandle(serial))
-    }
-
-    fn copy_in(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        src: &wgpu::Buffer,
-        (start, end): (u64, u64),
-        what: &str,
-    ) -> wgpu::Buffer {
-        let dst = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(&format!("kickstart-rt geometry {what}")),
-            size: end - start,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_DST
-                | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        encoder.copy_buffer_to_buffer(src, start, &dst, 0, end - start);
-        dst
-    }
-
-    /// Grows the instance table to hold `needed` records, carrying old records over in the
-    /// encoder. The check counts records of the real size (see the instance-id bug report's
-    /// growth bug).
-    fn ensure_instance_table(
-        &self,
-        s: &mut State,
-        encoder: &mut wgpu::CommandEncoder,
-        needed: u64,
-        serial: u64,
-    ) {
-        let have = s
-            .instance_table
-            .as_ref()
-            .map_or(0, |b| b.size() / INSTANCE_RECORD_SIZE);
-        if have >= needed {
-            return;
-        }
-        let capacity = needed.next_power_of_two().max(64);
-        let table = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("kickstart-rt instance table"),
-            size: capacity * INSTANCE_RECORD_SIZE,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_DST
-                | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        if let Some(old) = s.instance_table.replace(table.clone()) {
-            encoder.copy_buffer_to_buffer(&old, 0, &table, 0, old.size());
-            s.retired.push(Retired {
-                last_used: serial,
-                kind: AllocKind::Tlas,
-                buffers: vec![old],
-            });
-        }
     }
 
     /// Checks every task of the container against the context's handles and the field rules.
@@ -727,7 +1105,20 @@ impl ExecuteContext {
                                     ),
                                 ));
                             }
-                            _ => {}
+                            Some(d) => {
+                                let n: u32 = extents.iter().map(|e| e.triangles).sum();
+                                if n != d.triangles {
+                                    return Err(Error::input(
+                                        "GeometryTask",
+                                        "input.components",
+                                        format!("{n} triangles"),
+                                        format!(
+                                            "an Update of geometry `{}` must keep its {} triangles (its BVH is refitted); register a new geometry to change the topology",
+                                            d.name, d.triangles
+                                        ),
+                                    ));
+                                }
+                            }
                         },
                         _ => {}
                     }
@@ -771,14 +1162,29 @@ impl ExecuteContext {
                 }
                 BvhTask::Build(t) => {
                     validate::bvh_build(t)?;
-                    unsupported.get_or_insert("BvhBuildTask (BLAS/TLAS builds)");
+                    // The last BvhBuildTask of a container decides.
+                    plan.build = Some(*t);
                 }
             }
         }
+        let limits = self.device.limits();
         for task in &c.render_tasks {
-            validate::render_task(task)?;
+            validate::render_task(task, &limits)?;
             self.render_handles(s, task)?;
-            unsupported.get_or_insert(task.name());
+            let supported = match task {
+                RenderTask::TraceRays(_) => true,
+                other => other.trace_common().is_some_and(|(c, _)| {
+                    matches!(
+                        c.debug_parameters.debug_output_type,
+                        DebugOutputType::HitT
+                            | DebugOutputType::Barycentrics
+                            | DebugOutputType::RandomMeshColor
+                    )
+                }),
+            };
+            if !supported {
+                unsupported.get_or_insert(task.name());
+            }
         }
         match unsupported {
             Some(task) => Err(Error::Unsupported { task }),
@@ -802,19 +1208,26 @@ impl ExecuteContext {
 struct Plan<'c> {
     geometries: Vec<(&'c GeometryTask, Vec<validate::ComponentExtent>)>,
     instances: Vec<&'c InstanceTask>,
+    build: Option<BvhBuildTask>,
 }
 
+/// The instance's record (layout at [`INSTANCE_RECORD_SIZE`]).
 fn instance_record(input: &InstanceInput) -> [u8; INSTANCE_RECORD_SIZE as usize] {
-    let m = glam::Mat4::from(input.transform)
+    // Rows of the 3×4 affine: transposing the 4×4 turns its columns into rows.
+    let rows = glam::Mat4::from(input.transform)
         .transpose()
         .to_cols_array();
-    let mut words = [0u32; 16];
+    let inv = glam::Mat4::from(input.transform.inverse())
+        .transpose()
+        .to_cols_array();
+    let mut words = [0u32; 32];
     for i in 0..12 {
-        words[i] = m[i].to_bits();
+        words[i] = rows[i].to_bits();
+        words[12 + i] = inv[i].to_bits();
     }
-    words[12] = input.geometry.index;
-    words[13] = input.inclusion_mask.0;
-    words[14] = input.participating_in_tlas as u32;
+    words[24] = input.geometry.index;
+    words[25] = input.inclusion_mask.0;
+    words[26] = input.participating_in_tlas as u32;
     bytemuck::cast(words)
 }
 

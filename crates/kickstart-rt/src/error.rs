@@ -70,6 +70,19 @@ pub enum Error {
         library: crate::Version,
     },
     /// An operation that needs every GPU task completed was called while some are in flight.
+    /// A shared pool or table would exceed what one storage binding of this device may hold.
+    #[error("{what}: {bytes} bytes would exceed the device's max_storage_buffer_binding_size ({limit} bytes)")]
+    OutOfDeviceMemory {
+        /// The pool or object that needed the memory.
+        what: String,
+        /// Bytes it would have needed.
+        bytes: u64,
+        /// The device's limit.
+        limit: u64,
+    },
+    /// A blocking read-back (tools and tests only) failed.
+    #[error("GPU read-back failed: {0}")]
+    ReadBack(String),
     #[error("{operation} needs every GPU task marked completed, {in_flight} still in flight")]
     TasksInFlight {
         /// The refused operation.

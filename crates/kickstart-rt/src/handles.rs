@@ -159,6 +159,11 @@ impl<H: RawHandle, T> HandlePool<H, T> {
             .collect()
     }
 
+    /// Slots ever used (live or free): one past the highest index handed out.
+    pub(crate) fn slot_count(&self) -> u32 {
+        self.slots.len() as u32
+    }
+
     /// The live values, in slot order.
     pub(crate) fn values(&self) -> impl Iterator<Item = &T> {
         self.slots.iter().filter_map(|s| s.value.as_ref())

@@ -113,6 +113,7 @@ mod logging;
 mod scene;
 mod staging;
 mod tasks;
+mod timing;
 mod trace;
 mod validate;
 mod version;
@@ -120,8 +121,8 @@ mod version;
 pub use allocations::ResourceAllocations;
 pub use container::TaskContainer;
 pub use context::{
-    DenoisingContextInput, DenoisingMethod, ExecuteContext, InitSettings, RecordedTaskCounts,
-    SignalType, INSTANCE_RECORD_SIZE,
+    DenoisingContextInput, DenoisingMethod, DroppedTriangles, ExecuteContext, InitSettings,
+    RecordedTaskCounts, SignalType, INSTANCE_RECORD_SIZE,
 };
 pub use device::{
     optional_features, optional_features_supported, required_features, required_limits,
@@ -132,5 +133,6 @@ pub use handles::{
 };
 pub use logging::{LogCallback, Severity};
 pub use tasks::*;
+pub use timing::{GpuTimings, PassTiming};
 pub use validate::WRITABLE_OUTPUT_FORMATS;
 pub use version::{Version, VERSION};

@@ -610,8 +610,59 @@ fn light(task: &'static str, field: &str, l: &LightInfo) -> Result<()> {
     }
 }
 
+/// A buffer a [`TraceRaysTask`] binds as storage: usage, alignment and extent.
+fn ray_buffer(
+    task: &'static str,
+    field: &str,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    bytes: u64,
+    limits: &wgpu::Limits,
+) -> Result<()> {
+    if !buffer.usage().contains(wgpu::BufferUsages::STORAGE) {
+        return Err(Error::input(
+            task,
+            field,
+            buffer.usage(),
+            "needs BufferUsages::STORAGE (the SDK binds it as a storage buffer)",
+        ));
+    }
+    let align = limits.min_storage_buffer_offset_alignment.max(1) as u64;
+    if offset % align != 0 {
+        return Err(Error::input(
+            task,
+            format!("{field}_offset"),
+            offset,
+            format!("must be a multiple of the device's min_storage_buffer_offset_alignment ({align})"),
+        ));
+    }
+    if offset.checked_add(bytes).is_none_or(|e| e > buffer.size()) {
+        return Err(Error::input(
+            task,
+            format!("{field}_offset"),
+            offset,
+            format!(
+                "ray_count × 32 = {bytes} bytes from this offset exceed the buffer's {} bytes",
+                buffer.size()
+            ),
+        ));
+    }
+    if bytes > limits.max_storage_buffer_binding_size as u64 {
+        return Err(Error::input(
+            task,
+            "ray_count",
+            bytes / 32,
+            format!(
+                "the batch exceeds the device's max_storage_buffer_binding_size ({} bytes); split it",
+                limits.max_storage_buffer_binding_size
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Validates a render task's own fields (handles are checked by the context).
-pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
+pub(crate) fn render_task(task: &RenderTask, limits: &wgpu::Limits) -> Result<()> {
     let name = task.name();
     let one_in_one_out = |c: &DenoiseTaskCommon, input: &TextureInput, output: &TextureInput| {
         denoise_common(
@@ -621,6 +672,19 @@ pub(crate) fn render_task(task: &RenderTask) -> Result<()> {
         )
     };
     match task {
+        RenderTask::TraceRays(t) => {
+            let bytes = t.ray_count as u64 * 32;
+            ray_buffer(name, "rays", &t.rays, t.ray_offset, bytes, limits)?;
+            ray_buffer(name, "hits", &t.hits, t.hit_offset, bytes, limits)?;
+            if t.instance_mask.0 & !InstanceInclusionMask::ALL.0 != 0 {
+                return Err(Error::input(
+                    name,
+                    "instance_mask",
+                    t.instance_mask.0,
+                    "only bits 0–1 (InstanceInclusionMask::ALL) are defined",
+                ));
+            }
+        }
         RenderTask::DirectLightingInjection(t) => {
             readable(name, "depth.texture", &t.depth.texture)?;
             readable(name, "direct_lighting", &t.direct_lighting)?;

@@ -302,7 +302,7 @@ fn row_max_blas_build_count() {
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(BvhBuildTask {
         max_blas_build_count: 0,
-        build_tlas: true,
+        ..Default::default()
     });
     expect_field(&ctx, c, "BvhBuildTask", "max_blas_build_count");
 }
@@ -697,7 +697,8 @@ fn defaults_match_the_reference() {
         BvhBuildTask::default(),
         BvhBuildTask {
             max_blas_build_count: 4,
-            build_tlas: true
+            build_tlas: true,
+            tlas_update: TlasUpdate::Auto,
         }
     );
     let r = RoughnessInput::default();

@@ -3,7 +3,9 @@
 //! Not used in the frame path.
 
 mod bvh;
+mod readback;
 mod triangle;
 
 pub use bvh::{CpuBvh, CpuBvhNode, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
+pub use readback::{BlasReadback, Bvh2Child};
 pub use triangle::{intersect_triangle, Hit, Ray, TriangleHit};

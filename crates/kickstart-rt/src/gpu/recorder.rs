@@ -21,6 +21,9 @@ pub(crate) fn split_workgroups(count: u32) -> (u32, u32) {
 /// One timed pass: its label and the query indices of its begin/end timestamps.
 #[derive(Debug, Clone)]
 pub(crate) struct TimedPass {
+    /// What the SDK was doing (the recorder's scope: "ingest", "blas build", …).
+    pub scope: &'static str,
+    /// The pass itself.
     pub label: &'static str,
     pub begin: u32,
     pub end: u32,
@@ -49,12 +52,17 @@ impl Timestamps {
         }
     }
 
-    fn next(&mut self, label: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+    fn next(
+        &mut self,
+        scope: &'static str,
+        label: &'static str,
+    ) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
         let begin = self.passes.len() as u32 * 2;
         if begin + 2 > self.capacity {
             return None;
         }
         self.passes.push(TimedPass {
+            scope,
             label,
             begin,
             end: begin + 1,
@@ -72,6 +80,8 @@ pub(crate) struct Recorder<'a> {
     pub device: &'a wgpu::Device,
     pub encoder: &'a mut wgpu::CommandEncoder,
     pub timestamps: Option<&'a mut Timestamps>,
+    /// Attributes the following passes' timings ("ingest", "blas build", …).
+    pub scope: &'static str,
 }
 
 impl<'a> Recorder<'a> {
@@ -81,6 +91,7 @@ impl<'a> Recorder<'a> {
             device,
             encoder,
             timestamps: None,
+            scope: "",
         }
     }
 
@@ -96,7 +107,11 @@ impl<'a> Recorder<'a> {
         if workgroups == 0 {
             return;
         }
-        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(label));
+        let scope = self.scope;
+        let timestamp_writes = self
+            .timestamps
+            .as_mut()
+            .and_then(|t| t.next(scope, label));
         let mut pass = self
             .encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -3,3 +3,6 @@
 
 pub(crate) mod ingest;
 pub(crate) mod lbvh;
+pub(crate) mod pool;
+pub(crate) mod stubs;
+pub(crate) mod gpu_scene;

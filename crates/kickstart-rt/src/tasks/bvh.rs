@@ -250,13 +250,39 @@ pub struct InstanceTask {
     pub input: InstanceInput,
 }
 
-/// Controls how much BVH building one GPU task does.
+/// How a [`BvhBuildTask`] brings the TLAS up to date (see the reference's TLAS refit tutorial:
+/// a refit is cheaper than a rebuild, but its boxes loosen as instances move apart).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TlasUpdate {
+    /// Refit when only instance transforms changed since the last build, and fewer than
+    /// [`TlasUpdate::AUTO_REBUILD_AFTER_REFITS`] refits followed the last rebuild; otherwise
+    /// rebuild.
+    #[default]
+    Auto,
+    /// Always rebuild.
+    Rebuild,
+    /// Refit whenever possible: rebuilds only when instances were added or removed, or a BLAS
+    /// was (re)built, since the last build.
+    Refit,
+}
+
+impl TlasUpdate {
+    /// Refits in a row after which [`TlasUpdate::Auto`] rebuilds to restore tree quality.
+    pub const AUTO_REBUILD_AFTER_REFITS: u32 = 16;
+}
+
+/// Controls how much BVH building one GPU task does. Without one in a container, geometry
+/// registered or updated in it waits (in order) for a later task that has one, and the TLAS is
+/// not touched — as the reference, which builds only in `BVHBuildTask`s.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BvhBuildTask {
-    /// Most BLAS builds in this GPU task (≥ 1); the rest wait, in order, for later tasks.
+    /// Most BLAS builds (and refits) in this GPU task (≥ 1); the rest wait, in order, for later
+    /// tasks.
     pub max_blas_build_count: u32,
-    /// Build or refit the TLAS in this task.
+    /// Build or refit the TLAS in this task when an instance or a BLAS it uses changed.
     pub build_tlas: bool,
+    /// Rebuild or refit the TLAS.
+    pub tlas_update: TlasUpdate,
 }
 
 impl Default for BvhBuildTask {
@@ -264,6 +290,7 @@ impl Default for BvhBuildTask {
         BvhBuildTask {
             max_blas_build_count: 4,
             build_tlas: true,
+            tlas_update: TlasUpdate::Auto,
         }
     }
 }

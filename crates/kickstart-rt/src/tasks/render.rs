@@ -2,6 +2,7 @@
 //! G-buffer inputs they share. Defaults are the reference's.
 
 use crate::handles::{DenoisingContextHandle, InstanceHandle};
+use crate::tasks::bvh::InstanceInclusionMask;
 use glam::{Mat4, Vec3, Vec4};
 
 /// A texture the SDK reads or writes (the view is reference counted; the SDK keeps a clone while
@@ -577,10 +578,104 @@ pub struct DenoiseMultiShadowTask {
     pub output: TextureInput,
 }
 
+/// Which query a [`TraceRaysTask`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RayQuery {
+    /// The closest hit in `[t_min, t_max]` (ties: lowest instance, then lowest primitive index).
+    #[default]
+    ClosestHit,
+    /// Any hit in `[t_min, t_max]` (occlusion); stops at the first hit found, which need not be
+    /// the closest.
+    AnyHit,
+}
+
+/// One ray of a [`TraceRaysTask`] (32 bytes, `#[repr(C)]`): the points `origin + t·dir` for
+/// `t_min ≤ t ≤ t_max`. `dir` need not be normalised (`t` is in units of its length); `t_max` may
+/// be `f32::INFINITY`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuRay {
+    /// Start point, world space.
+    pub origin: [f32; 3],
+    /// Smallest accepted `t`.
+    pub t_min: f32,
+    /// Direction, world space.
+    pub dir: [f32; 3],
+    /// Largest accepted `t`.
+    pub t_max: f32,
+}
+
+/// One result of a [`TraceRaysTask`] (32 bytes, `#[repr(C)]`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuHit {
+    /// Ray parameter of the hit; −1 on a miss.
+    pub t: f32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the third vertex.
+    pub v: f32,
+    /// Instance index (the instance handle's [`crate::InstanceHandle::index`]); `u32::MAX` on a
+    /// miss.
+    pub instance: u32,
+    /// Triangle index within the instance's geometry: the triangles of earlier components first,
+    /// then this component's, after its `index_range`.
+    pub primitive: u32,
+    /// Padding to 32 bytes.
+    pub _pad: [u32; 3],
+}
+
+impl GpuHit {
+    /// `instance` of a miss.
+    pub const MISS: u32 = u32::MAX;
+
+    /// Whether the ray hit something.
+    pub fn is_hit(&self) -> bool {
+        self.instance != Self::MISS
+    }
+}
+
+/// A batch of rays read from a buffer, their hits written to a buffer: ray queries for tools,
+/// gameplay (visibility, picking) and tests, through the same traversal as every trace task.
+#[derive(Debug, Clone)]
+pub struct TraceRaysTask {
+    /// [`GpuRay`] records; needs `BufferUsages::STORAGE`.
+    pub rays: wgpu::Buffer,
+    /// Byte offset of the first ray: a multiple of the device's
+    /// `min_storage_buffer_offset_alignment`.
+    pub ray_offset: u64,
+    /// Rays to trace (0 traces nothing).
+    pub ray_count: u32,
+    /// Receives one [`GpuHit`] per ray; needs `BufferUsages::STORAGE`.
+    pub hits: wgpu::Buffer,
+    /// Byte offset of the first hit: a multiple of `min_storage_buffer_offset_alignment`.
+    pub hit_offset: u64,
+    /// Closest or any hit.
+    pub query: RayQuery,
+    /// Instances whose inclusion mask shares a bit with this one are visible.
+    pub instance_mask: InstanceInclusionMask,
+}
+
+impl TraceRaysTask {
+    /// A closest-hit batch of `ray_count` rays at offset 0, visible to `VISIBLE_IN_RT` instances.
+    pub fn new(rays: wgpu::Buffer, ray_count: u32, hits: wgpu::Buffer) -> Self {
+        TraceRaysTask {
+            rays,
+            ray_offset: 0,
+            ray_count,
+            hits,
+            hit_offset: 0,
+            query: RayQuery::ClosestHit,
+            instance_mask: InstanceInclusionMask::VISIBLE_IN_RT,
+        }
+    }
+}
+
 /// Any render task.
 #[derive(Debug, Clone)]
 #[allow(missing_docs)]
 pub enum RenderTask {
+    TraceRays(TraceRaysTask),
     DirectLightingInjection(DirectLightingInjectionTask),
     DirectLightTransfer(DirectLightTransferTask),
     TraceSpecular(TraceSpecularTask),
@@ -610,9 +705,22 @@ impl RenderTask {
         }
     }
 
+    /// The shared inputs and main output of a trace task; `None` for other tasks.
+    pub fn trace_common(&self) -> Option<(&TraceTaskCommon, &TextureInput)> {
+        match self {
+            RenderTask::TraceSpecular(t) => Some((&t.common, &t.output)),
+            RenderTask::TraceDiffuse(t) => Some((&t.common, &t.output)),
+            RenderTask::TraceAmbientOcclusion(t) => Some((&t.common, &t.output)),
+            RenderTask::TraceShadow(t) => Some((&t.common, &t.output)),
+            RenderTask::TraceMultiShadow(t) => Some((&t.common, &t.output0)),
+            _ => None,
+        }
+    }
+
     /// The task type's name, as errors report it.
     pub fn name(&self) -> &'static str {
         match self {
+            RenderTask::TraceRays(_) => "TraceRaysTask",
             RenderTask::DirectLightingInjection(_) => "DirectLightingInjectionTask",
             RenderTask::DirectLightTransfer(_) => "DirectLightTransferTask",
             RenderTask::TraceSpecular(_) => "TraceSpecularTask",

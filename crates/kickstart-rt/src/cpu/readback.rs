@@ -1,0 +1,128 @@
+//! A GPU BVH read back to the CPU (nodes in the BVH2 format of `docs/ray-tracing-core.md`), and
+//! its SAH cost with the same constants as [`super::CpuBvh::sah_cost`], so the two compare.
+
+use super::{SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
+use glam::Vec3;
+
+/// One child of a GPU BVH2 node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bvh2Child {
+    /// Box minimum (an empty child has `min.x > max.x`).
+    pub min: Vec3,
+    /// Box maximum.
+    pub max: Vec3,
+    /// Child reference: bit 31 set = leaf (bits 0–27 first primitive, bits 28–30 count − 1),
+    /// else an inner node index.
+    pub reference: u32,
+}
+
+impl Bvh2Child {
+    /// Whether the reference is a leaf.
+    pub fn is_leaf(&self) -> bool {
+        self.reference & 0x8000_0000 != 0
+    }
+
+    /// Whether the box is empty (never entered).
+    pub fn is_empty(&self) -> bool {
+        !(self.min.x <= self.max.x && self.min.y <= self.max.y && self.min.z <= self.max.z)
+    }
+
+    /// `(first, count)` of a leaf.
+    pub fn leaf_range(&self) -> (u32, u32) {
+        (self.reference & 0x0fff_ffff, ((self.reference >> 28) & 7) + 1)
+    }
+}
+
+/// A BLAS read back with [`crate::ExecuteContext::read_back_blas`].
+#[derive(Debug, Clone, Default)]
+pub struct BlasReadback {
+    /// Nodes; node 0 is the root. Each holds its two children.
+    pub nodes: Vec<[Bvh2Child; 2]>,
+    /// Triangles in leaf order (geometry space).
+    pub triangles: Vec<[Vec3; 3]>,
+    /// Each triangle's primitive index in its geometry.
+    pub primitive_indices: Vec<u32>,
+    /// SAH cost relative to the root box's area (traversal cost per inner node, intersection
+    /// cost per triangle), comparable to [`super::CpuBvh::sah_cost`].
+    pub sah_cost: f32,
+}
+
+fn area(min: Vec3, max: Vec3) -> f32 {
+    let d = (max - min).max(Vec3::ZERO);
+    2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+}
+
+impl BlasReadback {
+    /// Decodes raw nodes (16 floats each) and triangles (12 floats each: three `vec4`, the
+    /// primitive index in the bits of the first `w`).
+    pub fn new(raw_nodes: Vec<[f32; 16]>, raw_tris: Vec<[f32; 12]>) -> Self {
+        let nodes: Vec<[Bvh2Child; 2]> = raw_nodes
+            .iter()
+            .map(|n| {
+                let child = |o: usize, r: usize| Bvh2Child {
+                    min: Vec3::new(n[o], n[o + 1], n[o + 2]),
+                    max: Vec3::new(n[o + 4], n[o + 5], n[o + 6]),
+                    reference: n[r].to_bits(),
+                };
+                [child(0, 3), child(8, 7)]
+            })
+            .collect();
+        let triangles = raw_tris
+            .iter()
+            .map(|t| {
+                [
+                    Vec3::new(t[0], t[1], t[2]),
+                    Vec3::new(t[4], t[5], t[6]),
+                    Vec3::new(t[8], t[9], t[10]),
+                ]
+            })
+            .collect();
+        let primitive_indices = raw_tris.iter().map(|t| t[3].to_bits()).collect();
+        let mut r = BlasReadback {
+            nodes,
+            triangles,
+            primitive_indices,
+            sah_cost: 0.0,
+        };
+        r.sah_cost = r.compute_sah_cost();
+        r
+    }
+
+    /// SAH cost: the root counts as an inner node of area 1; each non-empty child adds its
+    /// relative area × (traversal cost when inner, intersection cost × count when a leaf).
+    fn compute_sah_cost(&self) -> f32 {
+        let Some(root) = self.nodes.first() else {
+            return 0.0;
+        };
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for c in root.iter().filter(|c| !c.is_empty()) {
+            lo = lo.min(c.min);
+            hi = hi.max(c.max);
+        }
+        let root_area = area(lo, hi).max(f32::MIN_POSITIVE);
+        let mut cost = SAH_TRAVERSAL_COST;
+        let mut stack = vec![0u32];
+        let mut visited = 0usize;
+        while let Some(i) = stack.pop() {
+            visited += 1;
+            // A malformed tree (a cycle) must not hang a tool.
+            if visited > self.nodes.len() {
+                break;
+            }
+            let Some(node) = self.nodes.get(i as usize) else {
+                continue;
+            };
+            for c in node.iter().filter(|c| !c.is_empty()) {
+                let a = area(c.min, c.max) / root_area;
+                if c.is_leaf() {
+                    cost += a * c.leaf_range().1 as f32 * SAH_INTERSECTION_COST;
+                } else {
+                    cost += a * SAH_TRAVERSAL_COST;
+                    stack.push(c.reference);
+                }
+            }
+        }
+        cost
+    }
+}

@@ -1,0 +1,774 @@
+//! The scene on the GPU: the shared pools (staged triangles, BLAS triangles, BLAS nodes, refit
+//! data), the geometry and instance tables, the TLAS, and the passes that fill them. Layouts:
+//! `docs/ray-tracing-core.md`. The context decides *what* to do each task; this module records it.
+
+use crate::error::{Error, Result};
+use crate::gpu::Recorder;
+use crate::scene::stubs::{ComponentIngest, Ingest, LbvhBuild, LbvhRefit, LeafRefs, Lbvh, Prims, RayTracer, SceneBuffers, DebugViewPass};
+use crate::scene::pool::{Pool, Range};
+use crate::staging::{StagingBuffer, StagingPool};
+
+/// Bytes of one triangle of the soup (three `vec4<f32>`).
+pub(crate) const TRIANGLE_BYTES: u64 = 48;
+/// Bytes of one BVH2 node.
+pub(crate) const NODE_BYTES: u64 = 64;
+/// Bytes of one geometry table record.
+pub(crate) const GEOMETRY_RECORD_SIZE: u64 = 48;
+/// Bytes of one instance table record.
+pub(crate) const INSTANCE_RECORD_BYTES: u64 = 128;
+/// Bytes of one primitive's AABB (two `vec4<f32>`).
+const AABB_BYTES: u64 = 32;
+
+/// BVH work a geometry waits for (in the context's queue).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum PendingBvh {
+    /// First build (or rebuild after re-registration).
+    Build,
+    /// New vertices of a built `allow_update` geometry: refit.
+    Refit,
+}
+
+/// Where a built BLAS lives in the pools.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct BlasRanges {
+    pub tris: Range,
+    pub nodes: Range,
+    /// Sort order (`n` words) then refit topology, kept for `allow_update` geometry only.
+    pub words: Option<Range>,
+}
+
+/// The GPU side of one geometry.
+#[derive(Debug, Default)]
+pub(crate) struct GeometryGpu {
+    pub triangles: u32,
+    /// Ingested, unsorted triangles (kept after the build only when `allow_update`).
+    pub staged: Option<Range>,
+    pub blas: Option<BlasRanges>,
+    pub pending: Option<PendingBvh>,
+}
+
+impl GeometryGpu {
+    /// Returns every range to its pool once the GPU task `last_used` has completed.
+    pub fn free_after(&mut self, scene: &mut GpuScene, last_used: u64) {
+        if let Some(r) = self.staged.take() {
+            scene.staged.free_after(r, last_used);
+        }
+        if let Some(b) = self.blas.take() {
+            scene.triangles.free_after(b.tris, last_used);
+            scene.nodes.free_after(b.nodes, last_used);
+            if let Some(w) = b.words {
+                scene.words.free_after(w, last_used);
+            }
+        }
+    }
+}
+
+/// A table of fixed-size records indexed by a handle's slot, grown (contents kept) on demand.
+pub(crate) struct Table {
+    label: &'static str,
+    record: u64,
+    pub buffer: wgpu::Buffer,
+}
+
+impl Table {
+    fn new(device: &wgpu::Device, label: &'static str, record: u64) -> Self {
+        Table {
+            label,
+            record,
+            buffer: storage(device, label, 64 * record),
+        }
+    }
+
+    fn slots(&self) -> u64 {
+        self.buffer.size() / self.record
+    }
+
+    fn ensure(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        slots: u64,
+        max_bytes: u64,
+    ) -> Result<()> {
+        // The growth check counts records of the real size (the instance-id bug report's
+        // buffer-growth bug compared against the wrong element size).
+        if self.slots() >= slots {
+            return Ok(());
+        }
+        let bytes = slots.next_power_of_two().max(64) * self.record;
+        if slots * self.record > max_bytes {
+            return Err(Error::OutOfDeviceMemory {
+                what: self.label.to_string(),
+                bytes: slots * self.record,
+                limit: max_bytes,
+            });
+        }
+        let new = storage(device, self.label, bytes.min(max_bytes));
+        encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
+        self.buffer = new;
+        Ok(())
+    }
+}
+
+/// CPU-written bytes for GPU buffers, gathered and then copied through one staging buffer in the
+/// engine's encoder (never `queue.write_buffer`: the engine may not have submitted earlier work
+/// that reads these buffers).
+#[derive(Default)]
+pub(crate) struct Uploads {
+    data: Vec<u8>,
+    copies: Vec<(wgpu::Buffer, u64, u64, u64)>,
+}
+
+impl Uploads {
+    /// Queues `bytes` (a multiple of 4) for `dst` at `offset` (a multiple of 4).
+    pub fn push(&mut self, dst: &wgpu::Buffer, offset: u64, bytes: &[u8]) {
+        let src = self.data.len() as u64;
+        self.data.extend_from_slice(bytes);
+        self.copies
+            .push((dst.clone(), offset, src, bytes.len() as u64));
+    }
+
+    /// Records the copies; the staging buffer returned belongs to the task's working set.
+    pub fn flush(
+        self,
+        device: &wgpu::Device,
+        staging: &mut StagingPool,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Option<StagingBuffer> {
+        if self.copies.is_empty() {
+            return None;
+        }
+        let buffer = staging.acquire(device, self.data.len() as u64);
+        if !buffer.write(0, &self.data) {
+            log::error!("kickstart-rt: staging buffer was not mapped; upload skipped");
+        }
+        buffer.buffer.unmap();
+        for (dst, offset, src, len) in self.copies {
+            encoder.copy_buffer_to_buffer(&buffer.buffer, src, &dst, offset, len);
+        }
+        Some(buffer)
+    }
+}
+
+/// Lazily created pipelines: a context that never traces never compiles the trace shaders.
+#[derive(Default)]
+struct Passes {
+    ingest: Option<Ingest>,
+    prims: Option<Prims>,
+    lbvh: Option<Lbvh>,
+    rays: Option<RayTracer>,
+    debug_view: Option<DebugViewPass>,
+}
+
+/// The TLAS and its build buffers.
+struct Tlas {
+    nodes: wgpu::Buffer,
+    order: wgpu::Buffer,
+    topology: wgpu::Buffer,
+    aabbs: wgpu::Buffer,
+    /// Instance slots the buffers hold.
+    capacity: u32,
+    /// Instance slots of the last build (0 before the first).
+    slots: u32,
+    built: bool,
+    refits_since_rebuild: u32,
+}
+
+/// Everything the SDK keeps on the GPU for ray tracing.
+pub(crate) struct GpuScene {
+    device: wgpu::Device,
+    max_binding: u64,
+    /// Ingested triangles waiting for (or kept for) their BLAS build: "vertex copies".
+    pub staged: Pool,
+    /// BLAS triangles in leaf order.
+    pub triangles: Pool,
+    /// BLAS nodes.
+    pub nodes: Pool,
+    /// Sort orders and refit topology of `allow_update` BLASes.
+    pub words: Pool,
+    pub geometry_table: Table,
+    pub instance_table: Table,
+    tlas: Tlas,
+    scratch_aabbs: wgpu::Buffer,
+    scratch_order: wgpu::Buffer,
+    /// Dropped-triangle counters of this task's ingestions (two per ingestion).
+    pub counters: wgpu::Buffer,
+    passes: Passes,
+}
+
+impl GpuScene {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let limits = device.limits();
+        let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let tlas_nodes = storage(device, "kickstart-rt TLAS nodes", NODE_BYTES);
+        GpuScene {
+            device: device.clone(),
+            max_binding,
+            staged: Pool::new(device, "kickstart-rt staged triangles", TRIANGLE_BYTES),
+            triangles: Pool::new(device, "kickstart-rt BLAS triangles", TRIANGLE_BYTES),
+            nodes: Pool::new(device, "kickstart-rt BLAS nodes", NODE_BYTES),
+            words: Pool::new(device, "kickstart-rt BLAS refit data", 4),
+            geometry_table: Table::new(device, "kickstart-rt geometry table", GEOMETRY_RECORD_SIZE),
+            instance_table: Table::new(device, "kickstart-rt instance table", INSTANCE_RECORD_BYTES),
+            tlas: Tlas {
+                nodes: tlas_nodes,
+                order: storage(device, "kickstart-rt TLAS order", 4),
+                topology: storage(device, "kickstart-rt TLAS topology", 4),
+                aabbs: storage(device, "kickstart-rt TLAS instance boxes", AABB_BYTES),
+                capacity: 0,
+                slots: 0,
+                built: false,
+                refits_since_rebuild: 0,
+            },
+            scratch_aabbs: storage(device, "kickstart-rt build boxes", AABB_BYTES),
+            scratch_order: storage(device, "kickstart-rt build order", 4),
+            counters: storage(device, "kickstart-rt ingestion counters", 8),
+            passes: Passes::default(),
+        }
+    }
+
+    /// The largest buffer one binding may hold on this device.
+    pub fn max_binding(&self) -> u64 {
+        self.max_binding
+    }
+
+    /// Creates every pipeline now.
+    pub fn prepare_pipelines(&mut self) {
+        self.ingest();
+        self.prims();
+        self.lbvh();
+        self.rays();
+        self.debug_view();
+    }
+
+    fn ingest(&mut self) -> &Ingest {
+        let d = &self.device;
+        self.passes.ingest.get_or_insert_with(|| Ingest::new(d))
+    }
+    fn prims(&mut self) -> &Prims {
+        let d = &self.device;
+        self.passes.prims.get_or_insert_with(|| Prims::new(d))
+    }
+    fn lbvh(&mut self) -> &mut Lbvh {
+        let d = &self.device;
+        self.passes.lbvh.get_or_insert_with(|| Lbvh::new(d))
+    }
+    fn rays(&mut self) -> &RayTracer {
+        let d = &self.device;
+        self.passes.rays.get_or_insert_with(|| RayTracer::new(d))
+    }
+    fn debug_view(&mut self) -> &mut DebugViewPass {
+        let d = &self.device;
+        self.passes
+            .debug_view
+            .get_or_insert_with(|| DebugViewPass::new(d))
+    }
+
+    /// Bytes of build scratch held.
+    pub fn scratch_bytes(&self) -> u64 {
+        self.scratch_aabbs.size()
+            + self.scratch_order.size()
+            + self.counters.size()
+            + self.passes.lbvh.as_ref().map_or(0, |l| l.scratch_bytes())
+    }
+
+    /// Bytes of the TLAS and its build buffers.
+    pub fn tlas_bytes(&self) -> u64 {
+        self.tlas.nodes.size()
+            + self.tlas.order.size()
+            + self.tlas.topology.size()
+            + self.tlas.aabbs.size()
+    }
+
+    /// Releases pool ranges no in-flight task can read.
+    pub fn collect(&mut self, oldest_in_flight: u64) {
+        self.staged.collect(oldest_in_flight);
+        self.triangles.collect(oldest_in_flight);
+        self.nodes.collect(oldest_in_flight);
+        self.words.collect(oldest_in_flight);
+    }
+
+    fn alloc(
+        pool: &mut Pool,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        len: u32,
+        max: u64,
+        what: &str,
+        element: u64,
+    ) -> Result<Range> {
+        pool.alloc(device, encoder, len, max)
+            .ok_or_else(|| Error::OutOfDeviceMemory {
+                what: what.to_string(),
+                bytes: pool.used_bytes() + len as u64 * element,
+                limit: max,
+            })
+    }
+
+    /// Space for `triangles` ingested triangles.
+    pub fn alloc_staged(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        triangles: u32,
+        name: &str,
+    ) -> Result<Range> {
+        Self::alloc(
+            &mut self.staged,
+            &self.device,
+            encoder,
+            triangles,
+            self.max_binding,
+            &format!("staged triangles of geometry `{name}`"),
+            TRIANGLE_BYTES,
+        )
+    }
+
+    /// Makes the geometry and instance tables hold the given slots.
+    pub fn ensure_tables(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        geometry_slots: u32,
+        instance_slots: u32,
+    ) -> Result<()> {
+        let max = self.max_binding;
+        self.geometry_table
+            .ensure(&self.device, encoder, geometry_slots as u64, max)?;
+        self.instance_table
+            .ensure(&self.device, encoder, instance_slots as u64, max)
+    }
+
+    /// Makes the counters buffer hold `ingestions` pairs and zeroes them.
+    pub fn reset_counters(&mut self, encoder: &mut wgpu::CommandEncoder, ingestions: u32) {
+        let bytes = (ingestions as u64 * 8).max(8);
+        if self.counters.size() < bytes {
+            self.counters = storage(
+                &self.device,
+                "kickstart-rt ingestion counters",
+                bytes.next_power_of_two(),
+            );
+        }
+        encoder.clear_buffer(&self.counters, 0, Some(bytes.div_ceil(4) * 4));
+    }
+
+    /// Decodes one geometry's components from `raw` into its staged range.
+    pub fn record_ingest(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        raw: &wgpu::Buffer,
+        components: &[ComponentIngest],
+        staged: Range,
+        ingestion: u32,
+    ) {
+        self.ingest();
+        let (Some(ingest), tris, counters) = (
+            self.passes.ingest.as_ref(),
+            self.staged.buffer(),
+            &self.counters,
+        ) else {
+            return;
+        };
+        rec.scope = "ingest";
+        ingest.record(rec, raw, components, tris, staged.start, counters, ingestion * 2);
+    }
+
+    fn ensure_scratch(&mut self, prims: u32) {
+        let n = prims.max(1) as u64;
+        if self.scratch_aabbs.size() < n * AABB_BYTES {
+            self.scratch_aabbs = storage(
+                &self.device,
+                "kickstart-rt build boxes",
+                n.next_power_of_two() * AABB_BYTES,
+            );
+        }
+        if self.scratch_order.size() < n * 4 {
+            self.scratch_order = storage(
+                &self.device,
+                "kickstart-rt build order",
+                n.next_power_of_two() * 4,
+            );
+        }
+    }
+
+    /// Builds the BLAS of geometry slot `slot` from its staged triangles. Returns the geometry
+    /// table header (first 16 bytes of its record) to upload.
+    pub fn build_blas(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        slot: u32,
+        g: &mut GeometryGpu,
+        keep_for_refit: bool,
+        name: &str,
+    ) -> Result<[u32; 4]> {
+        let n = g.triangles;
+        let Some(staged) = g.staged else {
+            return Err(Error::ReadBack(format!(
+                "geometry `{name}` has no staged triangles to build from"
+            )));
+        };
+        let max = self.max_binding;
+        let tris = Self::alloc(
+            &mut self.triangles,
+            &self.device,
+            rec.encoder,
+            n,
+            max,
+            &format!("BLAS triangles of geometry `{name}`"),
+            TRIANGLE_BYTES,
+        )?;
+        let nodes = Self::alloc(
+            &mut self.nodes,
+            &self.device,
+            rec.encoder,
+            Lbvh::node_count(n),
+            max,
+            &format!("BLAS nodes of geometry `{name}`"),
+            NODE_BYTES,
+        )?;
+        let words = if keep_for_refit {
+            Some(Self::alloc(
+                &mut self.words,
+                &self.device,
+                rec.encoder,
+                n + Lbvh::topology_words(n),
+                max,
+                &format!("refit data of geometry `{name}`"),
+                4,
+            )?)
+        } else {
+            None
+        };
+        self.ensure_scratch(n);
+        self.prims();
+        self.lbvh();
+        rec.scope = "blas build";
+        let (Some(prims), Some(lbvh)) = (self.passes.prims.as_ref(), self.passes.lbvh.as_mut())
+        else {
+            return Err(Error::Unsupported { task: "BLAS build" });
+        };
+        prims.triangle_aabbs(
+            rec,
+            self.staged.buffer(),
+            staged.start,
+            n,
+            &self.scratch_aabbs,
+            0,
+        );
+        let (order, order_base) = match words {
+            Some(w) => (self.words.buffer(), w.start),
+            None => (&self.scratch_order, 0),
+        };
+        lbvh.build(
+            rec,
+            &LbvhBuild {
+                aabbs: &self.scratch_aabbs,
+                aabb_base: 0,
+                count: n,
+                nodes: self.nodes.buffer(),
+                node_base: nodes.start,
+                order,
+                order_base,
+                topology: words.map(|w| (self.words.buffer(), w.start + n)),
+                leaf_refs: LeafRefs::SortedPosition,
+                bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+            },
+        );
+        prims.gather_triangles(
+            rec,
+            self.staged.buffer(),
+            staged.start,
+            order,
+            order_base,
+            n,
+            self.triangles.buffer(),
+            tris.start,
+        );
+        g.blas = Some(BlasRanges { tris, nodes, words });
+        Ok([nodes.start, tris.start, n, 1])
+    }
+
+    /// Refits a built `allow_update` BLAS to its re-ingested triangles.
+    pub fn refit_blas(&mut self, rec: &mut Recorder<'_>, slot: u32, g: &GeometryGpu) {
+        let (Some(staged), Some(BlasRanges {
+            tris,
+            nodes,
+            words: Some(words),
+        })) = (g.staged, g.blas)
+        else {
+            return;
+        };
+        let n = g.triangles;
+        self.ensure_scratch(n);
+        self.prims();
+        self.lbvh();
+        rec.scope = "blas refit";
+        let (Some(prims), Some(lbvh)) = (self.passes.prims.as_ref(), self.passes.lbvh.as_mut())
+        else {
+            return;
+        };
+        prims.triangle_aabbs(
+            rec,
+            self.staged.buffer(),
+            staged.start,
+            n,
+            &self.scratch_aabbs,
+            0,
+        );
+        lbvh.refit(
+            rec,
+            &LbvhRefit {
+                aabbs: &self.scratch_aabbs,
+                aabb_base: 0,
+                count: n,
+                nodes: self.nodes.buffer(),
+                node_base: nodes.start,
+                order: self.words.buffer(),
+                order_base: words.start,
+                topology: (self.words.buffer(), words.start + n),
+                leaf_refs: LeafRefs::SortedPosition,
+                bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+            },
+        );
+        prims.gather_triangles(
+            rec,
+            self.staged.buffer(),
+            staged.start,
+            self.words.buffer(),
+            words.start,
+            n,
+            self.triangles.buffer(),
+            tris.start,
+        );
+    }
+
+    /// Whether the next TLAS update must rebuild rather than refit.
+    pub fn tlas_needs_rebuild(&self, slots: u32) -> bool {
+        !self.tlas.built || self.tlas.slots != slots
+    }
+
+    /// Refits since the last rebuild.
+    pub fn tlas_refits_since_rebuild(&self) -> u32 {
+        self.tlas.refits_since_rebuild
+    }
+
+    /// Builds (`refit == false`) or refits the TLAS over instance slots `0..slots`.
+    pub fn update_tlas(&mut self, rec: &mut Recorder<'_>, slots: u32, refit: bool) -> Result<()> {
+        let refit = refit && !self.tlas_needs_rebuild(slots);
+        if slots > self.tlas.capacity {
+            let cap = slots.next_power_of_two().max(64);
+            let need = cap as u64 * NODE_BYTES;
+            if need > self.max_binding {
+                return Err(Error::OutOfDeviceMemory {
+                    what: "TLAS nodes".into(),
+                    bytes: need,
+                    limit: self.max_binding,
+                });
+            }
+            let d = &self.device;
+            self.tlas.nodes = storage(d, "kickstart-rt TLAS nodes", need);
+            self.tlas.order = storage(d, "kickstart-rt TLAS order", cap as u64 * 4);
+            self.tlas.topology = storage(
+                d,
+                "kickstart-rt TLAS topology",
+                Lbvh::topology_words(cap).max(1) as u64 * 4,
+            );
+            self.tlas.aabbs = storage(d, "kickstart-rt TLAS instance boxes", cap as u64 * AABB_BYTES);
+            self.tlas.capacity = cap;
+        }
+        self.prims();
+        self.lbvh();
+        let (Some(prims), Some(lbvh)) = (self.passes.prims.as_ref(), self.passes.lbvh.as_mut())
+        else {
+            return Err(Error::Unsupported { task: "TLAS build" });
+        };
+        rec.scope = if refit { "tlas refit" } else { "tlas build" };
+        prims.instance_aabbs(
+            rec,
+            &self.instance_table.buffer,
+            &self.geometry_table.buffer,
+            slots,
+            &self.tlas.aabbs,
+        );
+        if refit {
+            lbvh.refit(
+                rec,
+                &LbvhRefit {
+                    aabbs: &self.tlas.aabbs,
+                    aabb_base: 0,
+                    count: slots,
+                    nodes: &self.tlas.nodes,
+                    node_base: 0,
+                    order: &self.tlas.order,
+                    order_base: 0,
+                    topology: (&self.tlas.topology, 0),
+                    leaf_refs: LeafRefs::PrimitiveIndex,
+                    bounds_out: None,
+                },
+            );
+            self.tlas.refits_since_rebuild += 1;
+        } else {
+            lbvh.build(
+                rec,
+                &LbvhBuild {
+                    aabbs: &self.tlas.aabbs,
+                    aabb_base: 0,
+                    count: slots,
+                    nodes: &self.tlas.nodes,
+                    node_base: 0,
+                    order: &self.tlas.order,
+                    order_base: 0,
+                    topology: Some((&self.tlas.topology, 0)),
+                    leaf_refs: LeafRefs::PrimitiveIndex,
+                    bounds_out: None,
+                },
+            );
+            self.tlas.refits_since_rebuild = 0;
+            self.tlas.slots = slots;
+            self.tlas.built = true;
+        }
+        Ok(())
+    }
+
+    fn scene_buffers(&self) -> SceneBuffers<'_> {
+        SceneBuffers {
+            tlas_nodes: &self.tlas.nodes,
+            instances: &self.instance_table.buffer,
+            geometries: &self.geometry_table.buffer,
+            blas_nodes: self.nodes.buffer(),
+            triangles: self.triangles.buffer(),
+        }
+    }
+
+    /// Whether a TLAS exists to trace against (before the first build, every ray misses).
+    pub fn has_tlas(&self) -> bool {
+        self.tlas.built
+    }
+
+    /// Records a batch of rays.
+    pub fn trace_rays(&mut self, rec: &mut Recorder<'_>, t: &crate::tasks::TraceRaysTask) {
+        self.rays();
+        let Some(rays) = self.passes.rays.as_ref() else {
+            return;
+        };
+        rec.scope = "trace rays";
+        rays.record(
+            rec,
+            &self.scene_buffers(),
+            (&t.rays, t.ray_offset),
+            (&t.hits, t.hit_offset),
+            t.ray_count,
+            t.query,
+            t.instance_mask.0,
+        );
+    }
+
+    /// Records a primary-ray debug view.
+    pub fn debug_view_pass(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        output: &wgpu::TextureView,
+        viewport: (u32, u32, u32, u32),
+        view: &crate::tasks::ViewInfo,
+        kind: crate::tasks::DebugOutputType,
+    ) {
+        self.debug_view();
+        let Some(pass) = self.passes.debug_view.as_mut() else {
+            return;
+        };
+        rec.scope = "debug view";
+        let scene = SceneBuffers {
+            tlas_nodes: &self.tlas.nodes,
+            instances: &self.instance_table.buffer,
+            geometries: &self.geometry_table.buffer,
+            blas_nodes: self.nodes.buffer(),
+            triangles: self.triangles.buffer(),
+        };
+        pass.record(
+            rec,
+            &scene,
+            output,
+            output.texture().format(),
+            viewport,
+            view,
+            kind,
+        );
+    }
+
+    /// Reads back a BLAS (blocks on the device; tools and tests only).
+    pub fn read_back_blas(
+        &self,
+        queue: &wgpu::Queue,
+        g: &GeometryGpu,
+    ) -> Result<(Vec<[f32; 16]>, Vec<[f32; 12]>)> {
+        let Some(b) = g.blas else {
+            return Err(Error::ReadBack("the geometry's BLAS is not built yet".into()));
+        };
+        let nodes = read_back(
+            &self.device,
+            queue,
+            self.nodes.buffer(),
+            b.nodes.start as u64 * NODE_BYTES,
+            b.nodes.len as u64 * NODE_BYTES,
+        )?;
+        let tris = read_back(
+            &self.device,
+            queue,
+            self.triangles.buffer(),
+            b.tris.start as u64 * TRIANGLE_BYTES,
+            b.tris.len as u64 * TRIANGLE_BYTES,
+        )?;
+        Ok((
+            bytemuck::pod_collect_to_vec(&nodes),
+            bytemuck::pod_collect_to_vec(&tris),
+        ))
+    }
+}
+
+/// A STORAGE | COPY_SRC | COPY_DST buffer (at least 256 bytes, zeroed by wgpu).
+pub(crate) fn storage(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(256).div_ceil(4) * 4,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// Copies `size` bytes of `buffer` to the CPU, waiting for the device.
+pub(crate) fn read_back(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> Result<Vec<u8>> {
+    if size == 0 {
+        return Ok(Vec::new());
+    }
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("kickstart-rt read-back"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
+    queue.submit([enc.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| Error::ReadBack(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| Error::ReadBack(e.to_string()))?
+        .map_err(|e| Error::ReadBack(e.to_string()))?;
+    let data = staging
+        .slice(..)
+        .get_mapped_range()
+        .map_err(|e| Error::ReadBack(e.to_string()))?
+        .to_vec();
+    Ok(data)
+}
