@@ -13,15 +13,25 @@ fn field_of(e: &Error) -> String {
 }
 
 #[test]
-fn vertex_and_index_bytes_reach_sdk_memory() {
+fn static_geometry_copies_are_held_until_built_then_released() {
     let ctx = context(2);
     let g = ctx.create_geometry_handle();
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 2.0);
     build_submit_complete(&ctx, c);
     assert_eq!(ctx.geometry_triangle_count(g).unwrap(), Some(2));
-    // 4 vertices × 12 bytes + 6 indices × 4 bytes.
-    assert_eq!(ctx.resource_allocations().vertex_copies, 48 + 24);
+    // No BvhBuildTask yet: the ingested triangles (48 bytes each) wait in the shared pool.
+    assert_eq!(ctx.resource_allocations().vertex_copies, 2 * 48);
+    assert!(!ctx.geometry_is_built(g).unwrap());
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    assert!(ctx.geometry_is_built(g).unwrap());
+    let a = ctx.resource_allocations();
+    assert!(a.blas >= 2 * 48 + 64, "BLAS triangles and a node: {a:?}");
+    // Released in the first build after the building task completed.
+    build_submit_complete(&ctx, ctx.create_task_container());
+    assert_eq!(ctx.resource_allocations().vertex_copies, 0);
 }
 
 #[test]
@@ -173,7 +183,7 @@ fn destroyed_geometry_keeps_memory_until_first_build_after_completion() {
     let mut e = encoder();
     let t = ctx.build_gpu_task(c, &mut e).unwrap();
     let bytes = ctx.resource_allocations().vertex_copies;
-    assert_eq!(bytes, 72);
+    assert_eq!(bytes, 2 * 48, "two ingested triangles");
     ctx.destroy_geometry_handle(g).unwrap();
     // In flight: kept, even across another build.
     let mut e2 = encoder();
@@ -351,8 +361,16 @@ fn instance_data_is_at_the_instance_index() {
             "instance {}",
             h.index()
         );
-        assert_eq!(rec[12].to_bits(), g.index());
-        assert_eq!(rec[13].to_bits(), 3, "default inclusion mask");
+        // Then the inverse's rows: the translation is negated.
+        assert_eq!(
+            (rec[15], rec[19], rec[23]),
+            (-x, -1.0, -2.0),
+            "instance {}",
+            h.index()
+        );
+        assert_eq!(rec[24].to_bits(), g.index());
+        assert_eq!(rec[25].to_bits(), 3, "default inclusion mask");
+        assert_eq!(rec[26].to_bits(), 1, "participating");
     }
 }
 
@@ -392,13 +410,20 @@ fn input_buffer_without_copy_src_gets_our_error_not_a_wgpu_panic() {
 #[test]
 fn unimplemented_tasks_are_refused_by_name() {
     let ctx = context(2);
+    let [a, b] = [ctx.create_instance_handle(), ctx.create_instance_handle()];
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(BvhBuildTask::default());
+    c.schedule_render_task(RenderTask::DirectLightTransfer(DirectLightTransferTask {
+        source: a,
+        target: b,
+    }));
     let mut e = encoder();
     assert!(
-        matches!(ctx.build_gpu_task(c, &mut e), Err(Error::Unsupported { task }) if task.starts_with("BvhBuildTask"))
+        matches!(ctx.build_gpu_task(c, &mut e), Err(Error::Unsupported { task }) if task == "DirectLightTransferTask")
     );
     submit(e);
+    // Nothing of the refused container was applied: the context still builds.
+    build_submit_complete(&ctx, ctx.create_task_container());
 }
 
 #[test]
