@@ -7,17 +7,17 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use crate::allocations::ResourceAllocations;
 use crate::container::TaskContainer;
 use crate::error::{Error, Result};
-use crate::handles::*;
 use crate::gpu::recorder::Timestamps;
 use crate::gpu::Recorder;
+use crate::handles::*;
 use crate::logging::{LogCallback, Logger, Severity};
 use crate::scene::gpu_scene::{
     GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE, INSTANCE_RECORD_BYTES,
 };
 use crate::scene::stubs::ComponentIngest;
 use crate::staging::{StagingBuffer, StagingPool};
-use crate::timing::{GpuTimings, TimingReadback};
 use crate::tasks::*;
+use crate::timing::{GpuTimings, TimingReadback};
 use crate::validate;
 use crate::version::Version;
 
@@ -255,8 +255,8 @@ impl ExecuteContext {
             ));
         }
         crate::device::check_device(device)?;
-        let gpu_timing = settings.gpu_timing
-            && device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let gpu_timing =
+            settings.gpu_timing && device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         if settings.gpu_timing && !gpu_timing {
             logger.message(
                 Severity::Warning,
@@ -503,7 +503,8 @@ impl ExecuteContext {
     /// tests that read it back. `None` before the first instance is registered.
     pub fn instance_table(&self) -> Option<wgpu::Buffer> {
         let s = self.state();
-        s.any_instance.then(|| s.scene.instance_table.buffer.clone())
+        s.any_instance
+            .then(|| s.scene.instance_table.buffer.clone())
     }
 
     /// Marks a GPU task built by [`Self::build_gpu_task`] as executed by the GPU, so its working
@@ -578,7 +579,11 @@ impl ExecuteContext {
     ) -> Result<Option<DroppedTriangles>> {
         let mut s = self.state();
         self.collect_invoked(&mut s);
-        Ok(s.geometries.get(handle)?.data.as_ref().and_then(|d| d.dropped))
+        Ok(s.geometries
+            .get(handle)?
+            .data
+            .as_ref()
+            .and_then(|d| d.dropped))
     }
 
     /// Whether a geometry's BLAS is built and not waiting for a rebuild or refit.
@@ -704,11 +709,8 @@ impl ExecuteContext {
         let mut timestamps = self.gpu_timing.then(|| Timestamps::new(&self.device));
 
         // Tables large enough for every live slot; staged space for every registration.
-        s.scene.ensure_tables(
-            encoder,
-            s.geometries.slot_count(),
-            s.instances.slot_count(),
-        )?;
+        s.scene
+            .ensure_tables(encoder, s.geometries.slot_count(), s.instances.slot_count())?;
         let mut uploads = Uploads::default();
         let mut ingestions = Vec::new();
         for (task, extents) in &plan.geometries {
@@ -722,9 +724,7 @@ impl ExecuteContext {
             };
             let staged = match staged {
                 Some(r) => r,
-                None => s
-                    .scene
-                    .alloc_staged(encoder, triangles, &task.input.name)?,
+                None => s.scene.alloc_staged(encoder, triangles, &task.input.name)?,
             };
             ingestions.push((*task, extents, staged, triangles));
         }
@@ -777,11 +777,7 @@ impl ExecuteContext {
         // 3. Instance records, at the instance's slot index (the invariant of the instance-id
         //    bug report: the index a hit reports is the index of the instance's data).
         for t in &plan.instances {
-            let old = s
-                .instances
-                .get(t.handle)
-                .ok()
-                .and_then(|i| i.input.clone());
+            let old = s.instances.get(t.handle).ok().and_then(|i| i.input.clone());
             match old {
                 Some(o)
                     if o.geometry == t.input.geometry
@@ -807,8 +803,7 @@ impl ExecuteContext {
                 .iter()
                 .flat_map(|(_, e, _, _)| e.iter())
                 .map(|e| {
-                    (e.vertex_bytes.1 - e.vertex_bytes.0)
-                        + e.index_bytes.map_or(0, |(a, b)| b - a)
+                    (e.vertex_bytes.1 - e.vertex_bytes.0) + e.index_bytes.map_or(0, |(a, b)| b - a)
                 })
                 .sum();
             let raw = crate::scene::gpu_scene::storage(
@@ -861,7 +856,8 @@ impl ExecuteContext {
                 scope: "ingest",
             };
             for (i, ((_, _, staged, _), comps)) in ingestions.iter().zip(&plans).enumerate() {
-                s.scene.record_ingest(&mut rec, &raw, comps, *staged, i as u32);
+                s.scene
+                    .record_ingest(&mut rec, &raw, comps, *staged, i as u32);
             }
             ws._inputs.push(raw);
             let readback = self.device.create_buffer(&wgpu::BufferDescriptor {

@@ -633,7 +633,9 @@ fn ray_buffer(
             task,
             format!("{field}_offset"),
             offset,
-            format!("must be a multiple of the device's min_storage_buffer_offset_alignment ({align})"),
+            format!(
+                "must be a multiple of the device's min_storage_buffer_offset_alignment ({align})"
+            ),
         ));
     }
     if offset.checked_add(bytes).is_none_or(|e| e > buffer.size()) {

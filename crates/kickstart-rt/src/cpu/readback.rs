@@ -29,7 +29,10 @@ impl Bvh2Child {
 
     /// `(first, count)` of a leaf.
     pub fn leaf_range(&self) -> (u32, u32) {
-        (self.reference & 0x0fff_ffff, ((self.reference >> 28) & 7) + 1)
+        (
+            self.reference & 0x0fff_ffff,
+            ((self.reference >> 28) & 7) + 1,
+        )
     }
 }
 

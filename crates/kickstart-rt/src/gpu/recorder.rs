@@ -108,10 +108,7 @@ impl<'a> Recorder<'a> {
             return;
         }
         let scope = self.scope;
-        let timestamp_writes = self
-            .timestamps
-            .as_mut()
-            .and_then(|t| t.next(scope, label));
+        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
         let mut pass = self
             .encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -4,8 +4,11 @@
 
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
-use crate::scene::stubs::{ComponentIngest, Ingest, LbvhBuild, LbvhRefit, LeafRefs, Lbvh, Prims, RayTracer, SceneBuffers, DebugViewPass};
 use crate::scene::pool::{Pool, Range};
+use crate::scene::stubs::{
+    ComponentIngest, DebugViewPass, Ingest, Lbvh, LbvhBuild, LbvhRefit, LeafRefs, Prims, RayTracer,
+    SceneBuffers,
+};
 use crate::staging::{StagingBuffer, StagingPool};
 
 /// Bytes of one triangle of the soup (three `vec4<f32>`).
@@ -199,8 +202,9 @@ pub(crate) struct GpuScene {
 impl GpuScene {
     pub fn new(device: &wgpu::Device) -> Self {
         let limits = device.limits();
-        let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
-        let tlas_nodes = storage(device, "kickstart-rt TLAS nodes", NODE_BYTES);
+        let max_binding =
+            (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let tlas_nodes = empty_root(device);
         GpuScene {
             device: device.clone(),
             max_binding,
@@ -209,7 +213,11 @@ impl GpuScene {
             nodes: Pool::new(device, "kickstart-rt BLAS nodes", NODE_BYTES),
             words: Pool::new(device, "kickstart-rt BLAS refit data", 4),
             geometry_table: Table::new(device, "kickstart-rt geometry table", GEOMETRY_RECORD_SIZE),
-            instance_table: Table::new(device, "kickstart-rt instance table", INSTANCE_RECORD_BYTES),
+            instance_table: Table::new(
+                device,
+                "kickstart-rt instance table",
+                INSTANCE_RECORD_BYTES,
+            ),
             tlas: Tlas {
                 nodes: tlas_nodes,
                 order: storage(device, "kickstart-rt TLAS order", 4),
@@ -368,7 +376,15 @@ impl GpuScene {
             return;
         };
         rec.scope = "ingest";
-        ingest.record(rec, raw, components, tris, staged.start, counters, ingestion * 2);
+        ingest.record(
+            rec,
+            raw,
+            components,
+            tris,
+            staged.start,
+            counters,
+            ingestion * 2,
+        );
     }
 
     fn ensure_scratch(&mut self, prims: u32) {
@@ -488,11 +504,14 @@ impl GpuScene {
 
     /// Refits a built `allow_update` BLAS to its re-ingested triangles.
     pub fn refit_blas(&mut self, rec: &mut Recorder<'_>, slot: u32, g: &GeometryGpu) {
-        let (Some(staged), Some(BlasRanges {
-            tris,
-            nodes,
-            words: Some(words),
-        })) = (g.staged, g.blas)
+        let (
+            Some(staged),
+            Some(BlasRanges {
+                tris,
+                nodes,
+                words: Some(words),
+            }),
+        ) = (g.staged, g.blas)
         else {
             return;
         };
@@ -571,7 +590,11 @@ impl GpuScene {
                 "kickstart-rt TLAS topology",
                 Lbvh::topology_words(cap).max(1) as u64 * 4,
             );
-            self.tlas.aabbs = storage(d, "kickstart-rt TLAS instance boxes", cap as u64 * AABB_BYTES);
+            self.tlas.aabbs = storage(
+                d,
+                "kickstart-rt TLAS instance boxes",
+                cap as u64 * AABB_BYTES,
+            );
             self.tlas.capacity = cap;
         }
         self.prims();
@@ -700,7 +723,9 @@ impl GpuScene {
         g: &GeometryGpu,
     ) -> Result<(Vec<[f32; 16]>, Vec<[f32; 12]>)> {
         let Some(b) = g.blas else {
-            return Err(Error::ReadBack("the geometry's BLAS is not built yet".into()));
+            return Err(Error::ReadBack(
+                "the geometry's BLAS is not built yet".into(),
+            ));
         };
         let nodes = read_back(
             &self.device,
@@ -721,6 +746,24 @@ impl GpuScene {
             bytemuck::pod_collect_to_vec(&tris),
         ))
     }
+}
+
+/// A TLAS node buffer holding one root with two empty children: before the first TLAS build,
+/// every ray misses at once (a zeroed node would be a self-referencing inner node).
+fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let e = f32::from_bits(0x8000_0000);
+    let root: [f32; 16] = [
+        1e30, 1e30, 1e30, e, -1e30, -1e30, -1e30, e, 1e30, 1e30, 1e30, 0.0, -1e30, -1e30, -1e30,
+        0.0,
+    ];
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("kickstart-rt TLAS nodes"),
+        contents: bytemuck::cast_slice(&root),
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+    })
 }
 
 /// A STORAGE | COPY_SRC | COPY_DST buffer (at least 256 bytes, zeroed by wgpu).

@@ -1,8 +1,8 @@
 //! The scene on the GPU: shared pools, ingestion, BLAS/TLAS builds. Layouts:
 //! `docs/ray-tracing-core.md`.
 
+pub(crate) mod gpu_scene;
 pub(crate) mod ingest;
 pub(crate) mod lbvh;
 pub(crate) mod pool;
 pub(crate) mod stubs;
-pub(crate) mod gpu_scene;

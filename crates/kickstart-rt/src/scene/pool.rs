@@ -81,12 +81,7 @@ impl Pool {
             return None;
         }
         new_cap = new_cap.min(max_elems).min(u32::MAX as u64);
-        let new = create(
-            device,
-            self.label,
-            new_cap * self.element_bytes,
-            self.usage,
-        );
+        let new = create(device, self.label, new_cap * self.element_bytes, self.usage);
         encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
         // The old buffer stays alive while recorded commands use it (wgpu reference counts it).
         self.buffer = new;
@@ -150,7 +145,12 @@ impl Pool {
     }
 }
 
-fn create(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+fn create(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: size.max(256),

@@ -16,41 +16,102 @@ pub(crate) struct ComponentIngest {
 }
 pub(crate) struct Ingest;
 impl Ingest {
-    pub fn new(device: &wgpu::Device) -> Self { Ingest }
-    pub fn record(&self, rec: &mut Recorder<'_>, raw: &wgpu::Buffer, components: &[ComponentIngest], out_tris: &wgpu::Buffer, out_base: u32, counters: &wgpu::Buffer, counter_base: u32) {}
+    pub fn new(device: &wgpu::Device) -> Self {
+        Ingest
+    }
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        raw: &wgpu::Buffer,
+        components: &[ComponentIngest],
+        out_tris: &wgpu::Buffer,
+        out_base: u32,
+        counters: &wgpu::Buffer,
+        counter_base: u32,
+    ) {
+    }
 }
 pub(crate) struct Prims;
 impl Prims {
-    pub fn new(device: &wgpu::Device) -> Self { Prims }
-    pub fn triangle_aabbs(&self, rec: &mut Recorder<'_>, tris: &wgpu::Buffer, tri_base: u32, count: u32, aabbs: &wgpu::Buffer, aabb_base: u32) {}
-    pub fn gather_triangles(&self, rec: &mut Recorder<'_>, src: &wgpu::Buffer, src_base: u32, order: &wgpu::Buffer, order_base: u32, count: u32, dst: &wgpu::Buffer, dst_base: u32) {}
-    pub fn instance_aabbs(&self, rec: &mut Recorder<'_>, instances: &wgpu::Buffer, geometries: &wgpu::Buffer, count: u32, aabbs: &wgpu::Buffer) {}
+    pub fn new(device: &wgpu::Device) -> Self {
+        Prims
+    }
+    pub fn triangle_aabbs(
+        &self,
+        rec: &mut Recorder<'_>,
+        tris: &wgpu::Buffer,
+        tri_base: u32,
+        count: u32,
+        aabbs: &wgpu::Buffer,
+        aabb_base: u32,
+    ) {
+    }
+    pub fn gather_triangles(
+        &self,
+        rec: &mut Recorder<'_>,
+        src: &wgpu::Buffer,
+        src_base: u32,
+        order: &wgpu::Buffer,
+        order_base: u32,
+        count: u32,
+        dst: &wgpu::Buffer,
+        dst_base: u32,
+    ) {
+    }
+    pub fn instance_aabbs(
+        &self,
+        rec: &mut Recorder<'_>,
+        instances: &wgpu::Buffer,
+        geometries: &wgpu::Buffer,
+        count: u32,
+        aabbs: &wgpu::Buffer,
+    ) {
+    }
 }
-pub(crate) enum LeafRefs { SortedPosition, PrimitiveIndex }
+pub(crate) enum LeafRefs {
+    SortedPosition,
+    PrimitiveIndex,
+}
 pub(crate) struct LbvhBuild<'a> {
-    pub aabbs: &'a wgpu::Buffer, pub aabb_base: u32, pub count: u32,
-    pub nodes: &'a wgpu::Buffer, pub node_base: u32,
-    pub order: &'a wgpu::Buffer, pub order_base: u32,
+    pub aabbs: &'a wgpu::Buffer,
+    pub aabb_base: u32,
+    pub count: u32,
+    pub nodes: &'a wgpu::Buffer,
+    pub node_base: u32,
+    pub order: &'a wgpu::Buffer,
+    pub order_base: u32,
     pub topology: Option<(&'a wgpu::Buffer, u32)>,
     pub leaf_refs: LeafRefs,
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
 pub(crate) struct LbvhRefit<'a> {
-    pub aabbs: &'a wgpu::Buffer, pub aabb_base: u32, pub count: u32,
-    pub nodes: &'a wgpu::Buffer, pub node_base: u32,
-    pub order: &'a wgpu::Buffer, pub order_base: u32,
+    pub aabbs: &'a wgpu::Buffer,
+    pub aabb_base: u32,
+    pub count: u32,
+    pub nodes: &'a wgpu::Buffer,
+    pub node_base: u32,
+    pub order: &'a wgpu::Buffer,
+    pub order_base: u32,
     pub topology: (&'a wgpu::Buffer, u32),
     pub leaf_refs: LeafRefs,
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
 pub(crate) struct Lbvh;
 impl Lbvh {
-    pub fn new(device: &wgpu::Device) -> Self { Lbvh }
-    pub fn node_count(count: u32) -> u32 { count.saturating_sub(1).max(1) }
-    pub fn topology_words(count: u32) -> u32 { 2 * count }
+    pub fn new(device: &wgpu::Device) -> Self {
+        Lbvh
+    }
+    pub fn node_count(count: u32) -> u32 {
+        count.saturating_sub(1).max(1)
+    }
+    pub fn topology_words(count: u32) -> u32 {
+        2 * count
+    }
     pub fn build(&mut self, rec: &mut Recorder<'_>, b: &LbvhBuild<'_>) {}
     pub fn refit(&mut self, rec: &mut Recorder<'_>, r: &LbvhRefit<'_>) {}
-    pub fn scratch_bytes(&self) -> u64 { 0 }
+    pub fn scratch_bytes(&self) -> u64 {
+        0
+    }
 }
 pub(crate) struct SceneBuffers<'a> {
     pub tlas_nodes: &'a wgpu::Buffer,
@@ -61,11 +122,35 @@ pub(crate) struct SceneBuffers<'a> {
 }
 pub(crate) struct RayTracer;
 impl RayTracer {
-    pub fn new(device: &wgpu::Device) -> Self { RayTracer }
-    pub fn record(&self, rec: &mut Recorder<'_>, scene: &SceneBuffers<'_>, rays: (&wgpu::Buffer, u64), hits: (&wgpu::Buffer, u64), count: u32, query: RayQuery, mask: u32) {}
+    pub fn new(device: &wgpu::Device) -> Self {
+        RayTracer
+    }
+    pub fn record(
+        &self,
+        rec: &mut Recorder<'_>,
+        scene: &SceneBuffers<'_>,
+        rays: (&wgpu::Buffer, u64),
+        hits: (&wgpu::Buffer, u64),
+        count: u32,
+        query: RayQuery,
+        mask: u32,
+    ) {
+    }
 }
 pub(crate) struct DebugViewPass;
 impl DebugViewPass {
-    pub fn new(device: &wgpu::Device) -> Self { DebugViewPass }
-    pub fn record(&mut self, rec: &mut Recorder<'_>, scene: &SceneBuffers<'_>, output: &wgpu::TextureView, format: wgpu::TextureFormat, viewport: (u32, u32, u32, u32), view: &ViewInfo, kind: DebugOutputType) {}
+    pub fn new(device: &wgpu::Device) -> Self {
+        DebugViewPass
+    }
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        scene: &SceneBuffers<'_>,
+        output: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        viewport: (u32, u32, u32, u32),
+        view: &ViewInfo,
+        kind: DebugOutputType,
+    ) {
+    }
 }

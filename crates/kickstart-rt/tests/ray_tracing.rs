@@ -1,0 +1,844 @@
+//! The ray tracing core through the public API: geometry ingestion, GPU BLAS/TLAS builds and
+//! refits, and traversal, checked ray by ray against the CPU oracle (`kickstart_rt::cpu`).
+
+mod common;
+use common::rt::*;
+use common::*;
+use glam::{Affine3A, Quat, Vec3};
+use kickstart_rt::*;
+use proptest::prelude::*;
+use std::sync::{Arc, Mutex};
+
+const VISIBLE: u32 = InstanceInclusionMask::VISIBLE_IN_RT.0;
+
+/// A random transform: rotation, non-uniform scale (sometimes mirrored), translation.
+fn random_transform(rng: &mut Rng, spread: f32) -> Affine3A {
+    let axis = rng.unit();
+    let mut scale = Vec3::new(
+        rng.range(0.5, 2.0),
+        rng.range(0.5, 2.0),
+        rng.range(0.5, 2.0),
+    );
+    if rng.below(4) == 0 {
+        scale.x = -scale.x;
+    }
+    Affine3A::from_scale_rotation_translation(
+        scale,
+        Quat::from_axis_angle(axis, rng.range(0.0, 6.28)),
+        rng.v(-spread, spread),
+    )
+}
+
+/// Rays between random points of the scene's region, some with a finite range, some starting
+/// beyond their origin (t_min > 0), a few axis-aligned.
+fn random_rays(rng: &mut Rng, n: usize, extent: f32) -> Vec<GpuRay> {
+    (0..n)
+        .map(|k| {
+            let o = rng.v(-extent, extent);
+            let mut d = rng.v(-extent, extent) - o;
+            if k % 23 == 0 {
+                // Axis-aligned: two zero components (0 × ∞ in the slab test).
+                let axis = rng.below(3) as usize;
+                let mut a = Vec3::ZERO;
+                a[axis] = if rng.below(2) == 0 { 1.0 } else { -1.0 };
+                d = a;
+            }
+            let t_max = if k % 5 == 0 {
+                rng.range(0.1, 2.0)
+            } else {
+                f32::INFINITY
+            };
+            let t_min = if k % 7 == 0 { rng.range(0.0, 0.3) } else { 0.0 };
+            ray(o, d, t_min, t_max)
+        })
+        .collect()
+}
+
+struct Scene {
+    ctx: ExecuteContext,
+    oracle: Oracle,
+    instances: Vec<(InstanceHandle, InstanceInput)>,
+}
+
+/// Geometries (random soups of ≥ `tris` triangles, with duplicates and degenerates) and
+/// `instances` instances of them, some masked out and some not participating.
+fn random_scene(seed: u64, tris: u32, instances: u32) -> Scene {
+    let mut rng = Rng(seed);
+    let ctx = context(4);
+    let mut oracle = Oracle::default();
+    let mut c = ctx.create_task_container();
+    let geometries: Vec<GeometryHandle> = (0..3)
+        .map(|k| {
+            let h = ctx.create_geometry_handle();
+            let m = Mesh::soup(&mut rng, tris + k * 101, 1.0);
+            schedule_mesh(&mut c, h, &format!("soup {k}"), &m);
+            oracle.geometry(h, &m);
+            h
+        })
+        .collect();
+    let mut list = Vec::new();
+    for k in 0..instances {
+        let h = ctx.create_instance_handle();
+        let mut input = InstanceInput::new(
+            geometries[k as usize % geometries.len()],
+            random_transform(&mut rng, 4.0),
+        );
+        if k % 11 == 3 {
+            input.inclusion_mask = InstanceInclusionMask::DIRECT_LIGHT_INJECTION_TARGET;
+        }
+        if k % 13 == 7 {
+            input.participating_in_tlas = false;
+        }
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: h,
+            input: input.clone(),
+        });
+        oracle.instance(h, &input);
+        list.push((h, input));
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 100,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    Scene {
+        ctx,
+        oracle,
+        instances: list,
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 3, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// ≥ 10k-triangle meshes, ≥ 100 instances: GPU closest hits equal the CPU oracle's, masks
+    /// and participation are honoured, and any-hit agrees with closest-hit on occlusion.
+    #[test]
+    fn gpu_hits_equal_the_cpu_oracle(seed in any::<u64>(), tris in 10_000u32..10_500, instances in 100u32..130) {
+        let s = random_scene(seed, tris, instances);
+        let mut rng = Rng(seed ^ 0x5eed);
+        let rays = random_rays(&mut rng, 3000, 6.0);
+        let hits = closest(&s.ctx, &rays);
+        let a = compare(&s.oracle, &rays, &hits, VISIBLE);
+        assert_agrees(&a, "closest hit");
+        prop_assert!(a.hits > 300, "the rays must actually hit things: {}", a.hits);
+        for h in hits.iter().filter(|h| h.is_hit()) {
+            let (_, input) = &s.instances[s.instances.iter().position(|(i, _)| i.index() == h.instance).unwrap()];
+            prop_assert!(input.participating_in_tlas && input.inclusion_mask.contains(InstanceInclusionMask::VISIBLE_IN_RT));
+        }
+        let any = trace(&s.ctx, &rays, RayQuery::AnyHit, InstanceInclusionMask::VISIBLE_IN_RT);
+        let mut disagree = 0;
+        for (k, (h, c)) in any.iter().zip(&hits).enumerate() {
+            if h.is_hit() != c.is_hit() {
+                // Only an edge graze may flip between two traversals.
+                let (inst, prim) = if h.is_hit() { (h.instance, h.primitive) } else { (c.instance, c.primitive) };
+                prop_assert!(s.oracle.edge_distance(&rays[k], inst, prim) < 1e-4, "ray {k}: any {h:?} closest {c:?}");
+                disagree += 1;
+            }
+            if h.is_hit() {
+                prop_assert!(h.t >= rays[k].t_min && h.t <= rays[k].t_max);
+            }
+        }
+        prop_assert!(disagree * 500 <= rays.len());
+        // The injection-only mask sees exactly the other instances.
+        let inj = trace(&s.ctx, &rays, RayQuery::ClosestHit, InstanceInclusionMask::DIRECT_LIGHT_INJECTION_TARGET);
+        assert_agrees(&compare(&s.oracle, &rays, &inj, InstanceInclusionMask::DIRECT_LIGHT_INJECTION_TARGET.0), "injection mask");
+    }
+}
+
+/// Rays from inside closed meshes, and rays through their shared edges and vertices (from inside
+/// and outside), never miss; rays lying in face planes and axis-aligned rays agree with the CPU.
+#[test]
+fn closed_meshes_have_no_gaps() {
+    let ctx = context(4);
+    let mut oracle = Oracle::default();
+    let sphere = Mesh::icosphere(3);
+    let cube = Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0));
+    let gs = ctx.create_geometry_handle();
+    let gc = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    schedule_mesh(&mut c, gs, "icosphere", &sphere);
+    schedule_mesh(&mut c, gc, "cube", &cube);
+    oracle.geometry(gs, &sphere);
+    oracle.geometry(gc, &cube);
+    let placements = [
+        (gs, Affine3A::IDENTITY),
+        (
+            gs,
+            Affine3A::from_scale_rotation_translation(
+                Vec3::new(2.0, 0.5, 1.0),
+                Quat::from_rotation_y(0.7),
+                Vec3::new(6.0, 0.0, 0.0),
+            ),
+        ),
+        (gc, Affine3A::from_translation(Vec3::new(0.0, 6.0, 0.0))),
+        (
+            gc,
+            Affine3A::from_rotation_translation(
+                Quat::from_rotation_z(0.3),
+                Vec3::new(0.0, 0.0, 6.0),
+            ),
+        ),
+    ];
+    let mut inst = Vec::new();
+    for (g, t) in placements {
+        let h = ctx.create_instance_handle();
+        let input = InstanceInput::new(g, t);
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: h,
+            input: input.clone(),
+        });
+        oracle.instance(h, &input);
+        inst.push((h, g, t));
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+
+    let mut rng = Rng(7);
+    let mut must_hit = Vec::new();
+    for &(_, g, t) in &inst {
+        let m = if g == gs { &sphere } else { &cube };
+        let centre = t.transform_point3(Vec3::ZERO);
+        // Every vertex and every edge midpoint, from the centre and from random inside points.
+        let mut targets: Vec<Vec3> = m.positions.iter().map(|p| t.transform_point3(*p)).collect();
+        for tri in m.indices.chunks(3) {
+            for k in 0..3 {
+                let (a, b) = (
+                    m.positions[tri[k] as usize],
+                    m.positions[tri[(k + 1) % 3] as usize],
+                );
+                targets.push(t.transform_point3((a + b) * 0.5));
+            }
+        }
+        for p in &targets {
+            must_hit.push(ray(centre, *p - centre, 0.0, f32::INFINITY));
+            let inside = t.transform_point3(rng.v(-0.3, 0.3));
+            must_hit.push(ray(inside, *p - inside, 0.0, f32::INFINITY));
+            // From outside, aimed exactly at the vertex or edge point.
+            let outside = centre + (*p - centre) * 3.0 + rng.v(-0.5, 0.5);
+            must_hit.push(ray(outside, *p - outside, 0.0, f32::INFINITY));
+        }
+        for _ in 0..200 {
+            let inside = t.transform_point3(rng.v(-0.5, 0.5));
+            must_hit.push(ray(inside, rng.unit(), 0.0, f32::INFINITY));
+        }
+    }
+    let hits = closest(&ctx, &must_hit);
+    let missed: Vec<_> = must_hit
+        .iter()
+        .zip(&hits)
+        .filter(|(_, h)| !h.is_hit())
+        .collect();
+    assert!(
+        missed.is_empty(),
+        "{} of {} rays through closed meshes missed, e.g. {:?}",
+        missed.len(),
+        must_hit.len(),
+        missed.first()
+    );
+    assert_agrees(
+        &compare(&oracle, &must_hit, &hits, VISIBLE),
+        "closed meshes",
+    );
+
+    // Rays in the cube's face planes and along its edges, and axis-aligned rays.
+    let cube_at = Vec3::new(0.0, 6.0, 0.0);
+    let mut planar = Vec::new();
+    for k in 0..400 {
+        let u = rng.range(-1.5, 1.5);
+        let v = rng.range(-1.5, 1.5);
+        let o = cube_at
+            + match k % 4 {
+                0 => Vec3::new(-3.0, 1.0, u), // in the plane y = 1 (top face), along x
+                1 => Vec3::new(u, -3.0, 1.0), // in the plane z = 1, along y
+                2 => Vec3::new(1.0, v, -3.0), // in the plane x = 1, along z
+                _ => Vec3::new(-3.0, u, v),
+            };
+        let d = match k % 4 {
+            0 => Vec3::X,
+            1 => Vec3::Y,
+            2 => Vec3::Z,
+            _ => Vec3::X,
+        };
+        planar.push(ray(o, d, 0.0, f32::INFINITY));
+    }
+    let hits = closest(&ctx, &planar);
+    assert_agrees(
+        &compare(&oracle, &planar, &hits, VISIBLE),
+        "rays in face planes",
+    );
+    assert!(hits.iter().filter(|h| h.is_hit()).count() > 50);
+}
+
+/// Per-component formats, strides, offsets, transforms and index ranges: each hit reports the
+/// documented primitive index (earlier components' triangles first).
+#[test]
+fn ingestion_formats_and_components_hit_the_documented_primitives() {
+    let ctx = context(4);
+    // Component 0: Float16x4 at byte offset 8 with stride 12, u16 indices at offset 2;
+    // 2 triangles (a quad at z = 0 spanning x 0..1).
+    let quad = [
+        [0.0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ];
+    let mut vbytes = vec![0u8; 8];
+    for p in quad {
+        for c in [p[0], p[1], p[2], 1.0] {
+            vbytes.extend_from_slice(&half_bits(c).to_le_bytes());
+        }
+        vbytes.extend_from_slice(&[0xee; 4]); // stride padding
+    }
+    vbytes.resize(vbytes.len().div_ceil(4) * 4, 0);
+    let mut ibytes = vec![0u8; 2];
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        ibytes.extend_from_slice(&i.to_le_bytes());
+    }
+    ibytes.resize(ibytes.len().div_ceil(4) * 4, 0);
+    // Component 1: Snorm16x4, non-indexed, translated by x = 2 with its transform; the index
+    // range skips its first triangle.
+    let mut sbytes = Vec::new();
+    for p in [
+        [0.0f32, 0.0, 0.0],
+        [0.5, 0.0, 0.0],
+        [0.5, 0.5, 0.0],
+        [0.0, 0.0, 0.0],
+        [0.5, 0.5, 0.0],
+        [0.0, 0.5, 0.0],
+    ] {
+        for c in [p[0], p[1], p[2], 0.0] {
+            sbytes.extend_from_slice(&((c * 32767.0).round() as i16).to_le_bytes());
+        }
+    }
+    // Component 2: Float32x4, u32 indices, translated by x = 4.
+    let f4: Vec<f32> = quad.iter().flat_map(|p| [p[0], p[1], p[2], 7.0]).collect();
+    let i4 = [0u32, 1, 2, 0, 2, 3];
+    let src = wgpu::BufferUsages::COPY_SRC;
+    let g = ctx.create_geometry_handle();
+    let input = GeometryInput {
+        name: "mixed".into(),
+        components: vec![
+            GeometryComponent {
+                vertex_buffer: VertexBufferInput {
+                    buffer: buffer(&vbytes, src),
+                    offset: 8,
+                    stride: 12,
+                    count: 4,
+                    format: VertexFormat::Float16x4,
+                },
+                index_buffer: Some(IndexBufferInput {
+                    buffer: buffer(&ibytes, src),
+                    offset: 2,
+                    count: 6,
+                    format: IndexFormat::Uint16,
+                }),
+                transform: None,
+                index_range: None,
+            },
+            GeometryComponent {
+                vertex_buffer: VertexBufferInput {
+                    buffer: buffer(&sbytes, src),
+                    offset: 0,
+                    stride: 8,
+                    count: 6,
+                    format: VertexFormat::Snorm16x4,
+                },
+                index_buffer: None,
+                transform: Some(Affine3A::from_translation(Vec3::new(2.0, 0.0, 0.0))),
+                index_range: Some((3, 3)),
+            },
+            GeometryComponent {
+                vertex_buffer: VertexBufferInput {
+                    buffer: buffer(bytemuck::cast_slice(&f4), src),
+                    offset: 0,
+                    stride: 16,
+                    count: 4,
+                    format: VertexFormat::Float32x4,
+                },
+                index_buffer: Some(IndexBufferInput {
+                    buffer: buffer(bytemuck::cast_slice(&i4), src),
+                    offset: 0,
+                    count: 6,
+                    format: IndexFormat::Uint32,
+                }),
+                transform: Some(Affine3A::from_translation(Vec3::new(4.0, 0.0, 0.0))),
+                index_range: None,
+            },
+        ],
+        ..Default::default()
+    };
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: g,
+        input,
+    });
+    let i = ctx.create_instance_handle();
+    register_instance(&mut c, i, g, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    assert_eq!(ctx.geometry_triangle_count(g).unwrap(), Some(5));
+
+    // (x, y) aimed at, expected primitive.
+    let cases = [
+        ((0.75, 0.25), 0),      // component 0, triangle (0,1,2)
+        ((0.25, 0.75), 1),      // component 0, triangle (0,2,3)
+        ((2.1, 0.4), 2),        // component 1's second triangle (the first is skipped by the range)
+        ((2.4, 0.1), u32::MAX), // the skipped first triangle: nothing there
+        ((4.75, 0.25), 3),
+        ((4.25, 0.75), 4),
+    ];
+    let rays: Vec<GpuRay> = cases
+        .iter()
+        .map(|((x, y), _)| ray(Vec3::new(*x, *y, 1.0), -Vec3::Z, 0.0, 10.0))
+        .collect();
+    let hits = closest(&ctx, &rays);
+    for (((x, y), prim), h) in cases.iter().zip(&hits) {
+        if *prim == u32::MAX {
+            assert!(!h.is_hit(), "({x}, {y}) must miss: {h:?}");
+        } else {
+            assert!(h.is_hit(), "({x}, {y}) must hit primitive {prim}");
+            assert_eq!(h.primitive, *prim, "({x}, {y})");
+            assert_eq!(h.instance, i.index());
+            assert!((h.t - 1.0).abs() < 1e-3, "t {}", h.t);
+        }
+    }
+}
+
+/// f32 → IEEE half bits (round to nearest; test values are exactly representable).
+fn half_bits(v: f32) -> u16 {
+    let b = v.to_bits();
+    let sign = ((b >> 16) & 0x8000) as u16;
+    let exp = ((b >> 23) & 0xff) as i32;
+    if exp == 0 {
+        return sign;
+    }
+    let e = exp - 127 + 15;
+    sign | ((e as u16) << 10) | ((b >> 13) & 0x3ff) as u16
+}
+
+/// An `allow_update` geometry whose vertices move, refitted, traces exactly like a fresh build
+/// of the moved vertices; TLAS refit after moving instances equals a TLAS rebuild.
+#[test]
+fn refits_equal_rebuilds() {
+    let mut rng = Rng(99);
+    let before = Mesh::soup(&mut rng, 3000, 1.0);
+    let mut after = before.clone();
+    for p in &mut after.positions {
+        *p += Vec3::new(p.y * 0.3, (p.x * 5.0).sin() * 0.1, 0.05);
+    }
+    let transforms: Vec<Affine3A> = (0..40).map(|_| random_transform(&mut rng, 3.0)).collect();
+    let moved: Vec<Affine3A> = transforms
+        .iter()
+        .map(|t| Affine3A::from_translation(Vec3::new(0.3, -0.2, 0.1)) * *t)
+        .collect();
+
+    // A: register `before`, build; update to `after` (refit); move instances with a TLAS refit.
+    let a = context(4);
+    let ga = a.create_geometry_handle();
+    let mut c = a.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: ga,
+        input: mesh_input("dyn", &before, true),
+    });
+    let ia: Vec<InstanceHandle> = a.create_instance_handles(transforms.len());
+    for (h, t) in ia.iter().zip(&transforms) {
+        register_instance(&mut c, *h, ga, *t);
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&a, c);
+    let mut c = a.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Update,
+        handle: ga,
+        input: mesh_input("dyn", &after, true),
+    });
+    for (h, t) in ia.iter().zip(&moved) {
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Update,
+            handle: *h,
+            input: InstanceInput::new(ga, *t),
+        });
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        tlas_update: TlasUpdate::Refit,
+        ..Default::default()
+    });
+    let mut e = encoder();
+    let task = a.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    a.mark_gpu_task_completed(task).unwrap();
+    assert!(a.geometry_is_built(ga).unwrap());
+
+    // B: `after` and `moved` built from scratch.
+    let b = context(4);
+    let gb = b.create_geometry_handle();
+    let mut c = b.create_task_container();
+    schedule_mesh(&mut c, gb, "static", &after);
+    let ib: Vec<InstanceHandle> = b.create_instance_handles(moved.len());
+    for (h, t) in ib.iter().zip(&moved) {
+        register_instance(&mut c, *h, gb, *t);
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        tlas_update: TlasUpdate::Rebuild,
+        ..Default::default()
+    });
+    build_submit_complete(&b, c);
+
+    let rays = random_rays(&mut rng, 3000, 5.0);
+    let ha = closest(&a, &rays);
+    let hb = closest(&b, &rays);
+    let mut oracle = Oracle::default();
+    oracle.geometry(gb, &after);
+    for (h, t) in ib.iter().zip(&moved) {
+        oracle.instance(*h, &InstanceInput::new(gb, *t));
+    }
+    assert_agrees(&compare(&oracle, &rays, &hb, VISIBLE), "rebuild");
+    assert_agrees(&compare(&oracle, &rays, &ha, VISIBLE), "refit");
+    let same = ha
+        .iter()
+        .zip(&hb)
+        .filter(|(x, y)| {
+            x.instance == y.instance
+                && x.primitive == y.primitive
+                && (x.t - y.t).abs() <= 1e-5 * x.t.abs().max(1.0)
+        })
+        .count();
+    assert!(
+        same * 1000 >= rays.len() * 998,
+        "refit and rebuild agree on {same} of {} rays",
+        rays.len()
+    );
+}
+
+/// The instance a hit reports is the index of that instance's data, with instances registered
+/// out of order, destroyed, and their slots reused.
+#[test]
+fn hit_instance_is_the_instance_data_index() {
+    let ctx = context(4);
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    let quad = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    schedule_mesh(&mut c, g, "quad", &quad);
+    build_submit_complete(&ctx, c);
+    let handles = ctx.create_instance_handles(120);
+    // Register in reverse order, each quad at x = 2·index.
+    let mut c = ctx.create_task_container();
+    for h in handles.iter().rev() {
+        register_instance(
+            &mut c,
+            *h,
+            g,
+            Affine3A::from_translation(Vec3::new(2.0 * h.index() as f32, 0.0, 0.0)),
+        );
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    // Destroy every third; re-create (slots reused lowest first) and place them at x = -2·(k+1).
+    let dead: Vec<InstanceHandle> = handles.iter().step_by(3).copied().collect();
+    ctx.destroy_instance_handles(&dead).unwrap();
+    let again = ctx.create_instance_handles(dead.len() + 5);
+    let mut c = ctx.create_task_container();
+    for (k, h) in again.iter().enumerate().rev() {
+        register_instance(
+            &mut c,
+            *h,
+            g,
+            Affine3A::from_translation(Vec3::new(-2.0 * (k as f32 + 1.0), 0.0, 0.0)),
+        );
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+
+    let mut rays = Vec::new();
+    let mut expect = Vec::new();
+    for h in handles.iter().filter(|h| !dead.contains(h)) {
+        rays.push(ray(
+            Vec3::new(2.0 * h.index() as f32 + 0.5, 0.5, 1.0),
+            -Vec3::Z,
+            0.0,
+            5.0,
+        ));
+        expect.push(Some(h.index()));
+    }
+    for (k, h) in again.iter().enumerate() {
+        rays.push(ray(
+            Vec3::new(-2.0 * (k as f32 + 1.0) + 0.5, 0.5, 1.0),
+            -Vec3::Z,
+            0.0,
+            5.0,
+        ));
+        expect.push(Some(h.index()));
+    }
+    // Where destroyed instances were, unless a re-created one took the same place: nothing.
+    for h in &dead {
+        rays.push(ray(
+            Vec3::new(2.0 * h.index() as f32 + 0.5, 0.5, 1.0),
+            -Vec3::Z,
+            0.0,
+            5.0,
+        ));
+        expect.push(None);
+    }
+    let hits = closest(&ctx, &rays);
+    for (k, (h, e)) in hits.iter().zip(&expect).enumerate() {
+        match e {
+            Some(i) => assert_eq!(h.instance, *i, "ray {k}"),
+            None => assert!(!h.is_hit(), "ray {k} hit destroyed instance's place: {h:?}"),
+        }
+    }
+}
+
+/// `max_blas_build_count` throttles: builds happen over later tasks, in registration order, and
+/// instances of unbuilt geometry are invisible until their BLAS exists.
+#[test]
+fn throttled_builds_complete_in_queue_order() {
+    let ctx = context(4);
+    let quad = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    let geoms = ctx.create_geometry_handles(5);
+    let insts = ctx.create_instance_handles(5);
+    let mut c = ctx.create_task_container();
+    for (k, (g, i)) in geoms.iter().zip(&insts).enumerate() {
+        schedule_mesh(&mut c, *g, &format!("g{k}"), &quad);
+        register_instance(
+            &mut c,
+            *i,
+            *g,
+            Affine3A::from_translation(Vec3::new(2.0 * k as f32, 0.0, 0.0)),
+        );
+    }
+    let rays: Vec<GpuRay> = (0..5)
+        .map(|k| {
+            ray(
+                Vec3::new(2.0 * k as f32 + 0.5, 0.5, 1.0),
+                -Vec3::Z,
+                0.0,
+                5.0,
+            )
+        })
+        .collect();
+    let throttle = BvhBuildTask {
+        max_blas_build_count: 2,
+        ..Default::default()
+    };
+    c.schedule_bvh_task(throttle);
+    build_submit_complete(&ctx, c);
+    let built = |ctx: &ExecuteContext| {
+        geoms
+            .iter()
+            .map(|g| ctx.geometry_is_built(*g).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(built(&ctx), [true, true, false, false, false]);
+    let visible = |ctx: &ExecuteContext| {
+        closest(ctx, &rays)
+            .iter()
+            .map(|h| h.is_hit())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(visible(&ctx), [true, true, false, false, false]);
+    // A container without a BvhBuildTask builds nothing.
+    build_submit_complete(&ctx, ctx.create_task_container());
+    assert_eq!(built(&ctx), [true, true, false, false, false]);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(throttle);
+    build_submit_complete(&ctx, c);
+    assert_eq!(built(&ctx), [true, true, true, true, false]);
+    assert_eq!(visible(&ctx), [true, true, true, true, false]);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(throttle);
+    build_submit_complete(&ctx, c);
+    assert_eq!(visible(&ctx), [true; 5]);
+}
+
+/// Out-of-range indices and NaN/∞ positions: those triangles are dropped and reported (a
+/// warning naming the geometry, and counts); every other triangle, of that geometry and of the
+/// others, still traces correctly.
+#[test]
+fn bad_geometry_is_reported_and_the_rest_traces() {
+    let log: Arc<Mutex<Vec<String>>> = Arc::default();
+    let sink = log.clone();
+    let g = gpu();
+    let ctx = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            log_callback: Some(Arc::new(move |_, m: &str| {
+                sink.lock().unwrap().push(m.to_string())
+            })),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    // Three quads in a row at x = 0, 2, 4 (z = 0): "bad-index" has triangle 1 referencing
+    // vertex 99; "bad-nan" has a NaN in vertex 3 (used by triangle 1 only); "bad-inf" an ∞ in vertex 3.
+    let positions = |x: f32, v3: Vec3| {
+        vec![
+            Vec3::new(x, 0.0, 0.0),
+            Vec3::new(x + 1.0, 0.0, 0.0),
+            Vec3::new(x + 1.0, 1.0, 0.0),
+            v3,
+        ]
+    };
+    let meshes = [
+        (
+            "bad-index",
+            Mesh {
+                positions: positions(0.0, Vec3::new(0.0, 1.0, 0.0)),
+                indices: vec![0, 1, 2, 0, 2, 99],
+            },
+        ),
+        (
+            "bad-nan",
+            Mesh {
+                positions: positions(2.0, Vec3::new(f32::NAN, 1.0, 0.0)),
+                indices: vec![0, 1, 2, 0, 2, 3],
+            },
+        ),
+        (
+            "bad-inf",
+            Mesh {
+                positions: positions(4.0, Vec3::new(4.0, f32::INFINITY, 0.0)),
+                indices: vec![0, 1, 2, 0, 2, 3],
+            },
+        ),
+        (
+            "good",
+            Mesh {
+                positions: positions(6.0, Vec3::new(6.0, 1.0, 0.0)),
+                indices: vec![0, 1, 2, 0, 2, 3],
+            },
+        ),
+    ];
+    let mut c = ctx.create_task_container();
+    let mut handles = Vec::new();
+    for (name, m) in &meshes {
+        let h = ctx.create_geometry_handle();
+        schedule_mesh(&mut c, h, name, m);
+        let i = ctx.create_instance_handle();
+        register_instance(&mut c, i, h, Affine3A::IDENTITY);
+        handles.push(h);
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    g.device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    let dropped: Vec<DroppedTriangles> = handles
+        .iter()
+        .map(|h| {
+            ctx.geometry_dropped_triangles(*h)
+                .unwrap()
+                .expect("counts read back")
+        })
+        .collect();
+    assert_eq!(
+        dropped[0],
+        DroppedTriangles {
+            out_of_range_indices: 1,
+            non_finite_positions: 0
+        }
+    );
+    assert_eq!(
+        dropped[1],
+        DroppedTriangles {
+            out_of_range_indices: 0,
+            non_finite_positions: 1
+        }
+    );
+    assert_eq!(
+        dropped[2],
+        DroppedTriangles {
+            out_of_range_indices: 0,
+            non_finite_positions: 1
+        }
+    );
+    assert_eq!(dropped[3], DroppedTriangles::default());
+    let messages = log.lock().unwrap().clone();
+    for name in ["bad-index", "bad-nan", "bad-inf"] {
+        assert!(
+            messages
+                .iter()
+                .any(|m| m.contains(&format!("`{name}`")) && m.contains("dropped")),
+            "no warning names {name}: {messages:?}"
+        );
+    }
+    assert!(!messages.iter().any(|m| m.contains("`good`")));
+    // Triangle 0 of every quad (lower right half) hits; triangle 1 (upper left) only on "good".
+    for k in 0..4 {
+        let x = 2.0 * k as f32;
+        let rays = [
+            ray(Vec3::new(x + 0.75, 0.25, 1.0), -Vec3::Z, 0.0, 5.0),
+            ray(Vec3::new(x + 0.25, 0.75, 1.0), -Vec3::Z, 0.0, 5.0),
+        ];
+        let hits = closest(&ctx, &rays);
+        assert!(
+            hits[0].is_hit() && hits[0].primitive == 0,
+            "{}: {:?}",
+            meshes[k].0,
+            hits[0]
+        );
+        assert!((hits[0].t - 1.0).abs() < 1e-4);
+        assert_eq!(hits[1].is_hit(), k == 3, "{}: {:?}", meshes[k].0, hits[1]);
+    }
+}
+
+/// TraceRaysTask inputs are validated before anything is recorded.
+#[test]
+fn trace_rays_task_inputs_are_validated() {
+    let ctx = context(2);
+    let storage = wgpu::BufferUsages::STORAGE;
+    let rays = buffer(&[0u8; 64], storage);
+    let hits = buffer(&[0u8; 64], storage | wgpu::BufferUsages::COPY_SRC);
+    let copy_only = buffer(&[0u8; 64], wgpu::BufferUsages::COPY_SRC);
+    let cases: Vec<(TraceRaysTask, &str)> = vec![
+        (
+            TraceRaysTask::new(copy_only.clone(), 2, hits.clone()),
+            "rays",
+        ),
+        (TraceRaysTask::new(rays.clone(), 2, copy_only), "hits"),
+        (
+            TraceRaysTask::new(rays.clone(), 3, hits.clone()),
+            "rays_offset",
+        ),
+        (
+            TraceRaysTask {
+                ray_offset: 4,
+                ..TraceRaysTask::new(rays.clone(), 1, hits.clone())
+            },
+            "rays_offset",
+        ),
+        (
+            TraceRaysTask {
+                instance_mask: InstanceInclusionMask(8),
+                ..TraceRaysTask::new(rays.clone(), 1, hits.clone())
+            },
+            "instance_mask",
+        ),
+    ];
+    for (task, field) in cases {
+        let mut c = ctx.create_task_container();
+        c.schedule_render_task(RenderTask::TraceRays(task));
+        let mut e = encoder();
+        match ctx.build_gpu_task(c, &mut e) {
+            Err(Error::InvalidInput { task, field: f, .. }) => {
+                assert_eq!(task, "TraceRaysTask");
+                assert_eq!(f, field);
+            }
+            other => panic!("expected an error on {field}, got {other:?}"),
+        }
+        submit(e);
+    }
+    // Before any BVH exists, a valid batch simply misses.
+    let r = [ray(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY)];
+    let h = closest(&ctx, &r);
+    assert!(!h[0].is_hit() && h[0].t == -1.0);
+}
