@@ -6,7 +6,7 @@ use common::rt::*;
 use common::*;
 use glam::{Affine3A, Quat, Vec3};
 use kickstart_rt::*;
-use proptest::prelude::*;
+use proptest::prelude::{any, prop_assert, proptest, ProptestConfig};
 use std::sync::{Arc, Mutex};
 
 const VISIBLE: u32 = InstanceInclusionMask::VISIBLE_IN_RT.0;
