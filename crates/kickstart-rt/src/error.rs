@@ -69,7 +69,6 @@ pub enum Error {
         /// `kickstart_rt::VERSION`.
         library: crate::Version,
     },
-    /// An operation that needs every GPU task completed was called while some are in flight.
     /// A shared pool or table would exceed what one storage binding of this device may hold.
     #[error("{what}: {bytes} bytes would exceed the device's max_storage_buffer_binding_size ({limit} bytes)")]
     OutOfDeviceMemory {
@@ -83,6 +82,7 @@ pub enum Error {
     /// A blocking read-back (tools and tests only) failed.
     #[error("GPU read-back failed: {0}")]
     ReadBack(String),
+    /// An operation that needs every GPU task completed was called while some are in flight.
     #[error("{operation} needs every GPU task marked completed, {in_flight} still in flight")]
     TasksInFlight {
         /// The refused operation.

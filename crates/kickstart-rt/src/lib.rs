@@ -43,12 +43,34 @@
 //!
 //! ## Status of this version
 //!
-//! The API, handles, working sets, lazy destruction, validation and geometry/instance data
-//! ingestion work. BLAS/TLAS builds, the lighting cache, trace tasks and denoisers are not
-//! implemented yet: a container holding a [`BvhBuildTask`] or any [`RenderTask`] is fully
-//! validated and then refused with [`Error::Unsupported`] naming the task — never a silent no-op.
-//! Geometry copies are one buffer per component for now; the shared sub-allocated pools arrive
-//! with the BVH builder.
+//! Working: the API, handles, working sets, lazy destruction, validation, and the **ray tracing
+//! core** — geometry ingestion on the GPU (vertex pulling of every supported format into shared,
+//! sub-allocated pools), GPU BLAS builds (LBVH) and refits, the TLAS (rebuild or refit), ray
+//! batches ([`TraceRaysTask`]) and the primary-ray debug views (`HitT`, `Barycentrics`,
+//! `RandomMeshColor`) of the trace tasks. Not implemented yet: the lighting cache, the trace
+//! tasks' real outputs and the denoisers: such a task is fully validated and then refused with
+//! [`Error::Unsupported`] naming it — never a silent no-op.
+//!
+//! ## Ray tracing: how geometry becomes rays
+//!
+//! - A [`GeometryTask`] (`Register` or `Update`) copies the application's bytes inside its encoder
+//!   and decodes them on the GPU into the shared staged-triangle pool. Triangles with an
+//!   out-of-range index or a NaN/∞ position are dropped (never hit) and reported: a warning
+//!   naming the geometry through the log, and [`ExecuteContext::geometry_dropped_triangles`].
+//! - BLASes are built only by a [`BvhBuildTask`], at most `max_blas_build_count` per GPU task, in
+//!   the order their geometry was scheduled; the rest wait for later tasks (the reference's
+//!   throttling). An instance of a geometry whose BLAS is not built yet is invisible to rays.
+//!   Static geometry's staged copy is released once its BLAS is built; `allow_update` geometry
+//!   keeps it, and its `Update` (same triangle count) re-ingests the vertices and refits.
+//! - The TLAS covers every instance slot; a [`BvhBuildTask`] with `build_tlas` rebuilds it when
+//!   instances were added or removed, or a BLAS was built, and otherwise refits it when transforms
+//!   moved ([`TlasUpdate`]).
+//! - A hit reports the instance's handle index ([`InstanceHandle::index`], the index of its data
+//!   in the instance table) and the primitive index within its geometry: earlier components'
+//!   triangles first, then this component's, counted after its `index_range`.
+//! - Traversal is watertight: a ray through a shared edge or vertex hits (no gaps); among hits at
+//!   equal `t`, the lowest instance index, then the lowest primitive index wins. Layouts and the
+//!   traversal contract: `docs/ray-tracing-core.md`.
 //!
 //! ## Validation rules
 //!
@@ -79,7 +101,11 @@
 //! | `InstanceTask` | `input.transform` | finite | NaN/∞ |
 //! | `InstanceTask` | `input.inclusion_mask` | bits 0–1 | other bits |
 //! | `InstanceTask` | `input.initial_tile_color` | finite, ≥ 0 | otherwise |
+//! | `GeometryTask` | `input.components` (Update) | the registered triangle count | another count (the BVH is refitted) |
 //! | `BvhBuildTask` | `max_blas_build_count` | ≥ 1 | 0 |
+//! | `TraceRaysTask` | `rays`, `hits` | `STORAGE` usage | missing |
+//! | `TraceRaysTask` | `rays_offset`, `hits_offset` | multiples of `min_storage_buffer_offset_alignment`; `ray_count` × 32 bytes fit | misaligned; past the end |
+//! | `TraceRaysTask` | `instance_mask` | bits 0–1 | other bits |
 //! | trace tasks | `output` | `STORAGE_BINDING`, a format of [`WRITABLE_OUTPUT_FORMATS`] | otherwise |
 //! | trace tasks | `common.depth.texture`, `common.normal.texture`, optional inputs | `TEXTURE_BINDING`; depth formats allowed | missing usage; combined depth-stencil format |
 //! | trace tasks | `common.roughness.*` | global/min/max in [0, 1], min ≤ max, finite multiplier | otherwise |
