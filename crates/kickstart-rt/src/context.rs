@@ -14,7 +14,7 @@ use crate::logging::{LogCallback, Logger, Severity};
 use crate::scene::gpu_scene::{
     GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE, INSTANCE_RECORD_BYTES,
 };
-use crate::scene::stubs::ComponentIngest;
+use crate::scene::ingest::ComponentIngest;
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::tasks::*;
 use crate::timing::{GpuTimings, TimingReadback};

@@ -4,10 +4,11 @@
 
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
+use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::pool::{Pool, Range};
+use crate::scene::prims::Prims;
 use crate::scene::stubs::{
-    ComponentIngest, DebugViewPass, Ingest, Lbvh, LbvhBuild, LbvhRefit, LeafRefs, Prims, RayTracer,
-    SceneBuffers,
+    DebugViewPass, Lbvh, LbvhBuild, LbvhRefit, LeafRefs, RayTracer, SceneBuffers,
 };
 use crate::staging::{StagingBuffer, StagingPool};
 

@@ -5,4 +5,5 @@ pub(crate) mod gpu_scene;
 pub(crate) mod ingest;
 pub(crate) mod lbvh;
 pub(crate) mod pool;
+pub(crate) mod prims;
 pub(crate) mod stubs;

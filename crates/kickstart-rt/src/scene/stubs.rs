@@ -1,73 +1,8 @@
 //! TEMPORARY compile stand-ins for modules being written on other branches; deleted at merge.
 #![allow(dead_code, unused_variables, missing_docs)]
 use crate::gpu::Recorder;
-use crate::tasks::{DebugOutputType, IndexFormat, RayQuery, VertexFormat, ViewInfo};
+use crate::tasks::{DebugOutputType, RayQuery, ViewInfo};
 
-pub(crate) struct ComponentIngest {
-    pub vertex_byte_offset: u64,
-    pub vertex_stride: u64,
-    pub vertex_format: VertexFormat,
-    pub vertex_count: u32,
-    pub index: Option<(u64, IndexFormat)>,
-    pub first_index: u32,
-    pub triangle_count: u32,
-    pub transform: Option<glam::Affine3A>,
-    pub primitive_base: u32,
-}
-pub(crate) struct Ingest;
-impl Ingest {
-    pub fn new(device: &wgpu::Device) -> Self {
-        Ingest
-    }
-    pub fn record(
-        &self,
-        rec: &mut Recorder<'_>,
-        raw: &wgpu::Buffer,
-        components: &[ComponentIngest],
-        out_tris: &wgpu::Buffer,
-        out_base: u32,
-        counters: &wgpu::Buffer,
-        counter_base: u32,
-    ) {
-    }
-}
-pub(crate) struct Prims;
-impl Prims {
-    pub fn new(device: &wgpu::Device) -> Self {
-        Prims
-    }
-    pub fn triangle_aabbs(
-        &self,
-        rec: &mut Recorder<'_>,
-        tris: &wgpu::Buffer,
-        tri_base: u32,
-        count: u32,
-        aabbs: &wgpu::Buffer,
-        aabb_base: u32,
-    ) {
-    }
-    pub fn gather_triangles(
-        &self,
-        rec: &mut Recorder<'_>,
-        src: &wgpu::Buffer,
-        src_base: u32,
-        order: &wgpu::Buffer,
-        order_base: u32,
-        count: u32,
-        dst: &wgpu::Buffer,
-        dst_base: u32,
-    ) {
-    }
-    pub fn instance_aabbs(
-        &self,
-        rec: &mut Recorder<'_>,
-        instances: &wgpu::Buffer,
-        geometries: &wgpu::Buffer,
-        count: u32,
-        aabbs: &wgpu::Buffer,
-    ) {
-    }
-}
 pub(crate) enum LeafRefs {
     SortedPosition,
     PrimitiveIndex,

@@ -1,0 +1,158 @@
+// Small per-primitive passes of the BVH builds (docs/ray-tracing-core.md): triangle AABBs,
+// triangle gather into sorted order, instance world AABBs for the TLAS. Each entry point binds
+// only what it uses (automatic layouts are per entry point).
+
+struct Params {
+    a: u32,     // triangle_aabbs: tri_base; gather: src_base; instance_aabbs: count
+    b: u32,     // triangle_aabbs: count;    gather: order_base
+    c: u32,     // triangle_aabbs: aabb_base; gather: count
+    d: u32,     // gather: dst_base
+}
+
+struct InstanceGpu {
+    object_to_world: mat3x4<f32>, // rows
+    world_to_object: mat3x4<f32>,
+    geometry: u32,
+    mask: u32,
+    flags: u32,
+    pad: u32,
+    pad2: vec4<u32>,
+}
+
+struct GeometryGpu {
+    node_base: u32,
+    tri_base: u32,
+    tri_count: u32,
+    flags: u32,
+    bounds_min: vec4<f32>,
+    bounds_max: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+
+const WG: u32 = 64u;
+const EMPTY_MIN: vec4<f32> = vec4<f32>(1e30, 1e30, 1e30, 0.0);
+const EMPTY_MAX: vec4<f32> = vec4<f32>(-1e30, -1e30, -1e30, 0.0);
+
+fn linear_id(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
+    return (wid.y * nwg.x + wid.x) * WG + lid;
+}
+
+fn is_non_finite(v: vec3<f32>) -> bool {
+    let bits = bitcast<vec3<u32>>(v);
+    return any((bits & vec3<u32>(0x7f800000u)) == vec3<u32>(0x7f800000u));
+}
+
+// ---- triangle_aabbs -------------------------------------------------------------------------
+
+@group(0) @binding(1) var<storage, read> aabb_tris: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> tri_aabbs: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn triangle_aabbs(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let k = linear_id(wid, nwg, lid);
+    if k >= params.b {
+        return;
+    }
+    let t = 3u * (params.a + k);
+    let v0 = aabb_tris[t];
+    let v1 = aabb_tris[t + 1u];
+    let v2 = aabb_tris[t + 2u];
+    let out = 2u * (params.c + k);
+    // Dropped triangles (flag in the second vertex's w) get the empty box; so would a non-finite
+    // one, which ingestion never writes, rather than poisoning the build with NaN bounds.
+    let dropped = bitcast<u32>(v1.w) == 1u;
+    if dropped || is_non_finite(v0.xyz) || is_non_finite(v1.xyz) || is_non_finite(v2.xyz) {
+        tri_aabbs[out] = EMPTY_MIN;
+        tri_aabbs[out + 1u] = EMPTY_MAX;
+        return;
+    }
+    tri_aabbs[out] = vec4<f32>(min(min(v0.xyz, v1.xyz), v2.xyz), 0.0);
+    tri_aabbs[out + 1u] = vec4<f32>(max(max(v0.xyz, v1.xyz), v2.xyz), 0.0);
+}
+
+// ---- gather_triangles -----------------------------------------------------------------------
+
+// Copied as u32 bits: the w fields hold integers (primitive index, dropped flag) that are
+// subnormal or NaN patterns as floats.
+@group(0) @binding(1) var<storage, read> gather_src: array<vec4<u32>>;
+@group(0) @binding(2) var<storage, read> gather_order: array<u32>;
+@group(0) @binding(3) var<storage, read_write> gather_dst: array<vec4<u32>>;
+
+@compute @workgroup_size(64)
+fn gather_triangles(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let k = linear_id(wid, nwg, lid);
+    if k >= params.c {
+        return;
+    }
+    let s = 3u * (params.a + gather_order[params.b + k]);
+    let d = 3u * (params.d + k);
+    gather_dst[d] = gather_src[s];
+    gather_dst[d + 1u] = gather_src[s + 1u];
+    gather_dst[d + 2u] = gather_src[s + 2u];
+}
+
+// ---- instance_aabbs -------------------------------------------------------------------------
+
+@group(0) @binding(1) var<storage, read> instances: array<InstanceGpu>;
+@group(0) @binding(2) var<storage, read> geometries: array<GeometryGpu>;
+@group(0) @binding(3) var<storage, read_write> instance_boxes: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn instance_aabbs(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let i = linear_id(wid, nwg, lid);
+    if i >= params.a {
+        return;
+    }
+    let inst = instances[i];
+    var visible = (inst.flags & 1u) != 0u && inst.geometry < arrayLength(&geometries);
+    var g: GeometryGpu;
+    if visible {
+        g = geometries[inst.geometry];
+        // Built with triangles, and a non-empty root box (all triangles dropped leaves it empty).
+        visible = (g.flags & 1u) != 0u && g.tri_count > 0u && all(g.bounds_min.xyz <= g.bounds_max.xyz);
+    }
+    if !visible {
+        instance_boxes[2u * i] = EMPTY_MIN;
+        instance_boxes[2u * i + 1u] = EMPTY_MAX;
+        return;
+    }
+    let m = inst.object_to_world;
+    var lo = vec3<f32>(3.0e38);
+    var hi = vec3<f32>(-3.0e38);
+    for (var c = 0u; c < 8u; c++) {
+        let p = vec4<f32>(
+            select(g.bounds_min.x, g.bounds_max.x, (c & 1u) != 0u),
+            select(g.bounds_min.y, g.bounds_max.y, (c & 2u) != 0u),
+            select(g.bounds_min.z, g.bounds_max.z, (c & 4u) != 0u),
+            1.0,
+        );
+        let q = vec3<f32>(dot(m[0], p), dot(m[1], p), dot(m[2], p));
+        lo = min(lo, q);
+        hi = max(hi, q);
+    }
+    // Rounding of the transform (≤ 3 ulp of the sum of the terms' magnitudes, on the GPU or the
+    // CPU, fused or not) could shrink the box past a corner: pad by 8 ulp of that sum so the box
+    // contains the exactly transformed geometry box.
+    let extent = max(abs(g.bounds_min.xyz), abs(g.bounds_max.xyz));
+    let mag = vec3<f32>(
+        dot(abs(m[0].xyz), extent) + abs(m[0].w),
+        dot(abs(m[1].xyz), extent) + abs(m[1].w),
+        dot(abs(m[2].xyz), extent) + abs(m[2].w),
+    );
+    let pad = mag * 4.76837158203125e-7; // 2^-21
+    instance_boxes[2u * i] = vec4<f32>(lo - pad, 0.0);
+    instance_boxes[2u * i + 1u] = vec4<f32>(hi + pad, 0.0);
+}

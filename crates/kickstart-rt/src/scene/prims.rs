@@ -1,0 +1,399 @@
+//! Small per-primitive passes of the BVH builds (`shaders/prims.wgsl`): triangle AABBs for the
+//! BLAS builder, triangle gather into the builder's sorted order, and instance world AABBs for the
+//! TLAS. Layouts: `docs/ray-tracing-core.md`.
+
+use crate::gpu::shader::compute_pipeline;
+use crate::gpu::Recorder;
+
+/// Threads per workgroup of every `prims.wgsl` entry point (one primitive each).
+const WORKGROUP: u32 = 64;
+
+/// The three pipelines (one module, one entry point each).
+pub(crate) struct Prims {
+    /// `triangle_aabbs` entry point.
+    triangle_aabbs: wgpu::ComputePipeline,
+    /// `gather_triangles` entry point.
+    gather_triangles: wgpu::ComputePipeline,
+    /// `instance_aabbs` entry point.
+    instance_aabbs: wgpu::ComputePipeline,
+}
+
+impl Prims {
+    /// Creates the pipelines.
+    pub fn new(device: &wgpu::Device) -> Self {
+        let source = include_str!("../../shaders/prims.wgsl");
+        let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", source, entry);
+        Prims {
+            triangle_aabbs: make("triangle_aabbs"),
+            gather_triangles: make("gather_triangles"),
+            instance_aabbs: make("instance_aabbs"),
+        }
+    }
+
+    /// AABBs (2 `vec4` per primitive) of the `count` triangles from slot `tri_base` of `tris`
+    /// into `aabbs` from primitive `aabb_base`. Dropped triangles get the empty box; degenerate
+    /// finite triangles keep their flat box.
+    pub fn triangle_aabbs(
+        &self,
+        rec: &mut Recorder<'_>,
+        tris: &wgpu::Buffer,
+        tri_base: u32,
+        count: u32,
+        aabbs: &wgpu::Buffer,
+        aabb_base: u32,
+    ) {
+        if count == 0 {
+            return;
+        }
+        let params = rec.uniform(
+            "kickstart-rt triangle aabbs params",
+            &[tri_base, count, aabb_base, 0],
+        );
+        let bind = rec.bind_buffers(
+            "kickstart-rt triangle aabbs",
+            &self.triangle_aabbs,
+            0,
+            &[
+                params.as_entire_binding(),
+                tris.as_entire_binding(),
+                aabbs.as_entire_binding(),
+            ],
+        );
+        rec.dispatch(
+            "blas build: triangle aabbs",
+            &self.triangle_aabbs,
+            &[&bind],
+            count.div_ceil(WORKGROUP),
+        );
+    }
+
+    /// `dst[dst_base + k] = src[src_base + order[order_base + k]]` for `k < count`, whole
+    /// triangles (3 `vec4`), bit-exact.
+    #[allow(clippy::too_many_arguments)] // the interface the BVH code is written against
+    pub fn gather_triangles(
+        &self,
+        rec: &mut Recorder<'_>,
+        src: &wgpu::Buffer,
+        src_base: u32,
+        order: &wgpu::Buffer,
+        order_base: u32,
+        count: u32,
+        dst: &wgpu::Buffer,
+        dst_base: u32,
+    ) {
+        if count == 0 {
+            return;
+        }
+        let params = rec.uniform(
+            "kickstart-rt gather triangles params",
+            &[src_base, order_base, count, dst_base],
+        );
+        let bind = rec.bind_buffers(
+            "kickstart-rt gather triangles",
+            &self.gather_triangles,
+            0,
+            &[
+                params.as_entire_binding(),
+                src.as_entire_binding(),
+                order.as_entire_binding(),
+                dst.as_entire_binding(),
+            ],
+        );
+        rec.dispatch(
+            "blas build: gather triangles",
+            &self.gather_triangles,
+            &[&bind],
+            count.div_ceil(WORKGROUP),
+        );
+    }
+
+    /// World AABBs of instance slots `0..count` into `aabbs` (2 `vec4` each). A live instance
+    /// (flags bit 0) whose geometry is built (flags bit 0) with `tri_count > 0` and a non-empty
+    /// root box gets the box of its 8 transformed corners, padded outward by a few ulp so it
+    /// contains the exactly transformed box; every other slot gets the empty box.
+    pub fn instance_aabbs(
+        &self,
+        rec: &mut Recorder<'_>,
+        instances: &wgpu::Buffer,
+        geometries: &wgpu::Buffer,
+        count: u32,
+        aabbs: &wgpu::Buffer,
+    ) {
+        if count == 0 {
+            return;
+        }
+        let params = rec.uniform("kickstart-rt instance aabbs params", &[count, 0u32, 0, 0]);
+        let bind = rec.bind_buffers(
+            "kickstart-rt instance aabbs",
+            &self.instance_aabbs,
+            0,
+            &[
+                params.as_entire_binding(),
+                instances.as_entire_binding(),
+                geometries.as_entire_binding(),
+                aabbs.as_entire_binding(),
+            ],
+        );
+        rec.dispatch(
+            "tlas build: instance aabbs",
+            &self.instance_aabbs,
+            &[&bind],
+            count.div_ceil(WORKGROUP),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::testing::{buffer_with, gpu, read_back, run};
+    use glam::{Affine3A, Quat, Vec3};
+
+    /// Sentinel of untouched output words.
+    const SENTINEL: u32 = 0xdead_beef;
+
+    /// Small seeded PRNG (xorshift64*).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        }
+        fn below(&mut self, n: u32) -> u32 {
+            (((self.next() >> 32) * u64::from(n)) >> 32) as u32
+        }
+        fn range(&mut self, lo: f32, hi: f32) -> f32 {
+            lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
+        }
+    }
+
+    /// The first `n` words of `buf`.
+    fn words(buf: &wgpu::Buffer, n: usize) -> Vec<u32> {
+        bytemuck::cast_slice(&read_back(buf, 0, n as u64 * 4)).to_vec()
+    }
+
+    /// The empty box as written by the shaders.
+    const EMPTY: [[f32; 4]; 2] = [[1e30, 1e30, 1e30, 0.0], [-1e30, -1e30, -1e30, 0.0]];
+
+    #[test]
+    fn triangle_aabbs_are_exact_and_dropped_triangles_empty() {
+        let mut rng = Rng(11);
+        let n = 40usize;
+        let mut tris = vec![[0f32; 4]; 3 * n];
+        let mut dropped = vec![false; n];
+        for t in 0..n {
+            for k in 0..3 {
+                tris[3 * t + k] = [
+                    rng.range(-50.0, 50.0),
+                    rng.range(-50.0, 50.0),
+                    rng.range(-50.0, 50.0),
+                    0.0,
+                ];
+            }
+            match t % 5 {
+                1 => tris[3 * t + 2] = tris[3 * t], // degenerate: two equal vertices
+                2 => {
+                    // degenerate: collinear (the midpoint of the other two)
+                    let [a, b] = [tris[3 * t], tris[3 * t + 1]];
+                    tris[3 * t + 2] = [
+                        (a[0] + b[0]) * 0.5,
+                        (a[1] + b[1]) * 0.5,
+                        (a[2] + b[2]) * 0.5,
+                        0.0,
+                    ];
+                }
+                3 => {
+                    dropped[t] = true;
+                    tris[3 * t] = [0.0, 0.0, 0.0, f32::from_bits(t as u32)];
+                    tris[3 * t + 1] = [0.0, 0.0, 0.0, f32::from_bits(1)];
+                    tris[3 * t + 2] = [0.0; 4];
+                }
+                _ => tris[3 * t][3] = f32::from_bits(t as u32), // primitive index in w is ignored
+            }
+        }
+        let (tri_base, count, aabb_base) = (5u32, 30u32, 3u32);
+        let tri_buf = buffer_with(bytemuck::cast_slice(&tris));
+        let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * 40]));
+        let prims = Prims::new(&gpu().device);
+        run(|rec| prims.triangle_aabbs(rec, &tri_buf, tri_base, count, &aabbs, aabb_base));
+        let got = words(&aabbs, 8 * 40);
+        for p in 0..40usize {
+            let box_words = &got[8 * p..8 * p + 8];
+            let k = p as i64 - aabb_base as i64;
+            if k < 0 || k >= count as i64 {
+                assert!(box_words.iter().all(|&w| w == SENTINEL), "aabb {p} written");
+                continue;
+            }
+            let t = tri_base as usize + k as usize;
+            let want = if dropped[t] {
+                EMPTY
+            } else {
+                let v = &tris[3 * t..3 * t + 3];
+                let lo = |a: usize| v[0][a].min(v[1][a]).min(v[2][a]);
+                let hi = |a: usize| v[0][a].max(v[1][a]).max(v[2][a]);
+                [[lo(0), lo(1), lo(2), 0.0], [hi(0), hi(1), hi(2), 0.0]]
+            };
+            let want_words: Vec<u32> = want.iter().flatten().map(|f| f.to_bits()).collect();
+            assert_eq!(box_words, &want_words[..], "triangle {t}");
+        }
+    }
+
+    #[test]
+    fn gather_triangles_applies_the_permutation_bit_exactly() {
+        let mut rng = Rng(12);
+        // Random bits (NaN and subnormal patterns included): the copy must not touch them.
+        let src: Vec<u32> = (0..50 * 12).map(|_| rng.next() as u32).collect();
+        let mut perm: Vec<u32> = (0..30).collect();
+        for i in (1..perm.len()).rev() {
+            perm.swap(i, rng.below(i as u32 + 1) as usize);
+        }
+        let mut order = vec![SENTINEL; 4];
+        order.extend(&perm);
+        let (src_base, order_base, count, dst_base) = (7u32, 4u32, 30u32, 2u32);
+        let src_buf = buffer_with(bytemuck::cast_slice(&src));
+        let order_buf = buffer_with(bytemuck::cast_slice(&order));
+        let dst = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 12 * 40]));
+        let prims = Prims::new(&gpu().device);
+        run(|rec| {
+            prims.gather_triangles(
+                rec, &src_buf, src_base, &order_buf, order_base, count, &dst, dst_base,
+            )
+        });
+        let got = words(&dst, 12 * 40);
+        for d in 0..40usize {
+            let tri = &got[12 * d..12 * d + 12];
+            if d < dst_base as usize || d >= (dst_base + count) as usize {
+                assert!(tri.iter().all(|&w| w == SENTINEL), "triangle {d} written");
+            } else {
+                let s = (src_base + perm[d - dst_base as usize]) as usize;
+                assert_eq!(tri, &src[12 * s..12 * s + 12], "dst {d} from src {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn instance_aabbs_bound_transformed_corners_and_hidden_ones_are_empty() {
+        let mut rng = Rng(13);
+        let geometry = |built: u32, tri_count: u32, lo: [f32; 3], hi: [f32; 3]| -> Vec<u32> {
+            let mut g = vec![0, 0, tri_count, built];
+            g.extend(lo.iter().chain(&[0.0]).map(|f| f.to_bits()));
+            g.extend(hi.iter().chain(&[0.0]).map(|f| f.to_bits()));
+            g
+        };
+        let (lo, hi) = ([-1.0, -2.0, -3.0], [4.0, 5.0, 6.0]);
+        let mut geos = geometry(1, 10, lo, hi);
+        geos.extend(geometry(0, 0, lo, hi)); // 1: not built
+        geos.extend(geometry(1, 0, lo, hi)); // 2: built, no triangles
+        geos.extend(geometry(1, 4, [1e30; 3], [-1e30; 3])); // 3: all triangles dropped
+        geos.extend(geometry(0b11, 3, [2.0, 2.0, 2.0], [2.0, 3.0, 2.5])); // 4: flat box, extra flag bit
+        let instance = |t: Affine3A, geometry: u32, flags: u32| -> Vec<u32> {
+            let m = t.matrix3;
+            let mut w = Vec::new();
+            for r in 0..3 {
+                w.extend(
+                    [m.x_axis[r], m.y_axis[r], m.z_axis[r], t.translation[r]].map(f32::to_bits),
+                );
+            }
+            w.extend([0u32; 12]); // world_to_object: unused here
+            w.extend([geometry, 0xff, flags, 0, 0, 0, 0, 0]);
+            w
+        };
+        let spin = Affine3A::from_scale_rotation_translation(
+            Vec3::new(2.0, 0.5, 3.0),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -0.4),
+            Vec3::new(100.0, -7.0, 3.5),
+        );
+        // (transform, geometry, flags, visible)
+        let mut cases = vec![
+            (spin, 0, 1, true),
+            (spin, 0, 0, false),
+            (spin, 1, 1, false),
+            (spin, 2, 1, false),
+            (spin, 3, 1, false),
+            (spin, 99, 1, false), // geometry slot past the table
+            (Affine3A::IDENTITY, 0, 1, true),
+            (spin, 4, 0b101, true),
+        ];
+        for _ in 0..60 {
+            let t = Affine3A::from_scale_rotation_translation(
+                Vec3::new(
+                    rng.range(0.01, 20.0),
+                    rng.range(0.01, 20.0),
+                    rng.range(0.01, 20.0),
+                ),
+                Quat::from_euler(
+                    glam::EulerRot::ZYX,
+                    rng.range(-3.2, 3.2),
+                    rng.range(-3.2, 3.2),
+                    rng.range(-3.2, 3.2),
+                ),
+                Vec3::new(
+                    rng.range(-1e4, 1e4),
+                    rng.range(-1e4, 1e4),
+                    rng.range(-1e4, 1e4),
+                ),
+            );
+            cases.push((t, if rng.below(4) == 0 { 4 } else { 0 }, 1, true));
+        }
+        let inst: Vec<u32> = cases
+            .iter()
+            .flat_map(|&(t, g, f, _)| instance(t, g, f))
+            .collect();
+        let n = cases.len();
+        let inst_buf = buffer_with(bytemuck::cast_slice(&inst));
+        let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
+        let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * (n + 2)]));
+        let prims = Prims::new(&gpu().device);
+        run(|rec| prims.instance_aabbs(rec, &inst_buf, &geo_buf, n as u32, &aabbs));
+        let got: Vec<f32> = words(&aabbs, 8 * (n + 2))
+            .into_iter()
+            .map(f32::from_bits)
+            .collect();
+        for (i, &(t, g, _, visible)) in cases.iter().enumerate() {
+            let b = &got[8 * i..8 * i + 8];
+            if !visible {
+                assert_eq!(b, EMPTY.as_flattened(), "instance {i}");
+                continue;
+            }
+            let gw = &geos[12 * g as usize..12 * g as usize + 12];
+            let glo = Vec3::from_array([4, 5, 6].map(|w| f32::from_bits(gw[w])));
+            let ghi = Vec3::from_array([8, 9, 10].map(|w| f32::from_bits(gw[w])));
+            let (mut wlo, mut whi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+            for c in 0..8 {
+                let p = Vec3::select(
+                    glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0),
+                    ghi,
+                    glo,
+                );
+                let q = t.transform_point3(p);
+                wlo = wlo.min(q);
+                whi = whi.max(q);
+            }
+            assert_eq!((b[3], b[7]), (0.0, 0.0));
+            // Magnitude of the transform's terms: the scale of its rounding.
+            let e = glo.abs().max(ghi.abs());
+            let m = t.matrix3;
+            let row_dot = |r: usize| Vec3::from(m.row(r)).abs().dot(e);
+            let mag =
+                Vec3::new(row_dot(0), row_dot(1), row_dot(2)) + Vec3::from(t.translation).abs();
+            for a in 0..3 {
+                // Contains every CPU-transformed corner, and is tight (only the rounding pad).
+                assert!(
+                    b[a] <= wlo[a] && b[4 + a] >= whi[a],
+                    "instance {i} axis {a}: {b:?} vs {wlo} {whi}"
+                );
+                let tol = 1e-5 * mag[a];
+                assert!(
+                    wlo[a] - b[a] <= tol && b[4 + a] - whi[a] <= tol,
+                    "instance {i} axis {a} loose: {b:?} vs {wlo} {whi}"
+                );
+            }
+        }
+        assert!(
+            got[8 * n..].iter().all(|&w| w.to_bits() == SENTINEL),
+            "past count written"
+        );
+    }
+}
