@@ -1,1 +1,457 @@
-//! GPU radix sort (filled by its module's author).
+//! Stable GPU LSD radix sort of (u32 key, u32 value) pairs (`shaders/radix_sort.wgsl`).
+//!
+//! Portable by construction: WebGPU default limits, no subgroup operations, no inter-workgroup
+//! communication inside a dispatch (so no reliance on forward progress between workgroups).
+//! One 4-bit digit per pass; each pass is histogram → multi-level prefix sum → stable scatter.
+//! 4-bit digits keep the per-thread rank counters of a block in 8 KiB of workgroup memory (two
+//! 16-bit lanes per word), so ranking costs O(1) per element instead of a loop over the radix.
+
+// Until the GPU BVH builder (another branch) calls it, only the tests use this module.
+#![cfg_attr(not(test), allow(dead_code))]
+
+use super::shader::compute_pipeline;
+use super::Recorder;
+
+/// WGSL source of every kernel of the sort.
+const SOURCE: &str = include_str!("../../shaders/radix_sort.wgsl");
+
+/// Bits of one digit (one pass each). Must match `RADIX` in the shader.
+const DIGIT_BITS: u32 = 4;
+/// Digit values per pass.
+const RADIX: u32 = 1 << DIGIT_BITS;
+/// Elements per workgroup in `histogram` / `scatter` (256 threads × 4). Must match `BLOCK`.
+const BLOCK: u32 = 1024;
+/// Entries per workgroup in `reduce` / `scan_add`. Must match `SCAN_CHUNK`.
+const SCAN_CHUNK: u32 = 1024;
+/// Threads per workgroup of `copy_back`.
+const COPY_WG: u32 = 256;
+
+/// Per-dispatch parameters; layout of `Params` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    count: u32,
+    shift: u32,
+    bits: u32,
+    nblocks: u32,
+    level_base: u32,
+    level_len: u32,
+    next_base: u32,
+    has_next: u32,
+}
+
+/// One level of the prefix sum over the histogram array: where it lies in the `hist` buffer
+/// and how many entries it has.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Level {
+    base: u32,
+    len: u32,
+}
+
+/// Levels of the multi-level prefix sum over `first_len` entries: level 0 is the histogram
+/// itself; each next level holds the chunk sums of the previous one; the last fits one chunk.
+fn scan_levels(first_len: u32) -> Vec<Level> {
+    let mut levels = vec![Level {
+        base: 0,
+        len: first_len,
+    }];
+    while let Some(&last) = levels.last() {
+        if last.len <= SCAN_CHUNK {
+            break;
+        }
+        levels.push(Level {
+            base: last.base + last.len,
+            len: last.len.div_ceil(SCAN_CHUNK),
+        });
+    }
+    levels
+}
+
+/// Stable GPU LSD radix sort of (u32 key, u32 value) pairs.
+pub(crate) struct RadixSort {
+    histogram: wgpu::ComputePipeline,
+    reduce: wgpu::ComputePipeline,
+    scan_add: wgpu::ComputePipeline,
+    scatter: wgpu::ComputePipeline,
+    copy_back: wgpu::ComputePipeline,
+    /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
+    /// its scan levels; created on first use, grown when a sort needs more.
+    keys_tmp: Option<wgpu::Buffer>,
+    vals_tmp: Option<wgpu::Buffer>,
+    hist: Option<wgpu::Buffer>,
+}
+
+impl RadixSort {
+    /// Compiles the sort's pipelines; scratch buffers are created by the first [`Self::record`].
+    pub fn new(device: &wgpu::Device) -> Self {
+        let pipeline = |entry| compute_pipeline(device, "radix sort", SOURCE, entry);
+        RadixSort {
+            histogram: pipeline("histogram"),
+            reduce: pipeline("reduce"),
+            scan_add: pipeline("scan_add"),
+            scatter: pipeline("scatter"),
+            copy_back: pipeline("copy_back"),
+            keys_tmp: None,
+            vals_tmp: None,
+            hist: None,
+        }
+    }
+
+    /// Sorts `count` pairs in place: `keys[0..count]` and `values[0..count]` (whole buffers
+    /// bound at offset 0; STORAGE usage is all they need) ascending by key, stable (equal keys
+    /// keep their input order, so their values do too).
+    ///
+    /// Only the low `key_bits` bits of each key are sorted on: keys must be `< 2^key_bits`
+    /// (bits above are carried along but do not affect the order). `key_bits` is clamped to
+    /// 1..=32 except that 0 sorts nothing; fewer bits mean fewer passes (`ceil(key_bits / 4)`,
+    /// plus one copy pass when that is odd). `count` ≤ 1 records nothing. `count` is limited by
+    /// the device's `max_storage_buffer_binding_size / 4` (32M with default limits).
+    ///
+    /// Everything is recorded into `rec.encoder` (no submit); the scratch buffers stay in use
+    /// until that work has run, so record sorts with one `RadixSort` sequentially.
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        keys: &wgpu::Buffer,
+        values: &wgpu::Buffer,
+        count: u32,
+        key_bits: u32,
+    ) {
+        if count <= 1 || key_bits == 0 {
+            return;
+        }
+        let key_bits = key_bits.min(32);
+        let nblocks = count.div_ceil(BLOCK);
+        let levels = scan_levels(nblocks * RADIX);
+        let hist_len = levels.last().map_or(0, |l| l.base + l.len);
+        self.reserve(rec.device, count, hist_len);
+        let (Some(keys_tmp), Some(vals_tmp), Some(hist)) =
+            (&self.keys_tmp, &self.vals_tmp, &self.hist)
+        else {
+            return; // reserve always creates them
+        };
+
+        let params = Params {
+            count,
+            shift: 0,
+            bits: 0,
+            nblocks,
+            level_base: 0,
+            level_len: 0,
+            next_base: 0,
+            has_next: 0,
+        };
+        // A copy of the device reference, so the closure does not borrow `rec` (dispatch needs it
+        // mutably).
+        let device = rec.device;
+        let bind = |pipeline: &wgpu::ComputePipeline,
+                    uniform: &wgpu::Buffer,
+                    buffers: &[(u32, &wgpu::Buffer)]| {
+            let mut entries = vec![wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniform.as_entire_binding(),
+            }];
+            entries.extend(buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            }));
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("radix sort"),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            })
+        };
+
+        // The scan's bind groups do not depend on the digit: build them once for all passes.
+        // Upsweep: level i's chunk sums into level i + 1. Downsweep: the top level alone, then
+        // each lower level plus its chunk prefixes from the level above.
+        let mut reduce_groups = Vec::new();
+        let mut scan_groups = Vec::new();
+        for (i, level) in levels.iter().enumerate() {
+            let next = levels.get(i + 1);
+            let p = Params {
+                level_base: level.base,
+                level_len: level.len,
+                next_base: next.map_or(0, |n| n.base),
+                has_next: u32::from(next.is_some()),
+                ..params
+            };
+            let uniform = rec.uniform("radix sort scan params", &p);
+            let groups = level.len.div_ceil(SCAN_CHUNK);
+            if next.is_some() {
+                reduce_groups.push((bind(&self.reduce, &uniform, &[(5, hist)]), groups));
+            }
+            scan_groups.push((bind(&self.scan_add, &uniform, &[(5, hist)]), groups));
+        }
+
+        let passes = key_bits.div_ceil(DIGIT_BITS);
+        for pass in 0..passes {
+            let shift = pass * DIGIT_BITS;
+            let p = Params {
+                shift,
+                bits: (key_bits - shift).min(DIGIT_BITS),
+                ..params
+            };
+            let uniform = rec.uniform("radix sort pass params", &p);
+            // Even passes read the caller's buffers, odd passes write them back.
+            let (src, dst) = if pass % 2 == 0 {
+                ((keys, values), (keys_tmp, vals_tmp))
+            } else {
+                ((keys_tmp, vals_tmp), (keys, values))
+            };
+            let hist_group = bind(&self.histogram, &uniform, &[(1, src.0), (5, hist)]);
+            rec.dispatch(
+                "radix sort histogram",
+                &self.histogram,
+                &[&hist_group],
+                nblocks,
+            );
+            for (group, workgroups) in &reduce_groups {
+                rec.dispatch("radix sort reduce", &self.reduce, &[group], *workgroups);
+            }
+            for (group, workgroups) in scan_groups.iter().rev() {
+                rec.dispatch("radix sort scan", &self.scan_add, &[group], *workgroups);
+            }
+            let scatter_group = bind(
+                &self.scatter,
+                &uniform,
+                &[(1, src.0), (2, src.1), (3, dst.0), (4, dst.1), (5, hist)],
+            );
+            rec.dispatch(
+                "radix sort scatter",
+                &self.scatter,
+                &[&scatter_group],
+                nblocks,
+            );
+        }
+        if passes % 2 == 1 {
+            // A storage-to-storage copy rather than copy_buffer_to_buffer: the caller's buffers
+            // need no COPY_DST usage.
+            let uniform = rec.uniform("radix sort copy params", &params);
+            let group = bind(
+                &self.copy_back,
+                &uniform,
+                &[(1, keys_tmp), (2, vals_tmp), (3, keys), (4, values)],
+            );
+            let workgroups = count.div_ceil(COPY_WG);
+            rec.dispatch(
+                "radix sort copy back",
+                &self.copy_back,
+                &[&group],
+                workgroups,
+            );
+        }
+    }
+
+    /// Bytes of scratch it holds now (for the SDK's memory accounting).
+    pub fn scratch_bytes(&self) -> u64 {
+        [&self.keys_tmp, &self.vals_tmp, &self.hist]
+            .iter()
+            .filter_map(|b| b.as_ref().map(|b| b.size()))
+            .sum()
+    }
+
+    /// Makes the scratch hold `count` pairs and `hist_len` histogram entries. Growing drops the
+    /// old buffers: wgpu keeps them alive while already recorded commands use them.
+    fn reserve(&mut self, device: &wgpu::Device, count: u32, hist_len: u32) {
+        let storage = |label, entries: u32| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: u64::from(entries.max(1)) * 4,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
+        let too_small = |b: &Option<wgpu::Buffer>, entries: u32| {
+            b.as_ref().is_none_or(|b| b.size() < u64::from(entries) * 4)
+        };
+        if too_small(&self.keys_tmp, count) || too_small(&self.vals_tmp, count) {
+            // Whole blocks: a later sort of a slightly larger count reuses them.
+            let entries = count.checked_next_multiple_of(BLOCK).unwrap_or(count);
+            self.keys_tmp = Some(storage("radix sort keys scratch", entries));
+            self.vals_tmp = Some(storage("radix sort values scratch", entries));
+        }
+        if too_small(&self.hist, hist_len) {
+            self.hist = Some(storage("radix sort histogram", hist_len));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::testing;
+
+    /// Deterministic xorshift generator (tests need no `rand`).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 32) as u32
+        }
+    }
+
+    fn to_u32s(bytes: &[u8]) -> Vec<u32> {
+        bytemuck::pod_collect_to_vec(bytes)
+    }
+
+    /// Sorts `keys` (values = a scrambled original index) on the GPU with `sorter` and asserts
+    /// both arrays equal a CPU stable sort by key.
+    fn check_with(sorter: &mut RadixSort, keys: &[u32], key_bits: u32) {
+        let n = keys.len();
+        let values: Vec<u32> = (0..n as u32)
+            .map(|i| i.wrapping_mul(0x9e37_79b9) ^ 7)
+            .collect();
+        // Buffers of at least 4 bytes (wgpu rejects empty bindings); only the first n count.
+        let pad = |v: &[u32]| {
+            let mut v = v.to_vec();
+            v.push(0xdead_beef);
+            v
+        };
+        let kb = testing::buffer_with(bytemuck::cast_slice(&pad(keys)));
+        let vb = testing::buffer_with(bytemuck::cast_slice(&pad(&values)));
+        testing::run(|rec| sorter.record(rec, &kb, &vb, n as u32, key_bits));
+        let got_keys = to_u32s(&testing::read_back(&kb, 0, (n as u64 + 1) * 4));
+        let got_vals = to_u32s(&testing::read_back(&vb, 0, (n as u64 + 1) * 4));
+
+        let mut expected: Vec<(u32, u32)> = keys.iter().copied().zip(values).collect();
+        expected.sort_by_key(|&(k, _)| k); // stable
+        let (exp_keys, exp_vals): (Vec<u32>, Vec<u32>) = expected.into_iter().unzip();
+        assert_eq!(
+            got_keys[..n],
+            exp_keys[..],
+            "keys, n = {n}, key_bits = {key_bits}"
+        );
+        assert_eq!(
+            got_vals[..n],
+            exp_vals[..],
+            "values, n = {n}, key_bits = {key_bits}"
+        );
+        assert_eq!(got_keys[n], 0xdead_beef, "wrote past count");
+        assert_eq!(got_vals[n], 0xdead_beef, "wrote past count");
+    }
+
+    fn check(keys: &[u32], key_bits: u32) {
+        check_with(&mut RadixSort::new(&testing::gpu().device), keys, key_bits);
+    }
+
+    /// `n` keys below 2^bits drawn from about `n / 8` distinct values (many duplicates).
+    fn random_keys(n: usize, bits: u32, seed: u64) -> Vec<u32> {
+        let mut rng = Rng(seed);
+        let mask = if bits == 32 {
+            u32::MAX
+        } else {
+            (1 << bits) - 1
+        };
+        let pool: Vec<u32> = (0..n / 8 + 1).map(|_| rng.next() & mask).collect();
+        (0..n)
+            .map(|_| pool[rng.next() as usize % pool.len()])
+            .collect()
+    }
+
+    #[test]
+    fn radix_sort_random_30_bit_sizes_around_block_multiples() {
+        // One sorter for all sizes: also exercises growing the scratch between sorts.
+        let mut sorter = RadixSort::new(&testing::gpu().device);
+        for (i, n) in [0usize, 1, 2, 255, 256, 257, 1023, 1024, 1025, 4097, 100_003]
+            .into_iter()
+            .enumerate()
+        {
+            check_with(&mut sorter, &random_keys(n, 30, 1 + i as u64), 30);
+        }
+        assert!(sorter.scratch_bytes() >= 2 * 100_003 * 4);
+    }
+
+    #[test]
+    fn radix_sort_all_equal_keys_keep_input_order() {
+        check(&vec![12345u32; 5000], 30);
+        check(&vec![0u32; 3000], 32);
+    }
+
+    #[test]
+    fn radix_sort_sorted_and_reversed_input() {
+        let sorted: Vec<u32> = (0..20_000u32).map(|i| i * 37).collect();
+        check(&sorted, 30);
+        let reversed: Vec<u32> = sorted.iter().rev().copied().collect();
+        check(&reversed, 30);
+    }
+
+    #[test]
+    fn radix_sort_full_32_bit_keys() {
+        let mut rng = Rng(99);
+        let mut keys: Vec<u32> = (0..30_000).map(|_| rng.next()).collect();
+        keys.extend([u32::MAX, 0, u32::MAX, 1 << 31, 0]);
+        check(&keys, 32);
+    }
+
+    #[test]
+    fn radix_sort_fewer_key_bits() {
+        // 6 bits: 2 passes; 5 and 13 bits: odd pass counts (copy back); 1 bit: one pass.
+        for (bits, n) in [(6, 10_000), (5, 3000), (13, 7000), (1, 2500), (30, 70_000)] {
+            check(&random_keys(n, bits, u64::from(bits) * 7 + 3), bits);
+        }
+    }
+
+    #[test]
+    fn radix_sort_multi_level_scan() {
+        // 16 × 70 blocks = 1120 histogram entries: more than one scan chunk, so two levels.
+        assert_eq!(scan_levels(16 * 70).len(), 2);
+        check(&random_keys(70 * 1024 - 5, 30, 4242), 30);
+    }
+
+    #[test]
+    fn radix_sort_scan_levels_shrink_to_one_chunk() {
+        assert_eq!(scan_levels(5), vec![Level { base: 0, len: 5 }]);
+        let levels = scan_levels(16 * 16384 * 64);
+        assert_eq!(levels.len(), 3);
+        assert_eq!(
+            levels[1],
+            Level {
+                base: 16 * 16384 * 64,
+                len: 16384
+            }
+        );
+        assert_eq!(levels[2].len, 16);
+    }
+
+    /// Rough GPU timing of 1M 30-bit keys (run on real GPUs:
+    /// `cargo test --lib radix_sort_bench -- --ignored --nocapture`). Records several sorts in
+    /// one submission so per-submit overhead is amortised; also checks the result.
+    #[test]
+    #[ignore]
+    fn radix_sort_bench_1m_30_bit() {
+        let n = 1 << 20;
+        let keys = random_keys(n, 30, 5);
+        let g = testing::gpu();
+        let mut sorter = RadixSort::new(&g.device);
+        check_with(&mut sorter, &keys, 30); // warm-up and correctness
+        let kb = testing::buffer_with(bytemuck::cast_slice(&keys));
+        let vb = testing::buffer(n as u64 * 4);
+        // Record first (wgpu's CPU cost, large in debug builds), then time only submit + wait.
+        let reps = 20;
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let record_start = std::time::Instant::now();
+        {
+            let mut rec = crate::gpu::Recorder::new(&g.device, &mut enc);
+            for _ in 0..reps {
+                sorter.record(&mut rec, &kb, &vb, n as u32, 30);
+            }
+        }
+        let commands = enc.finish();
+        let recorded = record_start.elapsed() / reps;
+        let start = std::time::Instant::now();
+        g.queue.submit([commands]);
+        g.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("poll");
+        let per_sort = start.elapsed() / reps;
+        println!(
+            "radix sort of {n} pairs (30-bit keys): GPU {per_sort:?} per sort (submit to idle), \
+             recording {recorded:?} per sort"
+        );
+        // The brief's upper size: 16M pairs (multi-level scan, 2-D dispatch split).
+        check_with(&mut sorter, &random_keys(16 << 20, 30, 6), 30);
+    }
+}
