@@ -25,7 +25,12 @@ pub(crate) fn gpu() -> &'static TestGpu {
         let (features, limits) = if minimal {
             (wgpu::Features::empty(), wgpu::Limits::default())
         } else {
-            (adapter.features(), adapter.limits())
+            (
+                // What the SDK can use, not every adapter feature: wgpu refuses experimental
+                // ones (NVIDIA lists mesh shaders and ray-tracing pipelines) unless opted in.
+                crate::required_features() | crate::optional_features_supported(&adapter),
+                adapter.limits(),
+            )
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("kickstart-rt unit tests"),

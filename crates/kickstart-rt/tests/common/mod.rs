@@ -35,7 +35,13 @@ pub fn gpu() -> &'static Gpu {
         let (features, limits) = if minimal() {
             (wgpu::Features::empty(), wgpu::Limits::default())
         } else {
-            (adapter.features(), adapter.limits())
+            (
+                // What the SDK can use, not every adapter feature: wgpu refuses experimental
+                // ones (NVIDIA lists mesh shaders and ray-tracing pipelines) unless opted in.
+                kickstart_rt::required_features()
+                    | kickstart_rt::optional_features_supported(&adapter),
+                adapter.limits(),
+            )
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("kickstart-rt tests"),
