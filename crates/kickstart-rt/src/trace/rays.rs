@@ -368,6 +368,16 @@ mod tests {
         let rays = random_rays(&mut rng, 2500, 5.0, &targets);
         let scene = TestScene::single(tris);
         let near_edge = check_random(&scene, &rays, 0xff);
+        // Duplicates (600..630 copy 0..30) tie exactly with their originals: the lower
+        // primitive index always wins.
+        let hits = gpu_trace(
+            &scene,
+            &rays.iter().map(gpu_ray).collect::<Vec<_>>(),
+            RayQuery::ClosestHit,
+            0xff,
+        );
+        assert!(hits.iter().any(|h| h.primitive < 30));
+        assert!(hits.iter().all(|h| !(600..630).contains(&h.primitive)));
         eprintln!(
             "random soup: {near_edge} near-edge disagreements in {}",
             rays.len()
