@@ -4,6 +4,8 @@
 //! **Tie rule for shared edges and vertices**: a point exactly on an edge counts as inside, so a
 //! ray through a shared edge or vertex hits every triangle that shares it (never none: no gaps);
 //! a closest-hit query that finds several hits at the same `t` reports the lowest primitive index.
+//! Edge functions are evaluated in f32 only and an exact 0 is inside: the rule the GPU traversal
+//! (`shaders/traverse.wgsl`) implements too, so the two agree (up to FMA contraction on the GPU).
 
 use glam::Vec3;
 
@@ -99,15 +101,15 @@ pub(crate) fn intersect_sheared(
     let by = b[ky] - sh.s.y * b[kz];
     let cx = c[kx] - sh.s.x * c[kz];
     let cy = c[ky] - sh.s.y * c[kz];
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    // Exactly zero edge functions are recomputed in double precision, as the paper prescribes.
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
-        v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
-        w = (bx as f64 * ay as f64 - by as f64 * ax as f64) as f32;
-    }
+    // Edge functions in f32 only, no double-precision recomputation of zeros (the paper's
+    // fallback): WGSL has no portable f64, and the GPU traversal must follow the same rule.
+    // Rounding of a product is monotonic, so a non-zero value always has the exact sign; an
+    // exact 0 may stand for a tiny value of either sign and counts as inside (edge-inclusive).
+    // That can only add hits, never open a gap: the two triangles of a shared edge compute
+    // exactly negated values from the same two vertices, so a 0 is a 0 on both sides.
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
     if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
         return None;
     }

@@ -1,0 +1,396 @@
+// kickstart-rt traversal module: two-level BVH traversal (TLAS → instance → BLAS) with a
+// watertight ray/triangle test. Every tracing pass prepends this file to its own source (WGSL has
+// no include). Layouts and rules: docs/ray-tracing-core.md ("Traversal"); the CPU oracle in
+// src/cpu follows the same rules, and the unit tests in src/trace compare the two.
+//
+// Watertightness without f64: an edge function that is exactly 0 counts as inside (edge-inclusive,
+// evaluated in f32 only; the CPU oracle does the same). Rounding of a product is monotonic, so a
+// non-zero edge function always has the exact sign; a zero may be a rounded tiny value, and
+// counting it as inside can only add hits, never open a gap. Each edge function is evaluated with
+// its two endpoints in a canonical order, so the two triangles sharing an edge evaluate the same
+// expression (one of them negates it): even where the compiler contracts a*b - c*d into an FMA,
+// both sides round identically and their signs stay exactly opposite.
+
+struct GeometryGpu {
+    node_base: u32,
+    tri_base: u32,
+    tri_count: u32,
+    flags: u32,
+    bounds_min: vec4<f32>,
+    bounds_max: vec4<f32>,
+}
+
+struct InstanceGpu {
+    object_to_world: mat3x4<f32>,
+    world_to_object: mat3x4<f32>,
+    geometry: u32,
+    mask: u32,
+    flags: u32,
+    pad: u32,
+    pad2: vec4<u32>,
+}
+
+struct RtRay {
+    origin: vec3<f32>,
+    t_min: f32,
+    dir: vec3<f32>,
+    t_max: f32,
+}
+
+// `hit` is 1 on a hit. A miss has t = -1, instance = primitive = 0xffffffff, hit = 0.
+struct RtHit {
+    t: f32,
+    u: f32,
+    v: f32,
+    instance: u32,
+    primitive: u32,
+    hit: u32,
+}
+
+@group(0) @binding(0) var<storage, read> rt_tlas_nodes: array<vec4<f32>>;
+@group(0) @binding(1) var<storage, read> rt_instances: array<InstanceGpu>;
+@group(0) @binding(2) var<storage, read> rt_geometries: array<GeometryGpu>;
+@group(0) @binding(3) var<storage, read> rt_blas_nodes: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> rt_triangles: array<vec4<f32>>;
+
+const RT_STACK_SIZE: u32 = 64u;
+const RT_MAX_VISITS: u32 = 1048576u;
+const RT_LEAF_BIT: u32 = 0x80000000u;
+const RT_FIRST_MASK: u32 = 0x0fffffffu;
+const RT_NO_INDEX: u32 = 0xffffffffu;
+// Largest finite f32: stands in for ∞ (WGSL lets implementations assume no infinities).
+const RT_FLT_MAX: f32 = 3.40282347e38;
+// 1 + 2γ (Ize 2013), as the CPU's slab test: widens the far distance so rounding never culls a
+// box that a grazing ray touches.
+const RT_FAR_WIDEN: f32 = 1.0000004;
+
+fn rt_is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn rt_is_finite3(x: vec3<f32>) -> bool {
+    return rt_is_finite(x.x) && rt_is_finite(x.y) && rt_is_finite(x.z);
+}
+
+// Rows × (p, w), summed left to right as the CPU oracle does (a built-in dot may sum in another
+// order, which moves rays through vertices by an ulp relative to the oracle).
+fn rt_transform(m: mat3x4<f32>, p: vec3<f32>, w: f32) -> vec3<f32> {
+    return vec3<f32>(
+        m[0].x * p.x + m[0].y * p.y + m[0].z * p.z + m[0].w * w,
+        m[1].x * p.x + m[1].y * p.y + m[1].z * p.z + m[1].w * w,
+        m[2].x * p.x + m[2].y * p.y + m[2].z * p.z + m[2].w * w,
+    );
+}
+
+// A ray prepared for one space (world for the TLAS, an instance's object space for its BLAS).
+struct RtSpace {
+    origin: vec3<f32>,
+    // Reciprocal direction; 0 on flat axes (never used there).
+    inv_dir: vec3<f32>,
+    // Axes where the direction is 0 (or so small that its reciprocal overflows): the CPU gets
+    // ±∞ × 0 = NaN or ±∞ there, i.e. the axis only decides whether the origin is inside the slab.
+    flat_axis: vec3<bool>,
+    // Watertight test: axis permutation (kx, ky, kz) and shear (Sx, Sy, Sz).
+    k: vec3<u32>,
+    s: vec3<f32>,
+}
+
+fn rt_space(origin: vec3<f32>, dir: vec3<f32>) -> RtSpace {
+    var sp: RtSpace;
+    sp.origin = origin;
+    let zero = dir == vec3<f32>(0.0);
+    let inv = vec3<f32>(1.0) / select(dir, vec3<f32>(1.0), zero);
+    let overflow = vec3<bool>(!rt_is_finite(inv.x), !rt_is_finite(inv.y), !rt_is_finite(inv.z));
+    sp.flat_axis = zero | overflow;
+    sp.inv_dir = select(inv, vec3<f32>(0.0), sp.flat_axis);
+    // Same axis choice as the CPU (strict comparisons, ties to the later axis).
+    let a = abs(dir);
+    var kz = 2u;
+    if a.x > a.y {
+        if a.x > a.z {
+            kz = 0u;
+        }
+    } else if a.y > a.z {
+        kz = 1u;
+    }
+    var kx = (kz + 1u) % 3u;
+    var ky = (kx + 1u) % 3u;
+    // Keep the winding: swap when the dominant component is negative.
+    if dir[kz] < 0.0 {
+        let tmp = kx;
+        kx = ky;
+        ky = tmp;
+    }
+    let dz = dir[kz];
+    sp.k = vec3<u32>(kx, ky, kz);
+    sp.s = vec3<f32>(dir[kx] / dz, dir[ky] / dz, 1.0 / dz);
+    return sp;
+}
+
+struct RtBoxHit {
+    near: f32,
+    hit: bool,
+}
+
+// Slab test against [bmin, bmax] within [t_min, t_max]; empty boxes (min > max) are missed.
+fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32) -> RtBoxHit {
+    var r: RtBoxHit;
+    r.near = t_min;
+    r.hit = false;
+    if any(bmin > bmax) {
+        return r;
+    }
+    let inside = (sp.origin >= bmin) & (sp.origin <= bmax);
+    if any(sp.flat_axis & !inside) {
+        return r;
+    }
+    let t0 = (bmin - sp.origin) * sp.inv_dir;
+    let t1 = (bmax - sp.origin) * sp.inv_dir;
+    // A flat axis with the origin inside its slab does not constrain the interval (the CPU's
+    // NaN → ∓∞ rule).
+    let lo = select(min(t0, t1), vec3<f32>(-RT_FLT_MAX), sp.flat_axis);
+    let hi = select(max(t0, t1), vec3<f32>(RT_FLT_MAX), sp.flat_axis);
+    let near = max(t_min, max(lo.x, max(lo.y, lo.z)));
+    let far = min(t_max, min(hi.x, min(hi.y, hi.z)));
+    r.near = near;
+    r.hit = near <= far * RT_FAR_WIDEN;
+    return r;
+}
+
+// A vertex relative to the ray origin, permuted and sheared: (x, y) in the ray's 2-D frame, z
+// scaled by Sz. One function for every vertex, so a vertex shared by two triangles gets the same
+// bits in both.
+fn rt_shear(p: vec3<f32>, sp: RtSpace) -> vec3<f32> {
+    let d = p - sp.origin;
+    let dz = d[sp.k.z];
+    return vec3<f32>(d[sp.k.x] - sp.s.x * dz, d[sp.k.y] - sp.s.y * dz, sp.s.z * dz);
+}
+
+// Edge function of the edge p → q: q.x * p.y - q.y * p.x (the CPU's U = cx*by - cy*bx for b → c),
+// evaluated with the endpoints in a canonical order (see the header comment).
+fn rt_edge(p: vec2<f32>, q: vec2<f32>) -> f32 {
+    let swap = q.x < p.x || (q.x == p.x && q.y < p.y);
+    let a = select(p, q, swap);
+    let b = select(q, p, swap);
+    let f = b.x * a.y - b.y * a.x;
+    return select(f, -f, swap);
+}
+
+struct RtTriHit {
+    t: f32,
+    u: f32,
+    v: f32,
+    hit: bool,
+}
+
+// Watertight ray/triangle test (Woop, Benthin & Wald 2013), both windings, edge-inclusive,
+// t in [t_min, t_max] inclusive. u, v: weights of the second and third vertex.
+fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> RtTriHit {
+    var r: RtTriHit;
+    r.hit = false;
+    r.t = 0.0;
+    r.u = 0.0;
+    r.v = 0.0;
+    let pa = rt_shear(a, sp);
+    let pb = rt_shear(b, sp);
+    let pc = rt_shear(c, sp);
+    let u = rt_edge(pb.xy, pc.xy);
+    let v = rt_edge(pc.xy, pa.xy);
+    let w = rt_edge(pa.xy, pb.xy);
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return r;
+    }
+    let det = u + v + w;
+    if det == 0.0 || !rt_is_finite(det) {
+        return r;
+    }
+    let t_scaled = u * pa.z + v * pb.z + w * pc.z;
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !rt_is_finite(t) || t < t_min || t > t_max {
+        return r;
+    }
+    r.t = t;
+    r.u = v * inv;
+    r.v = w * inv;
+    r.hit = true;
+    return r;
+}
+
+fn rt_miss() -> RtHit {
+    return RtHit(-1.0, 0.0, 0.0, RT_NO_INDEX, RT_NO_INDEX, 0u);
+}
+
+// Traverses TLAS and BLASes with one stack. Entries at stack index >= `blas_sp` belong to the
+// BLAS of the instance being traversed; popping an entry below it means that BLAS is done. Each
+// entry keeps the entry distance of its box, so subtrees behind a closer hit are skipped.
+// `any_hit` returns at the first hit found.
+fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
+    var best = rt_miss();
+    if !rt_is_finite3(ray.origin) || !rt_is_finite3(ray.dir) || all(ray.dir == vec3<f32>(0.0)) {
+        return best;
+    }
+    // NaN range: nothing is in it (as on the CPU, where every comparison with NaN fails).
+    let tmin_bits = bitcast<u32>(ray.t_min) & 0x7fffffffu;
+    let tmax_bits = bitcast<u32>(ray.t_max) & 0x7fffffffu;
+    if tmin_bits > 0x7f800000u || tmax_bits > 0x7f800000u {
+        return best;
+    }
+    // ±∞ become ±FLT_MAX: the same set of finite t.
+    let t_min = clamp(ray.t_min, -RT_FLT_MAX, RT_FLT_MAX);
+    var t_max = clamp(ray.t_max, -RT_FLT_MAX, RT_FLT_MAX);
+    if ray.t_max < ray.t_min {
+        return best;
+    }
+    let world = rt_space(ray.origin, ray.dir);
+    var local = world;
+    var stack_ref: array<u32, RT_STACK_SIZE>;
+    var stack_t: array<f32, RT_STACK_SIZE>;
+    stack_ref[0] = 0u;
+    stack_t[0] = t_min;
+    var sp = 1u;
+    var blas_sp = RT_STACK_SIZE + 1u;
+    var node_base = 0u;
+    var tri_base = 0u;
+    var cur_inst = 0u;
+    var visits = 0u;
+    while sp > 0u && visits < RT_MAX_VISITS {
+        visits += 1u;
+        sp -= 1u;
+        let entry = stack_ref[sp];
+        let entry_t = stack_t[sp];
+        let in_blas = sp >= blas_sp;
+        if !in_blas {
+            blas_sp = RT_STACK_SIZE + 1u;
+        }
+        // Pushed before a closer hit was found: the box test would now fail.
+        if entry_t > t_max * RT_FAR_WIDEN {
+            continue;
+        }
+        if (entry & RT_LEAF_BIT) != 0u {
+            let first = entry & RT_FIRST_MASK;
+            let count = ((entry >> 28u) & 7u) + 1u;
+            if in_blas {
+                for (var i = 0u; i < count; i += 1u) {
+                    let slot = (tri_base + first + i) * 3u;
+                    let v0 = rt_triangles[slot];
+                    let v1 = rt_triangles[slot + 1u];
+                    let v2 = rt_triangles[slot + 2u];
+                    let h = rt_triangle(local, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                    if !h.hit {
+                        continue;
+                    }
+                    let prim = bitcast<u32>(v0.w);
+                    // Tie rule: equal t → lowest instance, then lowest primitive index.
+                    let better = best.hit == 0u || h.t < best.t
+                        || (h.t == best.t && (cur_inst < best.instance
+                            || (cur_inst == best.instance && prim < best.primitive)));
+                    if better {
+                        best = RtHit(h.t, h.u, h.v, cur_inst, prim, 1u);
+                        t_max = h.t;
+                        if any_hit {
+                            return best;
+                        }
+                    }
+                }
+            } else {
+                // A TLAS leaf of several instances: enter the first now and re-push the rest
+                // (below the BLAS entries, so they come after this BLAS is done).
+                if count > 1u && sp < RT_STACK_SIZE {
+                    stack_ref[sp] = RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u);
+                    stack_t[sp] = entry_t;
+                    sp += 1u;
+                }
+                let inst = rt_instances[first];
+                if (inst.mask & mask) == 0u || (inst.flags & 1u) == 0u {
+                    continue;
+                }
+                let geo = rt_geometries[inst.geometry];
+                if (geo.flags & 1u) == 0u || sp >= RT_STACK_SIZE {
+                    continue;
+                }
+                // No renormalisation: t means the same in object and world space.
+                let m = inst.world_to_object;
+                local = rt_space(
+                    rt_transform(m, ray.origin, 1.0),
+                    rt_transform(m, ray.dir, 0.0),
+                );
+                node_base = geo.node_base;
+                tri_base = geo.tri_base;
+                cur_inst = first;
+                blas_sp = sp;
+                stack_ref[sp] = 0u;
+                stack_t[sp] = entry_t;
+                sp += 1u;
+            }
+            continue;
+        }
+        var n0: vec4<f32>;
+        var n1: vec4<f32>;
+        var n2: vec4<f32>;
+        var n3: vec4<f32>;
+        var space = world;
+        if in_blas {
+            let base = (node_base + entry) * 4u;
+            n0 = rt_blas_nodes[base];
+            n1 = rt_blas_nodes[base + 1u];
+            n2 = rt_blas_nodes[base + 2u];
+            n3 = rt_blas_nodes[base + 3u];
+            space = local;
+        } else {
+            let base = entry * 4u;
+            n0 = rt_tlas_nodes[base];
+            n1 = rt_tlas_nodes[base + 1u];
+            n2 = rt_tlas_nodes[base + 2u];
+            n3 = rt_tlas_nodes[base + 3u];
+        }
+        let hl = rt_box(n0.xyz, n1.xyz, space, t_min, t_max);
+        let hr = rt_box(n2.xyz, n3.xyz, space, t_min, t_max);
+        let lref = bitcast<u32>(n0.w);
+        let rref = bitcast<u32>(n1.w);
+        // Push the farther child first so the nearer one is visited next. When the stack is
+        // full the farther child is dropped (it cannot happen for trees of depth < 32 per level).
+        if hl.hit && hr.hit {
+            var near_ref = lref;
+            var near_t = hl.near;
+            var far_ref = rref;
+            var far_t = hr.near;
+            if hr.near < hl.near {
+                near_ref = rref;
+                near_t = hr.near;
+                far_ref = lref;
+                far_t = hl.near;
+            }
+            if sp + 1u < RT_STACK_SIZE {
+                stack_ref[sp] = far_ref;
+                stack_t[sp] = far_t;
+                sp += 1u;
+            }
+            if sp < RT_STACK_SIZE {
+                stack_ref[sp] = near_ref;
+                stack_t[sp] = near_t;
+                sp += 1u;
+            }
+        } else if (hl.hit || hr.hit) && sp < RT_STACK_SIZE {
+            stack_ref[sp] = select(rref, lref, hl.hit);
+            stack_t[sp] = select(hr.near, hl.near, hl.hit);
+            sp += 1u;
+        }
+    }
+    return best;
+}
+
+// The closest hit of `ray` among visible instances ((instance.mask & mask) != 0, flags bit 0).
+fn rt_closest_hit(ray: RtRay, mask: u32) -> RtHit {
+    return rt_trace(ray, mask, false);
+}
+
+// Whether anything visible is hit in [t_min, t_max].
+fn rt_any_hit(ray: RtRay, mask: u32) -> bool {
+    return rt_trace(ray, mask, true).hit != 0u;
+}
+
+// Any-hit query that also reports the occluder it found (not necessarily the closest).
+fn rt_any_hit_occluder(ray: RtRay, mask: u32) -> RtHit {
+    return rt_trace(ray, mask, true);
+}
