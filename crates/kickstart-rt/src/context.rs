@@ -1038,7 +1038,7 @@ impl ExecuteContext {
                             (vp.x, vp.y, vp.width, vp.height),
                             &common.view,
                             common.debug_parameters.debug_output_type,
-                        );
+                        )?;
                     }
                 }
             }

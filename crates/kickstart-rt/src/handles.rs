@@ -163,11 +163,6 @@ impl<H: RawHandle, T> HandlePool<H, T> {
     pub(crate) fn slot_count(&self) -> u32 {
         self.slots.len() as u32
     }
-
-    /// The live values, in slot order.
-    pub(crate) fn values(&self) -> impl Iterator<Item = &T> {
-        self.slots.iter().filter_map(|s| s.value.as_ref())
-    }
 }
 
 /// Identifies one built GPU task until it is marked completed.

@@ -85,7 +85,8 @@ pub(crate) struct Recorder<'a> {
 }
 
 impl<'a> Recorder<'a> {
-    /// A recorder without timing.
+    /// A recorder without timing (unit tests; the context builds its recorders directly).
+    #[cfg(test)]
     pub fn new(device: &'a wgpu::Device, encoder: &'a mut wgpu::CommandEncoder) -> Self {
         Recorder {
             device,

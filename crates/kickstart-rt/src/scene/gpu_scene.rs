@@ -7,10 +7,10 @@ use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::Prims;
-use crate::scene::stubs::{
-    DebugViewPass, Lbvh, LbvhBuild, LbvhRefit, LeafRefs, RayTracer, SceneBuffers,
-};
+use crate::scene::stubs::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs};
 use crate::staging::{StagingBuffer, StagingPool};
+use crate::trace::debug_view::DebugViewPass;
+use crate::trace::rays::{RayTracer, SceneBuffers};
 
 /// Bytes of one triangle of the soup (three `vec4<f32>`).
 pub(crate) const TRIANGLE_BYTES: u64 = 48;
@@ -236,11 +236,6 @@ impl GpuScene {
         }
     }
 
-    /// The largest buffer one binding may hold on this device.
-    pub fn max_binding(&self) -> u64 {
-        self.max_binding
-    }
-
     /// Creates every pipeline now.
     pub fn prepare_pipelines(&mut self) {
         self.ingest();
@@ -268,9 +263,11 @@ impl GpuScene {
     }
     fn debug_view(&mut self) -> &mut DebugViewPass {
         let d = &self.device;
-        self.passes
-            .debug_view
-            .get_or_insert_with(|| DebugViewPass::new(d))
+        self.passes.debug_view.get_or_insert_with(|| {
+            let mut p = DebugViewPass::new();
+            p.prepare(d);
+            p
+        })
     }
 
     /// Bytes of build scratch held.
@@ -662,11 +659,6 @@ impl GpuScene {
         }
     }
 
-    /// Whether a TLAS exists to trace against (before the first build, every ray misses).
-    pub fn has_tlas(&self) -> bool {
-        self.tlas.built
-    }
-
     /// Records a batch of rays.
     pub fn trace_rays(&mut self, rec: &mut Recorder<'_>, t: &crate::tasks::TraceRaysTask) {
         self.rays();
@@ -693,10 +685,10 @@ impl GpuScene {
         viewport: (u32, u32, u32, u32),
         view: &crate::tasks::ViewInfo,
         kind: crate::tasks::DebugOutputType,
-    ) {
+    ) -> Result<()> {
         self.debug_view();
         let Some(pass) = self.passes.debug_view.as_mut() else {
-            return;
+            return Ok(());
         };
         rec.scope = "debug view";
         let scene = SceneBuffers {
@@ -714,7 +706,7 @@ impl GpuScene {
             viewport,
             view,
             kind,
-        );
+        )
     }
 
     /// Reads back a BLAS (blocks on the device; tools and tests only).

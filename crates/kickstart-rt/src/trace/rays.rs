@@ -16,48 +16,8 @@ const WORKGROUP_SIZE: u32 = 64;
 /// Size of one [`GpuRay`] / [`GpuHit`] record in bytes.
 pub(crate) const RECORD_SIZE: u64 = 32;
 
-/// Which query a ray batch runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum RayQuery {
-    /// The closest hit in the ray's range (ties: lowest instance, then lowest primitive).
-    #[default]
-    ClosestHit,
-    /// Any hit in the ray's range (stops at the first one found: shadows, occlusion).
-    AnyHit,
-}
-
-/// A ray record of a ray batch buffer (32 bytes): points `origin + t * dir`,
-/// `t_min <= t <= t_max`; `dir` need not be normalised (`t` is in units of its length).
-#[repr(C)]
-#[derive(Pod, Zeroable, Clone, Copy, Debug, PartialEq)]
-pub struct GpuRay {
-    /// Start point, world space.
-    pub origin: [f32; 3],
-    /// Smallest accepted `t`.
-    pub t_min: f32,
-    /// Direction, world space.
-    pub dir: [f32; 3],
-    /// Largest accepted `t` (∞ allowed).
-    pub t_max: f32,
-}
-
-/// A hit record of a ray batch buffer (32 bytes). A miss has `instance == u32::MAX` and `t == -1`.
-#[repr(C)]
-#[derive(Pod, Zeroable, Clone, Copy, Debug, PartialEq)]
-pub struct GpuHit {
-    /// Ray parameter of the hit; -1 on a miss.
-    pub t: f32,
-    /// Barycentric weight of the triangle's second vertex.
-    pub u: f32,
-    /// Barycentric weight of the third vertex.
-    pub v: f32,
-    /// Instance slot index; `u32::MAX` on a miss.
-    pub instance: u32,
-    /// Primitive index within the instance's geometry; `u32::MAX` on a miss.
-    pub primitive: u32,
-    /// Padding to 32 bytes.
-    pub _pad: [u32; 3],
-}
+#[allow(unused_imports)] // GpuHit and GpuRay are this module's tests' vocabulary
+pub(crate) use crate::tasks::{GpuHit, GpuRay, RayQuery};
 
 /// The scene as the traversal module binds it at `@group(0)` (layouts in
 /// docs/ray-tracing-core.md).
