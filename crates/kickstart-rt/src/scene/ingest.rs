@@ -353,13 +353,14 @@ mod tests {
                             continue;
                         }
                         pos[k as usize] = q.into();
-                        for r in 0..3 {
+                        // Rounding scale: the magnitudes of the terms of each row.
+                        for (r, tol_r) in tol[k as usize].iter_mut().enumerate() {
                             let m = t.matrix3;
                             let mag = (m.x_axis[r] * p[0]).abs()
                                 + (m.y_axis[r] * p[1]).abs()
                                 + (m.z_axis[r] * p[2]).abs()
                                 + t.translation[r].abs();
-                            tol[k as usize][r] = 4.0 * f32::EPSILON * mag;
+                            *tol_r = 4.0 * f32::EPSILON * mag;
                         }
                     }
                 }
@@ -425,11 +426,11 @@ mod tests {
             for k in 0..3 {
                 let gv = got[3 * *slot as usize + k];
                 assert_eq!(gv[3], e.bits[k][3], "slot {slot} vertex {k} w");
-                for r in 0..3 {
-                    let (a, b) = (f32::from_bits(gv[r]), f32::from_bits(e.bits[k][r]));
+                for (r, &g_bits) in gv.iter().take(3).enumerate() {
+                    let (a, b) = (f32::from_bits(g_bits), f32::from_bits(e.bits[k][r]));
                     if e.tol[k][r] == 0.0 {
                         assert_eq!(
-                            gv[r], e.bits[k][r],
+                            g_bits, e.bits[k][r],
                             "slot {slot} vertex {k}[{r}]: gpu {a} cpu {b}"
                         );
                     } else {
