@@ -192,7 +192,8 @@ fn attempt<T>(errors: &mut Vec<String>, what: &str, f: impl FnOnce() -> AnyResul
     match f() {
         Ok(v) => Some(v),
         Err(e) => {
-            log::warn!("{what}: {e}");
+            // Printed with the scene's results; the log gets it at once for long runs.
+            log::debug!("{what}: {e}");
             errors.push(format!("{what}: {e}"));
             None
         }
@@ -333,7 +334,7 @@ impl Bench<'_> {
             return Ok((Stats::new(vec![0.0]), Vec::new()));
         }
         let limits = self.device.limits();
-        let bytes = (rays.len() * std::mem::size_of::<GpuRay>()) as u64;
+        let bytes = std::mem::size_of_val(rays) as u64;
         if bytes > limits.max_buffer_size {
             return Err(format!(
                 "{} rays need {bytes} bytes, more than the device's largest buffer ({}); use a smaller --size",
@@ -345,7 +346,7 @@ impl Bench<'_> {
         // One task per chunk that fits a storage binding; chunk offsets keep the device's
         // storage offset alignment.
         let align_rays = (limits.min_storage_buffer_offset_alignment as u64 / 32).max(1);
-        let chunk = (limits.max_storage_buffer_binding_size as u64 / 32) / align_rays * align_rays;
+        let chunk = (limits.max_storage_buffer_binding_size / 32) / align_rays * align_rays;
         let ray_buffer = self
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {

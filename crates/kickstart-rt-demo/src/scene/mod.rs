@@ -97,7 +97,7 @@ pub(crate) fn check_indices(
     vertex_count: usize,
     indices: &[u32],
 ) -> Result<(), String> {
-    if indices.len() % 3 != 0 {
+    if !indices.len().is_multiple_of(3) {
         return Err(format!(
             "mesh {name:?}: {} indices is not a multiple of 3",
             indices.len()

@@ -22,7 +22,6 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         single_index: true,
         ignore_points: true,
         ignore_lines: true,
-        ..Default::default()
     };
     let (models, materials) = tobj::load_obj(path, &options)
         .map_err(|e| SceneError::new(path, format!("not a valid OBJ file: {e}")))?;
