@@ -217,3 +217,80 @@ fn computed_normals_are_area_weighted() {
     // An unused vertex still gets a unit normal.
     assert_eq!(compute_normals(&positions, &[]).len(), 5);
 }
+
+#[test]
+fn gltf_instances_hierarchy_modes_and_camera() {
+    // One mesh of three primitives (a triangle list, a strip, points) used by two nodes, the
+    // second a child of the first, and a camera node.
+    let dir = std::env::temp_dir().join(format!("ksrt-gltf-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut bin: Vec<u8> = Vec::new();
+    for p in [
+        [0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+    ] {
+        bin.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    for i in [0u32, 1, 2, 0, 1, 2, 3] {
+        bin.extend(i.to_le_bytes());
+    }
+    std::fs::write(dir.join("t data.bin"), &bin).expect("write bin");
+    let json = r#"{
+      "asset": {"version": "2.0"},
+      "scene": 0,
+      "scenes": [{"nodes": [0, 2]}],
+      "nodes": [
+        {"mesh": 0, "translation": [10, 0, 0], "children": [1]},
+        {"mesh": 0, "translation": [0, 5, 0]},
+        {"camera": 0, "translation": [0, 0, 10]}
+      ],
+      "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+      "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.4, 0.6, 1]}}],
+      "meshes": [{"primitives": [
+        {"attributes": {"POSITION": 0}, "indices": 1, "material": 0},
+        {"attributes": {"POSITION": 0}, "indices": 2, "mode": 5},
+        {"attributes": {"POSITION": 0}, "mode": 0}
+      ]}],
+      "buffers": [{"byteLength": 76, "uri": "t%20data.bin"}],
+      "bufferViews": [
+        {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+        {"buffer": 0, "byteOffset": 48, "byteLength": 12},
+        {"buffer": 0, "byteOffset": 60, "byteLength": 16}
+      ],
+      "accessors": [
+        {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+         "min": [0, 0, 0], "max": [1, 1, 0]},
+        {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"},
+        {"bufferView": 2, "componentType": 5125, "count": 4, "type": "SCALAR"}
+      ]
+    }"#;
+    let path = dir.join("t.gltf");
+    std::fs::write(&path, json).expect("write gltf");
+    let scene = load_file(&path).expect("load");
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // Points skipped; the list and the strip are one geometry each, instanced per node.
+    assert_eq!(scene.meshes.len(), 2);
+    assert_eq!(scene.meshes[0].triangle_count(), 1);
+    assert_eq!(scene.meshes[1].indices, vec![0, 1, 2, 2, 1, 3]);
+    assert!(close(scene.meshes[0].color, Vec3::new(0.2, 0.4, 0.6)));
+    assert!(
+        close(scene.meshes[1].color, Vec3::ONE),
+        "glTF's default material is white"
+    );
+    assert_eq!(scene.instances.len(), 4);
+    let place = |k: usize| scene.instances[k].transform.transform_point3(Vec3::ZERO);
+    assert_eq!([scene.instances[0].mesh, scene.instances[1].mesh], [0, 1]);
+    assert!(close(place(0), Vec3::new(10.0, 0.0, 0.0)));
+    assert!(
+        close(place(2), Vec3::new(10.0, 5.0, 0.0)),
+        "child composes its parent"
+    );
+    assert_eq!(scene.triangle_count(), 6);
+    let cam = scene.camera.expect("camera node");
+    assert!(close(cam.eye, Vec3::new(0.0, 0.0, 10.0)));
+    assert!(close(cam.at, Vec3::new(0.0, 0.0, 9.0)), "looks down -Z");
+    assert!((cam.fov_y_deg - 0.8f32.to_degrees()).abs() < 1e-3);
+}
