@@ -549,7 +549,13 @@ fn bench_scene(
                 .ok_or("the scene has no geometry")?;
             let gpu_sah_cost = glue::blas_sah_cost(&ctx, h.geometries[k])?;
             let tris: Vec<[Vec3; 3]> = mesh.triangles(Affine3A::IDENTITY).collect();
-            let cpu_sah_cost = ksrt::cpu::CpuBvh::build(&tris).sah_cost() as f64;
+            let cpu = ksrt::cpu::CpuBvh::build(&tris);
+            if cpu.nodes.is_empty() {
+                return Err(
+                    format!("{}: no finite triangle to build a CPU BVH over", mesh.name).into(),
+                );
+            }
+            let cpu_sah_cost = cpu.sah_cost() as f64;
             Ok(SahReport {
                 geometry: mesh.name.clone(),
                 triangles: tris.len(),
@@ -693,6 +699,12 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     } else {
         opts.scenes.clone()
     };
+    let mut scenes = Vec::new();
+    for name in &names {
+        let start = std::time::Instant::now();
+        scenes.push(scene::load(name, &opts.scenes_dir)?);
+        println!("loaded {name} in {:.2} s", start.elapsed().as_secs_f64());
+    }
     let adapter = gpu::adapter()?;
     let timestamp_query = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
     if !timestamp_query {
@@ -723,15 +735,12 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         scenes: Vec::new(),
         tlas: Vec::new(),
     };
-    for name in &names {
-        let start = std::time::Instant::now();
-        let scene = scene::load(name, &opts.scenes_dir)?;
-        println!("loaded {name} in {:.2} s", start.elapsed().as_secs_f64());
+    for (name, scene) in names.iter().zip(&scenes) {
         let camera = opts
             .camera
             .or_else(|| issue_camera(name))
             .unwrap_or_else(|| scene.camera_or_default(None));
-        let r = bench_scene(&bench, name, &scene, camera, opts.size);
+        let r = bench_scene(&bench, name, scene, camera, opts.size);
         print_scene(&r, opts.size);
         report.scenes.push(r);
     }
