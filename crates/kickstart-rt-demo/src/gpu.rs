@@ -1,10 +1,15 @@
-//! Adapter selection and the `info` / `render` commands.
+//! Adapter and device selection, the `info` command, and the helpers every GPU command shares:
+//! uploading a scene, registering it with the SDK, submitting tasks and reading results back.
 
 use kickstart_rt as ksrt;
+use wgpu::util::DeviceExt;
 
+use crate::scene::{Mesh, Scene};
 use crate::AnyResult;
 
-fn adapter() -> AnyResult<wgpu::Adapter> {
+/// The adapter `ksrt` runs on (the high-performance one of the primary backends, or what
+/// `WGPU_BACKEND` selects).
+pub fn adapter() -> AnyResult<wgpu::Adapter> {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     // Vulkan/Metal/DX12 unless WGPU_BACKEND says otherwise: probing GL on a headless machine only
     // prints EGL errors.
@@ -22,7 +27,9 @@ fn adapter() -> AnyResult<wgpu::Adapter> {
     Ok(adapter)
 }
 
-fn device(adapter: &wgpu::Adapter) -> AnyResult<(wgpu::Device, wgpu::Queue)> {
+/// A device with the SDK's required features and every optional one the adapter has (which
+/// includes `TIMESTAMP_QUERY`, the benchmark's GPU timing).
+pub fn device(adapter: &wgpu::Adapter) -> AnyResult<(wgpu::Device, wgpu::Queue)> {
     let desc = wgpu::DeviceDescriptor {
         label: Some("ksrt"),
         required_features: ksrt::required_features() | ksrt::optional_features_supported(adapter),
@@ -86,21 +93,179 @@ pub fn info() -> AnyResult<()> {
     Ok(())
 }
 
-/// `ksrt render`.
-pub fn render(size: &str, out: std::path::PathBuf) -> AnyResult<()> {
-    let (w, h) = size
-        .split_once('x')
-        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
-        .ok_or_else(|| format!("--size {size:?}: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
-    let adapter = adapter()?;
-    let (device, queue) = device(&adapter)?;
-    crate::render::render(
-        &device,
-        &queue,
-        &crate::render::RenderOptions {
-            width: w,
-            height: h,
-            out,
-        },
-    )
+/// A mesh's vertex and index buffers, made once and reused by every context that registers it.
+pub struct UploadedMesh {
+    /// Positions, `Float32x3`.
+    pub vertices: wgpu::Buffer,
+    /// `u32` triangle-list indices.
+    pub indices: wgpu::Buffer,
+    /// Vertex count.
+    pub vertex_count: u32,
+    /// Index count.
+    pub index_count: u32,
+    /// The mesh's name.
+    pub name: String,
+}
+
+/// Uploads one mesh; the SDK copies out of these buffers, hence `COPY_SRC`.
+pub fn upload(device: &wgpu::Device, mesh: &Mesh) -> UploadedMesh {
+    let usage =
+        wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC;
+    UploadedMesh {
+        vertices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(mesh.name.as_str()),
+            contents: bytemuck::cast_slice(&mesh.positions),
+            usage,
+        }),
+        indices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(mesh.name.as_str()),
+            contents: bytemuck::cast_slice(&mesh.indices),
+            usage,
+        }),
+        vertex_count: mesh.positions.len() as u32,
+        index_count: mesh.indices.len() as u32,
+        name: mesh.name.clone(),
+    }
+}
+
+/// Uploads every mesh of a scene.
+pub fn upload_scene(device: &wgpu::Device, scene: &Scene) -> Vec<UploadedMesh> {
+    scene.meshes.iter().map(|m| upload(device, m)).collect()
+}
+
+/// The SDK's description of an uploaded mesh.
+pub fn geometry_input(m: &UploadedMesh, allow_update: bool) -> ksrt::GeometryInput {
+    ksrt::GeometryInput {
+        name: m.name.clone(),
+        components: vec![ksrt::GeometryComponent {
+            vertex_buffer: ksrt::VertexBufferInput {
+                buffer: m.vertices.clone(),
+                offset: 0,
+                stride: 12,
+                count: m.vertex_count,
+                format: ksrt::VertexFormat::Float32x3,
+            },
+            index_buffer: Some(ksrt::IndexBufferInput {
+                buffer: m.indices.clone(),
+                offset: 0,
+                count: m.index_count,
+                format: ksrt::IndexFormat::Uint32,
+            }),
+            transform: None,
+            index_range: None,
+        }],
+        allow_update,
+        ..Default::default()
+    }
+}
+
+/// The SDK handles of a registered scene: one geometry per mesh, one instance per instance, in
+/// the scene's order.
+pub struct SceneHandles {
+    /// Per [`Scene::meshes`].
+    pub geometries: Vec<ksrt::GeometryHandle>,
+    /// Per [`Scene::instances`].
+    pub instances: Vec<ksrt::InstanceHandle>,
+}
+
+impl SceneHandles {
+    /// Scene instance index of each instance slot index (what a ray hit reports), for mapping
+    /// hits back to meshes.
+    pub fn instance_of_slot(&self) -> std::collections::HashMap<u32, usize> {
+        self.instances
+            .iter()
+            .enumerate()
+            .map(|(k, h)| (h.index(), k))
+            .collect()
+    }
+}
+
+/// Schedules the registration of every mesh (and, when `instances`, every instance) of `scene`.
+pub fn schedule_scene(
+    ctx: &ksrt::ExecuteContext,
+    container: &mut ksrt::TaskContainer,
+    scene: &Scene,
+    uploads: &[UploadedMesh],
+    allow_update: bool,
+    instances: bool,
+) -> SceneHandles {
+    let geometries = ctx.create_geometry_handles(uploads.len());
+    for (m, &handle) in uploads.iter().zip(&geometries) {
+        container.schedule_bvh_task(ksrt::GeometryTask {
+            operation: ksrt::TaskOperation::Register,
+            handle,
+            input: geometry_input(m, allow_update),
+        });
+    }
+    let mut handles = Vec::new();
+    if instances {
+        handles = ctx.create_instance_handles(scene.instances.len());
+        for (inst, &handle) in scene.instances.iter().zip(&handles) {
+            container.schedule_bvh_task(ksrt::InstanceTask {
+                operation: ksrt::TaskOperation::Register,
+                handle,
+                input: ksrt::InstanceInput::new(geometries[inst.mesh], inst.transform),
+            });
+        }
+    }
+    SceneHandles {
+        geometries,
+        instances: handles,
+    }
+}
+
+/// Builds `container` into a new encoder, lets `after` record more (read-back copies), submits.
+pub fn submit(
+    ctx: &ksrt::ExecuteContext,
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    container: ksrt::TaskContainer,
+    after: impl FnOnce(&mut wgpu::CommandEncoder),
+) -> AnyResult<ksrt::GpuTaskHandle> {
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("ksrt"),
+    });
+    let task = ctx.build_gpu_task(container, &mut encoder)?;
+    after(&mut encoder);
+    queue.submit([encoder.finish()]);
+    Ok(task)
+}
+
+/// Waits for the GPU to finish everything submitted, then retires `task`.
+pub fn complete(
+    ctx: &ksrt::ExecuteContext,
+    device: &wgpu::Device,
+    task: ksrt::GpuTaskHandle,
+) -> AnyResult<()> {
+    device.poll(wgpu::PollType::wait_indefinitely())?;
+    match ctx.mark_gpu_task_completed(task) {
+        // Already retired (e.g. by a timing read-back that waited on it): nothing left to do.
+        Ok(()) | Err(ksrt::Error::InvalidGpuTaskHandle(_)) => Ok(()),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Maps a `MAP_READ` buffer after the GPU is done and returns its bytes.
+pub fn map_read(device: &wgpu::Device, buffer: &wgpu::Buffer) -> AnyResult<Vec<u8>> {
+    let slice = buffer.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device.poll(wgpu::PollType::wait_indefinitely())?;
+    rx.recv()
+        .map_err(|_| "the buffer map callback never ran")??;
+    let bytes = slice.get_mapped_range()?.to_vec();
+    buffer.unmap();
+    Ok(bytes)
+}
+
+/// A `MAP_READ | COPY_DST` buffer of `size` bytes to copy results into.
+pub fn readback_buffer(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("ksrt read-back"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
 }

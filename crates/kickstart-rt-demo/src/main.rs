@@ -1,8 +1,13 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
+mod bench;
+mod debug_view;
 mod gpu;
 mod render;
 mod scene;
+mod sdk_glue;
+
+use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
@@ -25,15 +30,131 @@ struct Cli {
 enum Command {
     /// Print the adapter, backend, and the features/limits the SDK needs or can use.
     Info,
-    /// Render the built-in default scene and write PNG images.
+    /// Render a scene and write PNG images: `cpu-reference.png` (traced on the CPU reference
+    /// BVH), or with --debug-view the SDK's GPU debug view `debug-<view>.png`.
     Render {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "1280x720")]
         size: String,
         /// Output folder.
         #[arg(long, default_value = "out")]
-        out: std::path::PathBuf,
+        out: PathBuf,
+        /// A GPU primary-ray debug view instead of the CPU reference image.
+        #[arg(long, value_enum)]
+        debug_view: Option<debug_view::DebugView>,
+        /// Scene: default, cornell, dragon, apartment, bunny, cornell-obj, cornell-gltf, or a
+        /// path to a .gltf/.glb/.obj file.
+        #[arg(long, default_value = "default")]
+        scene: String,
+        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        #[arg(long)]
+        scenes: Option<PathBuf>,
+        /// Camera: eye_x,eye_y,eye_z,at_x,at_y,at_z,fov_deg (y up); default: the file's, else one
+        /// framing the scene.
+        #[arg(long, allow_hyphen_values = true)]
+        camera: Option<String>,
     },
+    /// Benchmark BLAS/TLAS builds and refits, BVH quality and ray throughput on the GPU.
+    Bench {
+        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        #[arg(long)]
+        scenes: Option<PathBuf>,
+        /// Scenes to benchmark (repeatable) [default: dragon and apartment].
+        #[arg(long)]
+        scene: Vec<String>,
+        /// Also write the results as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Camera for every scene (eye_x,eye_y,eye_z,at_x,at_y,at_z,fov_deg) [default: the
+        /// issue's for dragon and apartment, else the file's or one framing the scene].
+        #[arg(long, allow_hyphen_values = true)]
+        camera: Option<String>,
+        /// Timed repetitions of each measurement, after one warm-up.
+        #[arg(long, default_value_t = 5)]
+        iterations: u32,
+        /// Size of the ray batches' image, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1920x1080")]
+        size: String,
+    },
+}
+
+/// Parses `--size WIDTHxHEIGHT`, each side in 1..=16384.
+fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+        .ok_or_else(|| format!("--size {size:?}: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("--size {w}x{h}: each side must be in 1..=16384").into());
+    }
+    Ok((w, h))
+}
+
+fn render(
+    size: &str,
+    out: PathBuf,
+    debug_view: Option<debug_view::DebugView>,
+    scene_name: &str,
+    scenes: Option<PathBuf>,
+    camera: Option<String>,
+) -> AnyResult<()> {
+    let (width, height) = parse_size(size)?;
+    let camera = camera.as_deref().map(scene::parse_camera).transpose()?;
+    let start = std::time::Instant::now();
+    let scene = scene::load(scene_name, &scene::scenes_dir(scenes))?;
+    log::info!(
+        "loaded {scene_name} ({} triangles) in {:.2} s",
+        scene.triangle_count(),
+        start.elapsed().as_secs_f64()
+    );
+    let camera = scene.camera_or_default(camera);
+    let adapter = gpu::adapter()?;
+    let (device, queue) = gpu::device(&adapter)?;
+    match debug_view {
+        None => render::render(
+            &device,
+            &queue,
+            &scene,
+            &render::RenderOptions {
+                width,
+                height,
+                out,
+                camera,
+            },
+        ),
+        Some(view) => {
+            let texels =
+                debug_view::trace(&device, &queue, &scene, &camera, view, (width, height))?;
+            let image = debug_view::to_image(view, &texels, width, height);
+            std::fs::create_dir_all(&out)
+                .map_err(|e| format!("--out {}: cannot create: {e}", out.display()))?;
+            let path = out.join(format!("debug-{}.png", view.name()));
+            image.save(&path)?;
+            println!(
+                "wrote {} ({width}x{height}, traced on the GPU)",
+                path.display()
+            );
+            Ok(())
+        }
+    }
+}
+
+fn bench_command(
+    scenes: Option<PathBuf>,
+    names: Vec<String>,
+    json: Option<PathBuf>,
+    camera: Option<String>,
+    iterations: u32,
+    size: &str,
+) -> AnyResult<()> {
+    bench::run(bench::BenchOptions {
+        scenes_dir: scene::scenes_dir(scenes),
+        scenes: names,
+        json,
+        camera: camera.as_deref().map(scene::parse_camera).transpose()?,
+        iterations,
+        size: parse_size(size)?,
+    })
 }
 
 fn main() {
@@ -41,10 +162,51 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info => gpu::info(),
-        Command::Render { size, out } => gpu::render(&size, out),
+        Command::Render {
+            size,
+            out,
+            debug_view,
+            scene,
+            scenes,
+            camera,
+        } => render(&size, out, debug_view, &scene, scenes, camera),
+        Command::Bench {
+            scenes,
+            scene,
+            json,
+            camera,
+            iterations,
+            size,
+        } => bench_command(scenes, scene, json, camera, iterations, &size),
     };
     if let Err(e) = result {
         eprintln!("ksrt: {e}");
         std::process::exit(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn size_parsing() {
+        assert_eq!(parse_size("320x180").ok(), Some((320, 180)));
+        assert!(parse_size("320").is_err());
+        assert!(parse_size("0x10").is_err());
+        assert!(parse_size("axb").is_err());
+    }
+
+    #[test]
+    fn cli_accepts_negative_camera_values() {
+        let cli = Cli::try_parse_from([
+            "ksrt",
+            "bench",
+            "--camera",
+            "-0.006,0.125,0.32,-0.006,0.125,-0.005,30",
+            "--scene",
+            "dragon",
+        ]);
+        assert!(cli.is_ok());
     }
 }

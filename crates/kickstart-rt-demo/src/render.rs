@@ -1,4 +1,5 @@
-//! `ksrt render`: registers the default scene with the SDK and writes an image of it.
+//! `ksrt render` without `--debug-view`: registers the scene with the SDK and writes an image of
+//! it traced on the CPU.
 //!
 //! Until the SDK's GPU tracer lands, the image is traced with the SDK's public CPU reference BVH
 //! (`kickstart_rt::cpu`): primary rays, a sun with ray-traced hard shadows, each mesh its colour.
@@ -7,40 +8,46 @@
 use glam::Vec3;
 use kickstart_rt as ksrt;
 use kickstart_rt::cpu::{CpuBvh, Ray};
-use wgpu::util::DeviceExt;
 
-use crate::scene::{default_scene, Mesh};
+use crate::scene::{Camera, Scene};
 
 use crate::AnyResult;
 
 /// Options of `ksrt render`.
 pub struct RenderOptions {
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
+    /// Output folder.
     pub out: std::path::PathBuf,
+    /// The camera.
+    pub camera: Camera,
 }
 
-pub fn render(device: &wgpu::Device, queue: &wgpu::Queue, opts: &RenderOptions) -> AnyResult<()> {
-    if opts.width == 0 || opts.height == 0 || opts.width > 16384 || opts.height > 16384 {
-        return Err(format!(
-            "--size {}x{}: each side must be in 1..=16384",
-            opts.width, opts.height
-        )
-        .into());
-    }
-    let scene = default_scene();
+/// Registers `scene` with the SDK and writes `cpu-reference.png`, traced on the CPU.
+pub fn render(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    scene: &Scene,
+    opts: &RenderOptions,
+) -> AnyResult<()> {
     let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
-    register(&ctx, device, &scene)?;
+    let uploads = crate::gpu::upload_scene(device, scene);
+    let mut c = ctx.create_task_container();
+    crate::gpu::schedule_scene(&ctx, &mut c, scene, &uploads, false, true);
+    ctx.invoke_gpu_task(c)?;
     device.poll(wgpu::PollType::wait_indefinitely())?;
-    let triangles: usize = scene.iter().map(|m| m.indices.len() / 3).sum();
     println!(
-        "registered {} meshes ({triangles} triangles) with kickstart-rt; SDK memory {} bytes",
-        scene.len(),
+        "registered {} meshes, {} instances ({} triangles) with kickstart-rt; SDK memory {} bytes",
+        scene.meshes.len(),
+        scene.instances.len(),
+        scene.triangle_count(),
         ctx.resource_allocations().total()
     );
 
     let start = std::time::Instant::now();
-    let image = trace_cpu_reference(&scene, opts.width, opts.height);
+    let image = trace_cpu_reference(scene, &opts.camera, opts.width, opts.height);
     std::fs::create_dir_all(&opts.out)?;
     let path = opts.out.join("cpu-reference.png");
     image.save(&path)?;
@@ -54,88 +61,48 @@ pub fn render(device: &wgpu::Device, queue: &wgpu::Queue, opts: &RenderOptions) 
     Ok(())
 }
 
-fn register(ctx: &ksrt::ExecuteContext, device: &wgpu::Device, scene: &[Mesh]) -> AnyResult<()> {
-    let mut c = ctx.create_task_container();
-    for m in scene {
-        let vb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(m.name),
-            contents: bytemuck::cast_slice(&m.positions),
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_SRC,
-        });
-        let ib = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(m.name),
-            contents: bytemuck::cast_slice(&m.indices),
-            usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC,
-        });
-        let geometry = ctx.create_geometry_handle();
-        c.schedule_bvh_task(ksrt::GeometryTask {
-            operation: ksrt::TaskOperation::Register,
-            handle: geometry,
-            input: ksrt::GeometryInput {
-                name: m.name.into(),
-                components: vec![ksrt::GeometryComponent {
-                    vertex_buffer: ksrt::VertexBufferInput {
-                        buffer: vb,
-                        offset: 0,
-                        stride: 12,
-                        count: m.positions.len() as u32,
-                        format: ksrt::VertexFormat::Float32x3,
-                    },
-                    index_buffer: Some(ksrt::IndexBufferInput {
-                        buffer: ib,
-                        offset: 0,
-                        count: m.indices.len() as u32,
-                        format: ksrt::IndexFormat::Uint32,
-                    }),
-                    transform: None,
-                    index_range: None,
-                }],
-                ..Default::default()
-            },
-        });
-        c.schedule_bvh_task(ksrt::InstanceTask {
-            operation: ksrt::TaskOperation::Register,
-            handle: ctx.create_instance_handle(),
-            input: ksrt::InstanceInput::new(geometry, m.transform),
-        });
-    }
-    ctx.invoke_gpu_task(c)?;
-    Ok(())
-}
-
-fn trace_cpu_reference(scene: &[Mesh], width: u32, height: u32) -> image::RgbImage {
-    let mut tris = Vec::new();
-    let mut owner = Vec::new();
-    for (i, m) in scene.iter().enumerate() {
-        for t in m.world_triangles() {
-            tris.push(t);
-            owner.push(i);
-        }
-    }
+fn trace_cpu_reference(scene: &Scene, camera: &Camera, width: u32, height: u32) -> image::RgbImage {
+    let (tris, owner) = scene.world_triangles();
     let bvh = CpuBvh::build(&tris);
-    let eye = Vec3::new(0.3, 2.4, 6.0);
-    let at = Vec3::new(0.2, 0.8, 0.0);
-    let fwd = (at - eye).normalize();
-    let right = fwd.cross(Vec3::Y).normalize();
-    let up = right.cross(fwd);
-    let tan = (50f32.to_radians() / 2.0).tan();
-    let aspect = width as f32 / height as f32;
+    let eye = camera.eye;
+    // Shadow rays start this far off the surface: relative to the scene so that tiny scenes
+    // (the dragon is 0.3 units across) don't shadow themselves and big ones don't leak.
+    let offset = scene.size() * 2e-4;
     let sun = Vec3::new(0.5, 1.0, 0.4).normalize();
+    // First world triangle of each instance, to find a hit's triangle within its mesh.
+    let starts: Vec<usize> = scene
+        .instances
+        .iter()
+        .scan(0, |n, i| {
+            let first = *n;
+            *n += scene.meshes[i.mesh].triangle_count();
+            Some(first)
+        })
+        .collect();
+    let shading_normal = |prim: usize, u: f32, v: f32| -> Option<Vec3> {
+        let inst = scene.instances.get(*owner.get(prim)? as usize)?;
+        let mesh = &scene.meshes[inst.mesh];
+        let first = (prim - starts.get(*owner.get(prim)? as usize)?) * 3;
+        let idx = mesh.indices.get(first..first + 3)?;
+        let n = |k: usize| Vec3::from(mesh.normals[idx[k] as usize]);
+        let local = n(0) * (1.0 - u - v) + n(1) * u + n(2) * v;
+        // Normals transform by the inverse transpose (non-uniform scales).
+        (inst.transform.matrix3.inverse().transpose() * glam::Vec3A::from(local))
+            .try_normalize()
+            .map(Vec3::from)
+    };
     let mut img = image::RgbImage::new(width, height);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let rows: Vec<(u32, Vec<[u8; 3]>)> = std::thread::scope(|s| {
         let jobs: Vec<_> = (0..threads as u32)
             .map(|k| {
-                let (bvh, tris, owner) = (&bvh, &tris, &owner);
+                let (bvh, tris, owner, shading_normal) = (&bvh, &tris, &owner, &shading_normal);
                 s.spawn(move || {
                     let mut out = Vec::new();
                     for y in (k..height).step_by(threads) {
                         let row = (0..width)
                             .map(|x| {
-                                let u =
-                                    ((x as f32 + 0.5) / width as f32 * 2.0 - 1.0) * tan * aspect;
-                                let v = (1.0 - (y as f32 + 0.5) / height as f32 * 2.0) * tan;
-                                let dir = (fwd + right * u + up * v).normalize();
+                                let dir = camera.primary_dir(x, y, width, height);
                                 let ray = Ray {
                                     origin: eye,
                                     dir,
@@ -150,8 +117,12 @@ fn trace_cpu_reference(scene: &[Mesh], width: u32, height: u32) -> image::RgbIma
                                         if n.dot(dir) > 0.0 {
                                             n = -n;
                                         }
-                                        let p = eye + dir * h.t + n * 1e-3;
-                                        let lit = n.dot(sun).max(0.0);
+                                        let p = eye + dir * h.t + n * offset;
+                                        // Smooth shading from the vertex normals, turned to
+                                        // the side the ray sees.
+                                        let ns = shading_normal(h.primitive as usize, h.u, h.v)
+                                            .map_or(n, |s| if s.dot(n) < 0.0 { -s } else { s });
+                                        let lit = ns.dot(sun).max(0.0);
                                         let shadow = Ray {
                                             origin: p,
                                             dir: sun,
@@ -163,7 +134,10 @@ fn trace_cpu_reference(scene: &[Mesh], width: u32, height: u32) -> image::RgbIma
                                         } else {
                                             1.0
                                         };
-                                        scene[owner[h.primitive as usize]].color
+                                        scene.meshes[scene.instances
+                                            [owner[h.primitive as usize] as usize]
+                                            .mesh]
+                                            .color
                                             * (0.2 + 0.8 * lit * vis)
                                     }
                                 };

@@ -1,0 +1,808 @@
+//! `ksrt bench`: BLAS build and refit times, BVH quality (SAH cost against the CPU reference
+//! builder), TLAS build and refit times, and ray throughput, all timed on the GPU with the SDK's
+//! timestamp queries. Ray generation and other CPU work between batches is not timed.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use glam::{Affine3A, Quat, Vec3};
+use kickstart_rt as ksrt;
+use serde::Serialize;
+use wgpu::util::DeviceExt;
+
+use crate::gpu::{self, UploadedMesh};
+use crate::scene::{self, Camera, Scene};
+use crate::sdk_glue::{self as glue, GpuHit, GpuRay, Query, Tlas};
+use crate::AnyResult;
+
+/// Scenes benchmarked when no `--scene` is given.
+pub const DEFAULT_SCENES: [&str; 2] = ["dragon", "apartment"];
+
+/// Instance counts of the TLAS measurements.
+pub const TLAS_INSTANCE_COUNTS: [u32; 3] = [1_000, 10_000, 100_000];
+
+/// The cameras of the ray tracing core issue for its benchmark scenes (eye, target, fov).
+pub fn issue_camera(scene: &str) -> Option<Camera> {
+    let c = match scene {
+        "dragon" => "-0.006,0.125,0.32,-0.006,0.125,-0.005,30",
+        "apartment" => "9.2,1.6,-7.3,9.2,1.0,-3.0,75",
+        _ => return None,
+    };
+    scene::parse_camera(c).ok()
+}
+
+/// Options of `ksrt bench`.
+pub struct BenchOptions {
+    /// The scenes folder.
+    pub scenes_dir: PathBuf,
+    /// Scene names or paths.
+    pub scenes: Vec<String>,
+    /// Where to write the JSON report, if anywhere.
+    pub json: Option<PathBuf>,
+    /// Camera for every scene, overriding the issue's and the files'.
+    pub camera: Option<Camera>,
+    /// Timed repetitions of each measurement (after one untimed warm-up).
+    pub iterations: u32,
+    /// Ray batch image size.
+    pub size: (u32, u32),
+}
+
+/// Median, minimum and maximum of the timed repetitions, milliseconds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Stats {
+    /// Median.
+    pub median_ms: f64,
+    /// Fastest.
+    pub min_ms: f64,
+    /// Slowest.
+    pub max_ms: f64,
+    /// Every repetition, in order.
+    pub samples_ms: Vec<f64>,
+}
+
+impl Stats {
+    /// Statistics of `samples` (at least one).
+    pub fn new(samples: Vec<f64>) -> Stats {
+        let mut sorted = samples.clone();
+        sorted.sort_by(f64::total_cmp);
+        let n = sorted.len();
+        let median = match n {
+            0 => f64::NAN,
+            _ if n % 2 == 1 => sorted[n / 2],
+            _ => (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0,
+        };
+        Stats {
+            median_ms: median,
+            min_ms: sorted.first().copied().unwrap_or(f64::NAN),
+            max_ms: sorted.last().copied().unwrap_or(f64::NAN),
+            samples_ms: samples,
+        }
+    }
+
+    fn show(&self) -> String {
+        format!(
+            "{:.3} ms ({:.3}..{:.3})",
+            self.median_ms, self.min_ms, self.max_ms
+        )
+    }
+}
+
+/// BVH quality of the largest geometry.
+#[derive(Debug, Clone, Serialize)]
+pub struct SahReport {
+    /// The geometry's name.
+    pub geometry: String,
+    /// Its triangles.
+    pub triangles: usize,
+    /// SAH cost of the SDK's GPU BLAS.
+    pub gpu_sah_cost: f64,
+    /// SAH cost of `kickstart_rt::cpu::CpuBvh` (binned SAH) on the same triangles.
+    pub cpu_sah_cost: f64,
+    /// GPU / CPU: 1 = as good as the reference builder; higher traces slower.
+    pub ratio: f64,
+}
+
+/// One timed ray batch.
+#[derive(Debug, Clone, Serialize)]
+pub struct RayBatch {
+    /// `primary`, `ao` or `diffuse`.
+    pub kind: &'static str,
+    /// Rays in the batch.
+    pub rays: u64,
+    /// Rays that hit nothing.
+    pub misses: u64,
+    /// GPU time of the batch (`trace rays` passes).
+    pub time: Stats,
+    /// Rays per second at the median time, millions.
+    pub mrays_per_s: f64,
+}
+
+/// Everything measured on one scene; a measurement that failed is `None` with its error in
+/// `errors`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneReport {
+    /// Scene name or path.
+    pub scene: String,
+    /// Geometries (one BLAS each).
+    pub meshes: usize,
+    /// Instances.
+    pub instances: usize,
+    /// Triangles of the geometries, each counted once (what the BLAS builds process).
+    pub geometry_triangles: usize,
+    /// Triangles in the world (instanced ones counted per instance).
+    pub world_triangles: usize,
+    /// Camera of the ray batches: eye, target, vertical fov (degrees).
+    pub camera: [f32; 7],
+    /// All BLASes built in one task (`ingest` + `blas build` passes).
+    pub blas_build: Option<Stats>,
+    /// Geometry triangles / median BLAS build time, millions per second.
+    pub blas_build_mtri_per_s: Option<f64>,
+    /// All BLASes refit after a vertex update (`ingest` + `blas refit` passes).
+    pub blas_refit: Option<Stats>,
+    /// BVH quality of the largest geometry.
+    pub sah: Option<SahReport>,
+    /// Primary, AO and diffuse batches.
+    pub rays: Vec<RayBatch>,
+    /// (pixels + primary hits) / (primary batch time + diffuse batch time), millions of rays per
+    /// second: the workload the issue compares with its peers.
+    pub peer_mrays_per_s: Option<f64>,
+    /// Measurements that failed, and why.
+    pub errors: Vec<String>,
+}
+
+/// TLAS build and refit over `instances` instances of one small mesh with random transforms.
+#[derive(Debug, Clone, Serialize)]
+pub struct TlasReport {
+    /// Instances.
+    pub instances: u32,
+    /// Rebuild after every transform changed (`tlas build` passes).
+    pub build: Option<Stats>,
+    /// Refit after every transform changed (`tlas refit` passes).
+    pub refit: Option<Stats>,
+    /// Measurements that failed, and why.
+    pub errors: Vec<String>,
+}
+
+/// The whole `--json` report.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// kickstart-rt version.
+    pub sdk_version: String,
+    /// Adapter name.
+    pub adapter: String,
+    /// wgpu backend.
+    pub backend: String,
+    /// Whether the device has timestamp queries (without them nothing is timed).
+    pub timestamp_query: bool,
+    /// Ray batch image width.
+    pub width: u32,
+    /// Ray batch image height.
+    pub height: u32,
+    /// Timed repetitions per measurement.
+    pub iterations: u32,
+    /// Per scene.
+    pub scenes: Vec<SceneReport>,
+    /// Per instance count.
+    pub tlas: Vec<TlasReport>,
+}
+
+/// Runs `f`, keeping its error as text in `errors` (labelled `what`) so that one failed
+/// measurement does not hide the others.
+fn attempt<T>(errors: &mut Vec<String>, what: &str, f: impl FnOnce() -> AnyResult<T>) -> Option<T> {
+    match f() {
+        Ok(v) => Some(v),
+        Err(e) => {
+            // Printed with the scene's results; the log gets it at once for long runs.
+            log::debug!("{what}: {e}");
+            errors.push(format!("{what}: {e}"));
+            None
+        }
+    }
+}
+
+/// A small deterministic generator (SplitMix64): benchmark inputs are the same on every run.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// A cosine-weighted direction about the unit vector `n`.
+    fn cosine(&mut self, n: Vec3) -> Vec3 {
+        let (t, b) = n.any_orthonormal_pair();
+        let (r1, r2) = (self.f32(), self.f32());
+        let phi = std::f32::consts::TAU * r1;
+        let r = r2.sqrt();
+        (t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - r2).max(0.0).sqrt()).normalize()
+    }
+}
+
+/// The shared device state of one benchmark run.
+struct Bench<'a> {
+    device: &'a wgpu::Device,
+    queue: &'a wgpu::Queue,
+    iterations: u32,
+}
+
+impl Bench<'_> {
+    fn context(&self) -> AnyResult<ksrt::ExecuteContext> {
+        let ctx = ksrt::ExecuteContext::new(self.device, self.queue, glue::init_settings(true))?;
+        glue::prepare_pipelines(&ctx)?;
+        Ok(ctx)
+    }
+
+    /// Submits `container`, waits, and returns the GPU time of the passes `span` names.
+    fn timed(
+        &self,
+        ctx: &ksrt::ExecuteContext,
+        container: ksrt::TaskContainer,
+        span: &[&str],
+        after: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> AnyResult<f64> {
+        let task = gpu::submit(ctx, self.device, self.queue, container, after)?;
+        let ms = glue::wait_span_ms(ctx, task, span);
+        gpu::complete(ctx, self.device, task)?;
+        ms
+    }
+
+    /// Runs `one` once untimed (warm-up), then `iterations` times.
+    fn repeat(&self, mut one: impl FnMut(bool) -> AnyResult<f64>) -> AnyResult<Stats> {
+        one(false)?;
+        let samples = (0..self.iterations)
+            .map(|_| one(true))
+            .collect::<AnyResult<Vec<f64>>>()?;
+        Ok(Stats::new(samples))
+    }
+
+    /// Registers the scene's geometries (and instances) and builds every BVH, untimed.
+    fn registered(
+        &self,
+        scene: &Scene,
+        uploads: &[UploadedMesh],
+        allow_update: bool,
+        instances: bool,
+    ) -> AnyResult<(ksrt::ExecuteContext, gpu::SceneHandles)> {
+        let ctx = self.context()?;
+        let mut c = ctx.create_task_container();
+        let h = gpu::schedule_scene(&ctx, &mut c, scene, uploads, allow_update, instances);
+        c.schedule_bvh_task(glue::bvh_build_task(
+            uploads.len() as u32,
+            instances.then_some(Tlas::Auto),
+        ));
+        let task = gpu::submit(&ctx, self.device, self.queue, c, |_| {})?;
+        gpu::complete(&ctx, self.device, task)?;
+        Ok((ctx, h))
+    }
+
+    /// (a) Every BLAS built in one task, on a fresh context each time. Returns the last context
+    /// and its handles for the SAH read-back.
+    fn blas_build(
+        &self,
+        scene: &Scene,
+        uploads: &[UploadedMesh],
+    ) -> AnyResult<(Stats, ksrt::ExecuteContext, gpu::SceneHandles)> {
+        let mut last = None;
+        let stats = self.repeat(|_| {
+            let ctx = self.context()?;
+            let mut c = ctx.create_task_container();
+            let h = gpu::schedule_scene(&ctx, &mut c, scene, uploads, false, false);
+            c.schedule_bvh_task(glue::bvh_build_task(uploads.len() as u32, None));
+            let ms = self.timed(&ctx, c, &["ingest", "blas build"], |_| {})?;
+            last = Some((ctx, h));
+            Ok(ms)
+        })?;
+        let (ctx, h) = last.ok_or("no BLAS build ran")?;
+        Ok((stats, ctx, h))
+    }
+
+    /// (b) Every BLAS refit after an update of all its vertices (the same positions again: the
+    /// refit does the same work whatever they are).
+    fn blas_refit(&self, scene: &Scene, uploads: &[UploadedMesh]) -> AnyResult<Stats> {
+        let (ctx, h) = self.registered(scene, uploads, true, false)?;
+        self.repeat(|_| {
+            let mut c = ctx.create_task_container();
+            for (m, &handle) in uploads.iter().zip(&h.geometries) {
+                c.schedule_bvh_task(ksrt::GeometryTask {
+                    operation: ksrt::TaskOperation::Update,
+                    handle,
+                    input: gpu::geometry_input(m, true),
+                });
+            }
+            c.schedule_bvh_task(glue::bvh_build_task(uploads.len() as u32, None));
+            self.timed(&ctx, c, &["ingest", "blas refit"], |_| {})
+        })
+    }
+
+    /// Traces `rays` (`iterations` timed times after a warm-up) and returns the last hits.
+    fn trace(
+        &self,
+        ctx: &ksrt::ExecuteContext,
+        rays: &[GpuRay],
+        query: Query,
+    ) -> AnyResult<(Stats, Vec<GpuHit>)> {
+        if rays.is_empty() {
+            return Ok((Stats::new(vec![0.0]), Vec::new()));
+        }
+        let limits = self.device.limits();
+        let bytes = std::mem::size_of_val(rays) as u64;
+        if bytes > limits.max_buffer_size {
+            return Err(format!(
+                "{} rays need {bytes} bytes, more than the device's largest buffer ({}); use a smaller --size",
+                rays.len(),
+                limits.max_buffer_size
+            )
+            .into());
+        }
+        // One task per chunk that fits a storage binding; chunk offsets keep the device's
+        // storage offset alignment.
+        let align_rays = (limits.min_storage_buffer_offset_alignment as u64 / 32).max(1);
+        let chunk = (limits.max_storage_buffer_binding_size / 32) / align_rays * align_rays;
+        let ray_buffer = self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("ksrt bench rays"),
+                contents: bytemuck::cast_slice(rays),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        let hit_buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ksrt bench hits"),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = gpu::readback_buffer(self.device, bytes);
+        let count = rays.len() as u64;
+        let mut remaining = self.iterations + 1;
+        let stats = self.repeat(|_| {
+            remaining -= 1;
+            let mut c = ctx.create_task_container();
+            let mut first = 0u64;
+            while first < count {
+                let n = chunk.min(count - first);
+                c.schedule_render_task(glue::trace_rays_task(
+                    &ray_buffer,
+                    &hit_buffer,
+                    first * 32,
+                    n as u32,
+                    query,
+                )?);
+                first += n;
+            }
+            // Only the last repetition's hits are read back; the copy is outside the timed passes.
+            let read = remaining == 0;
+            self.timed(ctx, c, &["trace rays"], |e| {
+                if read {
+                    e.copy_buffer_to_buffer(&hit_buffer, 0, &readback, 0, bytes);
+                }
+            })
+        })?;
+        let hits = gpu::map_read(self.device, &readback)?
+            .chunks_exact(std::mem::size_of::<GpuHit>())
+            .map(bytemuck::pod_read_unaligned::<GpuHit>)
+            .collect();
+        Ok((stats, hits))
+    }
+}
+
+/// Where a primary hit is and which way its surface faces (against the ray).
+struct Surface {
+    point: Vec3,
+    normal: Vec3,
+}
+
+/// The geometric normal of a primary hit, from the mesh's triangle on the CPU; `None` when the
+/// hit's instance or primitive is not one the scene has.
+fn surface(
+    scene: &Scene,
+    slots: &HashMap<u32, usize>,
+    hit: &GpuHit,
+    ray_dir: Vec3,
+) -> Option<Surface> {
+    let inst = &scene.instances[*slots.get(&hit.instance)?];
+    let mesh = &scene.meshes[inst.mesh];
+    let first = hit.primitive as usize * 3;
+    let idx = mesh.indices.get(first..first + 3)?;
+    let [a, b, c] = [idx[0], idx[1], idx[2]].map(|i| {
+        inst.transform
+            .transform_point3(Vec3::from(mesh.positions[i as usize]))
+    });
+    let mut normal = (b - a).cross(c - a).try_normalize()?;
+    if normal.dot(ray_dir) > 0.0 {
+        normal = -normal;
+    }
+    // From the barycentrics rather than the ray's t: exact on the triangle's plane.
+    let point = a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v;
+    Some(Surface { point, normal })
+}
+
+fn batch(kind: &'static str, rays: usize, hits: &[GpuHit], time: Stats) -> RayBatch {
+    let misses = hits.iter().filter(|h| !h.is_hit()).count() as u64;
+    let mrays_per_s = rays as f64 / (time.median_ms * 1e3);
+    RayBatch {
+        kind,
+        rays: rays as u64,
+        misses,
+        time,
+        mrays_per_s,
+    }
+}
+
+/// (e) Primary, AO and diffuse batches and the peer workload.
+fn rays(
+    bench: &Bench,
+    scene: &Scene,
+    uploads: &[UploadedMesh],
+    camera: &Camera,
+    (width, height): (u32, u32),
+    report: &mut SceneReport,
+) -> AnyResult<()> {
+    let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
+    let slots = handles.instance_of_slot();
+    let dirs: Vec<Vec3> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| camera.primary_dir(x, y, width, height))
+        .collect();
+    let primary: Vec<GpuRay> = dirs
+        .iter()
+        .map(|d| GpuRay {
+            origin: camera.eye.to_array(),
+            t_min: 0.0,
+            dir: d.to_array(),
+            t_max: f32::INFINITY,
+        })
+        .collect();
+    let (primary_time, primary_hits) = bench.trace(&ctx, &primary, Query::Closest)?;
+    let primary_batch = batch("primary", primary.len(), &primary_hits, primary_time);
+    let pixels = primary.len() as f64;
+    let primary_hit_count = (primary_batch.rays - primary_batch.misses) as f64;
+    let primary_ms = primary_batch.time.median_ms;
+    report.rays.push(primary_batch);
+
+    // Secondary rays from the primary hits, generated on the CPU (untimed).
+    let offset = 1e-4 * scene.size();
+    let surfaces: Vec<Surface> = primary_hits
+        .iter()
+        .zip(&dirs)
+        .filter(|(h, _)| h.is_hit())
+        .filter_map(|(h, d)| surface(scene, &slots, h, *d))
+        .collect();
+    let mut rng = Rng(0x6b73_7274);
+    let secondary = |rng: &mut Rng, t_max: f32| -> Vec<GpuRay> {
+        surfaces
+            .iter()
+            .map(|s| GpuRay {
+                origin: (s.point + s.normal * offset).to_array(),
+                t_min: 0.0,
+                dir: rng.cosine(s.normal).to_array(),
+                t_max,
+            })
+            .collect()
+    };
+    let ao = secondary(&mut rng, 1.0);
+    let (ao_time, ao_hits) = bench.trace(&ctx, &ao, Query::Any)?;
+    report.rays.push(batch("ao", ao.len(), &ao_hits, ao_time));
+    let diffuse = secondary(&mut rng, f32::INFINITY);
+    let (diffuse_time, diffuse_hits) = bench.trace(&ctx, &diffuse, Query::Closest)?;
+    let diffuse_ms = diffuse_time.median_ms;
+    report
+        .rays
+        .push(batch("diffuse", diffuse.len(), &diffuse_hits, diffuse_time));
+    report.peer_mrays_per_s =
+        Some((pixels + primary_hit_count) / ((primary_ms + diffuse_ms) * 1e3));
+    Ok(())
+}
+
+/// Benchmarks one scene.
+fn bench_scene(
+    bench: &Bench,
+    name: &str,
+    scene: &Scene,
+    camera: Camera,
+    size: (u32, u32),
+) -> SceneReport {
+    let mut r = SceneReport {
+        scene: name.to_string(),
+        meshes: scene.meshes.len(),
+        instances: scene.instances.len(),
+        geometry_triangles: scene.meshes.iter().map(|m| m.triangle_count()).sum(),
+        world_triangles: scene.triangle_count(),
+        camera: [
+            camera.eye.x,
+            camera.eye.y,
+            camera.eye.z,
+            camera.at.x,
+            camera.at.y,
+            camera.at.z,
+            camera.fov_y_deg,
+        ],
+        blas_build: None,
+        blas_build_mtri_per_s: None,
+        blas_refit: None,
+        sah: None,
+        rays: Vec::new(),
+        peer_mrays_per_s: None,
+        errors: Vec::new(),
+    };
+    let uploads = gpu::upload_scene(bench.device, scene);
+    let mut errors = Vec::new();
+    if let Some((stats, ctx, h)) = attempt(&mut errors, "BLAS build", || {
+        bench.blas_build(scene, &uploads)
+    }) {
+        r.blas_build_mtri_per_s = Some(r.geometry_triangles as f64 / (stats.median_ms * 1e3));
+        r.blas_build = Some(stats);
+        r.sah = attempt(&mut errors, "SAH cost", || {
+            let (k, mesh) = scene
+                .meshes
+                .iter()
+                .enumerate()
+                .max_by_key(|(_, m)| m.triangle_count())
+                .ok_or("the scene has no geometry")?;
+            let gpu_sah_cost = glue::blas_sah_cost(&ctx, h.geometries[k])?;
+            let tris: Vec<[Vec3; 3]> = mesh.triangles(Affine3A::IDENTITY).collect();
+            let cpu = ksrt::cpu::CpuBvh::build(&tris);
+            if cpu.nodes.is_empty() {
+                return Err(
+                    format!("{}: no finite triangle to build a CPU BVH over", mesh.name).into(),
+                );
+            }
+            let cpu_sah_cost = cpu.sah_cost() as f64;
+            Ok(SahReport {
+                geometry: mesh.name.clone(),
+                triangles: tris.len(),
+                gpu_sah_cost,
+                cpu_sah_cost,
+                ratio: gpu_sah_cost / cpu_sah_cost,
+            })
+        });
+    }
+    r.blas_refit = attempt(&mut errors, "BLAS refit", || {
+        bench.blas_refit(scene, &uploads)
+    });
+    attempt(&mut errors, "rays", || {
+        rays(bench, scene, &uploads, &camera, size, &mut r)
+    });
+    r.errors = errors;
+    r
+}
+
+/// (d) TLAS build and refit over `count` random instances of a small sphere.
+fn bench_tlas(bench: &Bench, count: u32) -> TlasReport {
+    let mut errors = Vec::new();
+    let sphere = {
+        let (p, i) = crate::scene::builtin::icosphere(1);
+        crate::scene::Mesh::new("tlas sphere", p, i, Vec3::ONE)
+    };
+    let run = |tlas: Tlas, span: &'static str| -> AnyResult<Stats> {
+        let mesh = sphere.clone()?;
+        let upload = gpu::upload(bench.device, &mesh);
+        let ctx = bench.context()?;
+        let geometry = ctx.create_geometry_handle();
+        let instances = ctx.create_instance_handles(count as usize);
+        let mut rng = Rng(u64::from(count));
+        // Spread the instances through a cube that holds them about 3 radii apart.
+        let extent = (count as f32).cbrt() * 3.0;
+        let mut random = move || {
+            let axis = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5)
+                .try_normalize()
+                .unwrap_or(Vec3::Y);
+            Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5 + rng.f32()),
+                Quat::from_axis_angle(axis, rng.f32() * std::f32::consts::TAU),
+                (Vec3::new(rng.f32(), rng.f32(), rng.f32()) - 0.5) * extent,
+            )
+        };
+        let mut c = ctx.create_task_container();
+        c.schedule_bvh_task(ksrt::GeometryTask {
+            operation: ksrt::TaskOperation::Register,
+            handle: geometry,
+            input: gpu::geometry_input(&upload, false),
+        });
+        for &h in &instances {
+            c.schedule_bvh_task(ksrt::InstanceTask {
+                operation: ksrt::TaskOperation::Register,
+                handle: h,
+                input: ksrt::InstanceInput::new(geometry, random()),
+            });
+        }
+        c.schedule_bvh_task(glue::bvh_build_task(1, Some(Tlas::Rebuild)));
+        let task = gpu::submit(&ctx, bench.device, bench.queue, c, |_| {})?;
+        gpu::complete(&ctx, bench.device, task)?;
+        // Each repetition moves every instance, so the SDK has a TLAS to rebuild or refit.
+        bench.repeat(|_| {
+            let mut c = ctx.create_task_container();
+            for &h in &instances {
+                c.schedule_bvh_task(ksrt::InstanceTask {
+                    operation: ksrt::TaskOperation::Update,
+                    handle: h,
+                    input: ksrt::InstanceInput::new(geometry, random()),
+                });
+            }
+            c.schedule_bvh_task(glue::bvh_build_task(1, Some(tlas)));
+            bench.timed(&ctx, c, &[span], |_| {})
+        })
+    };
+    let build = attempt(
+        &mut errors,
+        &format!("TLAS build, {count} instances"),
+        || run(Tlas::Rebuild, "tlas build"),
+    );
+    let refit = attempt(
+        &mut errors,
+        &format!("TLAS refit, {count} instances"),
+        || run(Tlas::Refit, "tlas refit"),
+    );
+    TlasReport {
+        instances: count,
+        build,
+        refit,
+        errors,
+    }
+}
+
+fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
+    let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
+    println!(
+        "\n{}: {} geometries, {} instances, {} geometry triangles ({} in the world)",
+        r.scene, r.meshes, r.instances, r.geometry_triangles, r.world_triangles
+    );
+    println!(
+        "  BLAS build   {}{}",
+        opt(&r.blas_build),
+        r.blas_build_mtri_per_s
+            .map_or(String::new(), |m| format!("  {m:.1} Mtri/s"))
+    );
+    println!("  BLAS refit   {}", opt(&r.blas_refit));
+    match &r.sah {
+        Some(s) => println!(
+            "  SAH cost     GPU {:.2} / CPU {:.2} = {:.3} ({}, {} triangles)",
+            s.gpu_sah_cost, s.cpu_sah_cost, s.ratio, s.geometry, s.triangles
+        ),
+        None => println!("  SAH cost     —"),
+    }
+    println!("  rays at {w}x{h}:");
+    for b in &r.rays {
+        println!(
+            "    {:<8} {:>9} rays {:>9} misses  {}  {:.1} Mrays/s",
+            b.kind,
+            b.rays,
+            b.misses,
+            b.time.show(),
+            b.mrays_per_s
+        );
+    }
+    if let Some(p) = r.peer_mrays_per_s {
+        println!("    peer workload (primary + diffuse from hits): {p:.1} Mrays/s");
+    }
+    for e in &r.errors {
+        println!("  failed: {e}");
+    }
+}
+
+/// `ksrt bench`.
+pub fn run(opts: BenchOptions) -> AnyResult<()> {
+    if opts.iterations == 0 {
+        return Err("--iterations must be at least 1".into());
+    }
+    // Load every scene first: a wrong name fails before minutes of GPU work.
+    let names: Vec<String> = if opts.scenes.is_empty() {
+        DEFAULT_SCENES.iter().map(|s| s.to_string()).collect()
+    } else {
+        opts.scenes.clone()
+    };
+    let mut scenes = Vec::new();
+    for name in &names {
+        let start = std::time::Instant::now();
+        scenes.push(scene::load(name, &opts.scenes_dir)?);
+        println!("loaded {name} in {:.2} s", start.elapsed().as_secs_f64());
+    }
+    let adapter = gpu::adapter()?;
+    let timestamp_query = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+    if !timestamp_query {
+        log::warn!("the adapter has no TIMESTAMP_QUERY: GPU times cannot be measured");
+    }
+    let (device, queue) = gpu::device(&adapter)?;
+    let info = adapter.get_info();
+    println!(
+        "kickstart-rt {} bench on {} ({:?}), {} iterations after a warm-up",
+        ksrt::VERSION,
+        info.name,
+        info.backend,
+        opts.iterations
+    );
+    let bench = Bench {
+        device: &device,
+        queue: &queue,
+        iterations: opts.iterations,
+    };
+    let mut report = Report {
+        sdk_version: ksrt::VERSION.to_string(),
+        adapter: info.name.clone(),
+        backend: format!("{:?}", info.backend),
+        timestamp_query,
+        width: opts.size.0,
+        height: opts.size.1,
+        iterations: opts.iterations,
+        scenes: Vec::new(),
+        tlas: Vec::new(),
+    };
+    for (name, scene) in names.iter().zip(&scenes) {
+        let camera = opts
+            .camera
+            .or_else(|| issue_camera(name))
+            .unwrap_or_else(|| scene.camera_or_default(None));
+        let r = bench_scene(&bench, name, scene, camera, opts.size);
+        print_scene(&r, opts.size);
+        report.scenes.push(r);
+    }
+    println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
+    for count in TLAS_INSTANCE_COUNTS {
+        let t = bench_tlas(&bench, count);
+        let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
+        println!(
+            "  {:>7} instances  build {}  refit {}",
+            count,
+            opt(&t.build),
+            opt(&t.refit)
+        );
+        for e in &t.errors {
+            println!("    failed: {e}");
+        }
+        report.tlas.push(t);
+    }
+    if let Some(path) = &opts.json {
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text)
+            .map_err(|e| format!("--json {}: cannot write: {e}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    let failed = report.scenes.iter().map(|s| s.errors.len()).sum::<usize>()
+        + report.tlas.iter().map(|t| t.errors.len()).sum::<usize>();
+    if failed > 0 {
+        return Err(format!("{failed} measurements failed (listed above)").into());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_median_min_max() {
+        let s = Stats::new(vec![3.0, 1.0, 2.0, 10.0]);
+        assert_eq!((s.median_ms, s.min_ms, s.max_ms), (2.5, 1.0, 10.0));
+        assert_eq!(Stats::new(vec![4.0, 1.0, 2.0]).median_ms, 2.0);
+    }
+
+    #[test]
+    fn cosine_directions_are_unit_and_in_the_hemisphere() {
+        let mut rng = Rng(7);
+        let n = Vec3::new(0.3, -0.8, 0.2).normalize();
+        let mut mean_cos = 0.0;
+        for _ in 0..4096 {
+            let d = rng.cosine(n);
+            assert!((d.length() - 1.0).abs() < 1e-4);
+            assert!(d.dot(n) >= 0.0);
+            mean_cos += d.dot(n) / 4096.0;
+        }
+        // E[cos θ] under a cosine-weighted density is 2/3.
+        assert!((mean_cos - 2.0 / 3.0).abs() < 0.03, "{mean_cos}");
+    }
+
+    #[test]
+    fn issue_cameras_parse() {
+        assert!(issue_camera("dragon").is_some());
+        assert!(issue_camera("apartment").is_some());
+        assert!(issue_camera("bunny").is_none());
+    }
+}

@@ -1,0 +1,333 @@
+//! glTF 2.0 (`.gltf` + buffers, `.glb`) loading: the default scene's node hierarchy, every
+//! triangle primitive as a mesh, one instance per node that uses it, base colour factors, and the
+//! first perspective camera.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use glam::{Affine3A, Mat4, Vec3};
+use gltf::mesh::Mode;
+
+use super::{check_indices, compute_normals, Camera, Instance, Mesh, Scene, SceneError};
+
+/// Loads a `.gltf` or `.glb` file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| SceneError::new(path, format!("cannot read: {e}")))?;
+    // The gltf crate validates the JSON and reads accessors through bounds-checked slices, but it
+    // is third-party code fed arbitrary files: a panic inside it must still become an error that
+    // names the file rather than abort `ksrt`.
+    match std::panic::catch_unwind(|| load_bytes(path, &bytes)) {
+        Ok(r) => r,
+        Err(_) => Err(SceneError::new(
+            path,
+            "the glTF reader failed on malformed data",
+        )),
+    }
+}
+
+fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
+    let err = |what: String| SceneError::new(path, what);
+    let file = gltf::Gltf::from_slice(bytes)
+        .map_err(|e| err(format!("not a valid glTF 2.0 file: {e}")))?;
+    let buffers = file
+        .buffers()
+        .map(|b| load_buffer(path, &b, file.blob.as_deref()))
+        .collect::<Result<Vec<_>, _>>()?;
+
+    let mut scene = Scene::default();
+    // glTF mesh index → the scene meshes of its triangle primitives, converted on first use so
+    // meshes no node references cost nothing.
+    let mut converted: HashMap<usize, Vec<usize>> = HashMap::new();
+    let roots: Vec<gltf::Node> = match file.default_scene().or_else(|| file.scenes().next()) {
+        Some(s) => s.nodes().collect(),
+        None => {
+            // No scene: every node that is nobody's child is a root.
+            let children: std::collections::HashSet<usize> = file
+                .nodes()
+                .flat_map(|n| n.children().map(|c| c.index()).collect::<Vec<_>>())
+                .collect();
+            file.nodes()
+                .filter(|n| !children.contains(&n.index()))
+                .collect()
+        }
+    };
+    let mut visited = vec![false; file.nodes().len()];
+    let mut stack: Vec<(gltf::Node, Affine3A)> = roots
+        .into_iter()
+        .rev()
+        .map(|n| (n, Affine3A::IDENTITY))
+        .collect();
+    while let Some((node, parent)) = stack.pop() {
+        // A valid hierarchy is a forest: a node seen twice means a cycle or two parents, which
+        // would otherwise loop forever.
+        if std::mem::replace(&mut visited[node.index()], true) {
+            return Err(err(format!(
+                "node {} appears twice in the hierarchy (a cycle or two parents)",
+                node.index()
+            )));
+        }
+        let local = Affine3A::from_mat4(Mat4::from_cols_array_2d(&node.transform().matrix()));
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(err(format!(
+                "node {} has a non-finite transform",
+                node.index()
+            )));
+        }
+        if let Some(mesh) = node.mesh() {
+            let ids = match converted.get(&mesh.index()) {
+                Some(ids) => ids.clone(),
+                None => {
+                    let mut ids = Vec::new();
+                    for prim in mesh.primitives() {
+                        if let Some(m) = convert_primitive(&mesh, &prim, &buffers).map_err(err)? {
+                            ids.push(scene.meshes.len());
+                            scene.meshes.push(m);
+                        }
+                    }
+                    converted.insert(mesh.index(), ids.clone());
+                    ids
+                }
+            };
+            scene.instances.extend(ids.into_iter().map(|mesh| Instance {
+                mesh,
+                transform: world,
+            }));
+        }
+        if scene.camera.is_none() {
+            if let Some(cam) = node.camera() {
+                match cam.projection() {
+                    gltf::camera::Projection::Perspective(p) => {
+                        // A glTF camera looks down its local −Z with +Y up.
+                        let eye = world.transform_point3(Vec3::ZERO);
+                        scene.camera = Some(Camera {
+                            eye,
+                            at: eye + world.transform_vector3(Vec3::NEG_Z),
+                            up: world.transform_vector3(Vec3::Y),
+                            fov_y_deg: p.yfov().to_degrees(),
+                        });
+                    }
+                    gltf::camera::Projection::Orthographic(_) => log::warn!(
+                        "{}: orthographic camera of node {} ignored",
+                        path.display(),
+                        node.index()
+                    ),
+                }
+            }
+        }
+        for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+            stack.push((child, world));
+        }
+    }
+    Ok(scene)
+}
+
+/// The bytes of one buffer: the GLB binary chunk, a file next to the `.gltf`, or a base64
+/// `data:` URI.
+fn load_buffer(path: &Path, b: &gltf::Buffer, blob: Option<&[u8]>) -> Result<Vec<u8>, SceneError> {
+    let data = match b.source() {
+        gltf::buffer::Source::Bin => blob
+            .ok_or_else(|| {
+                SceneError::new(
+                    path,
+                    format!("buffer {} refers to a missing GLB binary chunk", b.index()),
+                )
+            })?
+            .to_vec(),
+        gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+            let payload = uri.split_once(";base64,").map(|(_, p)| p).ok_or_else(|| {
+                SceneError::new(
+                    path,
+                    format!("buffer {}: only base64 data URIs are supported", b.index()),
+                )
+            })?;
+            decode_base64(payload).ok_or_else(|| {
+                SceneError::new(
+                    path,
+                    format!("buffer {}: invalid base64 data URI", b.index()),
+                )
+            })?
+        }
+        gltf::buffer::Source::Uri(uri) => {
+            let file = path
+                .parent()
+                .unwrap_or_else(|| Path::new("."))
+                .join(percent_decode(uri));
+            std::fs::read(&file).map_err(|e| {
+                SceneError::new(
+                    &file,
+                    format!(
+                        "buffer {} of {}: cannot read: {e}",
+                        b.index(),
+                        path.display()
+                    ),
+                )
+            })?
+        }
+    };
+    if data.len() < b.length() {
+        return Err(SceneError::new(
+            path,
+            format!(
+                "buffer {} has {} bytes, the file declares {}",
+                b.index(),
+                data.len(),
+                b.length()
+            ),
+        ));
+    }
+    Ok(data)
+}
+
+/// Relative URIs in glTF are percent-encoded (a space is `%20`).
+fn percent_decode(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        if b[i] == b'%' && i + 2 < b.len() {
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Standard base64 (RFC 4648, padding optional); `None` on any other character.
+fn decode_base64(s: &str) -> Option<Vec<u8>> {
+    let mut out = Vec::with_capacity(s.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0u32);
+    for c in s.bytes().filter(|&c| c != b'=') {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => return None,
+        } as u32;
+        acc = (acc << 6) | v;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    Some(out)
+}
+
+/// One primitive as a triangle-list mesh, or `None` (with a warning) for modes that have no
+/// triangles. Strips and fans are converted to lists.
+fn convert_primitive(
+    mesh: &gltf::Mesh,
+    prim: &gltf::Primitive,
+    buffers: &[Vec<u8>],
+) -> Result<Option<Mesh>, String> {
+    let name = format!(
+        "{}#{}",
+        mesh.name()
+            .map_or_else(|| format!("mesh {}", mesh.index()), str::to_string),
+        prim.index()
+    );
+    let mode = prim.mode();
+    if matches!(
+        mode,
+        Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
+    ) {
+        log::warn!("{name}: primitive mode {mode:?} has no triangles; skipped");
+        return Ok(None);
+    }
+    let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let Some(positions) = reader.read_positions() else {
+        log::warn!("{name}: no readable POSITION attribute; skipped");
+        return Ok(None);
+    };
+    let positions: Vec<[f32; 3]> = positions.collect();
+    let raw: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None if prim.indices().is_some() => {
+            return Err(format!(
+                "{name}: the index accessor's data is out of its buffer"
+            ))
+        }
+        None => (0..positions.len() as u32).collect(),
+    };
+    let indices = match mode {
+        Mode::TriangleStrip => strip_to_list(&raw),
+        Mode::TriangleFan => fan_to_list(&raw),
+        _ => raw,
+    };
+    check_indices(&name, positions.len(), &indices)?;
+    let normals = match reader.read_normals() {
+        Some(n) => {
+            let n: Vec<[f32; 3]> = n.collect();
+            if n.len() == positions.len() {
+                n
+            } else {
+                compute_normals(&positions, &indices)
+            }
+        }
+        None => compute_normals(&positions, &indices),
+    };
+    let [r, g, b, _] = prim.material().pbr_metallic_roughness().base_color_factor();
+    Ok(Some(Mesh {
+        name: prim
+            .material()
+            .name()
+            .map_or(name.clone(), |m| format!("{name} ({m})")),
+        positions,
+        normals,
+        indices,
+        color: Vec3::new(r, g, b),
+    }))
+}
+
+/// Triangle `k` of a strip is `(k, k+1, k+2)`, with every odd one's first two vertices swapped so
+/// that all keep the strip's winding.
+fn strip_to_list(s: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(s.len().saturating_sub(2) * 3);
+    for k in 0..s.len().saturating_sub(2) {
+        if k % 2 == 0 {
+            out.extend([s[k], s[k + 1], s[k + 2]]);
+        } else {
+            out.extend([s[k + 1], s[k], s[k + 2]]);
+        }
+    }
+    out
+}
+
+/// Triangle `k` of a fan is `(k+1, k+2, 0)` (the glTF 2.0 specification's order).
+fn fan_to_list(s: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(s.len().saturating_sub(2) * 3);
+    for k in 0..s.len().saturating_sub(2) {
+        out.extend([s[k + 1], s[k + 2], s[0]]);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_become_lists() {
+        assert_eq!(strip_to_list(&[0, 1, 2, 3]), vec![0, 1, 2, 2, 1, 3]);
+        assert_eq!(fan_to_list(&[0, 1, 2, 3]), vec![1, 2, 0, 2, 3, 0]);
+        assert!(strip_to_list(&[0, 1]).is_empty());
+    }
+
+    #[test]
+    fn base64_and_percent_decoding() {
+        assert_eq!(decode_base64("aGVsbG8=").as_deref(), Some(&b"hello"[..]));
+        assert_eq!(decode_base64("a?"), None);
+        assert_eq!(percent_decode("my%20scene.bin"), "my scene.bin");
+        assert_eq!(percent_decode("100%"), "100%");
+    }
+}

@@ -1,0 +1,403 @@
+//! Scenes for `ksrt`: meshes in geometry space and the instances that place them, loaded from the
+//! built-in scenes or from glTF 2.0 / OBJ files, plus an optional camera.
+//!
+//! Meshes and instances are kept apart on purpose: the SDK registers one geometry (one BLAS) per
+//! [`Mesh`] and one instance per [`Instance`], so a glTF mesh used by several nodes is built once.
+
+pub mod builtin;
+mod gltf;
+mod obj;
+
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, Vec3};
+
+/// A loading error: which file and what is wrong with it.
+#[derive(Debug, Clone)]
+pub struct SceneError {
+    /// The file (or scene name) the error is about.
+    pub path: PathBuf,
+    /// What went wrong.
+    pub what: String,
+}
+
+impl SceneError {
+    /// An error about `path`.
+    pub fn new(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
+        SceneError {
+            path: path.into(),
+            what: what.into(),
+        }
+    }
+}
+
+impl std::fmt::Display for SceneError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.path.display(), self.what)
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// One triangle mesh in its own (geometry) space: what the SDK builds one BLAS from.
+#[derive(Debug, Clone)]
+pub struct Mesh {
+    /// A name for logs (file mesh/material names where there are any).
+    pub name: String,
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Unit vertex normals, one per position: the file's, or area-weighted ones computed here.
+    pub normals: Vec<[f32; 3]>,
+    /// Triangle-list indices into `positions` (a multiple of 3, all in range).
+    pub indices: Vec<u32>,
+    /// Linear RGB base colour (glTF `baseColorFactor`, OBJ `Kd`).
+    pub color: Vec3,
+}
+
+impl Mesh {
+    /// A mesh with computed normals, checking that the indices are a triangle list in range.
+    pub fn new(
+        name: impl Into<String>,
+        positions: Vec<[f32; 3]>,
+        indices: Vec<u32>,
+        color: Vec3,
+    ) -> Result<Mesh, String> {
+        let name = name.into();
+        check_indices(&name, positions.len(), &indices)?;
+        let normals = compute_normals(&positions, &indices);
+        Ok(Mesh {
+            name,
+            positions,
+            normals,
+            indices,
+            color,
+        })
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// The triangles placed by `transform`.
+    pub fn triangles(&self, transform: Affine3A) -> impl Iterator<Item = [Vec3; 3]> + '_ {
+        self.indices.chunks_exact(3).map(move |t| {
+            let p =
+                |k: usize| transform.transform_point3(Vec3::from(self.positions[t[k] as usize]));
+            [p(0), p(1), p(2)]
+        })
+    }
+}
+
+/// Checks that `indices` form a triangle list whose entries address `vertex_count` vertices.
+/// The loaders call it because files can hold anything, and an out-of-range index would panic
+/// later when the demo reads the mesh on the CPU.
+pub(crate) fn check_indices(
+    name: &str,
+    vertex_count: usize,
+    indices: &[u32],
+) -> Result<(), String> {
+    if !indices.len().is_multiple_of(3) {
+        return Err(format!(
+            "mesh {name:?}: {} indices is not a multiple of 3",
+            indices.len()
+        ));
+    }
+    if let Some(i) = indices.iter().find(|&&i| i as usize >= vertex_count) {
+        return Err(format!(
+            "mesh {name:?}: index {i} is out of range ({vertex_count} vertices)"
+        ));
+    }
+    Ok(())
+}
+
+/// Area-weighted vertex normals: each triangle adds its unnormalised cross product (length =
+/// twice its area) to its three vertices, so large faces dominate and slivers barely count.
+/// Vertices no triangle uses (or whose triangles are all degenerate) get +Y, so every normal is
+/// unit. Requires indices in range (see [`Mesh::new`]).
+pub fn compute_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
+    let mut sum = vec![Vec3::ZERO; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
+        let n = (b - a).cross(c - a);
+        if !n.is_finite() {
+            continue;
+        }
+        for &i in t {
+            sum[i as usize] += n;
+        }
+    }
+    sum.into_iter()
+        .map(|n| n.try_normalize().unwrap_or(Vec3::Y).to_array())
+        .collect()
+}
+
+/// One placement of a mesh in the world.
+#[derive(Debug, Clone)]
+pub struct Instance {
+    /// Index into [`Scene::meshes`].
+    pub mesh: usize,
+    /// Object-to-world transform (glTF node hierarchy, composed).
+    pub transform: Affine3A,
+}
+
+/// A pinhole camera, y up unless the file says otherwise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// Eye position.
+    pub eye: Vec3,
+    /// Point looked at.
+    pub at: Vec3,
+    /// Up direction (need not be orthogonal to the view direction).
+    pub up: Vec3,
+    /// Vertical field of view, degrees.
+    pub fov_y_deg: f32,
+}
+
+impl Camera {
+    /// The orthonormal basis `(forward, right, up)` and `tan(fov/2)`, for generating rays.
+    pub fn basis(&self) -> (Vec3, Vec3, Vec3, f32) {
+        let fwd = (self.at - self.eye).normalize_or(Vec3::NEG_Z);
+        // When up is parallel to the view direction, any perpendicular axis will do.
+        let right = fwd
+            .cross(self.up)
+            .try_normalize()
+            .unwrap_or_else(|| fwd.any_orthonormal_vector());
+        let up = right.cross(fwd);
+        (fwd, right, up, (self.fov_y_deg.to_radians() / 2.0).tan())
+    }
+
+    /// Direction (unit) of the primary ray through the centre of pixel `(x, y)` of a
+    /// `width`×`height` image, row 0 at the top.
+    pub fn primary_dir(&self, x: u32, y: u32, width: u32, height: u32) -> Vec3 {
+        let (fwd, right, up, tan) = self.basis();
+        let aspect = width as f32 / height as f32;
+        let u = ((x as f32 + 0.5) / width as f32 * 2.0 - 1.0) * tan * aspect;
+        let v = (1.0 - (y as f32 + 0.5) / height as f32 * 2.0) * tan;
+        (fwd + right * u + up * v).normalize()
+    }
+
+    /// `world_to_view` and `view_to_clip` (right-handed, wgpu's 0..1 depth) for the SDK's
+    /// `ViewInfo`; `near`/`far` in world units.
+    pub fn matrices(&self, aspect: f32, near: f32, far: f32) -> (glam::Mat4, glam::Mat4) {
+        let (fwd, _, up, _) = self.basis();
+        (
+            glam::Mat4::look_to_rh(self.eye, fwd, up),
+            glam::Mat4::perspective_rh(self.fov_y_deg.to_radians(), aspect, near, far),
+        )
+    }
+}
+
+/// Parses `--camera eye_x,eye_y,eye_z,at_x,at_y,at_z,fov_deg` (y up).
+pub fn parse_camera(s: &str) -> Result<Camera, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("--camera {s:?}: {:?} is not a finite number", p.trim()))
+        })
+        .collect::<Result<_, _>>()?;
+    let [ex, ey, ez, ax, ay, az, fov] = v[..] else {
+        return Err(format!(
+            "--camera {s:?}: expected 7 numbers eye_x,eye_y,eye_z,at_x,at_y,at_z,fov_deg, got {}",
+            v.len()
+        ));
+    };
+    let (eye, at) = (Vec3::new(ex, ey, ez), Vec3::new(ax, ay, az));
+    if eye == at {
+        return Err(format!("--camera {s:?}: eye and target are the same point"));
+    }
+    if !(fov > 0.0 && fov < 180.0) {
+        return Err(format!(
+            "--camera {s:?}: fov {fov} must be in (0, 180) degrees"
+        ));
+    }
+    Ok(Camera {
+        eye,
+        at,
+        up: Vec3::Y,
+        fov_y_deg: fov,
+    })
+}
+
+/// A scene: meshes, their instances, and the file's camera if it has one.
+#[derive(Debug, Clone, Default)]
+pub struct Scene {
+    /// A name for output (the scene name or file stem).
+    pub name: String,
+    /// Geometries, each in its own space.
+    pub meshes: Vec<Mesh>,
+    /// Placements of the meshes.
+    pub instances: Vec<Instance>,
+    /// The file's camera, if any.
+    pub camera: Option<Camera>,
+}
+
+impl Scene {
+    /// Triangles in the world (instanced meshes counted once per instance).
+    pub fn triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh].triangle_count())
+            .sum()
+    }
+
+    /// World-space triangles of every instance, in instance order, with the instance index of
+    /// each: what the CPU reference and the benchmark's CPU work need.
+    pub fn world_triangles(&self) -> (Vec<[Vec3; 3]>, Vec<u32>) {
+        let mut tris = Vec::with_capacity(self.triangle_count());
+        let mut owner = Vec::with_capacity(self.triangle_count());
+        for (k, inst) in self.instances.iter().enumerate() {
+            for t in self.meshes[inst.mesh].triangles(inst.transform) {
+                tris.push(t);
+                owner.push(k as u32);
+            }
+        }
+        (tris, owner)
+    }
+
+    /// World-space bounds `(min, max)` of the finite vertices of every instance; a unit box at the
+    /// origin when there are none (so cameras and offsets derived from it stay finite).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for inst in &self.instances {
+            let m = &self.meshes[inst.mesh];
+            for p in &m.positions {
+                let w = inst.transform.transform_point3(Vec3::from(*p));
+                if w.is_finite() {
+                    lo = lo.min(w);
+                    hi = hi.max(w);
+                }
+            }
+        }
+        if lo.x > hi.x {
+            (Vec3::splat(-0.5), Vec3::splat(0.5))
+        } else {
+            (lo, hi)
+        }
+    }
+
+    /// Length of the bounds' diagonal: the scene's size for offsets and clip planes.
+    pub fn size(&self) -> f32 {
+        let (lo, hi) = self.bounds();
+        (hi - lo).length().max(f32::MIN_POSITIVE)
+    }
+
+    /// A camera that frames the whole scene: looking at the centre of the bounds from the front
+    /// (+Z) and above, far enough that the bounding sphere fits the 50° vertical field of view.
+    pub fn default_camera(&self) -> Camera {
+        let (lo, hi) = self.bounds();
+        let centre = (lo + hi) * 0.5;
+        let radius = (hi - lo).length() * 0.5;
+        let fov_y_deg = 50.0f32;
+        let distance = radius / (fov_y_deg.to_radians() / 2.0).sin() * 1.05;
+        let dir = Vec3::new(0.0, 0.5, 1.0).normalize();
+        Camera {
+            eye: centre + dir * distance.max(1e-3),
+            at: centre,
+            up: Vec3::Y,
+            fov_y_deg,
+        }
+    }
+
+    /// The camera to render with: `override_camera`, else the file's, else [`Self::default_camera`].
+    pub fn camera_or_default(&self, override_camera: Option<Camera>) -> Camera {
+        override_camera
+            .or(self.camera)
+            .unwrap_or_else(|| self.default_camera())
+    }
+}
+
+/// The scene names `--scene` accepts, with the file each resolves to in the scenes folder
+/// (`None`: built in).
+pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
+    ("default", None),
+    ("cornell", None),
+    ("dragon", Some("stanford_dragon/dragon_vrip.glb")),
+    ("apartment", Some("dream_apartment/dream_apartment.glb")),
+    ("bunny", Some("stanford_bunny/bunny.obj")),
+    (
+        "cornell-obj",
+        Some("cornell_box/obj_mcguire/CornellBox-Original.obj"),
+    ),
+    ("cornell-gltf", Some("cornell_box/gltf_kajiya/scene.gltf")),
+];
+
+/// The scenes folder: `--scenes` when given, else `$KSRT_SCENES`, else `../shared/scenes` (the
+/// workplace layout: the shared data beside the repository).
+pub fn scenes_dir(arg: Option<PathBuf>) -> PathBuf {
+    arg.or_else(|| std::env::var_os("KSRT_SCENES").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("../shared/scenes"))
+}
+
+/// Loads `--scene NAME|PATH`: a name of [`SCENE_NAMES`] (files looked up in `scenes_dir`) or a
+/// path to a `.gltf`, `.glb` or `.obj` file.
+pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> {
+    match name_or_path {
+        "default" => return Ok(builtin::default_scene()),
+        "cornell" => return Ok(builtin::cornell_box()),
+        _ => {}
+    }
+    if let Some((name, Some(file))) = SCENE_NAMES.iter().find(|(n, _)| *n == name_or_path) {
+        let path = scenes_dir.join(file);
+        if !path.exists() {
+            return Err(SceneError::new(
+                &path,
+                format!(
+                    "scene {name:?} not found (scenes folder {}; set --scenes DIR or KSRT_SCENES)",
+                    scenes_dir.display()
+                ),
+            ));
+        }
+        let mut scene = load_file(&path)?;
+        scene.name = name.to_string();
+        return Ok(scene);
+    }
+    let path = Path::new(name_or_path);
+    let known = SCENE_NAMES
+        .iter()
+        .map(|(n, _)| *n)
+        .collect::<Vec<_>>()
+        .join(", ");
+    if path.extension().is_none() && !path.exists() {
+        return Err(SceneError::new(
+            path,
+            format!("no such scene; use one of {known}, or a path to a .gltf, .glb or .obj file"),
+        ));
+    }
+    load_file(path)
+}
+
+/// Loads a `.gltf`, `.glb` or `.obj` file by its extension.
+pub fn load_file(path: &Path) -> Result<Scene, SceneError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let mut scene = match ext.as_deref() {
+        Some("gltf" | "glb") => gltf::load(path)?,
+        Some("obj") => obj::load(path)?,
+        _ => {
+            return Err(SceneError::new(
+                path,
+                "unknown scene format (expected .gltf, .glb or .obj)",
+            ))
+        }
+    };
+    if scene.name.is_empty() {
+        scene.name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into());
+    }
+    if scene.instances.is_empty() {
+        log::warn!("{}: the scene has no triangles", path.display());
+    }
+    Ok(scene)
+}
+
+#[cfg(test)]
+mod tests;

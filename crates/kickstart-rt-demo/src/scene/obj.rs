@@ -1,0 +1,74 @@
+//! OBJ/MTL loading through `tobj`: faces triangulated, one mesh per OBJ object/group (one
+//! identity instance each), the material's diffuse colour `Kd` as the base colour.
+
+use std::path::Path;
+
+use glam::{Affine3A, Vec3};
+
+use super::{check_indices, compute_normals, Instance, Mesh, Scene, SceneError};
+
+/// Colour of meshes without a material (or whose MTL file is missing): a light grey, so they
+/// still show shading in the images.
+const DEFAULT_COLOR: Vec3 = Vec3::splat(0.8);
+
+/// Loads an `.obj` file and its `.mtl` libraries.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    // tobj reports a missing file only as "OpenFileFailed"; check first to say which and why.
+    std::fs::metadata(path).map_err(|e| SceneError::new(path, format!("cannot read: {e}")))?;
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        // One index for position and normal, so file normals (when there are any) line up with
+        // positions the way the SDK and the demo's meshes expect.
+        single_index: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, materials) = tobj::load_obj(path, &options)
+        .map_err(|e| SceneError::new(path, format!("not a valid OBJ file: {e}")))?;
+    let materials = materials.unwrap_or_else(|e| {
+        log::warn!(
+            "{}: material library not loaded ({e}); using a grey base colour",
+            path.display()
+        );
+        Vec::new()
+    });
+    let mut scene = Scene::default();
+    for model in models {
+        let m = model.mesh;
+        if m.indices.is_empty() {
+            continue;
+        }
+        let positions: Vec<[f32; 3]> = m
+            .positions
+            .chunks_exact(3)
+            .map(|p| [p[0], p[1], p[2]])
+            .collect();
+        check_indices(&model.name, positions.len(), &m.indices)
+            .map_err(|e| SceneError::new(path, e))?;
+        let normals = if m.normals.len() == m.positions.len() {
+            m.normals
+                .chunks_exact(3)
+                .map(|n| [n[0], n[1], n[2]])
+                .collect()
+        } else {
+            compute_normals(&positions, &m.indices)
+        };
+        let color = m
+            .material_id
+            .and_then(|i| materials.get(i))
+            .and_then(|mat| mat.diffuse)
+            .map_or(DEFAULT_COLOR, Vec3::from);
+        scene.instances.push(Instance {
+            mesh: scene.meshes.len(),
+            transform: Affine3A::IDENTITY,
+        });
+        scene.meshes.push(Mesh {
+            name: model.name,
+            positions,
+            normals,
+            indices: m.indices,
+            color,
+        });
+    }
+    Ok(scene)
+}
