@@ -55,6 +55,7 @@ pub fn trace(
     c.schedule_bvh_task(ksrt::BvhBuildTask {
         max_blas_build_count: (uploads.len() as u32).max(1),
         build_tlas: true,
+        ..Default::default()
     });
 
     let size = wgpu::Extent3d {
