@@ -110,33 +110,43 @@ fn render(
     let camera = scene.camera_or_default(camera);
     let adapter = gpu::adapter()?;
     let (device, queue) = gpu::device(&adapter)?;
-    match debug_view {
-        None => render::render(
-            &device,
-            &queue,
-            &scene,
-            &render::RenderOptions {
-                width,
-                height,
-                out,
-                camera,
-            },
-        ),
-        Some(view) => {
-            let texels =
-                debug_view::trace(&device, &queue, &scene, &camera, view, (width, height))?;
-            let image = debug_view::to_image(view, &texels, width, height);
-            std::fs::create_dir_all(&out)
-                .map_err(|e| format!("--out {}: cannot create: {e}", out.display()))?;
-            let path = out.join(format!("debug-{}.png", view.name()));
-            image.save(&path)?;
-            println!(
-                "wrote {} ({width}x{height}, traced on the GPU)",
-                path.display()
-            );
-            Ok(())
+    // Without --debug-view: the CPU reference image and every GPU debug view.
+    let views = match debug_view {
+        Some(v) => vec![v],
+        None => {
+            render::render(
+                &device,
+                &queue,
+                &scene,
+                &render::RenderOptions {
+                    width,
+                    height,
+                    out: out.clone(),
+                    camera,
+                },
+            )?;
+            vec![
+                debug_view::DebugView::MeshColor,
+                debug_view::DebugView::HitT,
+                debug_view::DebugView::Barycentrics,
+            ]
         }
+    };
+    for view in views {
+        let start = std::time::Instant::now();
+        let texels = debug_view::trace(&device, &queue, &scene, &camera, view, (width, height))?;
+        let image = debug_view::to_image(view, &texels, width, height);
+        std::fs::create_dir_all(&out)
+            .map_err(|e| format!("--out {}: cannot create: {e}", out.display()))?;
+        let path = out.join(format!("debug-{}.png", view.name()));
+        image.save(&path)?;
+        println!(
+            "wrote {} ({width}x{height}, GPU BVH build and primary rays through kickstart-rt, {:.2} s)",
+            path.display(),
+            start.elapsed().as_secs_f64()
+        );
     }
+    Ok(())
 }
 
 fn bench_command(
