@@ -1,0 +1,473 @@
+// GPU LBVH (Karras 2012, "Maximizing Parallelism in the Construction of BVHs, Octrees, and k-d
+// Trees") over primitive AABBs, and its refit. Layouts: docs/ray-tracing-core.md. Driven by
+// src/scene/lbvh.rs, which documents the pass order.
+//
+// Entry points (all 256 invocations, 1-D workgroups split into 2-D by the Recorder):
+//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6]
+//   lbvh_morton    per primitive: 30-bit Morton key (empty: 1 << 30, sorts last), value = index
+//   (radix sort of (keys, values), 31 key bits, by the caller)
+//   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
+//   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
+//                  refit share it)
+//
+// `work` layout (u32 words, all accessed atomically):
+//   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only)
+//   [8, 8 + 6 (n-1))             inner node boxes during the climb (min.xyz, max.xyz bit patterns)
+//   [8 + 6 (n-1), 8 + 7 (n-1))   arrival counters of the inner nodes (cleared before the climb)
+//
+// Topology layout (u32 words from topo_base), n >= 2:
+//   [0, 2 (n-1))           children of inner node i at 2i, 2i+1: inner index, or 0x80000000 | k
+//                          for the leaf at sorted position k
+//   [2 (n-1), 3 (n-1))     parent of inner node i (0xFFFFFFFF for the root)
+//   [3 (n-1), 4n - 3)      parent of leaf k
+
+struct Params {
+    count: u32,
+    aabb_base: u32,
+    node_base: u32,
+    order_base: u32,
+    topo_base: u32,
+    bounds_base: u32,
+    // bit 0: leaf refs are primitive indices (order[k]) instead of sorted positions k;
+    // bit 1: write the root box to bounds_out.
+    flags: u32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> aabbs: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> work: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> keys: array<u32>;
+@group(0) @binding(4) var<storage, read_write> values: array<u32>;
+@group(0) @binding(5) var<storage, read_write> order: array<u32>;
+@group(0) @binding(6) var<storage, read_write> topology: array<u32>;
+// Nodes and bounds are written as bit patterns (u32) so child refs stored in the `w` lanes are
+// never touched by float handling (they are denormals or NaNs as f32).
+@group(0) @binding(7) var<storage, read_write> nodes: array<vec4<u32>>;
+@group(0) @binding(8) var<storage, read_write> bounds_out: array<vec4<u32>>;
+
+const WG: u32 = 256u;
+const FLAG_PRIMITIVE_REFS: u32 = 1u;
+const FLAG_BOUNDS_OUT: u32 = 2u;
+const LEAF_BIT: u32 = 0x80000000u;
+const NO_PARENT: u32 = 0xFFFFFFFFu;
+// Key of empty primitives: above every 30-bit Morton code, below 2^31 (the sort uses 31 bits).
+const EMPTY_KEY: u32 = 0x40000000u;
+// Empty box while climbing: the largest finite floats, so a union with it is exact for every
+// finite coordinate. Written out as the documented (+1e30, -1e30).
+const BIG: f32 = 3.40282347e38;
+const EMPTY_OUT: f32 = 1e30;
+const BOXES_AT: u32 = 8u;
+
+fn linear_id(lid: u32, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return (wid.y * nwg.x + wid.x) * WG + lid;
+}
+
+// NaN by bit pattern (the compiler may assume floats are never NaN).
+fn is_nan(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
+}
+
+fn is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+// A float as a u32 that sorts like the float (negative: all bits flipped; positive: sign set).
+fn enc(x: f32) -> u32 {
+    let b = bitcast<u32>(x);
+    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
+}
+
+fn dec(u: u32) -> f32 {
+    return bitcast<f32>(select(~u, u & 0x7fffffffu, (u & 0x80000000u) != 0u));
+}
+
+struct Box {
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+}
+
+fn empty_box() -> Box {
+    return Box(vec3<f32>(BIG), vec3<f32>(-BIG));
+}
+
+fn is_empty(b: Box) -> bool {
+    return b.lo.x > b.hi.x;
+}
+
+// Primitive `prim`'s box; empty (min.x > max.x, or any NaN) becomes the canonical empty box so
+// it never enlarges a parent.
+fn prim_box(prim: u32) -> Box {
+    let i = 2u * (params.aabb_base + prim);
+    let lo = aabbs[i].xyz;
+    let hi = aabbs[i + 1u].xyz;
+    let nan = is_nan(lo.x) || is_nan(lo.y) || is_nan(lo.z) || is_nan(hi.x) || is_nan(hi.y)
+        || is_nan(hi.z);
+    if nan || lo.x > hi.x {
+        return empty_box();
+    }
+    return Box(lo, hi);
+}
+
+fn union_box(a: Box, b: Box) -> Box {
+    return Box(min(a.lo, b.lo), max(a.hi, b.hi));
+}
+
+// Centroid without overflow for huge boxes; valid when every lane is finite.
+fn centroid(b: Box) -> vec3<f32> {
+    return b.lo * 0.5 + b.hi * 0.5;
+}
+
+fn centroid_valid(b: Box) -> bool {
+    let c = centroid(b);
+    return !is_empty(b) && is_finite(c.x) && is_finite(c.y) && is_finite(c.z);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scene bounds of the valid centroids: workgroup reduce in shared atomics, then one device
+// atomicMax per word. Min is reduced as max of ~enc so a zero-cleared buffer is the identity.
+
+var<workgroup> wg_bounds: array<atomic<u32>, 6>;
+
+@compute @workgroup_size(256)
+fn lbvh_bounds(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_id(lid, wid, nwg);
+    if lid < 6u {
+        atomicStore(&wg_bounds[lid], 0u);
+    }
+    workgroupBarrier();
+    // No early return: the barriers below must be reached by the whole workgroup.
+    if i < params.count {
+        let b = prim_box(i);
+        if centroid_valid(b) {
+            let c = centroid(b);
+            atomicMax(&wg_bounds[0], ~enc(c.x));
+            atomicMax(&wg_bounds[1], ~enc(c.y));
+            atomicMax(&wg_bounds[2], ~enc(c.z));
+            atomicMax(&wg_bounds[3], enc(c.x));
+            atomicMax(&wg_bounds[4], enc(c.y));
+            atomicMax(&wg_bounds[5], enc(c.z));
+        }
+    }
+    workgroupBarrier();
+    if lid < 6u {
+        let v = atomicLoad(&wg_bounds[lid]);
+        if v != 0u {
+            atomicMax(&work[lid], v);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Morton keys.
+
+// Spreads the low 10 bits of v to every third bit.
+fn spread3(v: u32) -> u32 {
+    var x = v & 0x3ffu;
+    x = (x | (x << 16u)) & 0x030000ffu;
+    x = (x | (x << 8u)) & 0x0300f00fu;
+    x = (x | (x << 4u)) & 0x030c30c3u;
+    x = (x | (x << 2u)) & 0x09249249u;
+    return x;
+}
+
+// Cell 0..1023 of c in [lo, hi]; a zero or non-finite extent, or a non-finite c, gives cell 0
+// (such primitives still get a leaf; only their place in the order is arbitrary).
+fn cell(c: f32, lo: f32, hi: f32) -> u32 {
+    let extent = hi - lo;
+    let t = (c - lo) / extent * 1024.0;
+    // Finite first: only then is the comparison meaningful (NaN may be assumed away).
+    if !is_finite(extent) || !(extent > 0.0) || !is_finite(t) {
+        return 0u;
+    }
+    return u32(clamp(t, 0.0, 1023.0));
+}
+
+@compute @workgroup_size(256)
+fn lbvh_morton(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_id(lid, wid, nwg);
+    if i >= params.count {
+        return;
+    }
+    let b = prim_box(i);
+    var key = EMPTY_KEY;
+    if !is_empty(b) {
+        let lo = vec3<f32>(dec(~atomicLoad(&work[0])), dec(~atomicLoad(&work[1])),
+                           dec(~atomicLoad(&work[2])));
+        let hi = vec3<f32>(dec(atomicLoad(&work[3])), dec(atomicLoad(&work[4])),
+                           dec(atomicLoad(&work[5])));
+        let c = centroid(b);
+        key = (spread3(cell(c.x, lo.x, hi.x)) << 2u) | (spread3(cell(c.y, lo.y, hi.y)) << 1u)
+            | spread3(cell(c.z, lo.z, hi.z));
+    }
+    keys[i] = key;
+    values[i] = i;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hierarchy (Karras 2012, section 4): inner node i covers a key range starting or ending at i.
+
+// Length of the common prefix of sorted keys i and j, or -1 when j is outside [0, n). Equal keys
+// fall back to the indices (32 + clz(i ^ j)), so duplicates still give a valid binary tree.
+fn delta(i: i32, j: i32) -> i32 {
+    let n = i32(params.count);
+    if j < 0 || j >= n {
+        return -1;
+    }
+    let a = keys[i];
+    let b = keys[j];
+    if a == b {
+        return 32 + i32(countLeadingZeros(u32(i) ^ u32(j)));
+    }
+    return i32(countLeadingZeros(a ^ b));
+}
+
+@compute @workgroup_size(256)
+fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+                  @builtin(num_workgroups) nwg: vec3<u32>) {
+    let k = linear_id(lid, wid, nwg);
+    let n = params.count;
+    if k >= n {
+        return;
+    }
+    // One primitive is never sorted (no keys were made): its order is the identity.
+    order[params.order_base + k] = select(values[k], k, n < 2u);
+    if k + 1u >= n {
+        return; // n - 1 inner nodes
+    }
+    let i = i32(k);
+    let inner_parents = params.topo_base + 2u * (n - 1u);
+    let leaf_parents = params.topo_base + 3u * (n - 1u);
+    if k == 0u {
+        topology[inner_parents] = NO_PARENT;
+    }
+    // Direction of the range: towards the neighbour sharing the longer prefix.
+    let d = select(-1, 1, delta(i, i + 1) - delta(i, i - 1) > 0);
+    let delta_min = delta(i, i - d);
+    // Upper bound of the range length, then binary search for the other end.
+    var l_max = 2;
+    while delta(i, i + l_max * d) > delta_min {
+        l_max *= 2;
+    }
+    var l = 0;
+    var t = l_max / 2;
+    while t >= 1 {
+        if delta(i, i + (l + t) * d) > delta_min {
+            l += t;
+        }
+        t /= 2;
+    }
+    let j = i + l * d;
+    // Split: the last position sharing more than the node's prefix with i.
+    let delta_node = delta(i, j);
+    var s = 0;
+    var div = 2;
+    t = (l + div - 1) / div;
+    loop {
+        if delta(i, i + (s + t) * d) > delta_node {
+            s += t;
+        }
+        if t <= 1 {
+            break;
+        }
+        div *= 2;
+        t = (l + div - 1) / div;
+    }
+    let gamma = i + s * d + min(d, 0);
+    let first = u32(min(i, j));
+    let last = u32(max(i, j));
+    let g = u32(gamma);
+    var left = g;
+    var right = g + 1u;
+    if first == g {
+        left = LEAF_BIT | g;
+        topology[leaf_parents + g] = k;
+    } else {
+        topology[inner_parents + g] = k;
+    }
+    if last == g + 1u {
+        right = LEAF_BIT | (g + 1u);
+        topology[leaf_parents + g + 1u] = k;
+    } else {
+        topology[inner_parents + g + 1u] = k;
+    }
+    topology[params.topo_base + 2u * k] = left;
+    topology[params.topo_base + 2u * k + 1u] = right;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bottom-up boxes (build and refit), one invocation per leaf.
+//
+// WGSL promises no forward progress between workgroups and only relaxed atomics, so nothing here
+// waits on another invocation. Each invocation climbs from its leaf; at every inner node the
+// FIRST to arrive stops and the SECOND continues with the union of both children. The second
+// must see the first's box, hence:
+//   1. boxes live in `work` and are written/read with atomicStore/atomicLoad (device-coherent);
+//   2. write box -> storageBarrier() -> atomicAdd(arrival) -> storageBarrier() -> read sibling.
+//      storageBarrier() is an OpControlBarrier with Device memory scope and AcquireRelease |
+//      UniformMemory semantics: the first one is a release fence before the arrival increment,
+//      the second an acquire fence after it, so when the second arriver's atomicAdd reads the
+//      first's increment, the first's box stores happen-before the second's loads.
+// storageBarrier() is also a workgroup control barrier, so it must be reached in
+// workgroup-uniform control flow: the climb is a loop whose trip count is uniform (it runs while
+// ANY invocation of the workgroup is still climbing, read through workgroupUniformLoad), and
+// each invocation carries its own `climbing` flag. Inactive invocations just pass the barriers.
+
+var<workgroup> wg_active: atomic<u32>;
+var<workgroup> wg_go: u32;
+
+// The child ref as written into a node: inner index as is; leaf k -> k or order[k].
+fn out_ref(c: u32) -> u32 {
+    if (c & LEAF_BIT) == 0u || (params.flags & FLAG_PRIMITIVE_REFS) == 0u {
+        return c;
+    }
+    return LEAF_BIT | order[params.order_base + (c & 0x7fffffffu)];
+}
+
+// Box lanes as stored in nodes/bounds_out: the documented (+1e30, -1e30) when empty.
+fn out_lo(b: Box) -> vec3<u32> {
+    return bitcast<vec3<u32>>(select(b.lo, vec3<f32>(EMPTY_OUT), is_empty(b)));
+}
+
+fn out_hi(b: Box) -> vec3<u32> {
+    return bitcast<vec3<u32>>(select(b.hi, vec3<f32>(-EMPTY_OUT), is_empty(b)));
+}
+
+fn write_node(node: u32, l: Box, lref: u32, r: Box, rref: u32) {
+    let at = 4u * (params.node_base + node);
+    nodes[at] = vec4<u32>(out_lo(l), lref);
+    nodes[at + 1u] = vec4<u32>(out_hi(l), rref);
+    nodes[at + 2u] = vec4<u32>(out_lo(r), 0u);
+    nodes[at + 3u] = vec4<u32>(out_hi(r), 0u);
+}
+
+fn write_bounds(b: Box) {
+    if (params.flags & FLAG_BOUNDS_OUT) != 0u {
+        bounds_out[params.bounds_base] = vec4<u32>(out_lo(b), 0u);
+        bounds_out[params.bounds_base + 1u] = vec4<u32>(out_hi(b), 0u);
+    }
+}
+
+fn leaf_box(k: u32) -> Box {
+    return prim_box(order[params.order_base + k]);
+}
+
+fn store_box(node: u32, b: Box) {
+    let at = BOXES_AT + 6u * node;
+    atomicStore(&work[at], bitcast<u32>(b.lo.x));
+    atomicStore(&work[at + 1u], bitcast<u32>(b.lo.y));
+    atomicStore(&work[at + 2u], bitcast<u32>(b.lo.z));
+    atomicStore(&work[at + 3u], bitcast<u32>(b.hi.x));
+    atomicStore(&work[at + 4u], bitcast<u32>(b.hi.y));
+    atomicStore(&work[at + 5u], bitcast<u32>(b.hi.z));
+}
+
+fn load_box(node: u32) -> Box {
+    let at = BOXES_AT + 6u * node;
+    return Box(
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[at])), bitcast<f32>(atomicLoad(&work[at + 1u])),
+                  bitcast<f32>(atomicLoad(&work[at + 2u]))),
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[at + 3u])),
+                  bitcast<f32>(atomicLoad(&work[at + 4u])),
+                  bitcast<f32>(atomicLoad(&work[at + 5u]))));
+}
+
+// Box of child ref c (topology encoding): leaves from the input, inner nodes from `work`.
+fn child_box(c: u32) -> Box {
+    if (c & LEAF_BIT) != 0u {
+        return leaf_box(c & 0x7fffffffu);
+    }
+    return load_box(c);
+}
+
+@compute @workgroup_size(256)
+fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+              @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    let k = linear_id(lid, wid, nwg);
+    // Fewer than two primitives: no inner nodes; one invocation writes the fixed-shape root.
+    // (`n` is uniform, so this return keeps the rest in uniform control flow.)
+    if n < 2u {
+        if k == 0u {
+            let none = empty_box();
+            var l = none;
+            var lref = LEAF_BIT;
+            if n == 1u {
+                l = leaf_box(0u);
+                lref = out_ref(LEAF_BIT);
+            }
+            write_node(0u, l, lref, none, LEAF_BIT);
+            write_bounds(l);
+        }
+        return;
+    }
+    let inner_parents = params.topo_base + 2u * (n - 1u);
+    let leaf_parents = params.topo_base + 3u * (n - 1u);
+    let arrival_at = BOXES_AT + 6u * (n - 1u);
+
+    var climbing = k < n;
+    // Current node in topology encoding (leaf bit + sorted position, or inner index).
+    var node = LEAF_BIT | k;
+    var bx = empty_box();
+    if climbing {
+        bx = leaf_box(k);
+    }
+    loop {
+        // Uniform trip count: continue while anyone in the workgroup is still climbing.
+        if lid == 0u {
+            atomicStore(&wg_active, 0u);
+        }
+        workgroupBarrier();
+        if climbing {
+            atomicAdd(&wg_active, 1u);
+        }
+        workgroupBarrier();
+        if lid == 0u {
+            wg_go = atomicLoad(&wg_active);
+        }
+        if workgroupUniformLoad(&wg_go) == 0u {
+            break;
+        }
+
+        var parent = 0u;
+        if climbing {
+            if (node & LEAF_BIT) != 0u {
+                parent = topology[leaf_parents + (node & 0x7fffffffu)];
+            } else {
+                // Inner boxes are published for the sibling's climber (leaves are re-read
+                // from the input instead).
+                store_box(node, bx);
+                parent = topology[inner_parents + node];
+            }
+        }
+        // Release: the box above before the arrival below.
+        storageBarrier();
+        if climbing {
+            let before = atomicAdd(&work[arrival_at + parent], 1u);
+            // First to arrive: the sibling's box may not exist yet; its climber takes over.
+            climbing = before != 0u;
+        }
+        // Acquire: the sibling's box (stored before its arrival) is visible below.
+        storageBarrier();
+        if climbing {
+            let lc = topology[params.topo_base + 2u * parent];
+            let rc = topology[params.topo_base + 2u * parent + 1u];
+            var lb = bx;
+            var rb = bx;
+            if lc == node {
+                rb = child_box(rc);
+            } else {
+                lb = child_box(lc);
+            }
+            write_node(parent, lb, out_ref(lc), rb, out_ref(rc));
+            bx = union_box(lb, rb);
+            node = parent;
+            if parent == 0u {
+                write_bounds(bx);
+                climbing = false;
+            }
+        }
+    }
+}
