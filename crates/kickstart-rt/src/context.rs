@@ -461,14 +461,16 @@ impl ExecuteContext {
             vertex_copies: sc.staged.used_bytes(),
             blas: sc.triangles.used_bytes()
                 + sc.nodes.used_bytes()
-                + sc.words.used_bytes()
+                + sc.orders.used_bytes()
+                + sc.topologies.used_bytes()
                 + sc.geometry_table.buffer.size(),
             tlas: sc.tlas_bytes() + sc.instance_table.buffer.size(),
             scratch: sc.scratch_bytes(),
             pool_reserve: sc.staged.reserve_bytes()
                 + sc.triangles.reserve_bytes()
                 + sc.nodes.reserve_bytes()
-                + sc.words.reserve_bytes(),
+                + sc.orders.reserve_bytes()
+                + sc.topologies.reserve_bytes(),
             ..Default::default()
         };
         a.staging = s.staging.bytes()

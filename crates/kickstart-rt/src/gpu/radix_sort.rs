@@ -7,7 +7,6 @@
 //! 16-bit lanes per word), so ranking costs O(1) per element instead of a loop over the radix.
 
 // Until the GPU BVH builder (another branch) calls it, only the tests use this module.
-#![cfg_attr(not(test), allow(dead_code))]
 
 use super::shader::compute_pipeline;
 use super::Recorder;

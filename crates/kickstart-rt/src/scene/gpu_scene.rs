@@ -5,9 +5,9 @@
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
+use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs};
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::Prims;
-use crate::scene::stubs::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs};
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::trace::debug_view::DebugViewPass;
 use crate::trace::rays::{RayTracer, SceneBuffers};
@@ -37,8 +37,9 @@ pub(crate) enum PendingBvh {
 pub(crate) struct BlasRanges {
     pub tris: Range,
     pub nodes: Range,
-    /// Sort order (`n` words) then refit topology, kept for `allow_update` geometry only.
-    pub words: Option<Range>,
+    /// Sort order (`n` words; `orders` pool) and refit topology (`topologies` pool), kept for
+    /// `allow_update` geometry only. Separate pools: the builder binds them in one dispatch.
+    pub refit: Option<(Range, Range)>,
 }
 
 /// The GPU side of one geometry.
@@ -60,8 +61,9 @@ impl GeometryGpu {
         if let Some(b) = self.blas.take() {
             scene.triangles.free_after(b.tris, last_used);
             scene.nodes.free_after(b.nodes, last_used);
-            if let Some(w) = b.words {
-                scene.words.free_after(w, last_used);
+            if let Some((o, t)) = b.refit {
+                scene.orders.free_after(o, last_used);
+                scene.topologies.free_after(t, last_used);
             }
         }
     }
@@ -189,7 +191,9 @@ pub(crate) struct GpuScene {
     /// BLAS nodes.
     pub nodes: Pool,
     /// Sort orders and refit topology of `allow_update` BLASes.
-    pub words: Pool,
+    pub orders: Pool,
+    /// Refit topology of `allow_update` BLASes.
+    pub topologies: Pool,
     pub geometry_table: Table,
     pub instance_table: Table,
     tlas: Tlas,
@@ -212,7 +216,8 @@ impl GpuScene {
             staged: Pool::new(device, "kickstart-rt staged triangles", TRIANGLE_BYTES),
             triangles: Pool::new(device, "kickstart-rt BLAS triangles", TRIANGLE_BYTES),
             nodes: Pool::new(device, "kickstart-rt BLAS nodes", NODE_BYTES),
-            words: Pool::new(device, "kickstart-rt BLAS refit data", 4),
+            orders: Pool::new(device, "kickstart-rt BLAS sort orders", 4),
+            topologies: Pool::new(device, "kickstart-rt BLAS refit topology", 4),
             geometry_table: Table::new(device, "kickstart-rt geometry table", GEOMETRY_RECORD_SIZE),
             instance_table: Table::new(
                 device,
@@ -291,7 +296,8 @@ impl GpuScene {
         self.staged.collect(oldest_in_flight);
         self.triangles.collect(oldest_in_flight);
         self.nodes.collect(oldest_in_flight);
-        self.words.collect(oldest_in_flight);
+        self.orders.collect(oldest_in_flight);
+        self.topologies.collect(oldest_in_flight);
     }
 
     fn alloc(
@@ -438,16 +444,26 @@ impl GpuScene {
             &format!("BLAS nodes of geometry `{name}`"),
             NODE_BYTES,
         )?;
-        let words = if keep_for_refit {
-            Some(Self::alloc(
-                &mut self.words,
+        let refit = if keep_for_refit {
+            let order = Self::alloc(
+                &mut self.orders,
                 &self.device,
                 rec.encoder,
-                n + Lbvh::topology_words(n),
+                n,
                 max,
-                &format!("refit data of geometry `{name}`"),
+                &format!("sort order of geometry `{name}`"),
                 4,
-            )?)
+            )?;
+            let topology = Self::alloc(
+                &mut self.topologies,
+                &self.device,
+                rec.encoder,
+                Lbvh::topology_words(n),
+                max,
+                &format!("refit topology of geometry `{name}`"),
+                4,
+            )?;
+            Some((order, topology))
         } else {
             None
         };
@@ -467,8 +483,8 @@ impl GpuScene {
             &self.scratch_aabbs,
             0,
         );
-        let (order, order_base) = match words {
-            Some(w) => (self.words.buffer(), w.start),
+        let (order, order_base) = match refit {
+            Some((o, _)) => (self.orders.buffer(), o.start),
             None => (&self.scratch_order, 0),
         };
         lbvh.build(
@@ -481,7 +497,7 @@ impl GpuScene {
                 node_base: nodes.start,
                 order,
                 order_base,
-                topology: words.map(|w| (self.words.buffer(), w.start + n)),
+                topology: refit.map(|(_, t)| (self.topologies.buffer(), t.start)),
                 leaf_refs: LeafRefs::SortedPosition,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
             },
@@ -496,7 +512,7 @@ impl GpuScene {
             self.triangles.buffer(),
             tris.start,
         );
-        g.blas = Some(BlasRanges { tris, nodes, words });
+        g.blas = Some(BlasRanges { tris, nodes, refit });
         Ok([nodes.start, tris.start, n, 1])
     }
 
@@ -507,7 +523,7 @@ impl GpuScene {
             Some(BlasRanges {
                 tris,
                 nodes,
-                words: Some(words),
+                refit: Some((order, topology)),
             }),
         ) = (g.staged, g.blas)
         else {
@@ -538,9 +554,9 @@ impl GpuScene {
                 count: n,
                 nodes: self.nodes.buffer(),
                 node_base: nodes.start,
-                order: self.words.buffer(),
-                order_base: words.start,
-                topology: (self.words.buffer(), words.start + n),
+                order: self.orders.buffer(),
+                order_base: order.start,
+                topology: (self.topologies.buffer(), topology.start),
                 leaf_refs: LeafRefs::SortedPosition,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
             },
@@ -549,8 +565,8 @@ impl GpuScene {
             rec,
             self.staged.buffer(),
             staged.start,
-            self.words.buffer(),
-            words.start,
+            self.orders.buffer(),
+            order.start,
             n,
             self.triangles.buffer(),
             tris.start,

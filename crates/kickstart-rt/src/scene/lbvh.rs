@@ -12,17 +12,11 @@
 //!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology.
 
-// The scene code that calls this is on a parallel branch; drop this when it is merged.
-#![cfg_attr(not(test), allow(dead_code))]
-
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
 use bytemuck::{Pod, Zeroable};
 
-// TEMPORARY until `crate::gpu::radix_sort` lands: swap these two lines and delete
-// `mod standin_sort` (and `shaders/lbvh_sort_standin.wgsl`).
-use standin_sort::RadixSort;
-// use crate::gpu::radix_sort::RadixSort;
+use crate::gpu::radix_sort::RadixSort;
 
 /// Invocations per workgroup of every LBVH pass (the shader's `WG`).
 const WORKGROUP: u32 = 256;
@@ -364,85 +358,6 @@ impl Lbvh {
         Self::clear_arrivals(rec, &work, n);
         let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
         rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
-    }
-}
-
-/// TEMPORARY stand-in for `crate::gpu::radix_sort::RadixSort` (same interface) until that
-/// branch is merged: a bitonic network ordering by (key, value), which equals a stable sort by
-/// key because the values are distinct indices written in ascending order. Delete this module
-/// and `shaders/lbvh_sort_standin.wgsl` when swapping the `use` at the top.
-mod standin_sort {
-    use crate::gpu::shader::compute_pipeline;
-    use crate::gpu::Recorder;
-    use wgpu::util::DeviceExt;
-
-    /// Bitonic (key, value) sort, same interface as the real radix sort.
-    pub(crate) struct RadixSort {
-        step: wgpu::ComputePipeline,
-    }
-
-    impl RadixSort {
-        /// Creates the pipeline.
-        pub fn new(device: &wgpu::Device) -> Self {
-            let src = include_str!("../../shaders/lbvh_sort_standin.wgsl");
-            RadixSort {
-                step: compute_pipeline(device, "lbvh stand-in sort", src, "sort_step"),
-            }
-        }
-
-        /// Sorts `count` pairs in place, ascending by (key, value); `_key_bits` is unused.
-        pub fn record(
-            &mut self,
-            rec: &mut Recorder<'_>,
-            keys: &wgpu::Buffer,
-            values: &wgpu::Buffer,
-            count: u32,
-            _key_bits: u32,
-        ) {
-            if count < 2 {
-                return;
-            }
-            let size = count.next_power_of_two();
-            let mut block = 2;
-            while block <= size {
-                let mut dist = block / 2;
-                let mut flip = 1;
-                while dist >= 1 {
-                    let params: [u32; 4] = [count, block, dist, flip];
-                    let ubuf = rec
-                        .device
-                        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                            label: Some("stand-in sort params"),
-                            contents: bytemuck::cast_slice(&params),
-                            usage: wgpu::BufferUsages::UNIFORM,
-                        });
-                    let bg = rec.bind_buffers(
-                        "stand-in sort",
-                        &self.step,
-                        0,
-                        &[
-                            ubuf.as_entire_binding(),
-                            keys.as_entire_binding(),
-                            values.as_entire_binding(),
-                        ],
-                    );
-                    rec.dispatch(
-                        "lbvh stand-in sort",
-                        &self.step,
-                        &[&bg],
-                        (size / 2).div_ceil(256),
-                    );
-                    flip = 0;
-                    dist /= 2;
-                }
-                block *= 2;
-            }
-        }
-
-        /// No scratch of its own.
-        pub fn scratch_bytes(&self) -> u64 {
-            0
-        }
     }
 }
 

@@ -6,4 +6,3 @@ pub(crate) mod ingest;
 pub(crate) mod lbvh;
 pub(crate) mod pool;
 pub(crate) mod prims;
-pub(crate) mod stubs;
