@@ -146,8 +146,20 @@ pub struct SceneReport {
     /// (pixels + primary hits) / (primary batch time + diffuse batch time), millions of rays per
     /// second: the workload the issue compares with its peers.
     pub peer_mrays_per_s: Option<f64>,
+    /// Primary rays checked against the CPU reference BVH on this GPU (untimed).
+    pub oracle: Option<OracleCheck>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
+}
+
+/// A sample of primary rays traced again on the CPU reference BVH (world-space triangles): the
+/// evidence that the measured tracer is also right on this GPU.
+#[derive(Debug, Clone, Serialize)]
+pub struct OracleCheck {
+    /// Rays compared.
+    pub rays: usize,
+    /// Rays where hit/miss differs, or the distances differ by more than 1e-3 relative.
+    pub disagreements: usize,
 }
 
 /// TLAS build and refit over `instances` instances of one small mesh with random transforms.
@@ -170,6 +182,10 @@ pub struct Report {
     pub sdk_version: String,
     /// Adapter name.
     pub adapter: String,
+    /// Driver name and version, as wgpu reports them.
+    pub driver: String,
+    /// The commit `ksrt` was built from (embedded at build time; `-dirty` with local changes).
+    pub commit: String,
     /// wgpu backend.
     pub backend: String,
     /// Whether the device has timestamp queries (without them nothing is timed).
@@ -462,6 +478,7 @@ fn rays(
         })
         .collect();
     let (primary_time, primary_hits) = bench.trace(&ctx, &primary, Query::Closest)?;
+    report.oracle = Some(oracle_check(scene, &primary, &primary_hits));
     let primary_batch = batch("primary", primary.len(), &primary_hits, primary_time);
     let pixels = primary.len() as f64;
     let primary_hit_count = (primary_batch.rays - primary_batch.misses) as f64;
@@ -502,6 +519,40 @@ fn rays(
     Ok(())
 }
 
+/// Compares about 20 000 primary hits with the CPU reference BVH over the world's triangles.
+fn oracle_check(scene: &Scene, rays: &[GpuRay], hits: &[GpuHit]) -> OracleCheck {
+    let world: Vec<[Vec3; 3]> = scene
+        .instances
+        .iter()
+        .flat_map(|i| scene.meshes[i.mesh].triangles(i.transform))
+        .collect();
+    let bvh = ksrt::cpu::CpuBvh::build(&world);
+    let step = (rays.len() / 20_000).max(1);
+    let mut check = OracleCheck {
+        rays: 0,
+        disagreements: 0,
+    };
+    for (r, h) in rays.iter().zip(hits).step_by(step) {
+        let cpu = bvh.closest_hit(
+            &world,
+            &ksrt::cpu::Ray {
+                origin: Vec3::from(r.origin),
+                dir: Vec3::from(r.dir),
+                t_min: r.t_min,
+                t_max: r.t_max,
+            },
+        );
+        let agree = match (cpu, h.is_hit()) {
+            (None, false) => true,
+            (Some(c), true) => (c.t - h.t).abs() <= 1e-3 * c.t.abs().max(1e-3),
+            _ => false,
+        };
+        check.rays += 1;
+        check.disagreements += usize::from(!agree);
+    }
+    check
+}
+
 /// Benchmarks one scene.
 fn bench_scene(
     bench: &Bench,
@@ -531,6 +582,7 @@ fn bench_scene(
         sah: None,
         rays: Vec::new(),
         peer_mrays_per_s: None,
+        oracle: None,
         errors: Vec::new(),
     };
     let uploads = gpu::upload_scene(bench.device, scene);
@@ -683,6 +735,12 @@ fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
     if let Some(p) = r.peer_mrays_per_s {
         println!("    peer workload (primary + diffuse from hits): {p:.1} Mrays/s");
     }
+    if let Some(o) = &r.oracle {
+        println!(
+            "  CPU oracle   {} of {} sampled primary rays disagree (hit/miss, or t beyond 1e-3)",
+            o.disagreements, o.rays
+        );
+    }
     for e in &r.errors {
         println!("  failed: {e}");
     }
@@ -713,10 +771,13 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     let (device, queue) = gpu::device(&adapter)?;
     let info = adapter.get_info();
     println!(
-        "kickstart-rt {} bench on {} ({:?}), {} iterations after a warm-up",
+        "kickstart-rt {} (commit {}) bench on {} ({:?}, driver {} {}), {} iterations after a warm-up",
         ksrt::VERSION,
+        env!("KSRT_COMMIT"),
         info.name,
         info.backend,
+        info.driver,
+        info.driver_info,
         opts.iterations
     );
     let bench = Bench {
@@ -727,6 +788,8 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     let mut report = Report {
         sdk_version: ksrt::VERSION.to_string(),
         adapter: info.name.clone(),
+        driver: format!("{} {}", info.driver, info.driver_info),
+        commit: env!("KSRT_COMMIT").to_string(),
         backend: format!("{:?}", info.backend),
         timestamp_query,
         width: opts.size.0,

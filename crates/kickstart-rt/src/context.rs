@@ -970,7 +970,6 @@ impl ExecuteContext {
                 }
                 done += 1;
             }
-            drop(rec);
             ws.staging
                 .extend(headers.flush(&self.device, &mut s.staging, encoder));
 

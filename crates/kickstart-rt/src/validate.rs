@@ -628,7 +628,7 @@ fn ray_buffer(
         ));
     }
     let align = limits.min_storage_buffer_offset_alignment.max(1) as u64;
-    if offset % align != 0 {
+    if !offset.is_multiple_of(align) {
         return Err(Error::input(
             task,
             format!("{field}_offset"),
@@ -649,7 +649,7 @@ fn ray_buffer(
             ),
         ));
     }
-    if bytes > limits.max_storage_buffer_binding_size as u64 {
+    if bytes > limits.max_storage_buffer_binding_size {
         return Err(Error::input(
             task,
             "ray_count",

@@ -24,7 +24,7 @@ fn random_transform(rng: &mut Rng, spread: f32) -> Affine3A {
     }
     Affine3A::from_scale_rotation_translation(
         scale,
-        Quat::from_axis_angle(axis, rng.range(0.0, 6.28)),
+        Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU)),
         rng.v(-spread, spread),
     )
 }
@@ -773,7 +773,7 @@ fn bad_geometry_is_reported_and_the_rest_traces() {
     }
     assert!(!messages.iter().any(|m| m.contains("`good`")));
     // Triangle 0 of every quad (lower right half) hits; triangle 1 (upper left) only on "good".
-    for k in 0..4 {
+    for (k, (name, _)) in meshes.iter().enumerate() {
         let x = 2.0 * k as f32;
         let rays = [
             ray(Vec3::new(x + 0.75, 0.25, 1.0), -Vec3::Z, 0.0, 5.0),
@@ -782,12 +782,11 @@ fn bad_geometry_is_reported_and_the_rest_traces() {
         let hits = closest(&ctx, &rays);
         assert!(
             hits[0].is_hit() && hits[0].primitive == 0,
-            "{}: {:?}",
-            meshes[k].0,
+            "{name}: {:?}",
             hits[0]
         );
         assert!((hits[0].t - 1.0).abs() < 1e-4);
-        assert_eq!(hits[1].is_hit(), k == 3, "{}: {:?}", meshes[k].0, hits[1]);
+        assert_eq!(hits[1].is_hit(), k == 3, "{name}: {:?}", hits[1]);
     }
 }
 

@@ -137,7 +137,7 @@ impl<'a> Recorder<'a> {
     /// A storage buffer initialised with `data` (read-only use; written at creation).
     pub fn storage_init(&self, label: &str, data: &[u8]) -> wgpu::Buffer {
         let mut padded;
-        let contents = if data.len() % 4 != 0 || data.is_empty() {
+        let contents = if !data.len().is_multiple_of(4) || data.is_empty() {
             padded = data.to_vec();
             padded.resize(data.len().div_ceil(4).max(1) * 4, 0);
             &padded[..]

@@ -207,8 +207,9 @@ pub(crate) struct GpuScene {
 impl GpuScene {
     pub fn new(device: &wgpu::Device) -> Self {
         let limits = device.limits();
-        let max_binding =
-            (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         let tlas_nodes = empty_root(device);
         GpuScene {
             device: device.clone(),
@@ -726,11 +727,7 @@ impl GpuScene {
     }
 
     /// Reads back a BLAS (blocks on the device; tools and tests only).
-    pub fn read_back_blas(
-        &self,
-        queue: &wgpu::Queue,
-        g: &GeometryGpu,
-    ) -> Result<(Vec<[f32; 16]>, Vec<[f32; 12]>)> {
+    pub fn read_back_blas(&self, queue: &wgpu::Queue, g: &GeometryGpu) -> Result<RawBlas> {
         let Some(b) = g.blas else {
             return Err(Error::ReadBack(
                 "the geometry's BLAS is not built yet".into(),
@@ -774,6 +771,9 @@ fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
             | wgpu::BufferUsages::COPY_DST,
     })
 }
+
+/// A BLAS as read back: raw nodes (16 floats each) and triangles (12 floats each).
+pub(crate) type RawBlas = (Vec<[f32; 16]>, Vec<[f32; 12]>);
 
 /// A STORAGE | COPY_SRC | COPY_DST buffer (at least 256 bytes, zeroed by wgpu).
 pub(crate) fn storage(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
