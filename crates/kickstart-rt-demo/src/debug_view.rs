@@ -208,4 +208,72 @@ mod tests {
         assert!(img.get_pixel(1, 0).0[0] > 0 && img.get_pixel(1, 0).0[0] < 64);
         assert_eq!(img.get_pixel(2, 0).0, [0, 0, 0]);
     }
+
+    /// `ksrt render --debug-view` on the built-in scenes and every scene of the shared folder:
+    /// each is registered, built on the GPU and traced, and shows geometry (hits with finite
+    /// distances, at least two instance colours where it has several instances) and sky.
+    #[test]
+    fn debug_views_render_every_scene() {
+        let dir = std::env::var_os("KSRT_SCENES")
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|| {
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes")
+            });
+        let adapter =
+            crate::gpu::adapter().expect("GPU tests need an adapter (mesa-vulkan-drivers)");
+        let (device, queue) = crate::gpu::device(&adapter).expect("device");
+        let names = [
+            "default",
+            "cornell",
+            "cornell-obj",
+            "cornell-gltf",
+            "bunny",
+            "apartment",
+            "dragon",
+        ];
+        for name in names {
+            let scene = crate::scene::load(name, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let camera = scene.camera_or_default(crate::bench::issue_camera(name));
+            let (w, h) = (48, 27);
+            let t = trace(&device, &queue, &scene, &camera, DebugView::HitT, (w, h))
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let hits: Vec<&[f32; 4]> = t.iter().filter(|p| p[3] == 1.0).collect();
+            assert!(
+                hits.len() > 40,
+                "{name}: {} of {} pixels hit",
+                hits.len(),
+                t.len()
+            );
+            assert!(
+                hits.iter().all(|p| p[0].is_finite() && p[0] > 0.0),
+                "{name}"
+            );
+            let m = trace(
+                &device,
+                &queue,
+                &scene,
+                &camera,
+                DebugView::MeshColor,
+                (w, h),
+            )
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let mut colours: Vec<[u32; 3]> = m
+                .iter()
+                .filter(|p| p[3] == 1.0)
+                .map(|p| [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()])
+                .collect();
+            colours.sort();
+            colours.dedup();
+            let want = if scene.instances.len() > 1 { 2 } else { 1 };
+            assert!(
+                colours.len() >= want,
+                "{name}: {} instance colours",
+                colours.len()
+            );
+            // The same pixels hit in both views.
+            for (a, b) in t.iter().zip(&m) {
+                assert_eq!(a[3], b[3], "{name}");
+            }
+        }
+    }
 }
