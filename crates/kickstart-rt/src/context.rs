@@ -188,6 +188,9 @@ struct State {
     dead_instance_slots: Vec<u32>,
     /// Geometry slots whose table record must be cleared (destroyed geometry).
     dead_geometry_slots: Vec<u32>,
+    /// Instance records to write when the TLAS is next updated: rays always see the instance
+    /// table that matches the TLAS, also while a BvhBuildTask defers the TLAS.
+    pending_records: BTreeMap<u32, [u8; INSTANCE_RECORD_SIZE as usize]>,
     /// The set of TLAS leaves changed (instances added/removed, participation, a BLAS built).
     tlas_rebuild: bool,
     /// Only instance transforms (or refitted BLASes) changed since the last TLAS update.
@@ -282,6 +285,7 @@ impl ExecuteContext {
                 blas_queue: VecDeque::new(),
                 dead_instance_slots: Vec::new(),
                 dead_geometry_slots: Vec::new(),
+                pending_records: BTreeMap::new(),
                 tlas_rebuild: false,
                 tlas_refit: false,
                 any_instance: false,
@@ -758,11 +762,8 @@ impl ExecuteContext {
         }
         if !s.dead_instance_slots.is_empty() {
             for slot in std::mem::take(&mut s.dead_instance_slots) {
-                uploads.push(
-                    &s.scene.instance_table.buffer,
-                    slot as u64 * INSTANCE_RECORD_SIZE,
-                    &[0u8; INSTANCE_RECORD_SIZE as usize],
-                );
+                s.pending_records
+                    .insert(slot, [0u8; INSTANCE_RECORD_SIZE as usize]);
             }
             s.tlas_rebuild = true;
         }
@@ -789,11 +790,8 @@ impl ExecuteContext {
                 }
                 _ => s.tlas_rebuild = true,
             }
-            uploads.push(
-                &s.scene.instance_table.buffer,
-                t.handle.index as u64 * INSTANCE_RECORD_SIZE,
-                &instance_record(&t.input),
-            );
+            s.pending_records
+                .insert(t.handle.index, instance_record(&t.input));
         }
         ws.staging
             .extend(uploads.flush(&self.device, &mut s.staging, encoder));
@@ -972,29 +970,42 @@ impl ExecuteContext {
             }
             ws.staging
                 .extend(headers.flush(&self.device, &mut s.staging, encoder));
+        }
 
-            // 6. TLAS over every instance slot, when something it depends on changed.
-            if build.build_tlas && (s.tlas_rebuild || s.tlas_refit) {
-                let slots = s.instances.slot_count();
-                let refit = !s.tlas_rebuild
-                    && match build.tlas_update {
-                        TlasUpdate::Rebuild => false,
-                        TlasUpdate::Refit => true,
-                        TlasUpdate::Auto => {
-                            s.scene.tlas_refits_since_rebuild()
-                                < TlasUpdate::AUTO_REBUILD_AFTER_REFITS
-                        }
-                    };
-                let mut rec = Recorder {
-                    device: &self.device,
-                    encoder,
-                    timestamps: timestamps.as_mut(),
-                    scope: "tlas build",
+        // 6. TLAS over every instance slot, in every task that changed something it depends on
+        //    (DESIGN.md's data flow), unless a BvhBuildTask opts out with `build_tlas: false`.
+        let tlas_update = plan.build.map_or(Some(TlasUpdate::Auto), |b| {
+            b.build_tlas.then_some(b.tlas_update)
+        });
+        if let Some(mode) = tlas_update.filter(|_| s.tlas_rebuild || s.tlas_refit) {
+            let slots = s.instances.slot_count();
+            let refit = !s.tlas_rebuild
+                && match mode {
+                    TlasUpdate::Rebuild => false,
+                    TlasUpdate::Refit => true,
+                    TlasUpdate::Auto => {
+                        s.scene.tlas_refits_since_rebuild() < TlasUpdate::AUTO_REBUILD_AFTER_REFITS
+                    }
                 };
-                s.scene.update_tlas(&mut rec, slots, refit)?;
-                s.tlas_rebuild = false;
-                s.tlas_refit = false;
+            let mut records = Uploads::default();
+            for (slot, bytes) in std::mem::take(&mut s.pending_records) {
+                records.push(
+                    &s.scene.instance_table.buffer,
+                    slot as u64 * INSTANCE_RECORD_SIZE,
+                    &bytes,
+                );
             }
+            ws.staging
+                .extend(records.flush(&self.device, &mut s.staging, encoder));
+            let mut rec = Recorder {
+                device: &self.device,
+                encoder,
+                timestamps: timestamps.as_mut(),
+                scope: "tlas build",
+            };
+            s.scene.update_tlas(&mut rec, slots, refit)?;
+            s.tlas_rebuild = false;
+            s.tlas_refit = false;
         }
 
         // Instance bookkeeping (after the records are recorded).

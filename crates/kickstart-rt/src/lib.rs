@@ -62,9 +62,10 @@
 //!   throttling). An instance of a geometry whose BLAS is not built yet is invisible to rays.
 //!   Static geometry's staged copy is released once its BLAS is built; `allow_update` geometry
 //!   keeps it, and its `Update` (same triangle count) re-ingests the vertices and refits.
-//! - The TLAS covers every instance slot; a [`BvhBuildTask`] with `build_tlas` rebuilds it when
-//!   instances were added or removed, or a BLAS was built, and otherwise refits it when transforms
-//!   moved ([`TlasUpdate`]).
+//! - The TLAS covers every instance slot. Every GPU task that changed an instance or built a BLAS
+//!   rebuilds it when instances were added or removed or a BLAS was built, and otherwise refits
+//!   it when transforms moved ([`TlasUpdate`]); a [`BvhBuildTask`] with `build_tlas: false`
+//!   defers that.
 //! - A hit reports the instance's handle index ([`InstanceHandle::index`], the index of its data
 //!   in the instance table) and the primitive index within its geometry: earlier components'
 //!   triangles first, then this component's, counted after its `index_range`.

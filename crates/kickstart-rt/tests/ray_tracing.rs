@@ -841,3 +841,60 @@ fn trace_rays_task_inputs_are_validated() {
     let h = closest(&ctx, &r);
     assert!(!h[0].is_hit() && h[0].t == -1.0);
 }
+
+/// The TLAS follows instance changes in every task, with or without a `BvhBuildTask`, unless a
+/// `BvhBuildTask` defers it with `build_tlas: false`; `TlasUpdate::Auto` refits moves.
+#[test]
+fn tlas_follows_instance_changes_unless_deferred() {
+    let ctx = context(4);
+    let quad = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    schedule_mesh(&mut c, g, "quad", &quad);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let at = |x: f32| ray(Vec3::new(x + 0.5, 0.5, 1.0), -Vec3::Z, 0.0, 5.0);
+    let probe = |ctx: &ExecuteContext| {
+        closest(ctx, &[at(0.0), at(3.0)])
+            .iter()
+            .map(|h| h.is_hit())
+            .collect::<Vec<_>>()
+    };
+    // Registered in a container without a BvhBuildTask: visible at once.
+    let mut c = ctx.create_task_container();
+    register_instance(&mut c, i, g, Affine3A::IDENTITY);
+    build_submit_complete(&ctx, c);
+    assert_eq!(probe(&ctx), [true, false]);
+    // Moved with build_tlas: false: rays of that task still see the old place...
+    let moved = InstanceInput::new(g, Affine3A::from_translation(Vec3::new(3.0, 0.0, 0.0)));
+    let rays = [at(0.0), at(3.0)];
+    let rb = buffer(bytemuck::cast_slice(&rays), wgpu::BufferUsages::STORAGE);
+    let hb = buffer(
+        &[0u8; 64],
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    );
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Update,
+        handle: i,
+        input: moved,
+    });
+    c.schedule_bvh_task(BvhBuildTask {
+        build_tlas: false,
+        ..Default::default()
+    });
+    c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask::new(rb, 2, hb.clone())));
+    build_submit_complete(&ctx, c);
+    let hits: Vec<GpuHit> = bytemuck::pod_collect_to_vec(&read_buffer(&hb));
+    assert_eq!([hits[0].is_hit(), hits[1].is_hit()], [true, false]);
+    // ...and the next task that does not defer brings the move in (a refit).
+    assert_eq!(probe(&ctx), [false, true]);
+    // Destroyed: gone from the TLAS in the next task.
+    ctx.destroy_instance_handle(i).unwrap();
+    build_submit_complete(&ctx, ctx.create_task_container());
+    assert_eq!(probe(&ctx), [false, false]);
+}

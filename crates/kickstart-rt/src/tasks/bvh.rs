@@ -271,15 +271,18 @@ impl TlasUpdate {
     pub const AUTO_REBUILD_AFTER_REFITS: u32 = 16;
 }
 
-/// Controls how much BVH building one GPU task does. Without one in a container, geometry
-/// registered or updated in it waits (in order) for a later task that has one, and the TLAS is
-/// not touched — as the reference, which builds only in `BVHBuildTask`s.
+/// Controls how much BVH building one GPU task does. BLASes are built only by a task holding
+/// one (as the reference): without it, geometry registered or updated waits, in order, for a
+/// later task that has one. The TLAS is brought up to date in every task that changed an
+/// instance (or built a BLAS), unless this task's `build_tlas` is false.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BvhBuildTask {
     /// Most BLAS builds (and refits) in this GPU task (≥ 1); the rest wait, in order, for later
     /// tasks.
     pub max_blas_build_count: u32,
-    /// Build or refit the TLAS in this task when an instance or a BLAS it uses changed.
+    /// Build or refit the TLAS in this task when an instance or a BLAS it uses changed; `false`
+    /// defers that, and the instance data rays see, to the next task that updates the TLAS (rays
+    /// keep seeing the previous placements, consistently).
     pub build_tlas: bool,
     /// Rebuild or refit the TLAS.
     pub tlas_update: TlasUpdate,
