@@ -54,6 +54,15 @@ struct RtHit {
 @group(0) @binding(4) var<storage, read> rt_triangles: array<vec4<f32>>;
 
 const RT_STACK_SIZE: u32 = 64u;
+const RT_MAX_VISITS: u32 = 1048576u;
+const RT_LEAF_BIT: u32 = 0x80000000u;
+const RT_FIRST_MASK: u32 = 0x0fffffffu;
+const RT_NO_INDEX: u32 = 0xffffffffu;
+// Largest finite f32: stands in for ∞ (WGSL lets implementations assume no infinities).
+const RT_FLT_MAX: f32 = 3.40282347e38;
+// 1 + 2γ (Ize 2013), as the CPU's slab test: widens the far distance so rounding never culls a
+// box that a grazing ray touches.
+const RT_FAR_WIDEN: f32 = 1.0000004;
 
 // Traversal stack, split in two (one logical stack of RT_STACK_SIZE entries; the split changes
 // no result, only where entries live).
@@ -64,9 +73,9 @@ const RT_STACK_SIZE: u32 = 64u;
 // evict the BVH nodes from L1 and send most stack traffic to L2. Workgroup (shared) memory is
 // on-chip and not a cache: it takes a fixed carve-out of the same SRAM, but its accesses never
 // evict node data and never go to L2, so the shallow part of the stack, where nearly all pushes
-// and pops happen, goes there. Entries deeper than RT_SHARED_DEPTH (rare:
-// it needs RT_SHARED_DEPTH pending subtrees at once) spill to private arrays, which stay
-// allocated in local memory but are almost never touched, so they no longer thrash the cache.
+// and pops happen, goes there. Entries deeper than RT_SHARED_DEPTH (rare: that takes
+// RT_SHARED_DEPTH pending subtrees at once) spill to private arrays, which stay allocated in
+// local memory but are almost never touched, so they no longer thrash the cache.
 //
 // Layout: entry i of lane l is at i * RT_WORKGROUP_SIZE + l. RT_WORKGROUP_SIZE is a multiple of
 // the 32 banks, so the bank of an access is l mod 32 whatever the entry: the lanes of a warp
@@ -81,9 +90,9 @@ const RT_STACK_SIZE: u32 = 64u;
 // `rt_lane = local_invocation_index` before tracing.
 const RT_WORKGROUP_SIZE: u32 = 64u;
 const RT_SHARED_DEPTH: u32 = 24u;
-const RT_SPILL_DEPTH: u32 = 40u; // RT_STACK_SIZE - RT_SHARED_DEPTH
-var<workgroup> rt_wg_ref: array<u32, 1536>; // RT_SHARED_DEPTH * RT_WORKGROUP_SIZE
-var<workgroup> rt_wg_t: array<f32, 1536>;
+const RT_SPILL_DEPTH: u32 = RT_STACK_SIZE - RT_SHARED_DEPTH;
+var<workgroup> rt_wg_ref: array<u32, RT_SHARED_DEPTH * RT_WORKGROUP_SIZE>;
+var<workgroup> rt_wg_t: array<f32, RT_SHARED_DEPTH * RT_WORKGROUP_SIZE>;
 var<private> rt_spill_ref: array<u32, RT_SPILL_DEPTH>;
 var<private> rt_spill_t: array<f32, RT_SPILL_DEPTH>;
 // This invocation's local_invocation_index (set by the entry point).
@@ -113,15 +122,6 @@ fn rt_stack_load(i: u32) -> RtStackEntry {
     }
     return RtStackEntry(rt_spill_ref[i - RT_SHARED_DEPTH], rt_spill_t[i - RT_SHARED_DEPTH]);
 }
-const RT_MAX_VISITS: u32 = 1048576u;
-const RT_LEAF_BIT: u32 = 0x80000000u;
-const RT_FIRST_MASK: u32 = 0x0fffffffu;
-const RT_NO_INDEX: u32 = 0xffffffffu;
-// Largest finite f32: stands in for ∞ (WGSL lets implementations assume no infinities).
-const RT_FLT_MAX: f32 = 3.40282347e38;
-// 1 + 2γ (Ize 2013), as the CPU's slab test: widens the far distance so rounding never culls a
-// box that a grazing ray touches.
-const RT_FAR_WIDEN: f32 = 1.0000004;
 
 fn rt_is_finite(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
