@@ -64,6 +64,65 @@ const RT_FLT_MAX: f32 = 3.40282347e38;
 // box that a grazing ray touches.
 const RT_FAR_WIDEN: f32 = 1.0000004;
 
+// Traversal stack, split in two (one logical stack of RT_STACK_SIZE entries; the split changes
+// no result, only where entries live).
+//
+// Why: the stack is indexed dynamically, so a per-invocation array cannot live in registers; GPUs
+// put it in per-thread local memory, which goes through L1 like any global access. With thousands
+// of invocations per SM, 512 B each, incoherent rays (whose stacks are touched at every node)
+// evict the BVH nodes from L1 and send most stack traffic to L2. Workgroup (shared) memory is
+// on-chip and not a cache: it takes a fixed carve-out of the same SRAM, but its accesses never
+// evict node data and never go to L2, so the shallow part of the stack, where nearly all pushes
+// and pops happen, goes there. Entries deeper than RT_SHARED_DEPTH (rare: that takes
+// RT_SHARED_DEPTH pending subtrees at once) spill to private arrays, which stay allocated in
+// local memory but are almost never touched, so they no longer thrash the cache.
+//
+// Layout: entry i of lane l is at i * RT_WORKGROUP_SIZE + l. RT_WORKGROUP_SIZE is a multiple of
+// the 32 banks, so the bank of an access is l mod 32 whatever the entry: the lanes of a warp
+// never conflict, even when they sit at different stack depths. No barrier is needed: each lane
+// only touches its own entries.
+//
+// Size: 2 × 4 B × RT_SHARED_DEPTH × RT_WORKGROUP_SIZE = 12 KiB per workgroup, within the 16 KiB
+// WebGPU default limit, and small enough that the SM keeps several workgroups resident and a
+// useful L1 carve-out for node fetches (deeper shared stacks would cut both).
+//
+// Every pass that prepends this module must use @workgroup_size(RT_WORKGROUP_SIZE) (1-D) and set
+// `rt_lane = local_invocation_index` before tracing.
+const RT_WORKGROUP_SIZE: u32 = 64u;
+const RT_SHARED_DEPTH: u32 = 24u;
+const RT_SPILL_DEPTH: u32 = RT_STACK_SIZE - RT_SHARED_DEPTH;
+var<workgroup> rt_wg_ref: array<u32, RT_SHARED_DEPTH * RT_WORKGROUP_SIZE>;
+var<workgroup> rt_wg_t: array<f32, RT_SHARED_DEPTH * RT_WORKGROUP_SIZE>;
+var<private> rt_spill_ref: array<u32, RT_SPILL_DEPTH>;
+var<private> rt_spill_t: array<f32, RT_SPILL_DEPTH>;
+// This invocation's local_invocation_index (set by the entry point).
+var<private> rt_lane: u32;
+
+// Stack entry i (< RT_STACK_SIZE): node reference and entry distance.
+fn rt_stack_store(i: u32, node: u32, t: f32) {
+    if i < RT_SHARED_DEPTH {
+        let slot = i * RT_WORKGROUP_SIZE + rt_lane;
+        rt_wg_ref[slot] = node;
+        rt_wg_t[slot] = t;
+    } else {
+        rt_spill_ref[i - RT_SHARED_DEPTH] = node;
+        rt_spill_t[i - RT_SHARED_DEPTH] = t;
+    }
+}
+
+struct RtStackEntry {
+    node: u32,
+    t: f32,
+}
+
+fn rt_stack_load(i: u32) -> RtStackEntry {
+    if i < RT_SHARED_DEPTH {
+        let slot = i * RT_WORKGROUP_SIZE + rt_lane;
+        return RtStackEntry(rt_wg_ref[slot], rt_wg_t[slot]);
+    }
+    return RtStackEntry(rt_spill_ref[i - RT_SHARED_DEPTH], rt_spill_t[i - RT_SHARED_DEPTH]);
+}
+
 fn rt_is_finite(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
 }
@@ -80,6 +139,15 @@ fn rt_transform(m: mat3x4<f32>, p: vec3<f32>, w: f32) -> vec3<f32> {
         m[1].x * p.x + m[1].y * p.y + m[1].z * p.z + m[1].w * w,
         m[2].x * p.x + m[2].y * p.y + m[2].z * p.z + m[2].w * w,
     );
+}
+
+// Component k (0, 1 or 2) of v: exactly the value v[k], without a dynamic index. A runtime
+// vector index gets a bounds clamp from naga and may be lowered through a scratch copy of the
+// vector; it ran three times per vertex, nine per triangle. Two selects per component cost a few
+// ALU ops and yield the same bits, so the shear (and watertightness: every vertex still goes
+// through one deterministic formula) is unchanged.
+fn rt_component(v: vec3<f32>, k: u32) -> f32 {
+    return select(select(v.x, v.y, k == 1u), v.z, k == 2u);
 }
 
 // A ray prepared for one space (world for the TLAS, an instance's object space for its BLAS).
@@ -116,14 +184,14 @@ fn rt_space(origin: vec3<f32>, dir: vec3<f32>) -> RtSpace {
     var kx = (kz + 1u) % 3u;
     var ky = (kx + 1u) % 3u;
     // Keep the winding: swap when the dominant component is negative.
-    if dir[kz] < 0.0 {
+    let dz = rt_component(dir, kz);
+    if dz < 0.0 {
         let tmp = kx;
         kx = ky;
         ky = tmp;
     }
-    let dz = dir[kz];
     sp.k = vec3<u32>(kx, ky, kz);
-    sp.s = vec3<f32>(dir[kx] / dz, dir[ky] / dz, 1.0 / dz);
+    sp.s = vec3<f32>(rt_component(dir, kx) / dz, rt_component(dir, ky) / dz, 1.0 / dz);
     return sp;
 }
 
@@ -162,8 +230,12 @@ fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32)
 // bits in both.
 fn rt_shear(p: vec3<f32>, sp: RtSpace) -> vec3<f32> {
     let d = p - sp.origin;
-    let dz = d[sp.k.z];
-    return vec3<f32>(d[sp.k.x] - sp.s.x * dz, d[sp.k.y] - sp.s.y * dz, sp.s.z * dz);
+    let dz = rt_component(d, sp.k.z);
+    return vec3<f32>(
+        rt_component(d, sp.k.x) - sp.s.x * dz,
+        rt_component(d, sp.k.y) - sp.s.y * dz,
+        sp.s.z * dz,
+    );
 }
 
 // Edge function of the edge p → q: q.x * p.y - q.y * p.x (the CPU's U = cx*by - cy*bx for b → c),
@@ -244,10 +316,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
     }
     let world = rt_space(ray.origin, ray.dir);
     var local = world;
-    var stack_ref: array<u32, RT_STACK_SIZE>;
-    var stack_t: array<f32, RT_STACK_SIZE>;
-    stack_ref[0] = 0u;
-    stack_t[0] = t_min;
+    rt_stack_store(0u, 0u, t_min);
     var sp = 1u;
     var blas_sp = RT_STACK_SIZE + 1u;
     var node_base = 0u;
@@ -257,8 +326,9 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
     while sp > 0u && visits < RT_MAX_VISITS {
         visits += 1u;
         sp -= 1u;
-        let entry = stack_ref[sp];
-        let entry_t = stack_t[sp];
+        let popped = rt_stack_load(sp);
+        let entry = popped.node;
+        let entry_t = popped.t;
         let in_blas = sp >= blas_sp;
         if !in_blas {
             blas_sp = RT_STACK_SIZE + 1u;
@@ -297,8 +367,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 // A TLAS leaf of several instances: enter the first now and re-push the rest
                 // (below the BLAS entries, so they come after this BLAS is done).
                 if count > 1u && sp < RT_STACK_SIZE {
-                    stack_ref[sp] = RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u);
-                    stack_t[sp] = entry_t;
+                    rt_stack_store(sp, RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), entry_t);
                     sp += 1u;
                 }
                 let inst = rt_instances[first];
@@ -319,8 +388,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 tri_base = geo.tri_base;
                 cur_inst = first;
                 blas_sp = sp;
-                stack_ref[sp] = 0u;
-                stack_t[sp] = entry_t;
+                rt_stack_store(sp, 0u, entry_t);
                 sp += 1u;
             }
             continue;
@@ -362,18 +430,15 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 far_t = hl.near;
             }
             if sp + 1u < RT_STACK_SIZE {
-                stack_ref[sp] = far_ref;
-                stack_t[sp] = far_t;
+                rt_stack_store(sp, far_ref, far_t);
                 sp += 1u;
             }
             if sp < RT_STACK_SIZE {
-                stack_ref[sp] = near_ref;
-                stack_t[sp] = near_t;
+                rt_stack_store(sp, near_ref, near_t);
                 sp += 1u;
             }
         } else if (hl.hit || hr.hit) && sp < RT_STACK_SIZE {
-            stack_ref[sp] = select(rref, lref, hl.hit);
-            stack_t[sp] = select(hr.near, hl.near, hl.hit);
+            rt_stack_store(sp, select(rref, lref, hl.hit), select(hr.near, hl.near, hl.hit));
             sp += 1u;
         }
     }
