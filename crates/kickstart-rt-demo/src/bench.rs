@@ -271,9 +271,15 @@ impl Bench<'_> {
         ms
     }
 
-    /// Runs `one` once untimed (warm-up), then `iterations` times.
+    /// Runs `one` untimed for at least half a second (warm-up: GPU clocks ramp up from idle,
+    /// and one short run left them low enough to skew sub-millisecond passes 2–4× on the H100),
+    /// then `iterations` times timed.
     fn repeat(&self, mut one: impl FnMut(bool) -> AnyResult<f64>) -> AnyResult<Stats> {
+        let start = std::time::Instant::now();
         one(false)?;
+        while start.elapsed() < std::time::Duration::from_millis(500) {
+            one(false)?;
+        }
         let samples = (0..self.iterations)
             .map(|_| one(true))
             .collect::<AnyResult<Vec<f64>>>()?;
@@ -378,9 +384,11 @@ impl Bench<'_> {
         });
         let readback = gpu::readback_buffer(self.device, bytes);
         let count = rays.len() as u64;
-        let mut remaining = self.iterations + 1;
-        let stats = self.repeat(|_| {
-            remaining -= 1;
+        let mut timed_runs = 0;
+        let stats = self.repeat(|timed| {
+            if timed {
+                timed_runs += 1;
+            }
             let mut c = ctx.create_task_container();
             let mut first = 0u64;
             while first < count {
@@ -395,7 +403,7 @@ impl Bench<'_> {
                 first += n;
             }
             // Only the last repetition's hits are read back; the copy is outside the timed passes.
-            let read = remaining == 0;
+            let read = timed && timed_runs == self.iterations;
             self.timed(ctx, c, &["trace rays"], |e| {
                 if read {
                     e.copy_buffer_to_buffer(&hit_buffer, 0, &readback, 0, bytes);

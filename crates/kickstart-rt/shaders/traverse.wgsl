@@ -240,7 +240,17 @@ fn rt_shear(p: vec3<f32>, sp: RtSpace) -> vec3<f32> {
 
 // Edge function of the edge p → q: q.x * p.y - q.y * p.x (the CPU's U = cx*by - cy*bx for b → c),
 // evaluated with the endpoints in a canonical order (see the header comment).
+//
+// Coincident endpoints give exactly 0 (mathematically x*y - y*x). Written out, a compiler that
+// fuses the multiply-add (NVIDIA's does) returns the rounding error of x*y instead, the same
+// non-zero value on all three edges of a point-like triangle: a zero-area triangle would then be
+// "hit" by any ray reaching its box (seen on the H100 with a ray aimed at such a vertex). With
+// two coincident vertices the other two edges are exact negatives (canonical order), so the
+// determinant is exactly 0 and the triangle is never hit, as on the CPU.
 fn rt_edge(p: vec2<f32>, q: vec2<f32>) -> f32 {
+    if all(p == q) {
+        return 0.0;
+    }
     let swap = q.x < p.x || (q.x == p.x && q.y < p.y);
     let a = select(p, q, swap);
     let b = select(q, p, swap);
