@@ -25,15 +25,13 @@ struct GpuHitOut {
 @group(1) @binding(1) var<storage, read> rays: array<RtRay>;
 @group(1) @binding(2) var<storage, read_write> hits: array<GpuHitOut>;
 
-// The traversal stack lives partly in workgroup memory, sliced per lane: the workgroup size must
-// be the module's RT_WORKGROUP_SIZE and rt_lane must be set before tracing.
+// The traversal module's workgroup size (the Rust side dispatches by it).
 @compute @workgroup_size(RT_WORKGROUP_SIZE)
 fn main(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    rt_lane = lid;
     let i = (wid.y * nwg.x + wid.x) * RT_WORKGROUP_SIZE + lid;
     if i >= params.count {
         return;

@@ -64,50 +64,24 @@ const RT_FLT_MAX: f32 = 3.40282347e38;
 // box that a grazing ray touches.
 const RT_FAR_WIDEN: f32 = 1.0000004;
 
-// Traversal stack, split in two (one logical stack of RT_STACK_SIZE entries; the split changes
-// no result, only where entries live).
+// Traversal stack: one private array per invocation (node reference and entry distance), 64
+// entries for both levels.
 //
-// Why: the stack is indexed dynamically, so a per-invocation array cannot live in registers; GPUs
-// put it in per-thread local memory, which goes through L1 like any global access. With thousands
-// of invocations per SM, 512 B each, incoherent rays (whose stacks are touched at every node)
-// evict the BVH nodes from L1 and send most stack traffic to L2. Workgroup (shared) memory is
-// on-chip and not a cache: it takes a fixed carve-out of the same SRAM, but its accesses never
-// evict node data and never go to L2, so the shallow part of the stack, where nearly all pushes
-// and pops happen, goes there. Entries deeper than RT_SHARED_DEPTH (rare: that takes
-// RT_SHARED_DEPTH pending subtrees at once) spill to private arrays, which stay allocated in
-// local memory but are almost never touched, so they no longer thrash the cache.
+// Measured on the H100 (BENCHMARKS.md, 2026-11-23): moving the shallow part of the stack into
+// workgroup memory (per-lane slices of 16–24 entries) made incoherent rays 1.5–2.3× *slower*
+// than this private stack; the workgroup carve-out costs occupancy and L1 for node fetches more
+// than local-memory stack traffic costs. Keep the stack private unless a measurement says
+// otherwise.
 //
-// Layout: entry i of lane l is at i * RT_WORKGROUP_SIZE + l. RT_WORKGROUP_SIZE is a multiple of
-// the 32 banks, so the bank of an access is l mod 32 whatever the entry: the lanes of a warp
-// never conflict, even when they sit at different stack depths. No barrier is needed: each lane
-// only touches its own entries.
-//
-// Size: 2 × 4 B × RT_SHARED_DEPTH × RT_WORKGROUP_SIZE = 12 KiB per workgroup, within the 16 KiB
-// WebGPU default limit, and small enough that the SM keeps several workgroups resident and a
-// useful L1 carve-out for node fetches (deeper shared stacks would cut both).
-//
-// Every pass that prepends this module must use @workgroup_size(RT_WORKGROUP_SIZE) (1-D) and set
-// `rt_lane = local_invocation_index` before tracing.
+// Passes that include this module dispatch RT_WORKGROUP_SIZE invocations per workgroup.
 const RT_WORKGROUP_SIZE: u32 = 64u;
-const RT_SHARED_DEPTH: u32 = 24u;
-const RT_SPILL_DEPTH: u32 = RT_STACK_SIZE - RT_SHARED_DEPTH;
-var<workgroup> rt_wg_ref: array<u32, RT_SHARED_DEPTH * RT_WORKGROUP_SIZE>;
-var<workgroup> rt_wg_t: array<f32, RT_SHARED_DEPTH * RT_WORKGROUP_SIZE>;
-var<private> rt_spill_ref: array<u32, RT_SPILL_DEPTH>;
-var<private> rt_spill_t: array<f32, RT_SPILL_DEPTH>;
-// This invocation's local_invocation_index (set by the entry point).
-var<private> rt_lane: u32;
+var<private> rt_stack_ref: array<u32, RT_STACK_SIZE>;
+var<private> rt_stack_t: array<f32, RT_STACK_SIZE>;
 
 // Stack entry i (< RT_STACK_SIZE): node reference and entry distance.
 fn rt_stack_store(i: u32, node: u32, t: f32) {
-    if i < RT_SHARED_DEPTH {
-        let slot = i * RT_WORKGROUP_SIZE + rt_lane;
-        rt_wg_ref[slot] = node;
-        rt_wg_t[slot] = t;
-    } else {
-        rt_spill_ref[i - RT_SHARED_DEPTH] = node;
-        rt_spill_t[i - RT_SHARED_DEPTH] = t;
-    }
+    rt_stack_ref[i] = node;
+    rt_stack_t[i] = t;
 }
 
 struct RtStackEntry {
@@ -116,11 +90,7 @@ struct RtStackEntry {
 }
 
 fn rt_stack_load(i: u32) -> RtStackEntry {
-    if i < RT_SHARED_DEPTH {
-        let slot = i * RT_WORKGROUP_SIZE + rt_lane;
-        return RtStackEntry(rt_wg_ref[slot], rt_wg_t[slot]);
-    }
-    return RtStackEntry(rt_spill_ref[i - RT_SHARED_DEPTH], rt_spill_t[i - RT_SHARED_DEPTH]);
+    return RtStackEntry(rt_stack_ref[i], rt_stack_t[i]);
 }
 
 fn rt_is_finite(x: f32) -> bool {

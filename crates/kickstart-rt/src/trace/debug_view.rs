@@ -23,7 +23,7 @@ use glam::{DVec3, DVec4};
 const DEBUG_PRIMARY_WGSL: &str = include_str!("../../shaders/debug_primary.wgsl");
 
 /// Invocations per workgroup of the debug view shader (its `@workgroup_size`): `RT_WORKGROUP_SIZE`
-/// of `shaders/traverse.wgsl`, which sizes the per-lane traversal stacks in workgroup memory.
+/// of `shaders/traverse.wgsl`.
 const WORKGROUP_SIZE: u32 = 64;
 
 /// The task name used in errors.

@@ -11,7 +11,7 @@ pub(crate) const TRAVERSE_WGSL: &str = include_str!("../../shaders/traverse.wgsl
 const TRACE_RAYS_WGSL: &str = include_str!("../../shaders/trace_rays.wgsl");
 
 /// Invocations per workgroup of the ray batch shader (its `@workgroup_size`): `RT_WORKGROUP_SIZE`
-/// of `shaders/traverse.wgsl`, which sizes the per-lane traversal stacks in workgroup memory.
+/// of `shaders/traverse.wgsl`.
 const WORKGROUP_SIZE: u32 = 64;
 
 /// Size of one [`GpuRay`] / [`GpuHit`] record in bytes.
