@@ -1,9 +1,8 @@
-//! `ksrt render` without `--debug-view`: registers the scene with the SDK and writes an image of
-//! it traced on the CPU.
-//!
-//! Until the SDK's GPU tracer lands, the image is traced with the SDK's public CPU reference BVH
-//! (`kickstart_rt::cpu`): primary rays, a sun with ray-traced hard shadows, each mesh its colour.
-//! It is labelled as such in the file name and the output.
+//! The CPU reference image of `ksrt render`: the scene registered with the SDK, and the view
+//! traced with the SDK's public CPU reference BVH (`kickstart_rt::cpu`): primary rays, a sun with
+//! ray-traced hard shadows, each mesh its colour. It stands beside the GPU debug views until the
+//! lighting cache and the trace tasks make lit GPU images; it is labelled as such in the file name
+//! and the output.
 
 use glam::Vec3;
 use kickstart_rt as ksrt;
@@ -52,7 +51,7 @@ pub fn render(
     let path = opts.out.join("cpu-reference.png");
     image.save(&path)?;
     println!(
-        "wrote {} ({}x{}, traced on the CPU reference BVH in {:.2} s; the GPU trace tasks are not implemented yet)",
+        "wrote {} ({}x{}, traced on the CPU reference BVH in {:.2} s; lit GPU images need the lighting cache and trace tasks, not implemented yet)",
         path.display(),
         opts.width,
         opts.height,

@@ -9,25 +9,6 @@ struct Params {
     d: u32,     // gather: dst_base
 }
 
-struct InstanceGpu {
-    object_to_world: mat3x4<f32>, // rows
-    world_to_object: mat3x4<f32>,
-    geometry: u32,
-    mask: u32,
-    flags: u32,
-    pad: u32,
-    pad2: vec4<u32>,
-}
-
-struct GeometryGpu {
-    node_base: u32,
-    tri_base: u32,
-    tri_count: u32,
-    flags: u32,
-    bounds_min: vec4<f32>,
-    bounds_max: vec4<f32>,
-}
-
 @group(0) @binding(0) var<uniform> params: Params;
 
 const WG: u32 = 64u;

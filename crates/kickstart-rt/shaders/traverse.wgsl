@@ -1,7 +1,8 @@
 // kickstart-rt traversal module: two-level BVH traversal (TLAS → instance → BLAS) with a
 // watertight ray/triangle test. Every tracing pass prepends this file to its own source (WGSL has
 // no include). Layouts and rules: docs/ray-tracing-core.md ("Traversal"); the CPU oracle in
-// src/cpu follows the same rules, and the unit tests in src/trace compare the two.
+// src/cpu follows the same rules, and the unit tests in src/trace compare the two. The scene
+// table structs come from scene_types.wgsl, prepended before this file.
 //
 // Watertightness without f64: an edge function that is exactly 0 counts as inside (edge-inclusive,
 // evaluated in f32 only; the CPU oracle does the same). Rounding of a product is monotonic, so a
@@ -10,25 +11,6 @@
 // its two endpoints in a canonical order, so the two triangles sharing an edge evaluate the same
 // expression (one of them negates it): even where the compiler contracts a*b - c*d into an FMA,
 // both sides round identically and their signs stay exactly opposite.
-
-struct GeometryGpu {
-    node_base: u32,
-    tri_base: u32,
-    tri_count: u32,
-    flags: u32,
-    bounds_min: vec4<f32>,
-    bounds_max: vec4<f32>,
-}
-
-struct InstanceGpu {
-    object_to_world: mat3x4<f32>,
-    world_to_object: mat3x4<f32>,
-    geometry: u32,
-    mask: u32,
-    flags: u32,
-    pad: u32,
-    pad2: vec4<u32>,
-}
 
 struct RtRay {
     origin: vec3<f32>,

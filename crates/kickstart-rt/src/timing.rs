@@ -1,6 +1,6 @@
 //! GPU timings of the SDK's passes, from timestamp queries written around each compute pass.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gpu::recorder::{TimedPass, Timestamps};
 
 /// GPU time of one compute pass.
@@ -89,20 +89,8 @@ impl TimingReadback {
 
     /// Waits for the values and converts ticks (`period_ns` each) to milliseconds.
     pub fn wait(self, device: &wgpu::Device, period_ns: f32) -> Result<GpuTimings> {
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::ReadBack(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| Error::ReadBack(e.to_string()))?
-            .map_err(|e| Error::ReadBack(e.to_string()))?;
-        let ticks: Vec<u64> = match self.buffer.slice(..).get_mapped_range() {
-            Ok(v) => bytemuck::pod_collect_to_vec(&v),
-            Err(e) => return Err(Error::ReadBack(e.to_string())),
-        };
+        let bytes = crate::scene::gpu_scene::map_and_wait(device, &self.buffer)?;
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
         let to_ms = |t: u64| t as f64 * period_ns as f64 * 1e-6;
         let origin = ticks.first().copied().unwrap_or(0);
         let passes = self

@@ -807,8 +807,14 @@ pub(crate) fn read_back(
     let mut enc = device.create_command_encoder(&Default::default());
     enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
     queue.submit([enc.finish()]);
+    map_and_wait(device, &staging)
+}
+
+/// Maps a `MAP_READ` buffer, waits for the device, and copies its bytes out (tools and tests
+/// only: this blocks).
+pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
     let (tx, rx) = std::sync::mpsc::channel();
-    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
         let _ = tx.send(r);
     });
     device
@@ -817,7 +823,7 @@ pub(crate) fn read_back(
     rx.recv()
         .map_err(|e| Error::ReadBack(e.to_string()))?
         .map_err(|e| Error::ReadBack(e.to_string()))?;
-    let data = staging
+    let data = buffer
         .slice(..)
         .get_mapped_range()
         .map_err(|e| Error::ReadBack(e.to_string()))?

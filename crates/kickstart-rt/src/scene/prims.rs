@@ -21,7 +21,10 @@ pub(crate) struct Prims {
 impl Prims {
     /// Creates the pipelines.
     pub fn new(device: &wgpu::Device) -> Self {
-        let source = include_str!("../../shaders/prims.wgsl");
+        let source = concat!(
+            include_str!("../../shaders/scene_types.wgsl"),
+            include_str!("../../shaders/prims.wgsl")
+        );
         let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", source, entry);
         Prims {
             triangle_aabbs: make("triangle_aabbs"),

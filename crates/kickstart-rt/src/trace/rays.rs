@@ -7,7 +7,10 @@ use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
 
 /// The traversal module (`shaders/traverse.wgsl`) that every tracing pass prepends.
-pub(crate) const TRAVERSE_WGSL: &str = include_str!("../../shaders/traverse.wgsl");
+pub(crate) const TRAVERSE_WGSL: &str = concat!(
+    include_str!("../../shaders/scene_types.wgsl"),
+    include_str!("../../shaders/traverse.wgsl")
+);
 const TRACE_RAYS_WGSL: &str = include_str!("../../shaders/trace_rays.wgsl");
 
 /// Invocations per workgroup of the ray batch shader (its `@workgroup_size`): `RT_WORKGROUP_SIZE`
