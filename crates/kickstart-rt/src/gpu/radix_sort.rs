@@ -5,14 +5,19 @@
 //! One 4-bit digit per pass; each pass is histogram → multi-level prefix sum → stable scatter.
 //! 4-bit digits keep the per-thread rank counters of a block in 8 KiB of workgroup memory (two
 //! 16-bit lanes per word), so ranking costs O(1) per element instead of a loop over the radix.
-
-// Until the GPU BVH builder (another branch) calls it, only the tests use this module.
+//! Counts up to [`SMALL_SORT_MAX`] take a one-workgroup bitonic network over (key, position)
+//! instead: the same stable result in one dispatch, since small sorts (small BLASes, TLASes) are
+//! bound by dispatch count.
 
 use super::shader::compute_pipeline;
 use super::Recorder;
 
 /// WGSL source of every kernel of the sort.
 const SOURCE: &str = include_str!("../../shaders/radix_sort.wgsl");
+/// One-workgroup stable sort for small inputs (`shaders/radix_sort_small.wgsl`).
+const SMALL_SOURCE: &str = include_str!("../../shaders/radix_sort_small.wgsl");
+/// Largest count sorted by the one-workgroup path (its workgroup arrays' length).
+pub(crate) const SMALL_SORT_MAX: u32 = 1024;
 
 /// Bits of one digit (one pass each). Must match `RADIX` in the shader.
 const DIGIT_BITS: u32 = 4;
@@ -73,6 +78,8 @@ pub(crate) struct RadixSort {
     scan_add: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
     copy_back: wgpu::ComputePipeline,
+    /// The one-workgroup path for counts up to [`SMALL_SORT_MAX`].
+    small: wgpu::ComputePipeline,
     /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
     /// its scan levels; created on first use, grown when a sort needs more.
     keys_tmp: Option<wgpu::Buffer>,
@@ -90,6 +97,7 @@ impl RadixSort {
             scan_add: pipeline("scan_add"),
             scatter: pipeline("scatter"),
             copy_back: pipeline("copy_back"),
+            small: compute_pipeline(device, "radix sort (small)", SMALL_SOURCE, "sort_small"),
             keys_tmp: None,
             vals_tmp: None,
             hist: None,
@@ -117,6 +125,30 @@ impl RadixSort {
         key_bits: u32,
     ) {
         if count <= 1 || key_bits == 0 {
+            return;
+        }
+        if count <= SMALL_SORT_MAX {
+            // Same result (stable, ascending) in one dispatch instead of ~5 per digit pass.
+            let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
+            let bg = rec.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("radix sort (small)"),
+                layout: &self.small.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: uniform.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: keys.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: values.as_entire_binding(),
+                    },
+                ],
+            });
+            rec.dispatch("radix sort (small)", &self.small, &[&bg], 1);
             return;
         }
         let key_bits = key_bits.min(32);
@@ -367,6 +399,10 @@ mod tests {
     fn radix_sort_all_equal_keys_keep_input_order() {
         check(&vec![12345u32; 5000], 30);
         check(&vec![0u32; 3000], 32);
+        // The one-workgroup path: equal keys, including keys equal to its padding key.
+        check(&vec![7u32; 1000], 30);
+        check(&vec![u32::MAX; 700], 32);
+        check(&[u32::MAX, 0, u32::MAX, 5, 0, u32::MAX, 5], 32);
     }
 
     #[test]
