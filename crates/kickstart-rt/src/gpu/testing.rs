@@ -46,25 +46,8 @@ pub(crate) fn gpu() -> &'static TestGpu {
 /// Reads `size` bytes of `buffer` from `offset` back to the CPU (waits; tests only).
 pub(crate) fn read_back(buffer: &wgpu::Buffer, offset: u64, size: u64) -> Vec<u8> {
     let g = gpu();
-    let staging = g.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("test read-back"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut enc = g.device.create_command_encoder(&Default::default());
-    enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
-    g.queue.submit([enc.finish()]);
-    staging.map_async(wgpu::MapMode::Read, .., |r| r.expect("map"));
-    g.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .expect("poll");
-    let data = staging
-        .slice(..)
-        .get_mapped_range()
-        .expect("mapped")
-        .to_vec();
-    data
+    crate::scene::gpu_scene::read_back(&g.device, &g.queue, buffer, offset, size)
+        .expect("read-back")
 }
 
 /// A storage buffer (STORAGE | COPY_SRC | COPY_DST) with `data` in it.
@@ -105,4 +88,28 @@ pub(crate) fn run(f: impl FnOnce(&mut super::Recorder<'_>)) {
     g.device
         .poll(wgpu::PollType::wait_indefinitely())
         .expect("poll");
+}
+
+/// Small seeded PRNG (xorshift64*) for the unit tests' random inputs: failures reproduce from
+/// the seed.
+pub(crate) struct Rng(pub u64);
+
+impl Rng {
+    /// The next 64 random bits.
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+
+    /// Uniform in `0..n`.
+    pub fn below(&mut self, n: u32) -> u32 {
+        (((self.next() >> 32) * u64::from(n)) >> 32) as u32
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
+    }
 }

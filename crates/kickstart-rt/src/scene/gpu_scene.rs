@@ -166,6 +166,31 @@ struct Passes {
     debug_view: Option<DebugViewPass>,
 }
 
+impl Passes {
+    fn ingest(&mut self, d: &wgpu::Device) -> &Ingest {
+        self.ingest.get_or_insert_with(|| Ingest::new(d))
+    }
+
+    /// The two passes every BVH build and refit uses (borrowed together).
+    fn build(&mut self, d: &wgpu::Device) -> (&Prims, &mut Lbvh) {
+        let prims = self.prims.get_or_insert_with(|| Prims::new(d));
+        let lbvh = self.lbvh.get_or_insert_with(|| Lbvh::new(d));
+        (prims, lbvh)
+    }
+
+    fn rays(&mut self, d: &wgpu::Device) -> &RayTracer {
+        self.rays.get_or_insert_with(|| RayTracer::new(d))
+    }
+
+    fn debug_view(&mut self, d: &wgpu::Device) -> &mut DebugViewPass {
+        self.debug_view.get_or_insert_with(|| {
+            let mut p = DebugViewPass::new();
+            p.prepare(d);
+            p
+        })
+    }
+}
+
 /// The TLAS and its build buffers.
 struct Tlas {
     nodes: wgpu::Buffer,
@@ -244,36 +269,11 @@ impl GpuScene {
 
     /// Creates every pipeline now.
     pub fn prepare_pipelines(&mut self) {
-        self.ingest();
-        self.prims();
-        self.lbvh();
-        self.rays();
-        self.debug_view();
-    }
-
-    fn ingest(&mut self) -> &Ingest {
         let d = &self.device;
-        self.passes.ingest.get_or_insert_with(|| Ingest::new(d))
-    }
-    fn prims(&mut self) -> &Prims {
-        let d = &self.device;
-        self.passes.prims.get_or_insert_with(|| Prims::new(d))
-    }
-    fn lbvh(&mut self) -> &mut Lbvh {
-        let d = &self.device;
-        self.passes.lbvh.get_or_insert_with(|| Lbvh::new(d))
-    }
-    fn rays(&mut self) -> &RayTracer {
-        let d = &self.device;
-        self.passes.rays.get_or_insert_with(|| RayTracer::new(d))
-    }
-    fn debug_view(&mut self) -> &mut DebugViewPass {
-        let d = &self.device;
-        self.passes.debug_view.get_or_insert_with(|| {
-            let mut p = DebugViewPass::new();
-            p.prepare(d);
-            p
-        })
+        self.passes.ingest(d);
+        self.passes.build(d);
+        self.passes.rays(d);
+        self.passes.debug_view(d);
     }
 
     /// Bytes of build scratch held.
@@ -372,14 +372,8 @@ impl GpuScene {
         staged: Range,
         ingestion: u32,
     ) {
-        self.ingest();
-        let (Some(ingest), tris, counters) = (
-            self.passes.ingest.as_ref(),
-            self.staged.buffer(),
-            &self.counters,
-        ) else {
-            return;
-        };
+        let ingest = self.passes.ingest(&self.device);
+        let (tris, counters) = (self.staged.buffer(), &self.counters);
         rec.scope = "ingest";
         ingest.record(
             rec,
@@ -469,13 +463,8 @@ impl GpuScene {
             None
         };
         self.ensure_scratch(n);
-        self.prims();
-        self.lbvh();
         rec.scope = "blas build";
-        let (Some(prims), Some(lbvh)) = (self.passes.prims.as_ref(), self.passes.lbvh.as_mut())
-        else {
-            return Err(Error::Unsupported { task: "BLAS build" });
-        };
+        let (prims, lbvh) = self.passes.build(&self.device);
         prims.triangle_aabbs(
             rec,
             self.staged.buffer(),
@@ -532,13 +521,8 @@ impl GpuScene {
         };
         let n = g.triangles;
         self.ensure_scratch(n);
-        self.prims();
-        self.lbvh();
         rec.scope = "blas refit";
-        let (Some(prims), Some(lbvh)) = (self.passes.prims.as_ref(), self.passes.lbvh.as_mut())
-        else {
-            return;
-        };
+        let (prims, lbvh) = self.passes.build(&self.device);
         prims.triangle_aabbs(
             rec,
             self.staged.buffer(),
@@ -612,12 +596,7 @@ impl GpuScene {
             );
             self.tlas.capacity = cap;
         }
-        self.prims();
-        self.lbvh();
-        let (Some(prims), Some(lbvh)) = (self.passes.prims.as_ref(), self.passes.lbvh.as_mut())
-        else {
-            return Err(Error::Unsupported { task: "TLAS build" });
-        };
+        let (prims, lbvh) = self.passes.build(&self.device);
         rec.scope = if refit { "tlas refit" } else { "tlas build" };
         prims.instance_aabbs(
             rec,
@@ -666,26 +645,26 @@ impl GpuScene {
         Ok(())
     }
 
-    fn scene_buffers(&self) -> SceneBuffers<'_> {
-        SceneBuffers {
+    /// The pipelines, the device and the scene bindings, borrowed together (disjoint fields) for
+    /// a tracing pass.
+    fn tracing(&mut self) -> (&mut Passes, &wgpu::Device, SceneBuffers<'_>) {
+        let scene = SceneBuffers {
             tlas_nodes: &self.tlas.nodes,
             instances: &self.instance_table.buffer,
             geometries: &self.geometry_table.buffer,
             blas_nodes: self.nodes.buffer(),
             triangles: self.triangles.buffer(),
-        }
+        };
+        (&mut self.passes, &self.device, scene)
     }
 
     /// Records a batch of rays.
     pub fn trace_rays(&mut self, rec: &mut Recorder<'_>, t: &crate::tasks::TraceRaysTask) {
-        self.rays();
-        let Some(rays) = self.passes.rays.as_ref() else {
-            return;
-        };
+        let (passes, device, scene) = self.tracing();
         rec.scope = "trace rays";
-        rays.record(
+        passes.rays(device).record(
             rec,
-            &self.scene_buffers(),
+            &scene,
             (&t.rays, t.ray_offset),
             (&t.hits, t.hit_offset),
             t.ray_count,
@@ -703,19 +682,9 @@ impl GpuScene {
         view: &crate::tasks::ViewInfo,
         kind: crate::tasks::DebugOutputType,
     ) -> Result<()> {
-        self.debug_view();
-        let Some(pass) = self.passes.debug_view.as_mut() else {
-            return Ok(());
-        };
+        let (passes, device, scene) = self.tracing();
         rec.scope = "debug view";
-        let scene = SceneBuffers {
-            tlas_nodes: &self.tlas.nodes,
-            instances: &self.instance_table.buffer,
-            geometries: &self.geometry_table.buffer,
-            blas_nodes: self.nodes.buffer(),
-            triangles: self.triangles.buffer(),
-        };
-        pass.record(
+        passes.debug_view(device).record(
             rec,
             &scene,
             output,

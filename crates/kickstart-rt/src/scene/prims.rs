@@ -149,28 +149,11 @@ impl Prims {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::testing::{buffer_with, gpu, read_back, run};
+    use crate::gpu::testing::{buffer_with, gpu, read_back, run, Rng};
     use glam::{Affine3A, Quat, Vec3};
 
     /// Sentinel of untouched output words.
     const SENTINEL: u32 = 0xdead_beef;
-
-    /// Small seeded PRNG (xorshift64*).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-        }
-        fn below(&mut self, n: u32) -> u32 {
-            (((self.next() >> 32) * u64::from(n)) >> 32) as u32
-        }
-        fn range(&mut self, lo: f32, hi: f32) -> f32 {
-            lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
-        }
-    }
 
     /// The first `n` words of `buf`.
     fn words(buf: &wgpu::Buffer, n: usize) -> Vec<u32> {
