@@ -780,15 +780,21 @@ impl ExecuteContext {
         // 3. Instance records, at the instance's slot index (the invariant of the instance-id
         //    bug report: the index a hit reports is the index of the instance's data).
         for t in &plan.instances {
-            let old = s.instances.get(t.handle).ok().and_then(|i| i.input.clone());
-            match old {
-                Some(o)
-                    if o.geometry == t.input.geometry
-                        && o.participating_in_tlas == t.input.participating_in_tlas =>
-                {
-                    s.tlas_refit = true;
-                }
-                _ => s.tlas_rebuild = true,
+            // Only a move keeps the TLAS's leaves; compared in place (this runs for every
+            // instance update of every frame).
+            let moved_only = s
+                .instances
+                .get(t.handle)
+                .ok()
+                .and_then(|i| i.input.as_ref())
+                .is_some_and(|o| {
+                    o.geometry == t.input.geometry
+                        && o.participating_in_tlas == t.input.participating_in_tlas
+                });
+            if moved_only {
+                s.tlas_refit = true;
+            } else {
+                s.tlas_rebuild = true;
             }
             s.pending_records
                 .insert(t.handle.index, instance_record(&t.input));

@@ -906,3 +906,155 @@ fn tlas_follows_instance_changes_unless_deferred() {
     build_submit_complete(&ctx, ctx.create_task_container());
     assert_eq!(probe(&ctx), [false, false]);
 }
+
+/// An `Update` is a refit: another triangle count is refused naming the field, nothing is
+/// recorded, and the geometry keeps tracing as before.
+#[test]
+fn update_with_another_triangle_count_is_refused() {
+    let ctx = context(4);
+    let quad = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: g,
+        input: mesh_input("dyn", &quad, true),
+    });
+    register_instance(&mut c, i, g, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let one = Mesh {
+        indices: vec![0, 1, 2],
+        ..quad.clone()
+    };
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Update,
+        handle: g,
+        input: mesh_input("dyn", &one, true),
+    });
+    let mut e = encoder();
+    match ctx.build_gpu_task(c, &mut e) {
+        Err(Error::InvalidInput { task, field, .. }) => {
+            assert_eq!((task, field.as_str()), ("GeometryTask", "input.components"));
+        }
+        other => panic!("expected InvalidInput, got {other:?}"),
+    }
+    submit(e);
+    let hits = closest(&ctx, &[ray(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z, 0.0, 5.0)]);
+    assert!(hits[0].is_hit() && hits[0].primitive == 1, "{:?}", hits[0]);
+}
+
+/// GPU timings: with timestamp queries every SDK pass is timed under its label; without them
+/// (the minimal device) a warning says so and asking for timings is an error, not a panic.
+#[test]
+fn gpu_timings_label_the_passes_or_say_why_not() {
+    let log: Arc<Mutex<Vec<String>>> = Arc::default();
+    let sink = log.clone();
+    let g = gpu();
+    let ctx = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            gpu_timing: true,
+            log_callback: Some(Arc::new(move |_, m: &str| {
+                sink.lock().unwrap().push(m.to_string())
+            })),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let geometry = ctx.create_geometry_handle();
+    let instance = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    schedule_mesh(&mut c, geometry, "sphere", &Mesh::icosphere(2));
+    register_instance(&mut c, instance, geometry, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    let rays = [ray(Vec3::new(0.0, 0.0, 3.0), -Vec3::Z, 0.0, 10.0)];
+    c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask::new(
+        buffer(bytemuck::cast_slice(&rays), wgpu::BufferUsages::STORAGE),
+        1,
+        buffer(&[0u8; 32], wgpu::BufferUsages::STORAGE),
+    )));
+    let mut e = encoder();
+    let task = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    let timed = g
+        .device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY);
+    match ctx.wait_for_gpu_timings(task) {
+        Ok(t) => {
+            assert!(timed);
+            for label in ["ingest", "blas build", "tlas build", "trace rays"] {
+                assert!(t.passes.iter().any(|p| p.label == label), "{label}: {t:?}");
+                assert!(t.span_ms(&[label]).is_some_and(|ms| ms >= 0.0));
+            }
+            assert!(t.span_ms(&["ingest", "blas build"]).unwrap() >= t.sum_ms(&["blas build"]));
+            assert!(t.span_ms(&["no such pass"]).is_none());
+            // Each task's timings are read once.
+            assert!(matches!(
+                ctx.wait_for_gpu_timings(task),
+                Err(Error::ReadBack(_))
+            ));
+        }
+        Err(Error::ReadBack(_)) => {
+            assert!(!timed);
+            assert!(log
+                .lock()
+                .unwrap()
+                .iter()
+                .any(|m| m.contains("TIMESTAMP_QUERY")));
+        }
+        Err(other) => panic!("{other:?}"),
+    }
+    ctx.mark_gpu_task_completed(task).unwrap();
+}
+
+/// Tool queries on geometry: stale handles are `InvalidHandle`, an unbuilt BLAS cannot be read
+/// back, and a built one reads back with every triangle once and a sane SAH cost.
+#[test]
+fn blas_read_back_and_geometry_queries_check_their_handles() {
+    let ctx = context(4);
+    let sphere = Mesh::icosphere(2);
+    let g = ctx.create_geometry_handle();
+    assert!(matches!(ctx.read_back_blas(g), Err(Error::ReadBack(_))));
+    let mut c = ctx.create_task_container();
+    schedule_mesh(&mut c, g, "sphere", &sphere);
+    build_submit_complete(&ctx, c);
+    assert!(!ctx.geometry_is_built(g).unwrap());
+    assert!(matches!(ctx.read_back_blas(g), Err(Error::ReadBack(_))));
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let b = ctx.read_back_blas(g).unwrap();
+    let mut prims = b.primitive_indices.clone();
+    prims.sort_unstable();
+    assert_eq!(
+        prims,
+        (0..sphere.indices.len() as u32 / 3).collect::<Vec<_>>()
+    );
+    let cpu = kickstart_rt::cpu::CpuBvh::build(&sphere.triangles()).sah_cost();
+    assert!(
+        b.sah_cost >= 1.0 && b.sah_cost < 3.0 * cpu,
+        "{} vs {cpu}",
+        b.sah_cost
+    );
+    ctx.destroy_geometry_handle(g).unwrap();
+    assert!(matches!(
+        ctx.read_back_blas(g),
+        Err(Error::InvalidHandle { .. })
+    ));
+    assert!(matches!(
+        ctx.geometry_is_built(g),
+        Err(Error::InvalidHandle { .. })
+    ));
+    assert!(matches!(
+        ctx.geometry_dropped_triangles(g),
+        Err(Error::InvalidHandle { .. })
+    ));
+}
