@@ -317,6 +317,35 @@ fn readable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
     if format.is_combined_depth_stencil_format() {
         return Err(Error::input(task, field, format, "combined depth-stencil formats are not accepted: use a Depth32Float depth buffer, or copy depth to R32Float"));
     }
+    // Every input is read as unfilterable float (shaders/gbuffer.wgsl): integer formats cannot
+    // bind that way.
+    if matches!(
+        format.sample_type(None, None),
+        None | Some(wgpu::TextureSampleType::Uint | wgpu::TextureSampleType::Sint)
+    ) {
+        return Err(Error::input(
+            task,
+            field,
+            format,
+            "the SDK reads this texture as float: use a float, unorm, snorm or depth format",
+        ));
+    }
+    if t.texture().sample_count() != 1 {
+        return Err(Error::input(
+            task,
+            field,
+            format!("sample_count {}", t.texture().sample_count()),
+            "multisampled textures are not accepted: resolve them first",
+        ));
+    }
+    if t.texture().dimension() != wgpu::TextureDimension::D2 {
+        return Err(Error::input(
+            task,
+            field,
+            t.texture().dimension(),
+            "must be a 2D texture",
+        ));
+    }
     Ok(())
 }
 

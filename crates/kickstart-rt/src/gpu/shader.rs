@@ -22,6 +22,37 @@ pub(crate) fn compute_pipeline(
     })
 }
 
+/// A compute pipeline from WGSL `source` with explicit bind group layouts (`layouts[i]` is group
+/// `i`): needed where a shared module declares bindings a pass may not use (the G-buffer), since
+/// an automatic layout would drop them.
+#[allow(dead_code)] // Used by the trace, injection and denoise passes (landing).
+pub(crate) fn compute_pipeline_with_layouts(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    entry_point: &str,
+    layouts: &[&wgpu::BindGroupLayout],
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let groups: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().copied().map(Some).collect();
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &groups,
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some(entry_point),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
 /// Concatenates WGSL sources (shared modules first).
 pub(crate) fn assemble(parts: &[&str]) -> String {
     parts.join("\n")

@@ -113,3 +113,47 @@ impl Rng {
         lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
     }
 }
+
+/// A 2D texture (TEXTURE_BINDING | COPY_DST | COPY_SRC | STORAGE_BINDING where the format allows
+/// it) of `width × height` texels holding `texels` (tightly packed rows), and its view.
+pub(crate) fn texture_with(
+    format: wgpu::TextureFormat,
+    width: u32,
+    height: u32,
+    texels: &[u8],
+) -> wgpu::TextureView {
+    let g = gpu();
+    let mut usage = wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_DST
+        | wgpu::TextureUsages::COPY_SRC;
+    if crate::WRITABLE_OUTPUT_FORMATS.contains(&format) {
+        usage |= wgpu::TextureUsages::STORAGE_BINDING;
+    }
+    let size = wgpu::Extent3d {
+        width,
+        height,
+        depth_or_array_layers: 1,
+    };
+    let texture = g.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("test texture"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    });
+    let bpp = format.block_copy_size(None).expect("a colour format");
+    g.queue.write_texture(
+        texture.as_image_copy(),
+        texels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(width * bpp),
+            rows_per_image: Some(height),
+        },
+        size,
+    );
+    texture.create_view(&Default::default())
+}

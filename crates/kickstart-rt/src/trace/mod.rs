@@ -1,6 +1,7 @@
-//! Ray tracing passes: the shared traversal module, ray batches, debug views.
+//! Ray tracing passes: the shared traversal module, G-buffer decoding, ray batches, debug views.
 
 pub(crate) mod debug_view;
+pub(crate) mod gbuffer;
 pub(crate) mod rays;
 #[cfg(test)]
 pub(crate) mod test_scene;

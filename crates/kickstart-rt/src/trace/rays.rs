@@ -40,6 +40,26 @@ pub(crate) struct SceneBuffers<'a> {
 }
 
 impl SceneBuffers<'_> {
+    /// The explicit layout of the `@group(0)` scene bindings (five read-only storage buffers), for
+    /// pipelines built with explicit layouts.
+    #[allow(dead_code)] // Used by the trace, injection and denoise passes (landing).
+    pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+        let entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("kickstart-rt scene"),
+            entries: &[entry(0), entry(1), entry(2), entry(3), entry(4)],
+        })
+    }
+
     /// The `@group(0)` bind group of a pipeline that includes the traversal module.
     pub fn bind_group(
         &self,
