@@ -645,6 +645,17 @@ impl GpuScene {
         Ok(())
     }
 
+    /// The scene bindings of a tracing pass (the lighting cache's injection).
+    pub fn scene_buffers(&self) -> SceneBuffers<'_> {
+        SceneBuffers {
+            tlas_nodes: &self.tlas.nodes,
+            instances: &self.instance_table.buffer,
+            geometries: &self.geometry_table.buffer,
+            blas_nodes: self.nodes.buffer(),
+            triangles: self.triangles.buffer(),
+        }
+    }
+
     /// The pipelines, the device and the scene bindings, borrowed together (disjoint fields) for
     /// a tracing pass.
     fn tracing(&mut self) -> (&mut Passes, &wgpu::Device, SceneBuffers<'_>) {
@@ -681,6 +692,7 @@ impl GpuScene {
         viewport: (u32, u32, u32, u32),
         view: &crate::tasks::ViewInfo,
         kind: crate::tasks::DebugOutputType,
+        cache: (&crate::cache::DirectLightingCache, bool),
     ) -> Result<()> {
         let (passes, device, scene) = self.tracing();
         rec.scope = "debug view";
@@ -692,6 +704,7 @@ impl GpuScene {
             viewport,
             view,
             kind,
+            cache,
         )
     }
 
