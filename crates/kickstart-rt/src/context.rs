@@ -18,6 +18,7 @@ use crate::scene::ingest::ComponentIngest;
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::tasks::*;
 use crate::timing::{GpuTimings, TimingReadback};
+use crate::trace::tasks::TracePasses;
 use crate::validate;
 use crate::version::Version;
 
@@ -181,6 +182,8 @@ struct State {
     invoked: Vec<(u64, Arc<AtomicBool>)>,
     staging: StagingPool,
     scene: GpuScene,
+    /// The trace tasks' passes (created on first use: they generate the blue-noise tile).
+    trace: Option<TracePasses>,
     /// Geometries waiting for a BLAS build or refit, in the order they were scheduled.
     blas_queue: VecDeque<GeometryHandle>,
     /// Instance slots whose records must be rewritten as dead (destroyed instances, instances of
@@ -282,6 +285,7 @@ impl ExecuteContext {
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
                 scene: GpuScene::new(device),
+                trace: None,
                 blas_queue: VecDeque::new(),
                 dead_instance_slots: Vec::new(),
                 dead_geometry_slots: Vec::new(),
@@ -617,7 +621,11 @@ impl ExecuteContext {
 
     /// Creates every compute pipeline now, so the first frame that needs one does not stall.
     pub fn prepare_pipelines(&self) {
-        self.state().scene.prepare_pipelines();
+        let mut s = self.state();
+        s.scene.prepare_pipelines();
+        s.trace
+            .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue))
+            .prepare(&self.device);
     }
 
     /// The GPU time of each SDK pass of `task` (built with [`InitSettings::gpu_timing`]).
@@ -1041,6 +1049,14 @@ impl ExecuteContext {
                     ws._inputs.push(t.hits.clone());
                     s.scene.trace_rays(&mut rec, t);
                 }
+                other if TracePasses::handles(other) && is_default_output(other) => {
+                    let st = &mut *s;
+                    let passes = st
+                        .trace
+                        .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue));
+                    rec.scope = "trace";
+                    passes.record(&mut rec, &st.scene.buffers(), other)?;
+                }
                 other => {
                     if let Some((common, output)) = other.trace_common() {
                         let size = output.texture().size();
@@ -1187,6 +1203,7 @@ impl ExecuteContext {
             self.render_handles(s, task)?;
             let supported = match task {
                 RenderTask::TraceRays(_) => true,
+                t if TracePasses::handles(t) && is_default_output(t) => true,
                 other => other.trace_common().is_some_and(|(c, _)| {
                     matches!(
                         c.debug_parameters.debug_output_type,
@@ -1216,6 +1233,12 @@ impl ExecuteContext {
         }
         Ok(())
     }
+}
+
+/// A trace task asking for its normal output (not a debug view).
+fn is_default_output(task: &RenderTask) -> bool {
+    task.trace_common()
+        .is_some_and(|(c, _)| c.debug_parameters.debug_output_type == DebugOutputType::Default)
 }
 
 #[derive(Default)]

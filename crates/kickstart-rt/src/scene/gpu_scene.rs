@@ -645,6 +645,17 @@ impl GpuScene {
         Ok(())
     }
 
+    /// The scene bindings of the traversal (`@group(0)`), for passes outside this module.
+    pub fn buffers(&self) -> SceneBuffers<'_> {
+        SceneBuffers {
+            tlas_nodes: &self.tlas.nodes,
+            instances: &self.instance_table.buffer,
+            geometries: &self.geometry_table.buffer,
+            blas_nodes: self.nodes.buffer(),
+            triangles: self.triangles.buffer(),
+        }
+    }
+
     /// The pipelines, the device and the scene bindings, borrowed together (disjoint fields) for
     /// a tracing pass.
     fn tracing(&mut self) -> (&mut Passes, &wgpu::Device, SceneBuffers<'_>) {
