@@ -1,5 +1,7 @@
-// Primary-ray debug views (HitT, Barycentrics, RandomMeshColor): one camera ray per pixel of the
-// viewport, traced with traverse.wgsl (prepended; scene at @group(0)). The Rust side replaces
+// Primary-ray debug views (HitT, Barycentrics, RandomMeshColor, RandomTileColor,
+// DirectLightingCache): one camera ray per pixel of the viewport, traced with traverse.wgsl
+// (prepended; scene at @group(0)); the lighting cache's sampling module is prepended too
+// (@group(2)). The Rust side replaces
 // OUTPUT_FORMAT with the storage format of the output texture.
 
 struct DebugParams {
@@ -11,14 +13,15 @@ struct DebugParams {
     viewport: vec4<u32>,
     // 0: perspective (rays from the eye), 1: orthographic (rays from the near plane).
     ortho: u32,
-    // 1: HitT, 2: Barycentrics, 3: RandomMeshColor.
+    // 1: HitT, 2: Barycentrics, 3: RandomMeshColor, 4: RandomTileColor, 5: DirectLightingCache.
     kind: u32,
     // NDC depth of the ray origin (orthographic) and of the point the ray aims at.
     z_origin: f32,
     z_target: f32,
     // Instance inclusion mask of the primary rays (VISIBLE_IN_RT).
     mask: u32,
-    pad0: u32,
+    // 1: interpolated cache reads (DirectLightingCache).
+    bilinear: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -71,6 +74,17 @@ fn main(
             colour = vec4<f32>(hit.t, hit.t, hit.t, 1.0);
         } else if params.kind == 2u {
             colour = vec4<f32>(1.0 - hit.u - hit.v, hit.u, hit.v, 1.0);
+        } else if params.kind == 4u {
+            let c = hash_u32(cache_tile_id(hit.instance, hit.primitive, vec2<f32>(hit.u, hit.v)));
+            colour = vec4<f32>(
+                f32(c & 255u) / 255.0,
+                f32((c >> 8u) & 255u) / 255.0,
+                f32((c >> 16u) & 255u) / 255.0,
+                1.0,
+            );
+        } else if params.kind == 5u {
+            let c = cache_radiance(hit.instance, hit.primitive, vec2<f32>(hit.u, hit.v), params.bilinear != 0u);
+            colour = vec4<f32>(c, 1.0);
         } else {
             let c = hash_u32(hit.instance);
             colour = vec4<f32>(

@@ -47,6 +47,10 @@ pub struct InitSettings {
     /// [`ExecuteContext::wait_for_gpu_timings`]). Needs `Features::TIMESTAMP_QUERY` on the
     /// device; without it a warning is logged and timing stays off. Default off.
     pub gpu_timing: bool,
+    /// Initial size of the direct lighting cache's surfel pool, bytes (16 per surfel; default
+    /// 4 MiB). The pool grows by itself when instances need more (their caches are coarse until
+    /// then); a size near the scene's need avoids that first coarse frame.
+    pub lighting_cache_pool_bytes: u64,
 }
 
 impl Default for InitSettings {
@@ -57,6 +61,7 @@ impl Default for InitSettings {
             log_callback: None,
             min_log_severity: Severity::Warning,
             gpu_timing: false,
+            lighting_cache_pool_bytes: crate::cache::alloc::DEFAULT_INITIAL_SURFELS as u64 * 16,
         }
     }
 }
@@ -119,6 +124,8 @@ struct GeometryData {
     triangles: u32,
     gpu: GeometryGpu,
     dropped: Option<DroppedTriangles>,
+    cache: crate::cache::CacheParams,
+    allow_light_transfer_target: bool,
 }
 
 /// Triangles ingestion dropped from a geometry (they are never hit); also logged as a warning
@@ -203,6 +210,8 @@ struct State {
     timings: BTreeMap<u64, TimingReadback>,
     next_serial: u64,
     counts: RecordedTaskCounts,
+    /// The direct lighting cache (sampling contract in `crate::cache`).
+    cache: crate::cache::DirectLightingCache,
 }
 
 /// The SDK instance (the reference's `ExecuteContext`). One per device; `Send + Sync`: handle
@@ -297,6 +306,10 @@ impl ExecuteContext {
                 timings: BTreeMap::new(),
                 next_serial: 1,
                 counts: RecordedTaskCounts::default(),
+                cache: crate::cache::DirectLightingCache::new(
+                    device,
+                    (settings.lighting_cache_pool_bytes / 16).min(u32::MAX as u64) as u32,
+                ),
             }),
         })
     }
@@ -404,6 +417,8 @@ impl ExecuteContext {
         if slot.input.is_some() {
             s.dead_instance_slots.push(handle.index);
         }
+        let last = s.next_serial - 1;
+        s.cache.release(handle.index, last);
         Ok(())
     }
 
@@ -457,6 +472,7 @@ impl ExecuteContext {
             });
         }
         s.scene.collect(u64::MAX);
+        s.cache.collect(u64::MAX);
         s.staging.clear();
         Ok(())
     }
@@ -473,6 +489,7 @@ impl ExecuteContext {
                 + sc.topologies.used_bytes()
                 + sc.geometry_table.buffer.size(),
             tlas: sc.tlas_bytes() + sc.instance_table.buffer.size(),
+            cache: s.cache.bytes(),
             scratch: sc.scratch_bytes(),
             pool_reserve: sc.staged.reserve_bytes()
                 + sc.triangles.reserve_bytes()
@@ -488,6 +505,21 @@ impl ExecuteContext {
                 .map(|b| b.buffer.size())
                 .sum::<u64>();
         a
+    }
+
+    /// An instance's lighting cache as the GPU allocated it: `None` until the allocating task has
+    /// been marked complete and its log has been read back (asynchronously: a later call after a
+    /// device poll sees it), or while the instance waits for its geometry's BLAS.
+    pub fn lighting_cache_allocation(
+        &self,
+        handle: InstanceHandle,
+    ) -> Result<Option<crate::CacheAllocation>> {
+        let mut s = self.state();
+        self.collect_invoked(&mut s);
+        s.instances.get(handle)?;
+        let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
+        s.cache.collect(oldest);
+        Ok(s.cache.allocation(handle.index))
     }
 
     /// Number of built GPU tasks not yet marked complete.
@@ -526,12 +558,13 @@ impl ExecuteContext {
             .in_flight
             .remove(&handle.0)
             .ok_or(Error::InvalidGpuTaskHandle(handle.0))?;
-        Self::retire(&mut s, ws);
+        Self::retire(&mut s, handle.0, ws);
         Ok(())
     }
 
     /// Returns a completed task's staging to the pool and starts reading back its counters.
-    fn retire(s: &mut State, ws: WorkingSet) {
+    fn retire(s: &mut State, serial: u64, ws: WorkingSet) {
+        s.cache.task_completed(serial);
         for b in ws.staging {
             s.staging.release(b);
         }
@@ -626,6 +659,7 @@ impl ExecuteContext {
         s.trace
             .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue))
             .prepare(&self.device);
+        s.cache.prepare_pipelines();
     }
 
     /// The GPU time of each SDK pass of `task` (built with [`InitSettings::gpu_timing`]).
@@ -676,7 +710,7 @@ impl ExecuteContext {
         });
         for serial in done {
             if let Some(ws) = s.in_flight.remove(&serial) {
-                Self::retire(s, ws);
+                Self::retire(s, serial, ws);
             }
         }
         self.collect_dropped(s);
@@ -712,6 +746,7 @@ impl ExecuteContext {
         // 1. Deferred destruction: release what no in-flight task can still read.
         let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
         s.scene.collect(oldest);
+        s.cache.collect(oldest);
 
         let serial = s.next_serial;
         s.next_serial += 1;
@@ -770,6 +805,7 @@ impl ExecuteContext {
         }
         if !s.dead_instance_slots.is_empty() {
             for slot in std::mem::take(&mut s.dead_instance_slots) {
+                s.cache.release(slot, serial);
                 s.pending_records
                     .insert(slot, [0u8; INSTANCE_RECORD_SIZE as usize]);
             }
@@ -911,6 +947,8 @@ impl ExecuteContext {
                 triangles,
                 gpu: GeometryGpu::default(),
                 dropped: None,
+                cache: crate::cache::CacheParams::of(&task.input),
+                allow_light_transfer_target: task.input.allow_light_transfer_target,
             });
             data.gpu.triangles = triangles;
             data.gpu.staged = Some(staged);
@@ -1028,11 +1066,48 @@ impl ExecuteContext {
                 g.last_used = serial;
             }
             if let Ok(slot) = s.instances.get_mut(t.handle) {
+                // A new instance, or another geometry: a new cache (a move keeps it).
+                let new_cache = slot
+                    .input
+                    .as_ref()
+                    .is_none_or(|o| o.geometry != t.input.geometry);
                 slot.input = Some(t.input.clone());
                 slot.last_used = serial;
+                if new_cache {
+                    s.cache.register(t.handle.index, serial);
+                }
             }
             s.any_instance = true;
             s.counts.instance_tasks += 1;
+        }
+
+        // Direct lighting cache: grow what a read-back asked for, allocate waiting instances
+        // whose BLAS is built (DESIGN.md data flow step 5).
+        let mut cache_uploads = Uploads::default();
+        s.cache.prepare_task(
+            encoder,
+            &mut cache_uploads,
+            s.instances.slot_count(),
+            serial,
+        )?;
+        ws.staging
+            .extend(cache_uploads.flush(&self.device, &mut s.staging, encoder));
+        let jobs = Self::cache_jobs(s);
+        if !jobs.is_empty() {
+            let mut rec = Recorder {
+                device: &self.device,
+                encoder,
+                timestamps: timestamps.as_mut(),
+                scope: "cache allocation",
+            };
+            s.cache.record_allocations(
+                &mut rec,
+                &mut s.staging,
+                s.scene.triangles.buffer(),
+                &jobs,
+                serial,
+                &mut ws.staging,
+            )?;
         }
 
         // 7. Render tasks, in the order scheduled.
@@ -1049,13 +1124,43 @@ impl ExecuteContext {
                     ws._inputs.push(t.hits.clone());
                     s.scene.trace_rays(&mut rec, t);
                 }
+                RenderTask::DirectLightingInjection(t) => {
+                    let meta = s.cache.meta_buffer().clone();
+                    let surfels = s.cache.surfel_buffer().clone();
+                    let capacity = s.cache.capacity();
+                    s.cache.injector.record(
+                        &mut rec,
+                        &s.scene.scene_buffers(),
+                        (&meta, &surfels, capacity),
+                        t,
+                    )?;
+                }
+                RenderTask::DirectLightTransfer(t) => {
+                    let tris = s
+                        .instances
+                        .get(t.target)
+                        .ok()
+                        .and_then(|i| i.input.as_ref())
+                        .and_then(|i| s.geometries.get(i.geometry).ok())
+                        .and_then(|g| g.data.as_ref())
+                        .map_or(0, |d| d.triangles);
+                    let meta = s.cache.meta_buffer().clone();
+                    let surfels = s.cache.surfel_buffer().clone();
+                    s.cache.transferer.record(
+                        &mut rec,
+                        (&meta, &surfels),
+                        t.source.index,
+                        t.target.index,
+                        tris,
+                    );
+                }
                 other if TracePasses::handles(other) && is_default_output(other) => {
                     let st = &mut *s;
                     let passes = st
                         .trace
                         .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue));
                     rec.scope = "trace";
-                    passes.record(&mut rec, &st.scene.buffers(), other)?;
+                    passes.record(&mut rec, &st.scene.scene_buffers(), other)?;
                 }
                 other => {
                     if let Some((common, output)) = other.trace_common() {
@@ -1072,6 +1177,7 @@ impl ExecuteContext {
                             (vp.x, vp.y, vp.width, vp.height),
                             &common.view,
                             common.debug_parameters.debug_output_type,
+                            (&s.cache, common.use_bilinear_sampling),
                         )?;
                     }
                 }
@@ -1202,7 +1308,9 @@ impl ExecuteContext {
             validate::render_task(task, &limits)?;
             self.render_handles(s, task)?;
             let supported = match task {
-                RenderTask::TraceRays(_) => true,
+                RenderTask::TraceRays(_)
+                | RenderTask::DirectLightingInjection(_)
+                | RenderTask::DirectLightTransfer(_) => true,
                 t if TracePasses::handles(t) && is_default_output(t) => true,
                 other => other.trace_common().is_some_and(|(c, _)| {
                     matches!(
@@ -1210,6 +1318,8 @@ impl ExecuteContext {
                         DebugOutputType::HitT
                             | DebugOutputType::Barycentrics
                             | DebugOutputType::RandomMeshColor
+                            | DebugOutputType::RandomTileColor
+                            | DebugOutputType::DirectLightingCache
                     )
                 }),
             };
@@ -1225,8 +1335,7 @@ impl ExecuteContext {
 
     fn render_handles(&self, s: &State, task: &RenderTask) -> Result<()> {
         if let RenderTask::DirectLightTransfer(t) = task {
-            s.instances.get(t.source)?;
-            s.instances.get(t.target)?;
+            self.transfer_instances(s, t)?;
         }
         if let Some(c) = task.denoise_common() {
             s.denoisers.get(c.context)?;
@@ -1239,6 +1348,103 @@ impl ExecuteContext {
 fn is_default_output(task: &RenderTask) -> bool {
     task.trace_common()
         .is_some_and(|(c, _)| c.debug_parameters.debug_output_type == DebugOutputType::Default)
+}
+
+impl ExecuteContext {
+    /// Checks a transfer: both instances registered (in an earlier task), distinct, the target's
+    /// geometry allows transfer, and both geometries have the same triangle count.
+    fn transfer_instances(&self, s: &State, t: &DirectLightTransferTask) -> Result<()> {
+        const TASK: &str = "DirectLightTransferTask";
+        let geometry = |h: InstanceHandle, field: &'static str| -> Result<&GeometryData> {
+            s.instances
+                .get(h)?
+                .input
+                .as_ref()
+                .and_then(|i| s.geometries.get(i.geometry).ok())
+                .and_then(|g| g.data.as_ref())
+                .ok_or_else(|| {
+                    Error::input(
+                        TASK,
+                        field,
+                        h,
+                        "the instance must be registered by an earlier GPU task",
+                    )
+                })
+        };
+        let src = geometry(t.source, "source")?;
+        let dst = geometry(t.target, "target")?;
+        if t.source == t.target {
+            return Err(Error::input(
+                TASK,
+                "target",
+                t.target,
+                "must differ from the source",
+            ));
+        }
+        if !dst.allow_light_transfer_target {
+            return Err(Error::input(
+                TASK,
+                "target",
+                t.target,
+                format!(
+                    "geometry `{}` was registered without allow_light_transfer_target",
+                    dst.name
+                ),
+            ));
+        }
+        if src.triangles != dst.triangles {
+            return Err(Error::input(
+                TASK,
+                "target",
+                t.target,
+                format!(
+                    "the target's geometry has {} triangles, the source's {}: transfer maps primitive i to primitive i, so both need the same triangles in the same order",
+                    dst.triangles, src.triangles
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Allocation jobs of the instances waiting for a cache whose geometry's BLAS is built.
+    fn cache_jobs(s: &State) -> Vec<crate::cache::AllocJob> {
+        if s.cache.waiting().is_empty() {
+            return Vec::new();
+        }
+        let mut jobs = Vec::new();
+        for h in s.instances.handles() {
+            if !s.cache.waiting().contains(&h.index) {
+                continue;
+            }
+            let Some(input) = s.instances.get(h).ok().and_then(|i| i.input.as_ref()) else {
+                continue;
+            };
+            let Some(d) = s
+                .geometries
+                .get(input.geometry)
+                .ok()
+                .and_then(|g| g.data.as_ref())
+            else {
+                continue;
+            };
+            let Some(blas) = d
+                .gpu
+                .blas
+                .filter(|_| d.gpu.pending != Some(PendingBvh::Build))
+            else {
+                continue;
+            };
+            jobs.push(crate::cache::AllocJob {
+                slot: h.index,
+                tri_base: blas.tris.start,
+                tri_count: d.triangles,
+                params: d.cache,
+                transform: input.transform,
+                initial: input.initial_tile_color,
+            });
+        }
+        jobs
+    }
 }
 
 #[derive(Default)]

@@ -129,6 +129,7 @@
 #![warn(missing_docs)]
 
 mod allocations;
+mod cache;
 mod container;
 mod context;
 pub mod cpu;
@@ -146,6 +147,7 @@ mod validate;
 mod version;
 
 pub use allocations::ResourceAllocations;
+pub use cache::{CacheAllocation, CacheLevel};
 pub use container::TaskContainer;
 pub use context::{
     DenoisingContextInput, DenoisingMethod, DroppedTriangles, ExecuteContext, InitSettings,

@@ -645,8 +645,8 @@ impl GpuScene {
         Ok(())
     }
 
-    /// The scene bindings of the traversal (`@group(0)`), for passes outside this module.
-    pub fn buffers(&self) -> SceneBuffers<'_> {
+    /// The scene bindings of a tracing pass (the lighting cache's injection).
+    pub fn scene_buffers(&self) -> SceneBuffers<'_> {
         SceneBuffers {
             tlas_nodes: &self.tlas.nodes,
             instances: &self.instance_table.buffer,
@@ -692,6 +692,7 @@ impl GpuScene {
         viewport: (u32, u32, u32, u32),
         view: &crate::tasks::ViewInfo,
         kind: crate::tasks::DebugOutputType,
+        cache: (&crate::cache::DirectLightingCache, bool),
     ) -> Result<()> {
         let (passes, device, scene) = self.tracing();
         rec.scope = "debug view";
@@ -703,6 +704,7 @@ impl GpuScene {
             viewport,
             view,
             kind,
+            cache,
         )
     }
 

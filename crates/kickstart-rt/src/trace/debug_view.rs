@@ -57,7 +57,7 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
 
 /// Camera parameters of the shader, computed in f64 (inverting a reverse-Z or infinite
 /// projection in f32 loses digits the debug views show).
-fn camera(view: &ViewInfo) -> ([[f32; 4]; 4], [f32; 4], u32, f32, f32) {
+pub(crate) fn camera(view: &ViewInfo) -> ([[f32; 4]; 4], [f32; 4], u32, f32, f32) {
     let v2c = view.view_to_clip.as_dmat4();
     let w2v = view.world_to_view.as_dmat4();
     let clip_to_world = (v2c * w2v).inverse().as_mat4().to_cols_array_2d();
@@ -120,6 +120,7 @@ impl DebugViewPass {
                 };
                 let source = assemble(&[
                     TRAVERSE_WGSL,
+                    &crate::cache::sample_wgsl(2, false),
                     &DEBUG_PRIMARY_WGSL.replace("OUTPUT_FORMAT", name),
                 ]);
                 let pipeline = compute_pipeline(device, "kickstart-rt debug view", &source, "main");
@@ -151,17 +152,20 @@ impl DebugViewPass {
         viewport: (u32, u32, u32, u32),
         view: &ViewInfo,
         kind: DebugOutputType,
+        (cache, bilinear): (&crate::cache::DirectLightingCache, bool),
     ) -> Result<()> {
         let kind_code = match kind {
             DebugOutputType::HitT => 1,
             DebugOutputType::Barycentrics => 2,
             DebugOutputType::RandomMeshColor => 3,
+            DebugOutputType::RandomTileColor => 4,
+            DebugOutputType::DirectLightingCache => 5,
             other => {
                 return Err(Error::input(
                     TASK,
                     "debug_output_type",
                     other,
-                    "the primary-ray view writes HitT, Barycentrics or RandomMeshColor",
+                    "the primary-ray view writes HitT, Barycentrics, RandomMeshColor, RandomTileColor or DirectLightingCache",
                 ))
             }
         };
@@ -185,7 +189,7 @@ impl DebugViewPass {
                 z_origin,
                 z_target,
                 mask: InstanceInclusionMask::VISIBLE_IN_RT.0,
-                pad: [0; 3],
+                pad: [bilinear as u32, 0, 0],
             },
         );
         let device = rec.device;
@@ -205,10 +209,15 @@ impl DebugViewPass {
                 },
             ],
         });
+        let cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("kickstart-rt debug view cache"),
+            layout: &pipeline.get_bind_group_layout(2),
+            entries: &cache.sample_bind_group_entries(),
+        });
         rec.dispatch(
             "debug view",
             pipeline,
-            &[&scene_group, &io_group],
+            &[&scene_group, &io_group, &cache_group],
             pixels.div_ceil(WORKGROUP_SIZE),
         );
         Ok(())
@@ -275,6 +284,7 @@ mod tests {
         });
         let view_tex = tex.create_view(&Default::default());
         let mut pass = DebugViewPass::new();
+        let cache = crate::cache::DirectLightingCache::new(&testing::gpu().device, 64);
         testing::run(|rec| {
             pass.record(
                 rec,
@@ -284,6 +294,7 @@ mod tests {
                 (VX, VY, W, H),
                 v,
                 kind,
+                (&cache, true),
             )
             .unwrap();
         });
@@ -533,6 +544,7 @@ mod tests {
         // Every writable output format compiles (also on the minimal device).
         pass.prepare(&g.device);
         assert_eq!(pass.pipelines.len(), crate::WRITABLE_OUTPUT_FORMATS.len());
+        let cache = crate::cache::DirectLightingCache::new(&g.device, 64);
         testing::run(|rec| {
             let r = pass.record(
                 rec,
@@ -542,6 +554,7 @@ mod tests {
                 (0, 0, 4, 4),
                 &v,
                 DebugOutputType::Normal,
+                (&cache, true),
             );
             assert!(r.is_err());
         });

@@ -1,0 +1,672 @@
+//! The cache's GPU memory and its allocation: the `meta` buffer (headers per instance slot and
+//! triangle records, CPU-allocated since their sizes are known) and the surfel pool (allocated on
+//! the GPU, since the surfel count depends on the geometry the CPU never sees).
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{inject::Injector, storage_entry, transfer::Transferer, CacheParams};
+use crate::error::{Error, Result};
+use crate::gpu::shader::assemble;
+use crate::gpu::Recorder;
+use crate::scene::gpu_scene::{storage, Uploads};
+use crate::scene::pool::{Pool, Range};
+use crate::staging::{StagingBuffer, StagingPool};
+
+const ALLOC_WGSL: &str = include_str!("../../shaders/cache_alloc.wgsl");
+
+/// Words per instance header and per triangle record in `meta`.
+pub(crate) const HEADER_WORDS: u32 = 8;
+pub(crate) const RECORD_WORDS: u32 = 8;
+/// Bytes of one surfel.
+pub(crate) const SURFEL_BYTES: u64 = 16;
+/// Free blocks handed to the GPU per task, and allocations per task (the rest wait a task).
+const MAX_FREE_BLOCKS: usize = 64;
+const MAX_ALLOCS_PER_TASK: usize = 256;
+/// Word offsets of the allocation state buffer (as `cache_alloc.wgsl`).
+const ST_FREE: u64 = 4;
+const ST_LOG: u64 = 132;
+
+/// Surfels of a new context's pool (grown on demand).
+pub(crate) const DEFAULT_INITIAL_SURFELS: u32 = 1 << 18;
+
+/// One instance's allocation to record this task.
+#[derive(Debug, Clone)]
+pub(crate) struct AllocJob {
+    pub slot: u32,
+    /// First triangle slot of the geometry's BLAS in the triangle pool, and its triangle count.
+    pub tri_base: u32,
+    pub tri_count: u32,
+    pub params: CacheParams,
+    pub transform: glam::Affine3A,
+    pub initial: glam::Vec4,
+}
+
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy)]
+struct AllocParams {
+    rows: [[f32; 4]; 3],
+    initial: [f32; 4],
+    tri_count: u32,
+    tri_base: u32,
+    records: u32,
+    header: u32,
+    hash_size: u32,
+    mesh_colors: u32,
+    resolution_limit: u32,
+    force_direct: u32,
+    unit_length: f32,
+    direct_threshold: f32,
+    log_index: u32,
+    pad: u32,
+}
+
+/// Where an instance's surfels are, as far as the CPU knows.
+#[derive(Debug, Clone, Copy)]
+enum Surfels {
+    /// Allocated by task `serial`, entry `log` of its log; not read back yet.
+    Pending { serial: u64, log: usize },
+    /// Read back: `len` surfels at `start`; `level` 0 full, 1 coarse, 2 none.
+    Known { start: u32, len: u32, level: u32 },
+}
+
+struct InstanceCache {
+    records: Range,
+    surfels: Surfels,
+}
+
+struct AllocReadback {
+    serial: u64,
+    buffer: wgpu::Buffer,
+    mapped: Arc<AtomicBool>,
+    /// Instance slot of each log entry.
+    slots: Vec<u32>,
+    started: bool,
+}
+
+struct Pipelines {
+    layout: wgpu::BindGroupLayout,
+    insert: wgpu::ComputePipeline,
+    count: wgpu::ComputePipeline,
+    allocate: wgpu::ComputePipeline,
+    write: wgpu::ComputePipeline,
+}
+
+/// The direct lighting cache of a context (`State::cache`).
+pub(crate) struct DirectLightingCache {
+    device: wgpu::Device,
+    max_binding: u64,
+    /// Headers and triangle records (`u32` words). Words 0–1: header region start and slots.
+    meta: Pool,
+    headers: Range,
+    header_slots: u32,
+    surfels: wgpu::Buffer,
+    capacity: u32,
+    /// The allocation state: top, capacity, handed free blocks, the task's log.
+    state: wgpu::Buffer,
+    scratch: wgpu::Buffer,
+    instances: HashMap<u32, InstanceCache>,
+    /// Instance slots waiting for an allocation (geometry not built, or re-allocation).
+    waiting: Vec<u32>,
+    free: BTreeMap<u32, u32>,
+    pending_free: Vec<(u64, u32, u32)>,
+    readbacks: Vec<AllocReadback>,
+    grow_to: Option<u32>,
+    /// Caches released before their read-back arrived: (task, log entry, last use).
+    orphans: Vec<(u64, usize, u64)>,
+    /// Slots whose header must read "no cache" from the next task on.
+    cleared: Vec<u32>,
+    /// The pool's capacity was written to the allocation state.
+    state_ready: bool,
+    pipelines: Option<Pipelines>,
+    pub(crate) injector: Injector,
+    pub(crate) transferer: Transferer,
+}
+
+impl DirectLightingCache {
+    /// An empty cache with a pool of `initial_surfels`.
+    pub fn new(device: &wgpu::Device, encoder_free_init: u32) -> Self {
+        let limits = device.limits();
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let capacity = encoder_free_init
+            .max(64)
+            .min((max_binding / SURFEL_BYTES) as u32);
+        let mut meta = Pool::new(device, "kickstart-rt cache meta", 4);
+        // The first range of an empty pool starts at 0: words 0–1 locate the header region.
+        // (No copy is recorded: the pool has room for it.)
+        let mut scratch_encoder = device.create_command_encoder(&Default::default());
+        let first = meta.alloc(device, &mut scratch_encoder, 2, u64::MAX);
+        debug_assert_eq!(first.map(|r| r.start), Some(0));
+        drop(scratch_encoder);
+        let state_words = ST_LOG + 4 * MAX_ALLOCS_PER_TASK as u64;
+        let state = storage(
+            device,
+            "kickstart-rt cache allocation state",
+            state_words * 4,
+        );
+        DirectLightingCache {
+            device: device.clone(),
+            max_binding,
+            meta,
+            headers: Range { start: 0, len: 0 },
+            header_slots: 0,
+            surfels: storage(
+                device,
+                "kickstart-rt cache surfels",
+                capacity as u64 * SURFEL_BYTES,
+            ),
+            capacity,
+            state,
+            scratch: storage(device, "kickstart-rt cache allocation scratch", 4),
+            instances: HashMap::new(),
+            waiting: Vec::new(),
+            free: BTreeMap::new(),
+            pending_free: Vec::new(),
+            readbacks: Vec::new(),
+            grow_to: None,
+            orphans: Vec::new(),
+            cleared: Vec::new(),
+            state_ready: false,
+            pipelines: None,
+            injector: Injector::default(),
+            transferer: Transferer::default(),
+        }
+    }
+
+    #[allow(dead_code)] // part of the sampling contract: trace tasks build layouts with it
+    /// Layout entries of the sampling bindings (group `CACHE_GROUP` of [`super::SAMPLE_WGSL`]).
+    pub fn sample_layout_entries() -> [wgpu::BindGroupLayoutEntry; 2] {
+        [storage_entry(0, true), storage_entry(1, true)]
+    }
+
+    /// The sampling bindings: `meta` at 0, surfels at 1 (valid before any instance exists).
+    pub fn sample_bind_group_entries(&self) -> [wgpu::BindGroupEntry<'_>; 2] {
+        [
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: self.meta.buffer().as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: self.surfels.as_entire_binding(),
+            },
+        ]
+    }
+
+    pub(crate) fn meta_buffer(&self) -> &wgpu::Buffer {
+        self.meta.buffer()
+    }
+
+    pub(crate) fn surfel_buffer(&self) -> &wgpu::Buffer {
+        &self.surfels
+    }
+
+    /// Surfels the pool holds.
+    pub(crate) fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// GPU bytes of the cache (meta, surfel pool, allocation and injection buffers).
+    pub fn bytes(&self) -> u64 {
+        self.meta.buffer().size()
+            + self.surfels.size()
+            + self.state.size()
+            + self.scratch.size()
+            + self.injector.bytes()
+    }
+
+    /// A (re-)registered instance: its old cache is released, a new one waits for allocation.
+    pub fn register(&mut self, slot: u32, last_used: u64) {
+        self.release(slot, last_used);
+        if !self.waiting.contains(&slot) {
+            self.waiting.push(slot);
+        }
+    }
+
+    /// Whether `slot` waits for an allocation.
+    pub fn waiting(&self) -> &[u32] {
+        &self.waiting
+    }
+
+    /// Releases the cache of instance slot `slot` once task `last_used` has completed (the header
+    /// is cleared by the next [`Self::record_allocations`] call that allocates the slot, or by
+    /// `clear_headers`).
+    pub fn release(&mut self, slot: u32, last_used: u64) {
+        self.waiting.retain(|s| *s != slot);
+        let Some(c) = self.instances.remove(&slot) else {
+            return;
+        };
+        self.meta.free_after(c.records, last_used);
+        match c.surfels {
+            Surfels::Known { start, len, .. } => {
+                if len > 0 {
+                    self.pending_free.push((last_used, start, len));
+                }
+            }
+            // Freed when its read-back says where it is.
+            Surfels::Pending { serial, log } => self.orphans.push((serial, log, last_used)),
+        }
+        self.cleared.push(slot);
+    }
+
+    /// Frees ranges no in-flight task can read; applies allocation read-backs that arrived.
+    pub fn collect(&mut self, oldest_in_flight: u64) {
+        self.meta.collect(oldest_in_flight);
+        let mut i = 0;
+        while i < self.pending_free.len() {
+            let (last, start, len) = self.pending_free[i];
+            if last < oldest_in_flight {
+                self.pending_free.swap_remove(i);
+                free_insert(&mut self.free, start, len);
+            } else {
+                i += 1;
+            }
+        }
+        let mut k = 0;
+        while k < self.readbacks.len() {
+            if !self.readbacks[k].mapped.load(Ordering::Acquire) {
+                k += 1;
+                continue;
+            }
+            let r = self.readbacks.swap_remove(k);
+            let words: Vec<u32> = match r.buffer.slice(..).get_mapped_range() {
+                Ok(view) => bytemuck::pod_collect_to_vec(&view),
+                Err(_) => continue,
+            };
+            self.apply_log(&r, &words);
+        }
+    }
+
+    fn apply_log(&mut self, r: &AllocReadback, words: &[u32]) {
+        let w = |i: u64| words.get(i as usize).copied().unwrap_or(0);
+        // Blocks the GPU did not use return to the free list.
+        for b in 0..MAX_FREE_BLOCKS as u64 {
+            let (start, len) = (w(ST_FREE + 2 * b), w(ST_FREE + 2 * b + 1));
+            if len > 0 && b < w(2) as u64 {
+                free_insert(&mut self.free, start, len);
+            }
+        }
+        let top = w(0);
+        let mut shortfall = 0u64;
+        for (i, slot) in r.slots.iter().enumerate() {
+            let l = ST_LOG + 4 * i as u64;
+            let (start, len, level, full) = (w(l), w(l + 1), w(l + 2), w(l + 3));
+            let known = Surfels::Known { start, len, level };
+            if let Some(k) = self
+                .orphans
+                .iter()
+                .position(|&(s, log, _)| s == r.serial && log == i)
+            {
+                let (_, _, last) = self.orphans.swap_remove(k);
+                if len > 0 {
+                    self.pending_free.push((last, start, len));
+                }
+                continue;
+            }
+            if let Some(c) = self.instances.get_mut(slot) {
+                if matches!(c.surfels, Surfels::Pending { serial, log } if serial == r.serial && log == i)
+                {
+                    c.surfels = known;
+                    if level > 0 {
+                        shortfall += full as u64;
+                    }
+                }
+            }
+        }
+        if shortfall > 0 {
+            let need = top as u64 + shortfall;
+            let want = (need + need / 4)
+                .max(self.capacity as u64 * 2)
+                .min(self.max_binding / SURFEL_BYTES)
+                .min(u32::MAX as u64) as u32;
+            if want > self.capacity {
+                self.grow_to = Some(self.grow_to.map_or(want, |g| g.max(want)));
+            }
+        }
+    }
+
+    /// Starts reading back the allocation log of a completed task.
+    pub fn task_completed(&mut self, serial: u64) {
+        for r in self.readbacks.iter_mut().filter(|r| r.serial == serial) {
+            if r.started {
+                continue;
+            }
+            r.started = true;
+            let flag = r.mapped.clone();
+            r.buffer.map_async(wgpu::MapMode::Read, .., move |res| {
+                if res.is_ok() {
+                    flag.store(true, Ordering::Release);
+                }
+            });
+        }
+    }
+
+    fn pipelines(&mut self) -> &Pipelines {
+        let device = &self.device;
+        self.pipelines.get_or_insert_with(|| {
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("kickstart-rt cache allocation"),
+                entries: &[
+                    storage_entry(0, true),
+                    storage_entry(1, false),
+                    storage_entry(2, false),
+                    storage_entry(3, false),
+                    storage_entry(4, false),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 5,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    },
+                ],
+            });
+            let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("kickstart-rt cache allocation"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("kickstart-rt cache allocation"),
+                source: wgpu::ShaderSource::Wgsl(assemble(&[ALLOC_WGSL]).into()),
+            });
+            let make = |entry: &str| {
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("kickstart-rt cache allocation"),
+                    layout: Some(&pl),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+            };
+            Pipelines {
+                insert: make("insert"),
+                count: make("count"),
+                allocate: make("allocate"),
+                write: make("write"),
+                layout,
+            }
+        })
+    }
+
+    /// Creates the pipelines now.
+    pub fn prepare_pipelines(&mut self) {
+        self.pipelines();
+        self.injector.prepare(&self.device);
+        self.transferer.prepare(&self.device);
+    }
+
+    /// Grows the header region to `slots` instance slots and the pool when a read-back asked for
+    /// it (degraded caches are re-allocated). Records copies into `encoder`.
+    pub fn prepare_task(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        uploads: &mut Uploads,
+        slots: u32,
+        serial: u64,
+    ) -> Result<()> {
+        if slots > self.header_slots {
+            let new_slots = slots.next_power_of_two().max(64);
+            let words = new_slots * HEADER_WORDS;
+            let range = self
+                .meta
+                .alloc(&self.device, encoder, words, self.max_binding / 4)
+                .ok_or_else(|| Error::OutOfDeviceMemory {
+                    what: "lighting cache headers".into(),
+                    bytes: words as u64 * 4,
+                    limit: self.max_binding,
+                })?;
+            let meta = self.meta.buffer().clone();
+            if self.header_slots > 0 {
+                // Same-buffer copies are not allowed: go through a temporary buffer.
+                let bytes = self.headers.len as u64 * 4;
+                let tmp = storage(&self.device, "kickstart-rt cache header copy", bytes);
+                encoder.copy_buffer_to_buffer(&meta, self.headers.start as u64 * 4, &tmp, 0, bytes);
+                encoder.copy_buffer_to_buffer(&tmp, 0, &meta, range.start as u64 * 4, bytes);
+                self.meta.free_after(self.headers, serial);
+            }
+            let zeros = vec![0u8; ((new_slots - self.header_slots) * HEADER_WORDS * 4) as usize];
+            uploads.push(
+                &meta,
+                (range.start + self.header_slots * HEADER_WORDS) as u64 * 4,
+                &zeros,
+            );
+            uploads.push(&meta, 0, bytemuck::cast_slice(&[range.start, new_slots]));
+            self.headers = range;
+            self.header_slots = new_slots;
+        }
+        if let Some(new_cap) = self.grow_to.take() {
+            let new = storage(
+                &self.device,
+                "kickstart-rt cache surfels",
+                new_cap as u64 * SURFEL_BYTES,
+            );
+            encoder.copy_buffer_to_buffer(&self.surfels, 0, &new, 0, self.surfels.size());
+            self.surfels = new;
+            self.capacity = new_cap;
+            uploads.push(&self.state, 4, bytemuck::bytes_of(&new_cap));
+            // Degraded caches are allocated again at full resolution.
+            let degraded: Vec<u32> = self
+                .instances
+                .iter()
+                .filter(|(_, c)| matches!(c.surfels, Surfels::Known { level, .. } if level > 0))
+                .map(|(k, _)| *k)
+                .collect();
+            for slot in degraded {
+                self.register(slot, serial);
+            }
+        }
+        if !self.state_ready {
+            uploads.push(&self.state, 0, bytemuck::cast_slice(&[0u32, self.capacity]));
+            self.state_ready = true;
+        }
+        // Headers of released slots read "no cache" from this task on.
+        for slot in std::mem::take(&mut self.cleared) {
+            if slot < self.header_slots {
+                uploads.push(
+                    self.meta.buffer(),
+                    (self.headers.start + slot * HEADER_WORDS) as u64 * 4,
+                    &[0u8; HEADER_WORDS as usize * 4],
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Records the GPU allocation of `jobs` (instances whose geometry's BLAS is built). Jobs past
+    /// the per-task limit stay waiting.
+    pub fn record_allocations(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        staging: &mut StagingPool,
+        triangles: &wgpu::Buffer,
+        jobs: &[AllocJob],
+        serial: u64,
+        ws_staging: &mut Vec<StagingBuffer>,
+    ) -> Result<()> {
+        let jobs = &jobs[..jobs.len().min(MAX_ALLOCS_PER_TASK)];
+        if jobs.is_empty() {
+            return Ok(());
+        }
+        // Triangle records (CPU-allocated) and scratch big enough for the largest job.
+        let mut records = Vec::with_capacity(jobs.len());
+        for j in jobs {
+            let words = j.tri_count.max(1) * RECORD_WORDS;
+            let r = self
+                .meta
+                .alloc(&self.device, rec.encoder, words, self.max_binding / 4)
+                .ok_or_else(|| Error::OutOfDeviceMemory {
+                    what: "lighting cache triangle records".into(),
+                    bytes: words as u64 * 4,
+                    limit: self.max_binding,
+                })?;
+            records.push(r);
+        }
+        let max_tris = jobs.iter().map(|j| j.tri_count).max().unwrap_or(1).max(1);
+        let hash_size = (6 * max_tris).next_power_of_two();
+        let scratch_words = 4 + 13 * max_tris as u64 + 2 * hash_size as u64;
+        if scratch_words * 4 > self.max_binding {
+            return Err(Error::OutOfDeviceMemory {
+                what: "lighting cache allocation scratch".into(),
+                bytes: scratch_words * 4,
+                limit: self.max_binding,
+            });
+        }
+        if self.scratch.size() < scratch_words * 4 {
+            self.scratch = storage(
+                &self.device,
+                "kickstart-rt cache allocation scratch",
+                scratch_words * 4,
+            );
+        }
+        // Free blocks for this task (the largest first); what the GPU leaves comes back with the
+        // read-back.
+        let mut blocks: Vec<(u32, u32)> = self.free.iter().map(|(s, l)| (*s, *l)).collect();
+        blocks.sort_by_key(|b| std::cmp::Reverse(b.1));
+        blocks.truncate(MAX_FREE_BLOCKS);
+        for (s, _) in &blocks {
+            self.free.remove(s);
+        }
+        let mut uploads = Uploads::default();
+        let mut head = vec![0u32; ST_LOG as usize - 2];
+        head[0] = blocks.len() as u32;
+        for (i, (s, l)) in blocks.iter().enumerate() {
+            head[2 + 2 * i] = *s;
+            head[2 + 2 * i + 1] = *l;
+        }
+        uploads.push(&self.state, 8, bytemuck::cast_slice(&head));
+        ws_staging.extend(uploads.flush(&self.device, staging, rec.encoder));
+
+        let headers_start = self.headers.start;
+        let meta = self.meta.buffer().clone();
+        let surfels = self.surfels.clone();
+        let state = self.state.clone();
+        let scratch = self.scratch.clone();
+        let pipes = self.pipelines();
+        let layout = pipes.layout.clone();
+        let p = (
+            pipes.insert.clone(),
+            pipes.count.clone(),
+            pipes.allocate.clone(),
+            pipes.write.clone(),
+        );
+        rec.scope = "cache allocation";
+        let mut slots = Vec::with_capacity(jobs.len());
+        for (i, (j, r)) in jobs.iter().zip(&records).enumerate() {
+            let rows = glam::Mat4::from(j.transform).transpose().to_cols_array_2d();
+            let params = rec.uniform(
+                "kickstart-rt cache allocation params",
+                &AllocParams {
+                    rows: [rows[0], rows[1], rows[2]],
+                    initial: j.initial.to_array(),
+                    tri_count: j.tri_count,
+                    tri_base: j.tri_base,
+                    records: r.start,
+                    header: headers_start + j.slot * HEADER_WORDS,
+                    hash_size,
+                    mesh_colors: j.params.mesh_colors as u32,
+                    resolution_limit: j.params.tile_resolution_limit,
+                    force_direct: j.params.force_direct_tile_mapping as u32,
+                    unit_length: j.params.tile_unit_length,
+                    direct_threshold: j.params.direct_tile_mapping_threshold,
+                    log_index: i as u32,
+                    pad: 0,
+                },
+            );
+            let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("kickstart-rt cache allocation"),
+                layout: &layout,
+                entries: &[
+                    entry(0, triangles),
+                    entry(1, &meta),
+                    entry(2, &surfels),
+                    entry(3, &scratch),
+                    entry(4, &state),
+                    entry(5, &params),
+                ],
+            });
+            let words = 4 + 13 * j.tri_count as u64 + 2 * hash_size as u64;
+            rec.encoder.clear_buffer(&scratch, 0, Some(words * 4));
+            let corners = (3 * j.tri_count).div_ceil(64);
+            rec.dispatch("cache insert", &p.0, &[&bg], corners);
+            rec.dispatch("cache count", &p.1, &[&bg], corners);
+            rec.dispatch("cache allocate", &p.2, &[&bg], 1);
+            rec.dispatch("cache write", &p.3, &[&bg], j.tri_count.div_ceil(64));
+            slots.push(j.slot);
+            self.instances.insert(
+                j.slot,
+                InstanceCache {
+                    records: *r,
+                    surfels: Surfels::Pending { serial, log: i },
+                },
+            );
+            self.waiting.retain(|s| *s != j.slot);
+        }
+        let bytes = (ST_LOG + 4 * jobs.len() as u64) * 4;
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("kickstart-rt cache allocation read-back"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        rec.encoder
+            .copy_buffer_to_buffer(&self.state, 0, &buffer, 0, bytes);
+        self.readbacks.push(AllocReadback {
+            serial,
+            buffer,
+            mapped: Arc::new(AtomicBool::new(false)),
+            slots,
+            started: false,
+        });
+        Ok(())
+    }
+
+    /// The allocation of instance `slot` as read back: `(surfels, level)` with level 0 full,
+    /// 1 coarse, 2 none; `None` before its read-back arrived.
+    pub fn allocation(&self, slot: u32) -> Option<super::CacheAllocation> {
+        match self.instances.get(&slot)?.surfels {
+            Surfels::Known { len, level, .. } => Some(super::CacheAllocation {
+                surfels: len,
+                level: match level {
+                    0 => super::CacheLevel::Full,
+                    1 => super::CacheLevel::Coarse,
+                    _ => super::CacheLevel::None,
+                },
+            }),
+            Surfels::Pending { .. } => None,
+        }
+    }
+}
+
+fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// Inserts a free range, merged with its neighbours.
+fn free_insert(free: &mut BTreeMap<u32, u32>, start: u32, len: u32) {
+    let (mut s, mut l) = (start, len);
+    if let Some((&ps, &pl)) = free.range(..s).next_back() {
+        if ps + pl == s {
+            free.remove(&ps);
+            s = ps;
+            l += pl;
+        }
+    }
+    if let Some(&nl) = free.get(&(start + len)) {
+        free.remove(&(start + len));
+        l += nl;
+    }
+    free.insert(s, l);
+}

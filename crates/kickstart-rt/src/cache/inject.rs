@@ -1,0 +1,365 @@
+//! `DirectLightingInjectionTask`: the engine's direct lighting blended into the cache.
+//!
+//! Per strided pixel (one per `stride × stride` block, at an offset inside the block drawn anew
+//! for every injection task), the surface the pixel shows is found by tracing from the camera
+//! towards the position the depth gives (RClipSpace: unprojected with the task's matrices;
+//! RgbWorldSpace: read directly) and accepting a hit on an instance with
+//! `DIRECT_LIGHT_INJECTION_TARGET` within 0.2 % of that distance. The pixel's radiance (NaN/∞ as
+//! 0, clamped to [0, 65504]) is summed exactly into its nearest surfel's slot (64-bit fixed-point
+//! sums with 16 fractional bits, and a count); a resolve pass then blends each slot's average
+//! into the surfel: the first injection replaces the initial colour, the n-th after it moves the
+//! value by `(average − value) / min(n + 1, average_window)`.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::storage_entry;
+use crate::error::{Error, Result};
+use crate::gpu::shader::{assemble, compute_pipeline};
+use crate::gpu::Recorder;
+use crate::scene::gpu_scene::storage;
+use crate::trace::rays::{SceneBuffers, TRAVERSE_WGSL};
+use crate::{DepthType, DirectLightingInjectionTask};
+
+const INJECT_WGSL: &str = include_str!("../../shaders/cache_inject.wgsl");
+const RESOLVE_WGSL: &str = include_str!("../../shaders/cache_resolve.wgsl");
+const TASK: &str = "DirectLightingInjectionTask";
+/// Relative distance within which a traced hit counts as the surface the depth shows.
+const DEPTH_TOLERANCE: f32 = 2e-3;
+
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy)]
+struct InjectParams {
+    clip_to_world: [[f32; 4]; 4],
+    eye: [f32; 4],
+    viewport: [u32; 4],
+    grid: [u32; 4],
+    offset: [u32; 4],
+    f: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy)]
+struct ResolveParams {
+    slots: u32,
+    map_words: u32,
+    window: f32,
+    pad: u32,
+}
+
+struct InjectPipeline {
+    layouts: [wgpu::BindGroupLayout; 3],
+    pipeline: wgpu::ComputePipeline,
+}
+
+/// The injection passes and their accumulation buffer.
+#[derive(Default)]
+pub(crate) struct Injector {
+    /// Index 0: a depth-format depth texture; 1: a float texture.
+    inject: [Option<InjectPipeline>; 2],
+    resolve: Option<wgpu::ComputePipeline>,
+    /// Surfel → slot map (one word per surfel of the pool), then 8 words per slot.
+    accum: Option<(wgpu::Buffer, u32, u32)>,
+    tasks: u32,
+}
+
+fn texture_entry(binding: u32, depth: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: if depth {
+                wgpu::TextureSampleType::Depth
+            } else {
+                wgpu::TextureSampleType::Float { filterable: false }
+            },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline {
+    let (ty, load) = if depth_format {
+        (
+            "texture_depth_2d",
+            "vec4<f32>(textureLoad(depth_tex, pixel, 0), 0.0, 0.0, 0.0)",
+        )
+    } else {
+        ("texture_2d<f32>", "textureLoad(depth_tex, pixel, 0)")
+    };
+    let source = assemble(&[
+        TRAVERSE_WGSL,
+        &super::sample_wgsl(1, false),
+        &INJECT_WGSL
+            .replace("DEPTH_TEXTURE_TYPE", ty)
+            .replace("DEPTH_LOAD", load),
+    ]);
+    let scene = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("kickstart-rt injection scene"),
+        entries: &(0..5).map(|b| storage_entry(b, true)).collect::<Vec<_>>(),
+    });
+    let cache = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("kickstart-rt injection cache"),
+        entries: &[storage_entry(0, true), storage_entry(2, false)],
+    });
+    let io = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("kickstart-rt injection inputs"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            texture_entry(1, depth_format),
+            texture_entry(2, false),
+        ],
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("kickstart-rt injection"),
+        bind_group_layouts: &[Some(&scene), Some(&cache), Some(&io)],
+        immediate_size: 0,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("kickstart-rt injection"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("kickstart-rt injection"),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some("inject"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    InjectPipeline {
+        layouts: [scene, cache, io],
+        pipeline,
+    }
+}
+
+/// Whether a texture format reads as floats in WGSL (`Some(true)` for depth formats).
+fn float_kind(format: wgpu::TextureFormat) -> Option<bool> {
+    if format.has_depth_aspect() {
+        return (!format.has_stencil_aspect()).then_some(true);
+    }
+    match format.sample_type(None, None) {
+        Some(wgpu::TextureSampleType::Float { .. }) => Some(false),
+        _ => None,
+    }
+}
+
+/// A PCG hash (per-task block offsets).
+fn hash(x: u32) -> u32 {
+    let state = x.wrapping_mul(747796405).wrapping_add(2891336453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277803737);
+    (word >> 22) ^ word
+}
+
+impl Injector {
+    /// Creates the pipelines now.
+    pub fn prepare(&mut self, device: &wgpu::Device) {
+        for (i, p) in self.inject.iter_mut().enumerate() {
+            p.get_or_insert_with(|| inject_pipeline(device, i == 0));
+        }
+        self.resolve(device);
+    }
+
+    fn resolve(&mut self, device: &wgpu::Device) -> wgpu::ComputePipeline {
+        self.resolve
+            .get_or_insert_with(|| {
+                compute_pipeline(
+                    device,
+                    "kickstart-rt injection resolve",
+                    RESOLVE_WGSL,
+                    "resolve",
+                )
+            })
+            .clone()
+    }
+
+    /// Bytes of the accumulation buffer.
+    pub fn bytes(&self) -> u64 {
+        self.accum.as_ref().map_or(0, |a| a.0.size())
+    }
+
+    /// Records one injection task. `meta`/`surfels` are the cache's buffers, `capacity` its
+    /// surfel count.
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        scene: &SceneBuffers<'_>,
+        (meta, surfels, capacity): (&wgpu::Buffer, &wgpu::Buffer, u32),
+        task: &DirectLightingInjectionTask,
+    ) -> Result<()> {
+        let device = rec.device;
+        let depth_format = task.depth.texture.texture().format();
+        let Some(depth_is_depth) = float_kind(depth_format) else {
+            return Err(Error::input(
+                TASK,
+                "depth.texture",
+                depth_format,
+                "must be a depth format or a float colour format",
+            ));
+        };
+        let light_format = task.direct_lighting.texture().format();
+        if float_kind(light_format) != Some(false) {
+            return Err(Error::input(
+                TASK,
+                "direct_lighting",
+                light_format,
+                "must be a float colour format",
+            ));
+        }
+        if task.depth.depth_type == DepthType::RgbWorldSpace && depth_is_depth {
+            return Err(Error::input(
+                TASK,
+                "depth.depth_type",
+                task.depth.depth_type,
+                "RgbWorldSpace needs a float colour texture holding positions",
+            ));
+        }
+        let size = task.direct_lighting.texture().size();
+        let vp = task.viewport.unwrap_or(crate::Viewport {
+            x: 0,
+            y: 0,
+            width: size.width,
+            height: size.height,
+        });
+        let stride = task.injection_resolution_stride.clamp(1, 8);
+        let (gw, gh) = (vp.width.div_ceil(stride), vp.height.div_ceil(stride));
+        let slots = gw as u64 * gh as u64;
+        if slots == 0 {
+            return Ok(());
+        }
+        let words = capacity as u64 + 8 * slots;
+        if words * 4 > device.limits().max_storage_buffer_binding_size {
+            return Err(Error::input(
+                TASK,
+                "injection_resolution_stride",
+                stride,
+                "too many injected pixels for one storage binding with this cache size: raise the stride",
+            ));
+        }
+        let slots = slots as u32;
+        let fits = matches!(&self.accum, Some((_, c, s)) if *c == capacity && *s >= slots);
+        if !fits {
+            let keep = self.accum.as_ref().map_or(0, |a| a.2).max(slots);
+            let buffer = storage(
+                device,
+                "kickstart-rt injection accumulation",
+                (capacity as u64 + 8 * keep as u64) * 4,
+            );
+            self.accum = Some((buffer, capacity, keep));
+        }
+        let Some((accum, _, _)) = self.accum.clone() else {
+            return Ok(());
+        };
+        self.tasks = self.tasks.wrapping_add(1);
+        let seed = hash(self.tasks);
+        let (clip_to_world, eye, ortho, z_origin, _) = crate::trace::debug_view::camera(&task.view);
+        let params = rec.uniform(
+            "kickstart-rt injection params",
+            &InjectParams {
+                clip_to_world,
+                eye,
+                viewport: [vp.x, vp.y, vp.width, vp.height],
+                grid: [gw, gh, stride, ortho],
+                offset: [
+                    seed % stride,
+                    hash(seed) % stride,
+                    (task.depth.depth_type == DepthType::RgbWorldSpace) as u32,
+                    capacity,
+                ],
+                f: [z_origin, DEPTH_TOLERANCE, task.average_window, 0.0],
+            },
+        );
+        let index = if depth_is_depth { 0 } else { 1 };
+        let p = self.inject[index].get_or_insert_with(|| inject_pipeline(device, depth_is_depth));
+        let scene_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("kickstart-rt injection scene"),
+            layout: &p.layouts[0],
+            entries: &[
+                scene.tlas_nodes,
+                scene.instances,
+                scene.geometries,
+                scene.blas_nodes,
+                scene.triangles,
+            ]
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect::<Vec<_>>(),
+        });
+        let cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("kickstart-rt injection cache"),
+            layout: &p.layouts[1],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: meta.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: accum.as_entire_binding(),
+                },
+            ],
+        });
+        let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("kickstart-rt injection inputs"),
+            layout: &p.layouts[2],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&task.depth.texture),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&task.direct_lighting),
+                },
+            ],
+        });
+        let pipeline = p.pipeline.clone();
+        rec.scope = "injection";
+        rec.dispatch(
+            "cache inject",
+            &pipeline,
+            &[&scene_group, &cache_group, &io_group],
+            slots.div_ceil(64),
+        );
+        let resolve = self.resolve(device);
+        let rparams = rec.uniform(
+            "kickstart-rt injection resolve params",
+            &ResolveParams {
+                slots,
+                map_words: capacity,
+                window: task.average_window,
+                pad: 0,
+            },
+        );
+        let group = rec.bind_buffers(
+            "kickstart-rt injection resolve",
+            &resolve,
+            0,
+            &[
+                surfels.as_entire_binding(),
+                accum.as_entire_binding(),
+                rparams.as_entire_binding(),
+            ],
+        );
+        rec.dispatch("cache resolve", &resolve, &[&group], slots.div_ceil(64));
+        Ok(())
+    }
+}

@@ -1,0 +1,83 @@
+//! `DirectLightTransferTask`: the target instance's cache is filled from the source's (the LOD
+//! switch of the integration guide). Every surfel of the target reads the source's interpolated
+//! radiance at the same primitive index and barycentrics, so the source and target geometries
+//! must have the same triangle count and order (the same geometry, or LODs that keep it); the
+//! layouts and resolutions may differ. Transferred surfels count as one injection.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::gpu::shader::{assemble, compute_pipeline};
+use crate::gpu::Recorder;
+
+const TRANSFER_WGSL: &str = include_str!("../../shaders/cache_transfer.wgsl");
+
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy)]
+struct TransferParams {
+    source: u32,
+    target: u32,
+    tri_count: u32,
+    pad: u32,
+}
+
+/// The transfer pass.
+#[derive(Default)]
+pub(crate) struct Transferer {
+    pipeline: Option<wgpu::ComputePipeline>,
+}
+
+impl Transferer {
+    fn pipeline(&mut self, device: &wgpu::Device) -> wgpu::ComputePipeline {
+        self.pipeline
+            .get_or_insert_with(|| {
+                let source = assemble(&[&super::sample_wgsl(0, true), TRANSFER_WGSL]);
+                compute_pipeline(device, "kickstart-rt light transfer", &source, "transfer")
+            })
+            .clone()
+    }
+
+    /// Creates the pipeline now.
+    pub fn prepare(&mut self, device: &wgpu::Device) {
+        self.pipeline(device);
+    }
+
+    /// Records a transfer from instance slot `source` to `target` (`tri_count` triangles each).
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        (meta, surfels): (&wgpu::Buffer, &wgpu::Buffer),
+        source: u32,
+        target: u32,
+        tri_count: u32,
+    ) {
+        let pipeline = self.pipeline(rec.device);
+        let params = rec.uniform(
+            "kickstart-rt light transfer params",
+            &TransferParams {
+                source,
+                target,
+                tri_count,
+                pad: 0,
+            },
+        );
+        let cache = rec.bind_buffers(
+            "kickstart-rt light transfer cache",
+            &pipeline,
+            0,
+            &[meta.as_entire_binding(), surfels.as_entire_binding()],
+        );
+        let io = rec.bind_buffers(
+            "kickstart-rt light transfer params",
+            &pipeline,
+            1,
+            &[params.as_entire_binding()],
+        );
+        rec.scope = "light transfer";
+        rec.dispatch(
+            "cache transfer",
+            &pipeline,
+            &[&cache, &io],
+            tri_count.div_ceil(64),
+        );
+    }
+}
