@@ -1160,7 +1160,8 @@ impl ExecuteContext {
                         .trace
                         .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue));
                     rec.scope = "trace";
-                    passes.record(&mut rec, &st.scene.scene_buffers(), other)?;
+                    let cache = st.cache.sample_bind_group_entries();
+                    passes.record(&mut rec, &st.scene.scene_buffers(), &cache, other)?;
                 }
                 other => {
                     if let Some((common, output)) = other.trace_common() {

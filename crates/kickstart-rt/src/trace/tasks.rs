@@ -1,10 +1,11 @@
-//! The trace tasks' passes: ambient occlusion, shadows and multi-light shadows (and, with the
-//! lighting cache, specular and diffuse). One compute dispatch per task over the viewport (or its
+//! The trace tasks' passes: specular, diffuse, ambient occlusion, shadows and multi-light
+//! shadows. One compute dispatch per task over the viewport (or its
 //! checkerboard half), one ray (per light) per pixel. Semantics of every output:
 //! docs/trace-tasks.md.
 //!
 //! Bind groups: 0 the scene (traversal), 1 the G-buffer ([`GBufferBinder`]), 2 the task's
-//! parameters, blue noise, environment map, direct lighting and outputs. Pipelines are created
+//! parameters, blue noise, environment map, direct lighting and outputs, 3 (specular and diffuse)
+//! the lighting cache's sampling bindings. Pipelines are created
 //! per (task kind, output formats) on first use, with explicit layouts (the shared WGSL modules
 //! declare bindings some passes do not use).
 
@@ -21,6 +22,7 @@ use bytemuck::{Pod, Zeroable};
 const COMMON_WGSL: &str = include_str!("../../shaders/trace_common.wgsl");
 const AO_WGSL: &str = include_str!("../../shaders/trace_ao.wgsl");
 const SHADOW_WGSL: &str = include_str!("../../shaders/trace_shadow.wgsl");
+const RADIANCE_WGSL: &str = include_str!("../../shaders/trace_radiance.wgsl");
 
 /// Invocations per workgroup (`RT_WORKGROUP_SIZE` of the traversal module).
 const WORKGROUP_SIZE: u32 = 64;
@@ -35,6 +37,8 @@ pub(crate) enum TraceKind {
     AmbientOcclusion,
     Shadow,
     MultiShadow,
+    Specular,
+    Diffuse,
 }
 
 impl TraceKind {
@@ -44,6 +48,8 @@ impl TraceKind {
             TraceKind::AmbientOcclusion => "trace ambient occlusion",
             TraceKind::Shadow => "trace shadow",
             TraceKind::MultiShadow => "trace multi shadow",
+            TraceKind::Specular => "trace specular",
+            TraceKind::Diffuse => "trace diffuse",
         }
     }
 
@@ -53,7 +59,14 @@ impl TraceKind {
             TraceKind::AmbientOcclusion => 1,
             TraceKind::Shadow => 2,
             TraceKind::MultiShadow => 3,
+            TraceKind::Specular => 4,
+            TraceKind::Diffuse => 5,
         }
+    }
+
+    /// Whether the pass reads the lighting cache (bind group 3).
+    fn reads_cache(self) -> bool {
+        matches!(self, TraceKind::Specular | TraceKind::Diffuse)
     }
 }
 
@@ -72,7 +85,9 @@ struct TraceParams {
 const FLAG_ENV: u32 = 1;
 const FLAG_DIRECT_LIGHTING: u32 = 2;
 const FLAG_BILINEAR: u32 = 4;
+const FLAG_DEMODULATE: u32 = 8;
 const FLAG_FIRST_HIT: u32 = 16;
+const FLAG_DISNEY: u32 = 32;
 
 /// The WGSL storage format name of a writable output format.
 fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
@@ -102,6 +117,8 @@ struct Job<'a> {
     ao_radius: f32,
     lights: &'a [LightInfo],
     first_hit: bool,
+    demodulate: bool,
+    disney: bool,
 }
 
 /// The trace-task passes of one context.
@@ -110,6 +127,9 @@ pub(crate) struct TracePasses {
     gbuffer: GBufferBinder,
     blue_noise: wgpu::TextureView,
     placeholder: wgpu::TextureView,
+    cache_layout: wgpu::BindGroupLayout,
+    /// The lighting cache's sampling module at group 3 (a stand-in in unit tests).
+    cache_wgsl: String,
     pipelines: Vec<Pipeline>,
 }
 
@@ -137,6 +157,11 @@ impl TracePasses {
             gbuffer: GBufferBinder::new(device),
             blue_noise: blue_noise_texture(device, queue),
             placeholder,
+            cache_layout: device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("kickstart-rt trace cache"),
+                entries: &crate::cache::DirectLightingCache::sample_layout_entries(),
+            }),
+            cache_wgsl: crate::cache::sample_wgsl(3, false),
             pipelines: Vec::new(),
         }
     }
@@ -146,6 +171,8 @@ impl TracePasses {
         matches!(
             task,
             RenderTask::TraceAmbientOcclusion(_)
+                | RenderTask::TraceSpecular(_)
+                | RenderTask::TraceDiffuse(_)
                 | RenderTask::TraceShadow(_)
                 | RenderTask::TraceMultiShadow(_)
         )
@@ -161,6 +188,9 @@ impl TracePasses {
             (TraceKind::Shadow, F::Rgba16Float, None),
             (TraceKind::Shadow, F::R32Float, None),
             (TraceKind::MultiShadow, F::Rgba16Float, Some(F::Rgba16Float)),
+            (TraceKind::Specular, F::Rgba16Float, None),
+            (TraceKind::Specular, F::Rgba16Float, Some(F::Rgba16Float)),
+            (TraceKind::Diffuse, F::Rgba16Float, None),
         ] {
             // Every format listed has a WGSL name, so this cannot fail.
             let _ = self.pipeline(device, kind, (f0, f1));
@@ -200,19 +230,35 @@ impl TracePasses {
             TraceKind::AmbientOcclusion => (AO_WGSL, "main"),
             TraceKind::Shadow => (SHADOW_WGSL, "shadow"),
             TraceKind::MultiShadow => (SHADOW_WGSL, "multi_shadow"),
+            TraceKind::Specular => (RADIANCE_WGSL, "specular"),
+            TraceKind::Diffuse => (RADIANCE_WGSL, "diffuse"),
+        };
+        let (declaration, store) = if formats.1.is_some() {
+            (
+                format!("@group(2) @binding(5) var out1: texture_storage_2d<{f1}, write>;"),
+                "textureStore(out1, texel, v);",
+            )
+        } else {
+            (String::new(), "")
         };
         let body = body
             .replace("OUTPUT0_FORMAT", f0)
-            .replace("OUTPUT1_FORMAT", f1);
-        let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, &body]);
+            .replace("OUTPUT1_FORMAT", f1)
+            .replace("OUTPUT1_DECLARATION", &declaration)
+            .replace("OUTPUT1_STORE", store);
+        let cache = if kind.reads_cache() {
+            self.cache_wgsl.as_str()
+        } else {
+            ""
+        };
+        let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
         let io_layout = io_layout(device, formats);
-        let pipeline = compute_pipeline_with_layouts(
-            device,
-            kind.label(),
-            &source,
-            entry,
-            &[&self.scene_layout, self.gbuffer.layout(), &io_layout],
-        );
+        let mut layouts = vec![&self.scene_layout, self.gbuffer.layout(), &io_layout];
+        if kind.reads_cache() {
+            layouts.push(&self.cache_layout);
+        }
+        let pipeline =
+            compute_pipeline_with_layouts(device, kind.label(), &source, entry, &layouts);
         self.pipelines.push(Pipeline {
             kind,
             formats,
@@ -222,14 +268,41 @@ impl TracePasses {
         Ok(self.pipelines.len() - 1)
     }
 
-    /// Records `task` (validated by the caller; [`Self::handles`] must be true).
+    /// Records `task` (validated by the caller; [`Self::handles`] must be true). `cache` are the
+    /// lighting cache's sampling bindings (`DirectLightingCache::sample_bind_group_entries`).
     pub fn record(
         &mut self,
         rec: &mut Recorder<'_>,
         scene: &SceneBuffers<'_>,
+        cache: &[wgpu::BindGroupEntry<'_>],
         task: &RenderTask,
     ) -> Result<()> {
         let job = match task {
+            RenderTask::TraceSpecular(t) => Job {
+                kind: TraceKind::Specular,
+                common: &t.common,
+                out0: &t.output,
+                out1: t
+                    .demodulation_output
+                    .as_ref()
+                    .filter(|_| t.demodulate_specular),
+                ao_radius: 0.0,
+                lights: &[],
+                first_hit: false,
+                demodulate: t.demodulate_specular,
+                disney: false,
+            },
+            RenderTask::TraceDiffuse(t) => Job {
+                kind: TraceKind::Diffuse,
+                common: &t.common,
+                out0: &t.output,
+                out1: None,
+                ao_radius: 0.0,
+                lights: &[],
+                first_hit: false,
+                demodulate: false,
+                disney: t.diffuse_brdf == DiffuseBrdf::NormalizedDisney,
+            },
             RenderTask::TraceAmbientOcclusion(t) => Job {
                 kind: TraceKind::AmbientOcclusion,
                 common: &t.common,
@@ -238,6 +311,8 @@ impl TracePasses {
                 ao_radius: t.ao_radius,
                 lights: &[],
                 first_hit: false,
+                demodulate: false,
+                disney: false,
             },
             RenderTask::TraceShadow(t) => Job {
                 kind: TraceKind::Shadow,
@@ -247,6 +322,8 @@ impl TracePasses {
                 ao_radius: 0.0,
                 lights: std::slice::from_ref(&t.light),
                 first_hit: t.enable_first_hit_and_end_search,
+                demodulate: false,
+                disney: false,
             },
             RenderTask::TraceMultiShadow(t) => Job {
                 kind: TraceKind::MultiShadow,
@@ -256,18 +333,21 @@ impl TracePasses {
                 ao_radius: 0.0,
                 lights: &t.lights,
                 first_hit: t.enable_first_hit_and_end_search,
+                demodulate: false,
+                disney: false,
             },
             other => {
                 return Err(Error::Unsupported { task: other.name() });
             }
         };
-        self.record_job(rec, scene, &job)
+        self.record_job(rec, scene, cache, &job)
     }
 
     fn record_job(
         &mut self,
         rec: &mut Recorder<'_>,
         scene: &SceneBuffers<'_>,
+        cache: &[wgpu::BindGroupEntry<'_>],
         job: &Job<'_>,
     ) -> Result<()> {
         let c = job.common;
@@ -334,10 +414,20 @@ impl TracePasses {
             layout: &p.io_layout,
             entries: &entries,
         });
+        let mut groups = vec![&scene_group, &gb_group, &io_group];
+        let cache_group;
+        if job.kind.reads_cache() {
+            cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("kickstart-rt trace cache"),
+                layout: &self.cache_layout,
+                entries: cache,
+            });
+            groups.push(&cache_group);
+        }
         rec.dispatch(
             job.kind.label(),
             &p.pipeline,
-            &[&scene_group, &gb_group, &io_group],
+            &groups,
             pixels.div_ceil(WORKGROUP_SIZE),
         );
         Ok(())
@@ -409,6 +499,12 @@ fn trace_params(job: &Job<'_>) -> TraceParams {
     }
     if job.first_hit {
         flags |= FLAG_FIRST_HIT;
+    }
+    if job.demodulate {
+        flags |= FLAG_DEMODULATE;
+    }
+    if job.disney {
+        flags |= FLAG_DISNEY;
     }
     let o = &c.ray_offset;
     TraceParams {
