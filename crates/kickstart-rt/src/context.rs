@@ -18,6 +18,7 @@ use crate::scene::ingest::ComponentIngest;
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::tasks::*;
 use crate::timing::{GpuTimings, TimingReadback};
+use crate::trace::tasks::TracePasses;
 use crate::validate;
 use crate::version::Version;
 
@@ -188,6 +189,8 @@ struct State {
     invoked: Vec<(u64, Arc<AtomicBool>)>,
     staging: StagingPool,
     scene: GpuScene,
+    /// The trace tasks' passes (created on first use: they generate the blue-noise tile).
+    trace: Option<TracePasses>,
     /// Geometries waiting for a BLAS build or refit, in the order they were scheduled.
     blas_queue: VecDeque<GeometryHandle>,
     /// Instance slots whose records must be rewritten as dead (destroyed instances, instances of
@@ -291,6 +294,7 @@ impl ExecuteContext {
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
                 scene: GpuScene::new(device),
+                trace: None,
                 blas_queue: VecDeque::new(),
                 dead_instance_slots: Vec::new(),
                 dead_geometry_slots: Vec::new(),
@@ -652,6 +656,9 @@ impl ExecuteContext {
     pub fn prepare_pipelines(&self) {
         let mut s = self.state();
         s.scene.prepare_pipelines();
+        s.trace
+            .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue))
+            .prepare(&self.device);
         s.cache.prepare_pipelines();
     }
 
@@ -1077,8 +1084,12 @@ impl ExecuteContext {
         // Direct lighting cache: grow what a read-back asked for, allocate waiting instances
         // whose BLAS is built (DESIGN.md data flow step 5).
         let mut cache_uploads = Uploads::default();
-        s.cache
-            .prepare_task(encoder, &mut cache_uploads, s.instances.slot_count(), serial)?;
+        s.cache.prepare_task(
+            encoder,
+            &mut cache_uploads,
+            s.instances.slot_count(),
+            serial,
+        )?;
         ws.staging
             .extend(cache_uploads.flush(&self.device, &mut s.staging, encoder));
         let jobs = Self::cache_jobs(s);
@@ -1142,6 +1153,15 @@ impl ExecuteContext {
                         t.target.index,
                         tris,
                     );
+                }
+                other if TracePasses::handles(other) && is_default_output(other) => {
+                    let st = &mut *s;
+                    let passes = st
+                        .trace
+                        .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue));
+                    rec.scope = "trace";
+                    let cache = st.cache.sample_bind_group_entries();
+                    passes.record(&mut rec, &st.scene.scene_buffers(), &cache, other)?;
                 }
                 other => {
                     if let Some((common, output)) = other.trace_common() {
@@ -1292,6 +1312,7 @@ impl ExecuteContext {
                 RenderTask::TraceRays(_)
                 | RenderTask::DirectLightingInjection(_)
                 | RenderTask::DirectLightTransfer(_) => true,
+                t if TracePasses::handles(t) && is_default_output(t) => true,
                 other => other.trace_common().is_some_and(|(c, _)| {
                     matches!(
                         c.debug_parameters.debug_output_type,
@@ -1324,6 +1345,12 @@ impl ExecuteContext {
     }
 }
 
+/// A trace task asking for its normal output (not a debug view).
+fn is_default_output(task: &RenderTask) -> bool {
+    task.trace_common()
+        .is_some_and(|(c, _)| c.debug_parameters.debug_output_type == DebugOutputType::Default)
+}
+
 impl ExecuteContext {
     /// Checks a transfer: both instances registered (in an earlier task), distinct, the target's
     /// geometry allows transfer, and both geometries have the same triangle count.
@@ -1348,7 +1375,12 @@ impl ExecuteContext {
         let src = geometry(t.source, "source")?;
         let dst = geometry(t.target, "target")?;
         if t.source == t.target {
-            return Err(Error::input(TASK, "target", t.target, "must differ from the source"));
+            return Err(Error::input(
+                TASK,
+                "target",
+                t.target,
+                "must differ from the source",
+            ));
         }
         if !dst.allow_light_transfer_target {
             return Err(Error::input(
@@ -1396,7 +1428,10 @@ impl ExecuteContext {
             else {
                 continue;
             };
-            let Some(blas) = d.gpu.blas.filter(|_| d.gpu.pending != Some(PendingBvh::Build))
+            let Some(blas) = d
+                .gpu
+                .blas
+                .filter(|_| d.gpu.pending != Some(PendingBvh::Build))
             else {
                 continue;
             };

@@ -376,6 +376,23 @@ fn writable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
     Ok(())
 }
 
+/// The multi-shadow outputs pack per-light data into four channels (docs/trace-tasks.md).
+fn four_channels(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
+    let format = t.texture().format();
+    if matches!(
+        format,
+        wgpu::TextureFormat::Rgba16Float | wgpu::TextureFormat::Rgba32Float
+    ) {
+        return Ok(());
+    }
+    Err(Error::input(
+        task,
+        field,
+        format,
+        "the packed multi-shadow format needs four channels: Rgba16Float or Rgba32Float",
+    ))
+}
+
 /// Checks a viewport against the textures it addresses; returns the effective one.
 fn viewport(
     task: &'static str,
@@ -532,6 +549,9 @@ fn trace_common(
     ];
     if let Some(m) = &c.input_mask {
         tex.push(("common.input_mask", m));
+    }
+    if let Some(d) = &c.direct_lighting {
+        tex.push(("common.direct_lighting", d));
     }
     viewport(task, c.viewport, &tex)?;
     Ok(())
@@ -759,7 +779,14 @@ pub(crate) fn render_task(task: &RenderTask, limits: &wgpu::Limits) -> Result<()
         RenderTask::TraceSpecular(t) => {
             trace_common(name, &t.common, ("output", &t.output))?;
             match (&t.demodulation_output, t.demodulate_specular) {
-                (Some(o), _) => writable(name, "demodulation_output", o)?,
+                (Some(o), _) => {
+                    writable(name, "demodulation_output", o)?;
+                    viewport(
+                        name,
+                        t.common.viewport,
+                        &[("output", &t.output), ("demodulation_output", o)],
+                    )?;
+                }
                 (None, true) => {
                     return Err(Error::input(
                         name,
@@ -792,6 +819,13 @@ pub(crate) fn render_task(task: &RenderTask, limits: &wgpu::Limits) -> Result<()
         RenderTask::TraceMultiShadow(t) => {
             trace_common(name, &t.common, ("output0", &t.output0))?;
             writable(name, "output1", &t.output1)?;
+            four_channels(name, "output0", &t.output0)?;
+            four_channels(name, "output1", &t.output1)?;
+            viewport(
+                name,
+                t.common.viewport,
+                &[("output0", &t.output0), ("output1", &t.output1)],
+            )?;
             if t.lights.is_empty() || t.lights.len() > MAX_MULTI_SHADOW_LIGHTS {
                 return Err(Error::input(
                     name,

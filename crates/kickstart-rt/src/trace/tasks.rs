@@ -1,0 +1,557 @@
+//! The trace tasks' passes: specular, diffuse, ambient occlusion, shadows and multi-light
+//! shadows. One compute dispatch per task over the viewport (or its
+//! checkerboard half), one ray (per light) per pixel. Semantics of every output:
+//! docs/trace-tasks.md.
+//!
+//! Bind groups: 0 the scene (traversal), 1 the G-buffer ([`GBufferBinder`]), 2 the task's
+//! parameters, blue noise, environment map, direct lighting and outputs, 3 (specular and diffuse)
+//! the lighting cache's sampling bindings. Pipelines are created
+//! per (task kind, output formats) on first use, with explicit layouts (the shared WGSL modules
+//! declare bindings some passes do not use).
+
+use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
+use super::lights::{pack_lights, GpuLight};
+use super::rays::{SceneBuffers, TRAVERSE_WGSL};
+use super::sampling::blue_noise_texture;
+use crate::gpu::shader::{assemble, compute_pipeline_with_layouts};
+use crate::gpu::Recorder;
+use crate::tasks::*;
+use crate::{Error, InstanceInclusionMask, Result};
+use bytemuck::{Pod, Zeroable};
+
+const COMMON_WGSL: &str = include_str!("../../shaders/trace_common.wgsl");
+const AO_WGSL: &str = include_str!("../../shaders/trace_ao.wgsl");
+const SHADOW_WGSL: &str = include_str!("../../shaders/trace_shadow.wgsl");
+const RADIANCE_WGSL: &str = include_str!("../../shaders/trace_radiance.wgsl");
+
+/// Invocations per workgroup (`RT_WORKGROUP_SIZE` of the traversal module).
+const WORKGROUP_SIZE: u32 = 64;
+
+/// Secondary rays start past `T_MIN_PER_VIEW_DISTANCE × view distance` (with or without a ray
+/// offset): depth-reconstructed positions carry an error that grows with the view distance.
+pub const T_MIN_PER_VIEW_DISTANCE: f32 = 1e-4;
+
+/// Which pass a trace task runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum TraceKind {
+    AmbientOcclusion,
+    Shadow,
+    MultiShadow,
+    Specular,
+    Diffuse,
+}
+
+impl TraceKind {
+    /// The pass's label and timing name.
+    fn label(self) -> &'static str {
+        match self {
+            TraceKind::AmbientOcclusion => "trace ambient occlusion",
+            TraceKind::Shadow => "trace shadow",
+            TraceKind::MultiShadow => "trace multi shadow",
+            TraceKind::Specular => "trace specular",
+            TraceKind::Diffuse => "trace diffuse",
+        }
+    }
+
+    /// Decorrelates the noise of tasks traced in the same frame.
+    fn salt(self) -> u32 {
+        match self {
+            TraceKind::AmbientOcclusion => 1,
+            TraceKind::Shadow => 2,
+            TraceKind::MultiShadow => 3,
+            TraceKind::Specular => 4,
+            TraceKind::Diffuse => 5,
+        }
+    }
+
+    /// Whether the pass reads the lighting cache (bind group 3).
+    fn reads_cache(self) -> bool {
+        matches!(self, TraceKind::Specular | TraceKind::Diffuse)
+    }
+}
+
+/// The uniform of `shaders/trace_common.wgsl` (`TraceParams`).
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy)]
+struct TraceParams {
+    mode: [u32; 4],
+    lengths: [f32; 4],
+    misc: [u32; 4],
+    offset_wp: [f32; 4],
+    offset_cd: [f32; 4],
+    lights: [GpuLight; MAX_MULTI_SHADOW_LIGHTS],
+}
+
+const FLAG_ENV: u32 = 1;
+const FLAG_DIRECT_LIGHTING: u32 = 2;
+const FLAG_BILINEAR: u32 = 4;
+const FLAG_DEMODULATE: u32 = 8;
+const FLAG_FIRST_HIT: u32 = 16;
+const FLAG_DISNEY: u32 = 32;
+
+/// The WGSL storage format name of a writable output format.
+fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
+    match format {
+        wgpu::TextureFormat::Rgba16Float => Some("rgba16float"),
+        wgpu::TextureFormat::Rgba32Float => Some("rgba32float"),
+        wgpu::TextureFormat::R32Float => Some("r32float"),
+        wgpu::TextureFormat::Rg32Float => Some("rg32float"),
+        _ => None,
+    }
+}
+
+/// One cached pipeline.
+struct Pipeline {
+    kind: TraceKind,
+    formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+    pipeline: wgpu::ComputePipeline,
+    io_layout: wgpu::BindGroupLayout,
+}
+
+/// What one trace task asks of its pass.
+struct Job<'a> {
+    kind: TraceKind,
+    common: &'a TraceTaskCommon,
+    out0: &'a TextureInput,
+    out1: Option<&'a TextureInput>,
+    ao_radius: f32,
+    lights: &'a [LightInfo],
+    first_hit: bool,
+    demodulate: bool,
+    disney: bool,
+}
+
+/// The trace-task passes of one context.
+pub(crate) struct TracePasses {
+    scene_layout: wgpu::BindGroupLayout,
+    gbuffer: GBufferBinder,
+    blue_noise: wgpu::TextureView,
+    placeholder: wgpu::TextureView,
+    cache_layout: wgpu::BindGroupLayout,
+    /// The lighting cache's sampling module at group 3 (a stand-in in unit tests).
+    cache_wgsl: String,
+    pipelines: Vec<Pipeline>,
+}
+
+impl TracePasses {
+    /// Creates the layouts and the blue-noise tile (pipelines come on first use).
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
+        let placeholder = device
+            .create_texture(&wgpu::TextureDescriptor {
+                label: Some("kickstart-rt trace placeholder"),
+                size: wgpu::Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+            .create_view(&Default::default());
+        TracePasses {
+            scene_layout: SceneBuffers::layout(device),
+            gbuffer: GBufferBinder::new(device),
+            blue_noise: blue_noise_texture(device, queue),
+            placeholder,
+            cache_layout: device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("kickstart-rt trace cache"),
+                entries: &crate::cache::DirectLightingCache::sample_layout_entries(),
+            }),
+            cache_wgsl: crate::cache::sample_wgsl(3, false),
+            pipelines: Vec::new(),
+        }
+    }
+
+    /// Whether this module records `task` with its default output (debug views go elsewhere).
+    pub fn handles(task: &RenderTask) -> bool {
+        matches!(
+            task,
+            RenderTask::TraceAmbientOcclusion(_)
+                | RenderTask::TraceSpecular(_)
+                | RenderTask::TraceDiffuse(_)
+                | RenderTask::TraceShadow(_)
+                | RenderTask::TraceMultiShadow(_)
+        )
+    }
+
+    /// Creates the pipelines of every kind for the common output formats (Rgba16Float, and
+    /// R32Float for the single-channel outputs), so the first frame does not stall.
+    pub fn prepare(&mut self, device: &wgpu::Device) {
+        use wgpu::TextureFormat as F;
+        for (kind, f0, f1) in [
+            (TraceKind::AmbientOcclusion, F::Rgba16Float, None),
+            (TraceKind::AmbientOcclusion, F::R32Float, None),
+            (TraceKind::Shadow, F::Rgba16Float, None),
+            (TraceKind::Shadow, F::R32Float, None),
+            (TraceKind::MultiShadow, F::Rgba16Float, Some(F::Rgba16Float)),
+            (TraceKind::Specular, F::Rgba16Float, None),
+            (TraceKind::Specular, F::Rgba16Float, Some(F::Rgba16Float)),
+            (TraceKind::Diffuse, F::Rgba16Float, None),
+        ] {
+            // Every format listed has a WGSL name, so this cannot fail.
+            let _ = self.pipeline(device, kind, (f0, f1));
+        }
+    }
+
+    /// The pipeline of `kind` writing `formats`, created on first use.
+    fn pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        kind: TraceKind,
+        formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+    ) -> Result<usize> {
+        if let Some(i) = self
+            .pipelines
+            .iter()
+            .position(|p| p.kind == kind && p.formats == formats)
+        {
+            return Ok(i);
+        }
+        let name = |f: wgpu::TextureFormat, field: &str| {
+            wgsl_format(f).ok_or_else(|| {
+                Error::input(
+                    kind.label(),
+                    field.to_string(),
+                    f,
+                    "must be one of WRITABLE_OUTPUT_FORMATS",
+                )
+            })
+        };
+        let f0 = name(formats.0, "output")?;
+        let f1 = match formats.1 {
+            Some(f) => name(f, "output1")?,
+            None => "r32float",
+        };
+        let (body, entry) = match kind {
+            TraceKind::AmbientOcclusion => (AO_WGSL, "main"),
+            TraceKind::Shadow => (SHADOW_WGSL, "shadow"),
+            TraceKind::MultiShadow => (SHADOW_WGSL, "multi_shadow"),
+            TraceKind::Specular => (RADIANCE_WGSL, "specular"),
+            TraceKind::Diffuse => (RADIANCE_WGSL, "diffuse"),
+        };
+        let (declaration, store) = if formats.1.is_some() {
+            (
+                format!("@group(2) @binding(5) var out1: texture_storage_2d<{f1}, write>;"),
+                "textureStore(out1, texel, v);",
+            )
+        } else {
+            (String::new(), "")
+        };
+        let body = body
+            .replace("OUTPUT0_FORMAT", f0)
+            .replace("OUTPUT1_FORMAT", f1)
+            .replace("OUTPUT1_DECLARATION", &declaration)
+            .replace("OUTPUT1_STORE", store);
+        let cache = if kind.reads_cache() {
+            self.cache_wgsl.as_str()
+        } else {
+            ""
+        };
+        let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
+        let io_layout = io_layout(device, formats);
+        let mut layouts = vec![&self.scene_layout, self.gbuffer.layout(), &io_layout];
+        if kind.reads_cache() {
+            layouts.push(&self.cache_layout);
+        }
+        let pipeline =
+            compute_pipeline_with_layouts(device, kind.label(), &source, entry, &layouts);
+        self.pipelines.push(Pipeline {
+            kind,
+            formats,
+            pipeline,
+            io_layout,
+        });
+        Ok(self.pipelines.len() - 1)
+    }
+
+    /// Records `task` (validated by the caller; [`Self::handles`] must be true). `cache` are the
+    /// lighting cache's sampling bindings (`DirectLightingCache::sample_bind_group_entries`).
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        scene: &SceneBuffers<'_>,
+        cache: &[wgpu::BindGroupEntry<'_>],
+        task: &RenderTask,
+    ) -> Result<()> {
+        let job = match task {
+            RenderTask::TraceSpecular(t) => Job {
+                kind: TraceKind::Specular,
+                common: &t.common,
+                out0: &t.output,
+                out1: t
+                    .demodulation_output
+                    .as_ref()
+                    .filter(|_| t.demodulate_specular),
+                ao_radius: 0.0,
+                lights: &[],
+                first_hit: false,
+                demodulate: t.demodulate_specular,
+                disney: false,
+            },
+            RenderTask::TraceDiffuse(t) => Job {
+                kind: TraceKind::Diffuse,
+                common: &t.common,
+                out0: &t.output,
+                out1: None,
+                ao_radius: 0.0,
+                lights: &[],
+                first_hit: false,
+                demodulate: false,
+                disney: t.diffuse_brdf == DiffuseBrdf::NormalizedDisney,
+            },
+            RenderTask::TraceAmbientOcclusion(t) => Job {
+                kind: TraceKind::AmbientOcclusion,
+                common: &t.common,
+                out0: &t.output,
+                out1: None,
+                ao_radius: t.ao_radius,
+                lights: &[],
+                first_hit: false,
+                demodulate: false,
+                disney: false,
+            },
+            RenderTask::TraceShadow(t) => Job {
+                kind: TraceKind::Shadow,
+                common: &t.common,
+                out0: &t.output,
+                out1: None,
+                ao_radius: 0.0,
+                lights: std::slice::from_ref(&t.light),
+                first_hit: t.enable_first_hit_and_end_search,
+                demodulate: false,
+                disney: false,
+            },
+            RenderTask::TraceMultiShadow(t) => Job {
+                kind: TraceKind::MultiShadow,
+                common: &t.common,
+                out0: &t.output0,
+                out1: Some(&t.output1),
+                ao_radius: 0.0,
+                lights: &t.lights,
+                first_hit: t.enable_first_hit_and_end_search,
+                demodulate: false,
+                disney: false,
+            },
+            other => {
+                return Err(Error::Unsupported { task: other.name() });
+            }
+        };
+        self.record_job(rec, scene, cache, &job)
+    }
+
+    fn record_job(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        scene: &SceneBuffers<'_>,
+        cache: &[wgpu::BindGroupEntry<'_>],
+        job: &Job<'_>,
+    ) -> Result<()> {
+        let c = job.common;
+        let formats = (
+            job.out0.texture().format(),
+            job.out1.map(|t| t.texture().format()),
+        );
+        let index = self.pipeline(rec.device, job.kind, formats)?;
+        let inputs = GBufferInputs::of_trace(c, job.out0);
+        let vp = inputs.viewport;
+        let half = c.half_resolution_mode != HalfResolutionMode::Off;
+        let pixels = if half {
+            vp.width.div_ceil(2) as u64 * vp.height as u64
+        } else {
+            vp.width as u64 * vp.height as u64
+        };
+        let Ok(pixels) = u32::try_from(pixels) else {
+            return Err(Error::input(
+                job.kind.label(),
+                "common.viewport",
+                vp,
+                "too many pixels",
+            ));
+        };
+        let params = trace_params(job);
+        let gb_params = rec.uniform("kickstart-rt g-buffer params", &inputs.params());
+        let tp = rec.uniform("kickstart-rt trace params", &params);
+        let device = rec.device;
+        let gb_group = self.gbuffer.bind_group(device, &gb_params, &inputs);
+        let p = &self.pipelines[index];
+        let scene_group = scene.bind_group(rec, &p.pipeline);
+        let env = c.environment_map.as_ref().unwrap_or(&self.placeholder);
+        let direct = c.direct_lighting.as_ref().unwrap_or(&self.placeholder);
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: tp.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&self.blue_noise),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(env),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::TextureView(direct),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: wgpu::BindingResource::TextureView(job.out0),
+            },
+        ];
+        if let Some(o) = job.out1 {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 5,
+                resource: wgpu::BindingResource::TextureView(o),
+            });
+        }
+        let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("kickstart-rt trace io"),
+            layout: &p.io_layout,
+            entries: &entries,
+        });
+        let mut groups = vec![&scene_group, &gb_group, &io_group];
+        let cache_group;
+        if job.kind.reads_cache() {
+            cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("kickstart-rt trace cache"),
+                layout: &self.cache_layout,
+                entries: cache,
+            });
+            groups.push(&cache_group);
+        }
+        rec.dispatch(
+            job.kind.label(),
+            &p.pipeline,
+            &groups,
+            pixels.div_ceil(WORKGROUP_SIZE),
+        );
+        Ok(())
+    }
+}
+
+/// The explicit layout of group 2: uniform, three sampled textures, one or two storage outputs.
+fn io_layout(
+    device: &wgpu::Device,
+    formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+) -> wgpu::BindGroupLayout {
+    let texture = |binding| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    };
+    let storage = |binding, format| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format,
+            view_dimension: wgpu::TextureViewDimension::D2,
+        },
+        count: None,
+    };
+    let mut entries = vec![
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        },
+        texture(1),
+        texture(2),
+        texture(3),
+        storage(4, formats.0),
+    ];
+    if let Some(f) = formats.1 {
+        entries.push(storage(5, f));
+    }
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("kickstart-rt trace io"),
+        entries: &entries,
+    })
+}
+
+/// The pass uniform of `job`.
+fn trace_params(job: &Job<'_>) -> TraceParams {
+    let c = job.common;
+    let mut flags = 0;
+    if c.environment_map.is_some() {
+        flags |= FLAG_ENV;
+    }
+    if c.direct_lighting.is_some() {
+        flags |= FLAG_DIRECT_LIGHTING;
+    }
+    if c.use_bilinear_sampling {
+        flags |= FLAG_BILINEAR;
+    }
+    if job.first_hit {
+        flags |= FLAG_FIRST_HIT;
+    }
+    if job.demodulate {
+        flags |= FLAG_DEMODULATE;
+    }
+    if job.disney {
+        flags |= FLAG_DISNEY;
+    }
+    let o = &c.ray_offset;
+    TraceParams {
+        mode: [
+            match c.half_resolution_mode {
+                HalfResolutionMode::Off => 0,
+                HalfResolutionMode::Checkerboard => 1,
+                HalfResolutionMode::CheckerboardInverted => 2,
+            },
+            match c.debug_parameters.random_number_generator {
+                RandomNumberGenerator::BlueNoise => 0,
+                RandomNumberGenerator::Xorshift => 1,
+            },
+            c.debug_parameters.frame_index,
+            flags,
+        ],
+        lengths: [
+            c.max_ray_length.min(f32::MAX),
+            job.ao_radius,
+            T_MIN_PER_VIEW_DISTANCE,
+            0.0,
+        ],
+        misc: [
+            match o.offset_type {
+                RayOffsetType::Disabled => 0,
+                RayOffsetType::WorldPosition => 1,
+                RayOffsetType::CamDistance => 2,
+            },
+            job.lights.len() as u32,
+            InstanceInclusionMask::VISIBLE_IN_RT.0,
+            job.kind.salt(),
+        ],
+        offset_wp: [
+            o.world_position_threshold,
+            o.world_position_float_scale,
+            o.world_position_int_scale,
+            0.0,
+        ],
+        offset_cd: [
+            o.cam_distance_constant,
+            o.cam_distance_linear,
+            o.cam_distance_quadratic,
+            0.0,
+        ],
+        lights: pack_lights(job.lights),
+    }
+}
+
+#[cfg(test)]
+mod tests;
