@@ -150,7 +150,6 @@ struct InstanceSlot {
 }
 
 struct DenoisingSlot {
-    #[allow(dead_code)]
     input: DenoisingContextInput,
 }
 
@@ -177,6 +176,8 @@ struct State {
     geometries: HandlePool<GeometryHandle, GeometrySlot>,
     instances: HandlePool<InstanceHandle, InstanceSlot>,
     denoisers: HandlePool<DenoisingContextHandle, DenoisingSlot>,
+    /// The denoisers' history per context and their passes.
+    denoise: crate::denoise::Denoisers,
     in_flight: BTreeMap<u64, WorkingSet>,
     invoked: Vec<(u64, Arc<AtomicBool>)>,
     staging: StagingPool,
@@ -278,6 +279,7 @@ impl ExecuteContext {
                 geometries: HandlePool::new(id),
                 instances: HandlePool::new(id),
                 denoisers: HandlePool::new(id),
+                denoise: crate::denoise::Denoisers::new(device),
                 in_flight: BTreeMap::new(),
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
@@ -361,6 +363,7 @@ impl ExecuteContext {
                 "each must be in 1..=16384",
             ));
         }
+        crate::denoise::check_context(&input, &self.device.limits())?;
         Ok(self.state().denoisers.insert(DenoisingSlot { input }))
     }
 
@@ -453,6 +456,7 @@ impl ExecuteContext {
             });
         }
         s.scene.collect(u64::MAX);
+        s.denoise.collect(u64::MAX);
         s.staging.clear();
         Ok(())
     }
@@ -475,6 +479,7 @@ impl ExecuteContext {
                 + sc.nodes.reserve_bytes()
                 + sc.orders.reserve_bytes()
                 + sc.topologies.reserve_bytes(),
+            denoiser: s.denoise.bytes(),
             ..Default::default()
         };
         a.staging = s.staging.bytes()
@@ -617,7 +622,9 @@ impl ExecuteContext {
 
     /// Creates every compute pipeline now, so the first frame that needs one does not stall.
     pub fn prepare_pipelines(&self) {
-        self.state().scene.prepare_pipelines();
+        let mut s = self.state();
+        s.scene.prepare_pipelines();
+        s.denoise.prepare_pipelines();
     }
 
     /// The GPU time of each SDK pass of `task` (built with [`InitSettings::gpu_timing`]).
@@ -704,6 +711,15 @@ impl ExecuteContext {
         // 1. Deferred destruction: release what no in-flight task can still read.
         let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
         s.scene.collect(oldest);
+        // Denoiser histories: created for new contexts, retired for destroyed ones.
+        let live: Vec<_> = s
+            .denoisers
+            .handles()
+            .into_iter()
+            .filter_map(|h| s.denoisers.get(h).ok().map(|d| (h, d.input)))
+            .collect();
+        s.denoise.sync(&live);
+        s.denoise.collect(oldest);
 
         let serial = s.next_serial;
         s.next_serial += 1;
@@ -1041,6 +1057,7 @@ impl ExecuteContext {
                     ws._inputs.push(t.hits.clone());
                     s.scene.trace_rays(&mut rec, t);
                 }
+                t if t.denoise_common().is_some() => s.denoise.record(&mut rec, t, serial),
                 other => {
                     if let Some((common, output)) = other.trace_common() {
                         let size = output.texture().size();
@@ -1187,6 +1204,7 @@ impl ExecuteContext {
             self.render_handles(s, task)?;
             let supported = match task {
                 RenderTask::TraceRays(_) => true,
+                t if t.denoise_common().is_some() => true,
                 other => other.trace_common().is_some_and(|(c, _)| {
                     matches!(
                         c.debug_parameters.debug_output_type,
@@ -1212,7 +1230,7 @@ impl ExecuteContext {
             s.instances.get(t.target)?;
         }
         if let Some(c) = task.denoise_common() {
-            s.denoisers.get(c.context)?;
+            crate::denoise::check_task(task, &s.denoisers.get(c.context)?.input)?;
         }
         Ok(())
     }

@@ -132,6 +132,7 @@ mod allocations;
 mod container;
 mod context;
 pub mod cpu;
+mod denoise;
 mod device;
 mod error;
 mod gpu;
