@@ -158,7 +158,6 @@ struct InstanceSlot {
 }
 
 struct DenoisingSlot {
-    #[allow(dead_code)]
     input: DenoisingContextInput,
 }
 
@@ -185,6 +184,8 @@ struct State {
     geometries: HandlePool<GeometryHandle, GeometrySlot>,
     instances: HandlePool<InstanceHandle, InstanceSlot>,
     denoisers: HandlePool<DenoisingContextHandle, DenoisingSlot>,
+    /// The denoisers' history per context and their passes.
+    denoise: crate::denoise::Denoisers,
     in_flight: BTreeMap<u64, WorkingSet>,
     invoked: Vec<(u64, Arc<AtomicBool>)>,
     staging: StagingPool,
@@ -290,6 +291,7 @@ impl ExecuteContext {
                 geometries: HandlePool::new(id),
                 instances: HandlePool::new(id),
                 denoisers: HandlePool::new(id),
+                denoise: crate::denoise::Denoisers::new(device),
                 in_flight: BTreeMap::new(),
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
@@ -378,6 +380,7 @@ impl ExecuteContext {
                 "each must be in 1..=16384",
             ));
         }
+        crate::denoise::check_context(&input, &self.device.limits())?;
         Ok(self.state().denoisers.insert(DenoisingSlot { input }))
     }
 
@@ -473,6 +476,7 @@ impl ExecuteContext {
         }
         s.scene.collect(u64::MAX);
         s.cache.collect(u64::MAX);
+        s.denoise.collect(u64::MAX);
         s.staging.clear();
         Ok(())
     }
@@ -496,6 +500,7 @@ impl ExecuteContext {
                 + sc.nodes.reserve_bytes()
                 + sc.orders.reserve_bytes()
                 + sc.topologies.reserve_bytes(),
+            denoiser: s.denoise.bytes(),
             ..Default::default()
         };
         a.staging = s.staging.bytes()
@@ -660,6 +665,7 @@ impl ExecuteContext {
             .get_or_insert_with(|| TracePasses::new(&self.device, &self.queue))
             .prepare(&self.device);
         s.cache.prepare_pipelines();
+        s.denoise.prepare_pipelines();
     }
 
     /// The GPU time of each SDK pass of `task` (built with [`InitSettings::gpu_timing`]).
@@ -747,6 +753,15 @@ impl ExecuteContext {
         let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
         s.scene.collect(oldest);
         s.cache.collect(oldest);
+        // Denoiser histories: created for new contexts, retired for destroyed ones.
+        let live: Vec<_> = s
+            .denoisers
+            .handles()
+            .into_iter()
+            .filter_map(|h| s.denoisers.get(h).ok().map(|d| (h, d.input)))
+            .collect();
+        s.denoise.sync(&live);
+        s.denoise.collect(oldest);
 
         let serial = s.next_serial;
         s.next_serial += 1;
@@ -1163,6 +1178,7 @@ impl ExecuteContext {
                     let cache = st.cache.sample_bind_group_entries();
                     passes.record(&mut rec, &st.scene.scene_buffers(), &cache, other)?;
                 }
+                t if t.denoise_common().is_some() => s.denoise.record(&mut rec, t, serial),
                 other => {
                     if let Some((common, output)) = other.trace_common() {
                         let size = output.texture().size();
@@ -1313,6 +1329,7 @@ impl ExecuteContext {
                 | RenderTask::DirectLightingInjection(_)
                 | RenderTask::DirectLightTransfer(_) => true,
                 t if TracePasses::handles(t) && is_default_output(t) => true,
+                t if t.denoise_common().is_some() => true,
                 other => other.trace_common().is_some_and(|(c, _)| {
                     matches!(
                         c.debug_parameters.debug_output_type,
@@ -1339,7 +1356,7 @@ impl ExecuteContext {
             self.transfer_instances(s, t)?;
         }
         if let Some(c) = task.denoise_common() {
-            s.denoisers.get(c.context)?;
+            crate::denoise::check_task(task, &s.denoisers.get(c.context)?.input)?;
         }
         Ok(())
     }

@@ -133,6 +133,7 @@ mod cache;
 mod container;
 mod context;
 pub mod cpu;
+mod denoise;
 mod device;
 mod error;
 mod gpu;

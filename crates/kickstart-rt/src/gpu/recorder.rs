@@ -124,6 +124,32 @@ impl<'a> Recorder<'a> {
         pass.dispatch_workgroups(x, y, 1);
     }
 
+    /// One compute pass with one 2-D dispatch of `(x, y)` workgroups (image passes).
+    pub fn dispatch_2d(
+        &mut self,
+        label: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        bind_groups: &[&wgpu::BindGroup],
+        (x, y): (u32, u32),
+    ) {
+        if x == 0 || y == 0 {
+            return;
+        }
+        let scope = self.scope;
+        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes,
+            });
+        pass.set_pipeline(pipeline);
+        for (i, bg) in bind_groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, Some(*bg), &[]);
+        }
+        pass.dispatch_workgroups(x, y, 1);
+    }
+
     /// A uniform buffer holding `data` (written at creation: safe to use in this encoder).
     pub fn uniform<T: Pod>(&self, label: &str, data: &T) -> wgpu::Buffer {
         self.device

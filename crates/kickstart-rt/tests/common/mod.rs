@@ -5,6 +5,7 @@
 
 #![allow(dead_code)]
 
+pub mod denoise;
 pub mod rt;
 pub mod cache;
 

@@ -1,0 +1,284 @@
+// kickstart-rt denoisers, pass 1: temporal accumulation.
+//
+// Per viewport pixel: decodes the G-buffer (with the camera jitter) into this frame's guide,
+// reads the noisy signal(s) (checkerboard: untraced pixels are rebuilt from their four traced
+// neighbours, weighted by geometric similarity), reprojects into the previous frame (motion
+// vectors of either type, or the previous matrices), keeps the bilinear taps whose surface
+// matches (normal and plane distance; disocclusion drops the history), clamps the history to
+// the current neighbourhood's mean ± γσ (ghosting), and blends: the history length grows by one
+// up to max_history and the new sample weighs 1 / length. The history holds the accumulated raw
+// signal (never the spatially filtered one), so the spatial filter cannot blur it over time.
+//
+// Included after gbuffer.wgsl (group 0) and denoise_common.wgsl.
+
+@group(1) @binding(0) var<uniform> dp: DenoiseParams;
+@group(1) @binding(1) var dn_motion: texture_2d<f32>;
+@group(1) @binding(2) var dn_input0: texture_2d<f32>;
+@group(1) @binding(3) var dn_input1: texture_2d<f32>;
+
+@group(2) @binding(0) var<storage, read> guide_prev: array<vec4<u32>>;
+@group(2) @binding(1) var<storage, read_write> guide_cur: array<vec4<u32>>;
+@group(2) @binding(2) var<storage, read> hist_prev0: array<vec4<u32>>;
+@group(2) @binding(3) var<storage, read> hist_prev1: array<vec4<u32>>;
+@group(2) @binding(4) var<storage, read_write> hist_cur0: array<vec4<u32>>;
+@group(2) @binding(5) var<storage, read_write> hist_cur1: array<vec4<u32>>;
+
+// Width of the history clamp, in standard deviations of the neighbourhood.
+const CLAMP_SIGMAS: f32 = 2.0;
+
+// The noisy input of signal `s` at `texel` as (rgb, hit distance); scalar signals repeat their
+// value in rgb. Occlusion: normalised hit distance (1 = open). Shadow: visibility 1 where the
+// input is negative (the light is visible), 0 where a hit was found; the hit distance is kept
+// for the penumbra estimate. Multi-shadow: input0.r is the visibility, input0.g the hit distance.
+fn dn_load_input(s: u32, texel: vec2<u32>) -> vec4<f32> {
+    var t: vec4<f32>;
+    if s == 0u {
+        t = textureLoad(dn_input0, texel, 0);
+    } else {
+        t = textureLoad(dn_input1, texel, 0);
+    }
+    t = dn_sanitize(t);
+    switch dn_kind(s) {
+        case DN_KIND_OCCLUSION: {
+            let v = clamp(t.x, 0.0, 1.0);
+            return vec4<f32>(v, v, v, v);
+        }
+        case DN_KIND_SHADOW: {
+            let v = select(0.0, 1.0, t.x < 0.0);
+            return vec4<f32>(v, v, v, max(t.x, 0.0));
+        }
+        case DN_KIND_MULTI_SHADOW: {
+            let v = clamp(t.x, 0.0, 1.0);
+            return vec4<f32>(v, v, v, max(t.y, 0.0));
+        }
+        default: {
+            return vec4<f32>(t.xyz, max(t.w, 0.0));
+        }
+    }
+}
+
+// Whether the input holds a traced sample at viewport-relative pixel `p`.
+fn dn_traced(p: vec2<u32>) -> bool {
+    if dp.checkerboard == 0u {
+        return true;
+    }
+    let texel = p + dp.viewport.xy;
+    return ((texel.x + texel.y) & 1u) == dp.checkerboard - 1u;
+}
+
+fn dn_in_viewport(p: vec2<i32>) -> bool {
+    return p.x >= 0 && p.y >= 0 && p.x < i32(dp.viewport.z) && p.y < i32(dp.viewport.w);
+}
+
+// The signal at viewport-relative pixel `p`; checkerboard holes are filled from the traced
+// 4-neighbours, weighted by how well their surface matches (`pos`, `n`; `valid` false: plain
+// average).
+fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) -> vec4<f32> {
+    if dn_traced(p) {
+        return dn_load_input(s, p + dp.viewport.xy);
+    }
+    var sum = vec4<f32>(0.0);
+    var wsum = 0.0;
+    var any_sum = vec4<f32>(0.0);
+    var any_count = 0.0;
+    let offsets = array<vec2<i32>, 4>(vec2<i32>(-1, 0), vec2<i32>(1, 0), vec2<i32>(0, -1), vec2<i32>(0, 1));
+    let dist = max(dn_view_distance(pos), 1e-6);
+    for (var k = 0; k < 4; k++) {
+        let q = vec2<i32>(p) + offsets[k];
+        if !dn_in_viewport(q) {
+            continue;
+        }
+        let texel = vec2<u32>(q) + dp.viewport.xy;
+        let v = dn_load_input(s, texel);
+        any_sum += v;
+        any_count += 1.0;
+        if valid {
+            let sq = gb_surface(texel);
+            if sq.valid {
+                let plane = abs(dot(n, sq.position - pos)) / (0.02 * dist);
+                let w = max(dot(n, sq.normal), 0.0) * exp(-plane * plane);
+                sum += w * v;
+                wsum += w;
+            }
+        }
+    }
+    if wsum > 1e-4 {
+        return sum / wsum;
+    }
+    return any_sum / max(any_count, 1.0);
+}
+
+fn dn_load_hist(s: u32, i: u32) -> vec4<u32> {
+    if s == 0u {
+        return hist_prev0[i];
+    }
+    return hist_prev1[i];
+}
+
+fn dn_store_hist(s: u32, i: u32, v: vec4<u32>) {
+    if s == 0u {
+        hist_cur0[i] = v;
+    } else {
+        hist_cur1[i] = v;
+    }
+}
+
+// Whether the previous frame's surface `g` is the current one: similar normal, and on the same
+// plane as the predicted previous position (or, with view-space motion, which does not say how
+// depth changed, at the same camera distance).
+fn dn_reusable(g: DnGuide, pos: vec3<f32>, n: vec3<f32>, pred: vec3<f32>) -> bool {
+    if dot(g.normal, n) < 0.8 {
+        return false;
+    }
+    let dist = max(dn_prev_view_distance(pred), 1e-6);
+    let plane_ok = abs(dot(n, g.position - pred)) < 0.01 * dist;
+    if dp.motion_type != 1u {
+        return plane_ok;
+    }
+    let d = dn_view_distance(pos);
+    let ndv = max(abs(dot(n, dn_to_eye(pos))), 0.1);
+    return plane_ok || abs(dn_prev_view_distance(g.position) - d) < (0.03 / ndv) * d;
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
+        return;
+    }
+    let p = gid.xy;
+    let i = p.y * dp.viewport.z + p.x;
+    let texel = p + dp.viewport.xy;
+
+    var surf = gb_surface(texel);
+    if surf.valid && gb.depth_type == 1u {
+        // The depth was rendered with the jittered projection: unproject where it sampled.
+        let z = textureLoad(gb_depth, texel, 0).x;
+        surf.position = gb_unproject(gb_ndc_of(vec2<f32>(texel) + 0.5 - dp.jitter.xy), z);
+    }
+    let pos = surf.position;
+    let n = surf.normal;
+
+    if !surf.valid {
+        guide_cur[i] = vec4<u32>(DN_INVALID);
+        for (var s = 0u; s < dp.signal_count; s++) {
+            let v = dn_sample(s, p, false, pos, n);
+            dn_store_hist(s, i, dn_pack_signal(v, 0.0, 0.0));
+        }
+        return;
+    }
+    guide_cur[i] = dn_pack_guide(pos, n, gb_roughness(texel));
+
+    // Where this surface was in the previous frame (continuous viewport pixel coordinates).
+    var prev_xy: vec2<f32>;
+    var pred = pos;
+    let size = vec2<f32>(dp.viewport.zw);
+    if dp.motion_type == 1u {
+        let m = textureLoad(dn_motion, texel, 0).xy * dp.motion_scale.xy;
+        let uv = (vec2<f32>(p) + 0.5 - dp.jitter.xy) / size;
+        prev_xy = (uv + m) * size + dp.jitter.zw;
+    } else {
+        if dp.motion_type == 2u {
+            pred = pos + textureLoad(dn_motion, texel, 0).xyz * dp.motion_scale.xyz;
+        }
+        let c = gb_project_prev(pred);
+        prev_xy = c.xy + dp.jitter.zw;
+        if c.w <= 0.0 {
+            prev_xy = vec2<f32>(-1e6);
+        }
+    }
+
+    // Bilinear taps of the previous frame that show this surface.
+    var taps: array<u32, 4>;
+    var weights = array<f32, 4>(0.0, 0.0, 0.0, 0.0);
+    var wsum = 0.0;
+    if dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6)) {
+        let base = floor(prev_xy - 0.5);
+        let f = prev_xy - 0.5 - base;
+        for (var k = 0; k < 4; k++) {
+            let o = vec2<f32>(f32(k & 1), f32(k >> 1));
+            let q = vec2<i32>(base + o);
+            if !dn_in_viewport(q) {
+                continue;
+            }
+            let j = u32(q.y) * dp.viewport.z + u32(q.x);
+            let g = dn_unpack_guide(guide_prev[j]);
+            if !g.valid || !dn_reusable(g, pos, n, pred) {
+                continue;
+            }
+            let bw = mix(1.0 - f.x, f.x, o.x) * mix(1.0 - f.y, f.y, o.y);
+            let w = max(bw, 1e-4);
+            taps[k] = j;
+            weights[k] = w;
+            wsum += w;
+        }
+    }
+
+    for (var s = 0u; s < dp.signal_count; s++) {
+        var cur = dn_sample(s, p, true, pos, n);
+
+        // Neighbourhood statistics of the current input (traced pixels only).
+        var m1 = vec4<f32>(0.0);
+        var m2 = vec4<f32>(0.0);
+        var cnt = 0.0;
+        var m1_nc = vec4<f32>(0.0);
+        var m2_nc = vec4<f32>(0.0);
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
+                let q = vec2<i32>(p) + vec2<i32>(dx, dy);
+                if !dn_in_viewport(q) || !dn_traced(vec2<u32>(q)) {
+                    continue;
+                }
+                let v = dn_load_input(s, vec2<u32>(q) + dp.viewport.xy);
+                m1 += v;
+                m2 += v * v;
+                cnt += 1.0;
+                if dx != 0 || dy != 0 {
+                    m1_nc += v;
+                    m2_nc += v * v;
+                }
+            }
+        }
+        let mean = m1 / max(cnt, 1.0);
+        let sigma = sqrt(max(m2 / max(cnt, 1.0) - mean * mean, vec4<f32>(0.0)));
+        let kind = dn_kind(s);
+        if (kind == DN_KIND_SPECULAR || kind == DN_KIND_DIFFUSE) && cnt > 2.0 {
+            // Fireflies: a sample far above all its neighbours is clamped to them.
+            let cn = cnt - select(0.0, 1.0, dn_traced(p));
+            let mean_nc = m1_nc / max(cn, 1.0);
+            let sigma_nc = sqrt(max(m2_nc / max(cn, 1.0) - mean_nc * mean_nc, vec4<f32>(0.0)));
+            let hi = mean_nc + 4.0 * sigma_nc + 0.1 * abs(mean_nc);
+            cur = vec4<f32>(min(cur.xyz, hi.xyz), cur.w);
+        }
+
+        var hist = vec4<f32>(0.0);
+        var hist_m2 = 0.0;
+        var hist_len = 0.0;
+        if wsum > 1e-3 {
+            for (var k = 0; k < 4; k++) {
+                if weights[k] > 0.0 {
+                    let h = dn_load_hist(s, taps[k]);
+                    let w = weights[k] / wsum;
+                    hist += w * dn_value(h);
+                    hist_m2 += w * bitcast<f32>(h.z);
+                    hist_len += w * bitcast<f32>(h.w);
+                }
+            }
+            // Ghosting: the history may not leave the current neighbourhood's range. The range
+            // has a floor: 3×3 samples of a sparse signal (a penumbra's visibility, dark
+            // radiance with rare bright samples) are often all equal, and clamping to them
+            // would bias the history towards one sample.
+            var floor = 0.25 * max(abs(mean), abs(hist));
+            if kind != DN_KIND_SPECULAR && kind != DN_KIND_DIFFUSE {
+                floor += vec4<f32>(0.2);
+            }
+            let half = CLAMP_SIGMAS * sigma + floor;
+            hist = clamp(hist, mean - half, mean + half);
+        }
+        let len = min(hist_len + 1.0, dp.max_history);
+        let alpha = 1.0 / len;
+        let lum = dn_luminance(cur.xyz);
+        let value = mix(hist, cur, alpha);
+        let moment2 = mix(hist_m2, lum * lum, alpha);
+        dn_store_hist(s, i, dn_pack_signal(value, moment2, len));
+    }
+}

@@ -1,0 +1,86 @@
+//! The GPU memory of one denoising context: guides, history and filter intermediates, sized by
+//! the context's maximum resolution. Every buffer holds one 16-byte record per pixel (see
+//! `shaders/denoise_common.wgsl`); a signal's buffers are separate so that each binding stays
+//! under WebGPU's default 128 MiB binding limit up to 4K.
+
+use crate::context::{DenoisingContextInput, SignalType};
+use crate::tasks::Viewport;
+
+/// Bytes of one per-pixel record.
+pub(crate) const RECORD_BYTES: u64 = 16;
+
+/// Signals a context of `signal_type` filters in one pass.
+pub(crate) fn signal_count(signal_type: SignalType) -> usize {
+    match signal_type {
+        SignalType::SpecularAndDiffuse => 2,
+        _ => 1,
+    }
+}
+
+/// Bytes of one per-pixel buffer of a context of `input`'s size.
+pub(crate) fn buffer_bytes(input: &DenoisingContextInput) -> u64 {
+    input.max_width as u64 * input.max_height as u64 * RECORD_BYTES
+}
+
+/// One context's buffers and the state carried between its frames.
+pub(crate) struct History {
+    pub input: DenoisingContextInput,
+    /// This and the previous frame's guide, by frame parity.
+    pub guides: [wgpu::Buffer; 2],
+    /// `history[parity][signal]`: the accumulated signal of this and the previous frame.
+    pub history: [Vec<wgpu::Buffer>; 2],
+    /// `temp[k][signal]`: à-trous ping-pong buffers.
+    pub temp: [Vec<wgpu::Buffer>; 2],
+    /// Frames recorded (the parity picks the current buffers).
+    pub frame: u64,
+    /// The viewport of the last frame: another size invalidates the history (its rows no longer
+    /// line up).
+    pub last_viewport: Option<Viewport>,
+    /// The previous frame's camera jitter, pixels.
+    pub prev_jitter: glam::Vec2,
+    /// Serial of the last GPU task that used it.
+    pub last_used: u64,
+}
+
+impl History {
+    /// Allocates the buffers of a context (contents undefined until the first frame, which
+    /// starts without history).
+    pub fn new(device: &wgpu::Device, input: DenoisingContextInput) -> Self {
+        let size = buffer_bytes(&input);
+        let buffer = |label: &str| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
+        let n = signal_count(input.signal_type);
+        let set = |label: &str| (0..n).map(|_| buffer(label)).collect::<Vec<_>>();
+        History {
+            input,
+            guides: [
+                buffer("kickstart-rt denoiser guide"),
+                buffer("kickstart-rt denoiser guide"),
+            ],
+            history: [
+                set("kickstart-rt denoiser history"),
+                set("kickstart-rt denoiser history"),
+            ],
+            temp: [
+                set("kickstart-rt denoiser intermediate"),
+                set("kickstart-rt denoiser intermediate"),
+            ],
+            frame: 0,
+            last_viewport: None,
+            prev_jitter: glam::Vec2::ZERO,
+            last_used: 0,
+        }
+    }
+
+    /// GPU bytes held.
+    pub fn bytes(&self) -> u64 {
+        let n = signal_count(self.input.signal_type) as u64;
+        buffer_bytes(&self.input) * (2 + 4 * n)
+    }
+}

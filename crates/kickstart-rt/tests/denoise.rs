@@ -1,0 +1,705 @@
+//! The denoisers on synthetic inputs: an analytic scene's G-buffer, a converged reference signal
+//! and noisy inputs (reference × per-pixel noise of mean 1, new every frame). Issue 7's
+//! acceptance list: convergence, edges, flat walls, camera cuts, moving objects, hard and soft
+//! shadows, checkerboard input; plus the contexts' memory and validation.
+
+mod common;
+
+use common::denoise::*;
+use common::rt::Rng;
+use common::*;
+use glam::{Vec3, Vec4};
+use kickstart_rt::*;
+
+const EYE: Vec3 = Vec3::new(0.3, 1.6, 2.6);
+
+fn static_gbuffer() -> GBuffer {
+    gbuffer(EYE, Vec3::ZERO, EYE, Vec3::ZERO)
+}
+
+fn run_static(
+    signal: SignalType,
+    method: DenoisingMethod,
+    frames: u32,
+    refs: &[Vec<Vec4>],
+    seed: u64,
+) -> (GBuffer, Vec<Vec<f64>>, Vec<Vec<Vec4>>, Vec<f64>) {
+    let g = static_gbuffer();
+    let h = Harness::new(signal, method);
+    let mut rng = Rng(seed);
+    let mut psnrs = vec![Vec::new(); refs.len()];
+    let mut noisy_psnr = vec![0.0; refs.len()];
+    let mut last = Vec::new();
+    for _ in 0..frames {
+        let inputs: Vec<Vec<Vec4>> = refs.iter().map(|r| noisy(r, &mut rng)).collect();
+        for (k, r) in refs.iter().enumerate() {
+            noisy_psnr[k] = psnr(&g, &inputs[k], r);
+        }
+        last = h.frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
+        for (k, r) in refs.iter().enumerate() {
+            psnrs[k].push(psnr(&g, &last[k], r));
+        }
+    }
+    (g, psnrs, last, noisy_psnr)
+}
+
+fn assert_converges(name: &str, psnrs: &[f64], noisy: f64) {
+    eprintln!("{name}: noisy {noisy:.2} dB, denoised {psnrs:.2?}");
+    for k in 1..psnrs.len() {
+        assert!(
+            psnrs[k] >= psnrs[k - 1] - 0.3,
+            "{name}: error rose from frame {} to {}: {psnrs:.2?}",
+            k - 1,
+            k
+        );
+    }
+    let last = psnrs[psnrs.len() - 1];
+    assert!(
+        last >= noisy + 10.0,
+        "{name}: {last:.2} dB after {} frames, noisy input {noisy:.2} dB",
+        psnrs.len()
+    );
+}
+
+#[test]
+fn static_camera_error_falls_and_ends_10db_better() {
+    let g = static_gbuffer();
+    let diffuse = reference_image(&g, reference);
+    let (_, psnrs, _, noisy) = run_static(
+        SignalType::Diffuse,
+        DenoisingMethod::HighQuality,
+        16,
+        std::slice::from_ref(&diffuse),
+        1,
+    );
+    assert_converges("diffuse (high quality)", &psnrs[0], noisy[0]);
+}
+
+#[test]
+fn fast_method_also_converges() {
+    let g = static_gbuffer();
+    let diffuse = reference_image(&g, reference);
+    let (_, psnrs, _, noisy) = run_static(
+        SignalType::Diffuse,
+        DenoisingMethod::Fast,
+        16,
+        std::slice::from_ref(&diffuse),
+        2,
+    );
+    assert_converges("diffuse (fast)", &psnrs[0], noisy[0]);
+}
+
+#[test]
+fn specular_and_diffuse_denoise_both_signals_in_one_task() {
+    let g = static_gbuffer();
+    let diffuse = reference_image(&g, reference);
+    // A second, different signal: the specular one is brighter on the wall and darker on the box.
+    let specular = reference_image(&g, |s| {
+        let r = reference(s);
+        if s.object == 1 {
+            Vec3::new(1.2, 1.0, 0.8) * (0.8 + 0.2 * s.position.x.cos())
+        } else {
+            Vec3::new(r.z, r.y, r.x) * 0.5
+        }
+    });
+    let (_, psnrs, _, noisy) = run_static(
+        SignalType::SpecularAndDiffuse,
+        DenoisingMethod::HighQuality,
+        16,
+        &[specular, diffuse],
+        3,
+    );
+    assert_converges("specular of SpecularAndDiffuse", &psnrs[0], noisy[0]);
+    assert_converges("diffuse of SpecularAndDiffuse", &psnrs[1], noisy[1]);
+}
+
+#[test]
+fn occlusion_converges() {
+    let g = static_gbuffer();
+    // Normalised hit distance: darker near the box's foot and the wall's corner.
+    let ao = reference_image(&g, |s| {
+        let to_box = (s.position.x.abs().max(s.position.z.abs()) - 0.5).max(0.0);
+        let v = (0.4 + to_box).min(1.0) * (0.5 + 0.5 * (s.position.z + 2.0).min(1.0));
+        Vec3::splat(v)
+    });
+    // Occlusion samples stay in [0, 1]: the reference ± uniform noise as wide as it can be.
+    let h = Harness::new(SignalType::DiffuseOcclusion, DenoisingMethod::HighQuality);
+    let mut rng = Rng(4);
+    let mut psnrs = Vec::new();
+    let mut noisy_psnr = 0.0;
+    for _ in 0..16 {
+        let input: Vec<Vec4> = ao
+            .iter()
+            .map(|r| {
+                let a = r.x.min(1.0 - r.x);
+                Vec4::splat(r.x + rng.range(-a, a))
+            })
+            .collect();
+        noisy_psnr = psnr(&g, &input, &ao);
+        let out = h.frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue);
+        psnrs.push(psnr(&g, &out[0], &ao));
+    }
+    assert_converges("occlusion", &psnrs, noisy_psnr);
+}
+
+/// Pixels whose 4-neighbourhood in `reference` changes by more than `step` (a depth or normal
+/// discontinuity of the scene), with their neighbours.
+fn edge_pixels(g: &GBuffer, reference: &[Vec4], step: f32) -> Vec<usize> {
+    let s = SIZE as usize;
+    let mut out = Vec::new();
+    for y in 1..s - 1 {
+        for x in 1..s - 1 {
+            let i = y * s + x;
+            if g.surfaces[i].is_none() {
+                continue;
+            }
+            let c = reference[i].truncate();
+            let jump = [i - 1, i + 1, i - s, i + s]
+                .iter()
+                .filter(|&&j| g.surfaces[j].is_some())
+                .map(|&j| (reference[j].truncate() - c).abs().max_element())
+                .fold(0.0f32, f32::max);
+            if jump > step {
+                out.push(i);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn edges_survive_depth_and_normal_discontinuities() {
+    let g = static_gbuffer();
+    let r = reference_image(&g, reference);
+    let (_, _, last, _) = run_static(
+        SignalType::Diffuse,
+        DenoisingMethod::HighQuality,
+        16,
+        std::slice::from_ref(&r),
+        5,
+    );
+    let out = &last[0];
+    let edges = edge_pixels(&g, &r, 0.25);
+    assert!(
+        edges.len() > 40,
+        "the scene has box edges and a wall corner: {}",
+        edges.len()
+    );
+    // Across each edge the denoised image keeps the reference's step: the error of an edge pixel
+    // stays a small part of the step (a blur across it would halve the step).
+    let mut err = 0.0;
+    for &i in &edges {
+        err += (out[i].truncate() - r[i].truncate()).abs().max_element();
+    }
+    let mean_err = err / edges.len() as f32;
+    eprintln!("edge pixels {}, mean error {mean_err:.4}", edges.len());
+    assert!(
+        mean_err < 0.08,
+        "edges blurred: mean error {mean_err:.4} at {} edge pixels",
+        edges.len()
+    );
+    // And the step itself: for each edge pixel pair of different objects or faces, the denoised
+    // difference has the reference's sign and at least 70 % of its size.
+    let s = SIZE as usize;
+    let mut pairs = 0;
+    let mut kept = 0;
+    for &i in &edges {
+        let j = i + 1;
+        if g.surfaces[j].is_none() {
+            continue;
+        }
+        let dr = r[j].truncate() - r[i].truncate();
+        let k = dr.abs().max_position();
+        if dr[k].abs() < 0.25 {
+            continue;
+        }
+        pairs += 1;
+        let dd = out[j][k] - out[i][k];
+        if dd * dr[k].signum() >= 0.7 * dr[k].abs() {
+            kept += 1;
+        }
+        let _ = s;
+    }
+    assert!(pairs > 10, "horizontal edge pairs: {pairs}");
+    assert!(
+        kept as f32 >= 0.9 * pairs as f32,
+        "steps kept at {kept} of {pairs} horizontal edge pairs"
+    );
+}
+
+#[test]
+fn flat_uniform_wall_stays_flat() {
+    let g = static_gbuffer();
+    let flat = reference_image(&g, |_| Vec3::splat(0.5));
+    let (_, _, last, _) = run_static(
+        SignalType::Diffuse,
+        DenoisingMethod::HighQuality,
+        16,
+        std::slice::from_ref(&flat),
+        6,
+    );
+    let vals: Vec<f32> = g
+        .surfaces
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_some())
+        .map(|(i, _)| last[0][i].x)
+        .collect();
+    let mean = vals.iter().sum::<f32>() / vals.len() as f32;
+    let sd = (vals.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / vals.len() as f32).sqrt();
+    let worst = vals.iter().map(|v| (v - 0.5).abs()).fold(0.0f32, f32::max);
+    let worst_pixel = (0..last[0].len())
+        .filter(|&i| g.surfaces[i].is_some())
+        .max_by(|&a, &b| {
+            (last[0][a].x - 0.5)
+                .abs()
+                .total_cmp(&(last[0][b].x - 0.5).abs())
+        });
+    eprintln!(
+        "worst pixel {worst_pixel:?}: {:?}",
+        worst_pixel.map(|i| g.surfaces[i])
+    );
+    eprintln!("flat: mean {mean:.4}, sd {sd:.4}, worst {worst:.4}");
+    // The noisy input's standard deviation is 0.5/√3 ≈ 0.29.
+    assert!((mean - 0.5).abs() < 0.01, "mean {mean}");
+    assert!(sd < 0.02, "not flat: standard deviation {sd}");
+    assert!(worst < 0.1, "a blotch of {worst}");
+}
+
+#[test]
+fn discard_history_keeps_nothing_of_the_old_view() {
+    let g = static_gbuffer();
+    let h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+    let mut rng = Rng(7);
+    let red = reference_image(&g, |_| Vec3::new(1.0, 0.0, 0.0));
+    for _ in 0..8 {
+        h.frame(
+            &g,
+            &[noisy(&red, &mut rng)],
+            Motion::Matrices,
+            DenoiseMode::Continue,
+        );
+    }
+    // Camera cut to a view of the same geometry with another colour: green.
+    let green = reference_image(&g, |_| Vec3::new(0.0, 1.0, 0.0));
+    let out = h.frame(
+        &g,
+        &[noisy(&green, &mut rng)],
+        Motion::Matrices,
+        DenoiseMode::DiscardHistory,
+    );
+    let worst_red = out[0].iter().map(|v| v.x).fold(0.0f32, f32::max);
+    assert_eq!(
+        worst_red, 0.0,
+        "a pixel kept the old view's red: {worst_red}"
+    );
+    // Without the discard, the history carries red into the frame (the test can fail).
+    let h2 = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+    let orange = reference_image(&g, |_| Vec3::new(1.0, 0.5, 0.0));
+    for _ in 0..8 {
+        h2.frame(
+            &g,
+            &[noisy(&red, &mut rng)],
+            Motion::Matrices,
+            DenoiseMode::Continue,
+        );
+    }
+    let out = h2.frame(
+        &g,
+        &[noisy(&orange, &mut rng)],
+        Motion::Matrices,
+        DenoiseMode::Continue,
+    );
+    let mean_green = out[0].iter().map(|v| v.y).sum::<f32>() / out[0].len() as f32;
+    assert!(
+        mean_green < 0.45,
+        "history was not used: mean green {mean_green}"
+    );
+}
+
+/// Runs the box moving along +x by `speed` world units per frame, noise-free bright box on a
+/// dark floor, and returns the worst error of pixels farther than `band` pixels from any pixel
+/// whose surface (object) differs from the previous frames'.
+fn trail_error(motion: Motion) -> f32 {
+    let h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+    let colour = |s: &common::denoise::Surface| {
+        if s.object == 2 {
+            Vec3::splat(1.0)
+        } else {
+            Vec3::splat(0.1)
+        }
+    };
+    let speed = 0.08;
+    let mut prev_box = Vec3::new(-1.0, 0.0, 0.0);
+    let mut last = (static_gbuffer(), Vec::new());
+    for f in 0..12 {
+        let box_at = Vec3::new(-1.0 + speed * f as f32, 0.0, 0.0);
+        let g = gbuffer(EYE, box_at, EYE, prev_box);
+        let r = reference_image(&g, colour);
+        let out = h.frame(&g, std::slice::from_ref(&r), motion, DenoiseMode::Continue);
+        prev_box = box_at;
+        last = (g, vec![r, out[0].clone()]);
+    }
+    let (g, imgs) = last;
+    let (r, out) = (&imgs[0], &imgs[1]);
+    // Pixels more than 3 pixels away from the box's current silhouette must be clean.
+    let s = SIZE as i32;
+    let is_box = |x: i32, y: i32| {
+        x >= 0
+            && y >= 0
+            && x < s
+            && y < s
+            && g.surfaces[(y * s + x) as usize].is_some_and(|q| q.object == 2)
+    };
+    let mut worst = 0.0f32;
+    for y in 0..s {
+        for x in 0..s {
+            let i = (y * s + x) as usize;
+            if g.surfaces[i].is_none() || g.surfaces[i].is_some_and(|q| q.object == 2) {
+                continue;
+            }
+            let near_box = (-3..=3).any(|dy| (-3..=3).any(|dx| is_box(x + dx, y + dy)));
+            if near_box {
+                continue;
+            }
+            worst = worst.max((out[i] - r[i]).truncate().abs().max_element());
+        }
+    }
+    worst
+}
+
+#[test]
+fn moving_object_leaves_no_trail() {
+    for motion in [Motion::WorldSpace, Motion::ViewSpace, Motion::Matrices] {
+        let worst = trail_error(motion);
+        eprintln!("{motion:?}: worst error off the box {worst:.4}");
+        assert!(
+            worst < 0.05,
+            "{motion:?}: a trail of {worst} (box 1.0 on floor 0.1)"
+        );
+    }
+}
+
+/// Shadow trace output on the static scene for a light whose penumbra spans `width` world
+/// units across x = 0.2 on the floor: negative (visible) or a hit distance of 0.5.
+fn shadow_input(g: &GBuffer, width: f32, rng: &mut Rng) -> Vec<Vec4> {
+    g.surfaces
+        .iter()
+        .map(|s| match s {
+            None => Vec4::splat(-1.0),
+            Some(s) => {
+                let p = visibility(s.position.x, width);
+                let v = if rng.f() < p { -1.0 } else { 0.5 };
+                Vec4::new(v, 0.0, 0.0, 0.0)
+            }
+        })
+        .collect()
+}
+
+fn visibility(x: f32, width: f32) -> f32 {
+    if width == 0.0 {
+        return if x < 0.2 { 1.0 } else { 0.0 };
+    }
+    ((0.2 + width / 2.0 - x) / width).clamp(0.0, 1.0)
+}
+
+fn run_shadow(width: f32, seed: u64) -> (GBuffer, Vec<Vec4>) {
+    let g = static_gbuffer();
+    let h = Harness::new(SignalType::Shadow, DenoisingMethod::HighQuality);
+    let mut rng = Rng(seed);
+    let mut out = Vec::new();
+    for _ in 0..16 {
+        out = h.frame(
+            &g,
+            &[shadow_input(&g, width, &mut rng)],
+            Motion::Matrices,
+            DenoiseMode::Continue,
+        );
+    }
+    (g, out.remove(0))
+}
+
+#[test]
+fn small_light_shadow_stays_hard() {
+    let (g, out) = run_shadow(0.0, 8);
+    let mut checked = 0;
+    for (i, s) in g.surfaces.iter().enumerate() {
+        let Some(s) = s else { continue };
+        let want = visibility(s.position.x, 0.0);
+        // Every pixel whose footprint does not straddle the edge keeps its exact visibility.
+        let x = i % SIZE as usize;
+        let straddles = [x.saturating_sub(1), (x + 1).min(SIZE as usize - 1)]
+            .iter()
+            .any(|&xx| {
+                g.surfaces[i - x + xx].is_some_and(|q| visibility(q.position.x, 0.0) != want)
+            });
+        if straddles {
+            continue;
+        }
+        checked += 1;
+        assert!(
+            (out[i].x - want).abs() < 0.05,
+            "hard shadow softened at pixel {i}: {} instead of {want}",
+            out[i].x
+        );
+    }
+    assert!(checked > 1000);
+}
+
+#[test]
+fn large_light_penumbra_is_smooth() {
+    let width = 1.0;
+    let (g, out) = run_shadow(width, 9);
+    let s = SIZE as usize;
+    let mut err = 0.0;
+    let mut n = 0;
+    let mut rough_out = 0.0f32;
+    let mut rough_in = 0.0f32;
+    let mut rng = Rng(10);
+    let noisy = shadow_input(&g, width, &mut rng);
+    let vis = |v: f32| if v < 0.0 { 1.0f32 } else { 0.0 };
+    for y in 0..s {
+        for x in 1..s - 1 {
+            let i = y * s + x;
+            let (Some(a), Some(b), Some(c)) = (g.surfaces[i - 1], g.surfaces[i], g.surfaces[i + 1])
+            else {
+                continue;
+            };
+            if a.object != 0 || b.object != 0 || c.object != 0 {
+                continue;
+            }
+            let want = visibility(b.position.x, width);
+            if want <= 0.0 || want >= 1.0 {
+                continue;
+            }
+            err += (out[i].x - want).abs();
+            rough_out += (out[i - 1].x - 2.0 * out[i].x + out[i + 1].x).abs();
+            rough_in += (vis(noisy[i - 1].x) - 2.0 * vis(noisy[i].x) + vis(noisy[i + 1].x)).abs();
+            n += 1;
+        }
+    }
+    assert!(n > 200, "penumbra pixels {n}");
+    let mean_err = err / n as f32;
+    eprintln!(
+        "penumbra: {n} pixels, mean error {mean_err:.4}, roughness {:.4} (noisy {:.4})",
+        rough_out / n as f32,
+        rough_in / n as f32
+    );
+    assert!(
+        mean_err < 0.08,
+        "penumbra off the expected ramp by {mean_err}"
+    );
+    let roughness = rough_out / n as f32;
+    assert!(roughness < 0.05, "penumbra not smooth: {roughness}");
+}
+
+#[test]
+fn checkerboard_input_is_resolved_to_every_pixel() {
+    for mode in [
+        HalfResolutionMode::Checkerboard,
+        HalfResolutionMode::CheckerboardInverted,
+    ] {
+        let g = static_gbuffer();
+        let mut h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+        h.half_resolution_mode = mode;
+        let r = reference_image(&g, reference);
+        let traced_parity = if mode == HalfResolutionMode::Checkerboard {
+            0
+        } else {
+            1
+        };
+        let mut rng = Rng(11);
+        let mut out = Vec::new();
+        let mut noisy_psnr = 0.0;
+        for _ in 0..16 {
+            // Untraced cells hold garbage the denoiser must never show.
+            let mut input = noisy(&r, &mut rng);
+            noisy_psnr = psnr(&g, &input, &r);
+            for (i, v) in input.iter_mut().enumerate() {
+                let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
+                if (x + y) % 2 != traced_parity {
+                    *v = Vec4::new(1000.0, -50.0, f32::NAN, 3.0);
+                }
+            }
+            out = h
+                .frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue)
+                .remove(0);
+        }
+        let p = psnr(&g, &out, &r);
+        eprintln!("{mode:?}: {p:.2} dB (noisy full-resolution input {noisy_psnr:.2} dB)");
+        // An untraced pixel none of whose 4-neighbours is on its surface (a box corner) has no
+        // sample of its own colour at all: it is not checked.
+        let s_ = SIZE as usize;
+        let same = |a: &common::denoise::Surface, j: usize| {
+            g.surfaces[j].is_some_and(|b| b.object == a.object && b.normal == a.normal)
+        };
+        let mut unknowable = 0;
+        for (i, s) in g.surfaces.iter().enumerate() {
+            if let Some(a) = s {
+                let (x, y) = (i % s_, i / s_);
+                let traced = (x + y) % 2 == traced_parity as usize;
+                let neighbours = [
+                    (x > 0).then(|| i - 1),
+                    (x + 1 < s_).then(|| i + 1),
+                    (y > 0).then(|| i - s_),
+                    (y + 1 < s_).then(|| i + s_),
+                ];
+                if !traced && !neighbours.iter().flatten().any(|&j| same(a, j)) {
+                    unknowable += 1;
+                    continue;
+                }
+                let e = (out[i] - r[i]).truncate().abs().max_element();
+                assert!(
+                    e < 0.25,
+                    "{mode:?}: pixel {i} ({s:?}) is {} for {}",
+                    out[i],
+                    r[i]
+                );
+            }
+        }
+        assert!(
+            unknowable < 10,
+            "{mode:?}: {unknowable} pixels without a sample"
+        );
+        assert!(p > noisy_psnr + 8.0, "{mode:?}: {p:.2} dB");
+    }
+}
+
+#[test]
+fn multi_shadow_denoises_the_packed_visibility() {
+    // The multi-shadow format read by the denoiser: R = visibility in [0, 1], G = hit distance.
+    let g = static_gbuffer();
+    let h = Harness::new(SignalType::MultiShadow, DenoisingMethod::HighQuality);
+    let mut rng = Rng(12);
+    let want = |s: &common::denoise::Surface| 0.25 + 0.5 * visibility(s.position.x, 1.0);
+    let mut out = Vec::new();
+    for _ in 0..16 {
+        let input: Vec<Vec4> = g
+            .surfaces
+            .iter()
+            .map(|s| match s {
+                None => Vec4::new(1.0, 0.0, 0.0, 0.0),
+                Some(s) => {
+                    // Two lights: one always visible at weight 0.25 … a noisy estimate.
+                    let v = (want(s) + rng.range(-0.25, 0.25)).clamp(0.0, 1.0);
+                    Vec4::new(v, 0.5, 0.0, 0.0)
+                }
+            })
+            .collect();
+        out = h
+            .frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue)
+            .remove(0);
+    }
+    let mut err = 0.0;
+    let mut n = 0;
+    for (i, s) in g.surfaces.iter().enumerate() {
+        if let Some(s) = s {
+            err += (out[i].x - want(s)).abs();
+            n += 1;
+        }
+    }
+    let mean = err / n as f32;
+    assert!(mean < 0.03, "multi-shadow mean error {mean}");
+}
+
+#[test]
+fn history_memory_is_created_lazily_counted_and_released_after_destroy() {
+    let g = static_gbuffer();
+    let h = Harness::new(SignalType::SpecularAndDiffuse, DenoisingMethod::Fast);
+    let ctx = &h.ctx;
+    assert_eq!(ctx.resource_allocations().denoiser, 0, "created lazily");
+    let build = |ctx: &ExecuteContext| {
+        let mut e = encoder();
+        let t = ctx
+            .build_gpu_task(ctx.create_task_container(), &mut e)
+            .unwrap();
+        submit(e);
+        t
+    };
+    let t = build(ctx);
+    // Guides ×2, and per signal: history ×2 and intermediates ×2; 16 bytes per pixel each.
+    let bytes = (SIZE * SIZE * 16 * (2 + 4 * 2)) as u64;
+    assert_eq!(ctx.resource_allocations().denoiser, bytes);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    let r = reference_image(&g, reference);
+    let used = h.submit_frame(&g, &[r.clone(), r], Motion::Matrices, DenoiseMode::Continue);
+    ctx.destroy_denoising_context_handle(h.handle).unwrap();
+    // The task that used it is still in flight: the memory stays.
+    let t2 = build(ctx);
+    assert_eq!(ctx.resource_allocations().denoiser, bytes);
+    ctx.mark_gpu_task_completed(used).unwrap();
+    ctx.mark_gpu_task_completed(t2).unwrap();
+    let t3 = build(ctx);
+    assert_eq!(ctx.resource_allocations().denoiser, 0);
+    ctx.mark_gpu_task_completed(t3).unwrap();
+}
+
+#[test]
+fn denoise_task_refuses_a_context_of_another_signal_or_size() {
+    let g = static_gbuffer();
+    let h = Harness::new(SignalType::Shadow, DenoisingMethod::Fast);
+    let other = h
+        .ctx
+        .create_denoising_context_handle(DenoisingContextInput {
+            max_width: 16,
+            max_height: 16,
+            signal_type: SignalType::Diffuse,
+            method: DenoisingMethod::Fast,
+        })
+        .unwrap();
+    // A Diffuse context used by a shadow task.
+    let mut common = h.common(&g, Motion::Matrices, DenoiseMode::Continue);
+    common.context = other;
+    let task = |common| {
+        RenderTask::DenoiseShadow(DenoiseShadowTask {
+            common,
+            input: texture(
+                wgpu::TextureFormat::R32Float,
+                SIZE,
+                SIZE,
+                wgpu::TextureUsages::TEXTURE_BINDING,
+            ),
+            output: h.outputs[0].clone(),
+        })
+    };
+    let mut c = h.ctx.create_task_container();
+    c.schedule_render_task(task(common));
+    let mut e = encoder();
+    match h.ctx.build_gpu_task(c, &mut e) {
+        Err(Error::InvalidInput { task, field, .. }) => {
+            assert_eq!(
+                (task, field.as_str()),
+                ("DenoiseShadowTask", "common.context")
+            )
+        }
+        other => panic!("expected an InvalidInput error, got {other:?}"),
+    }
+    // A Diffuse context of 16×16 used for 64×64.
+    let d = Harness::new(SignalType::Diffuse, DenoisingMethod::Fast);
+    let mut common = d.common(&g, Motion::Matrices, DenoiseMode::Continue);
+    common.context = d
+        .ctx
+        .create_denoising_context_handle(DenoisingContextInput {
+            max_width: 16,
+            max_height: 16,
+            signal_type: SignalType::Diffuse,
+            method: DenoisingMethod::Fast,
+        })
+        .unwrap();
+    let mut c = d.ctx.create_task_container();
+    c.schedule_render_task(RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+        common,
+        input: texture(
+            wgpu::TextureFormat::Rgba32Float,
+            SIZE,
+            SIZE,
+            wgpu::TextureUsages::TEXTURE_BINDING,
+        ),
+        output: d.outputs[0].clone(),
+    }));
+    match d.ctx.build_gpu_task(c, &mut e) {
+        Err(Error::InvalidInput { field, .. }) if field == "viewport" => {}
+        other => panic!("expected a viewport error, got {other:?}"),
+    }
+    submit(e);
+}
