@@ -4,6 +4,8 @@ mod bench;
 mod composite;
 mod debug_view;
 mod frame;
+#[cfg(test)]
+mod golden;
 mod gpu;
 mod lit;
 mod raster;
@@ -12,6 +14,8 @@ mod render;
 mod renderer;
 mod scene;
 mod sdk_glue;
+#[cfg(test)]
+mod testing;
 mod view;
 
 use std::path::PathBuf;

@@ -409,14 +409,20 @@ impl GpuScene {
                 ..Default::default()
             })
         };
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("ksrt material"),
-            address_mode_u: wgpu::AddressMode::Repeat,
-            address_mode_v: wgpu::AddressMode::Repeat,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
+        let sampler_with = |filter| {
+            device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("ksrt material"),
+                address_mode_u: wgpu::AddressMode::Repeat,
+                address_mode_v: wgpu::AddressMode::Repeat,
+                mag_filter: filter,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            })
+        };
+        let (linear, nearest) = (
+            sampler_with(wgpu::FilterMode::Linear),
+            sampler_with(wgpu::FilterMode::Nearest),
+        );
         let meshes = scene
             .meshes
             .iter()
@@ -434,6 +440,14 @@ impl GpuScene {
                     })
                 };
                 let material = &m.material;
+                // One sampler per material: the base colour texture's filter.
+                let sampler = match material
+                    .base_color_texture
+                    .and_then(|i| scene.textures.get(i))
+                {
+                    Some(t) if t.nearest => &nearest,
+                    _ => &linear,
+                };
                 let views = [
                     view_of(material.base_color_texture, true),
                     view_of(material.metallic_roughness_texture, false),
@@ -460,7 +474,7 @@ impl GpuScene {
                             },
                             wgpu::BindGroupEntry {
                                 binding: 3,
-                                resource: wgpu::BindingResource::Sampler(&sampler),
+                                resource: wgpu::BindingResource::Sampler(sampler),
                             },
                         ],
                     }),

@@ -224,6 +224,7 @@ impl TextureCache {
         scene.textures.push(Texture {
             name,
             image: decoded,
+            nearest: texture.sampler().mag_filter() == Some(gltf::texture::MagFilter::Nearest),
         });
         self.decoded.insert(img.index(), k);
         Ok(k)

@@ -99,6 +99,9 @@ pub struct Texture {
     pub name: String,
     /// The texels.
     pub image: image::RgbaImage,
+    /// Magnified with nearest-texel sampling (glTF sampler `magFilter` NEAREST) rather than
+    /// bilinear.
+    pub nearest: bool,
 }
 
 /// A light of the rasteriser (and of the SDK's shadow task, for the sun). Radiometric values are
@@ -507,5 +510,7 @@ pub fn load_file(path: &Path) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
+#[cfg(test)]
+mod asset_tests;
 #[cfg(test)]
 mod tests;
