@@ -19,6 +19,9 @@ struct Settings {
     // encode sRGB in the shader (the target is not an sRGB format); exposure; ambient level
     // used when there is no diffuse GI
     params: vec4f,
+    // what to show: 0 the composite, 1 direct light, 2 specular, 3 diffuse, 4 AO, 5 shadow
+    // visibility, 6 the SDK debug view; the scene's size (hit distance shading)
+    view: vec4f,
 }
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -33,6 +36,7 @@ struct Settings {
 @group(0) @binding(9) var rt_diffuse: texture_2d<f32>;
 @group(0) @binding(10) var rt_ao: texture_2d<f32>;
 @group(0) @binding(11) var rt_shadow: texture_2d<f32>;
+@group(0) @binding(12) var rt_debug: texture_2d<f32>;
 
 @vertex
 fn vs_fullscreen(@builtin(vertex_index) i: u32) -> @builtin(position) vec4f {
@@ -99,6 +103,24 @@ fn fs_main(@builtin(position) frag: vec4f) -> Out {
             let l = max(textureLoad(rt_specular, pixel, 0).rgb, vec3f(0.0));
             color += l * env_brdf(spec.rgb, spec.a, nv);
         }
+    }
+    let mode = u32(settings.view.x);
+    if (mode == 1u) {
+        color = textureLoad(direct_tex, pixel, 0).rgb;
+    } else if (mode == 2u) {
+        color = textureLoad(rt_specular, pixel, 0).rgb;
+    } else if (mode == 3u) {
+        color = textureLoad(rt_diffuse, pixel, 0).rgb;
+    } else if (mode == 4u) {
+        color = vec3f(textureLoad(rt_ao, pixel, 0).r);
+    } else if (mode == 5u) {
+        var vis = textureLoad(rt_shadow, pixel, 0).r;
+        if (settings.params.x > 0.5) {
+            vis = select(0.0, 1.0, vis < 0.0);
+        }
+        color = vec3f(vis);
+    } else if (mode == 6u) {
+        color = textureLoad(rt_debug, pixel, 0).rgb;
     }
     var out: Out;
     out.hdr = vec4f(color, 1.0);

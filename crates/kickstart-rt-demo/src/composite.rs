@@ -23,6 +23,40 @@ pub const AMBIENT: f32 = 0.03;
 struct Settings {
     enabled: [f32; 4],
     params: [f32; 4],
+    view: [f32; 4],
+}
+
+/// What the composite shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Show {
+    /// The composite.
+    #[default]
+    Final,
+    /// The rasterised direct light only.
+    Direct,
+    /// The specular channel (denoised when it is).
+    Specular,
+    /// The diffuse channel.
+    Diffuse,
+    /// The AO channel.
+    Ao,
+    /// The shadow visibility.
+    Shadow,
+    /// The SDK debug view (`SdkOutputs::debug`).
+    Debug,
+}
+
+impl Show {
+    /// Every mode, in the viewer's cycling order.
+    pub const ALL: [Show; 7] = [
+        Show::Final,
+        Show::Direct,
+        Show::Specular,
+        Show::Diffuse,
+        Show::Ao,
+        Show::Shadow,
+        Show::Debug,
+    ];
 }
 
 /// The composite pipeline for one display format.
@@ -44,7 +78,7 @@ impl Composite {
         use crate::raster::gpu_scene_entries as e;
         let mut entries = vec![e::uniform(0), e::uniform(1)];
         entries.push(e::texture(2, wgpu::TextureSampleType::Depth));
-        for b in 3..=11 {
+        for b in 3..=12 {
             entries.push(e::texture(b, e::UNFILTERED));
         }
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -85,6 +119,7 @@ impl Composite {
             contents: bytemuck::bytes_of(&Settings {
                 enabled: [0.0; 4],
                 params: [0.0; 4],
+                view: [0.0; 4],
             }),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
@@ -99,6 +134,7 @@ impl Composite {
     /// Records the composite of `main` and the SDK's `outputs` (the channels `produced` says
     /// exist, denoised where denoised) into `hdr` and `ldr`. Writes its settings with a queue
     /// write: call once per frame, before submitting.
+    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         device: &wgpu::Device,
@@ -107,6 +143,7 @@ impl Composite {
         main: &ViewTargets,
         outputs: &SdkOutputs,
         produced: Produced,
+        show: Show,
         hdr: &wgpu::TextureView,
         ldr: &wgpu::TextureView,
     ) {
@@ -127,6 +164,7 @@ impl Composite {
                 EXPOSURE,
                 AMBIENT,
             ],
+            view: [show as u32 as f32, 0.0, 0.0, 0.0],
         };
         queue.write_buffer(&self.settings, 0, bytemuck::bytes_of(&settings));
         let views = [
@@ -148,6 +186,7 @@ impl Composite {
             ),
             pick(produced.ao, &outputs.ao, &outputs.ao_denoised),
             pick(produced.shadow, &outputs.shadow, &outputs.shadow_denoised),
+            outputs.debug.create_view(&Default::default()),
         ];
         let mut entries = vec![
             wgpu::BindGroupEntry {

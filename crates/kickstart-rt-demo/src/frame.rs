@@ -170,6 +170,8 @@ pub struct SdkOutputs {
     pub shadow: wgpu::Texture,
     /// Shadow, denoised visibility (R: 1 lit).
     pub shadow_denoised: wgpu::Texture,
+    /// The SDK debug view asked for ([`SdkFrame::debug_view`]).
+    pub debug: wgpu::Texture,
 }
 
 impl SdkOutputs {
@@ -201,6 +203,7 @@ impl SdkOutputs {
             ao_denoised: t("ksrt ao denoised"),
             shadow: t("ksrt shadow"),
             shadow_denoised: t("ksrt shadow denoised"),
+            debug: t("ksrt debug view"),
         }
     }
 }
@@ -243,9 +246,14 @@ pub struct SdkFrame {
     pub refused: BTreeSet<Part>,
     /// The output textures.
     pub outputs: SdkOutputs,
+    /// An SDK debug view to trace into `outputs.debug` each frame (through an AO task with that
+    /// debug output type), or `None`.
+    pub debug_view: Option<ksrt::DebugOutputType>,
     size: (u32, u32),
     denoisers: std::collections::HashMap<u8, ksrt::DenoisingContextHandle>,
     shadow_light: Option<ksrt::LightInfo>,
+    /// The trace inputs of the last frame, for the debug view's task.
+    debug_common: Option<ksrt::TraceTaskCommon>,
     scene_size: f32,
     seed: u32,
 }
@@ -301,10 +309,12 @@ impl SdkFrame {
             ctx,
             effects,
             refused: BTreeSet::new(),
+            debug_view: None,
             outputs: SdkOutputs::new(device, size),
             size,
             denoisers: Default::default(),
             shadow_light: shadow_light.map(|l| light_info(l, scene_size)),
+            debug_common: None,
             scene_size,
             seed,
         }
@@ -355,10 +365,41 @@ impl SdkFrame {
         Ok(h)
     }
 
-    /// Schedules this frame's tasks and records them into `encoder`; `None` when every part is
-    /// off or refused. Parts the SDK refuses as unsupported are dropped (one warning each) and the
-    /// container is built again without them.
+    /// Schedules this frame's tasks and records them into `encoder`: the frame's container,
+    /// then the debug view's (its own container, so that a refused debug view is told apart from
+    /// a refused effect). Returns the GPU tasks built (none when every part is off or refused).
+    /// Parts the SDK refuses as unsupported are dropped (one warning each) and the container is
+    /// built again without them.
     pub fn record(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        inputs: &FrameInputs<'_>,
+    ) -> ksrt::Result<Vec<ksrt::GpuTaskHandle>> {
+        let mut handles: Vec<ksrt::GpuTaskHandle> =
+            self.record_frame(encoder, inputs)?.into_iter().collect();
+        if let (Some(debug), Some(mut common)) = (self.debug_view, self.debug_common.take()) {
+            common.debug_parameters.debug_output_type = debug;
+            let mut c = self.ctx.create_task_container();
+            c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
+                ksrt::TraceAmbientOcclusionTask {
+                    common,
+                    output: self.outputs.debug.create_view(&Default::default()),
+                    ao_radius: self.ao_radius(),
+                },
+            ));
+            match self.ctx.build_gpu_task(c, encoder) {
+                Ok(h) => handles.push(h),
+                Err(ksrt::Error::Unsupported { .. }) => {
+                    log::warn!("kickstart-rt does not support the debug view {debug:?} yet: off");
+                    self.debug_view = None;
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(handles)
+    }
+
+    fn record_frame(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         inputs: &FrameInputs<'_>,
@@ -468,6 +509,7 @@ impl SdkFrame {
                 enable_first_hit_and_end_search: true,
             }));
         }
+        self.debug_common = Some(common.clone());
         let mode = if inputs.discard_history {
             ksrt::DenoiseMode::DiscardHistory
         } else {

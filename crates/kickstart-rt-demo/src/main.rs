@@ -133,7 +133,7 @@ enum Command {
 }
 
 /// Parses `--size WIDTHxHEIGHT`, each side in 1..=16384.
-fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
+pub(crate) fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
     let (w, h) = size
         .split_once('x')
         .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))

@@ -61,6 +61,8 @@ pub struct Renderer {
     pub frame: u32,
     prev_view: Option<FrameView>,
     lidar_on: bool,
+    /// What the composite shows.
+    pub show: crate::composite::Show,
     _uploads: Vec<UploadedMesh>,
     /// The scene's SDK handles.
     pub handles: gpu::SceneHandles,
@@ -151,6 +153,7 @@ impl Renderer {
             frame: 0,
             prev_view: None,
             lidar_on: opts.effects.lidar,
+            show: Default::default(),
             _uploads: uploads,
             handles,
         })
@@ -164,15 +167,15 @@ impl Renderer {
 
     /// Records one frame of `camera` into `encoder`: shadow map (first frame), G-buffer and
     /// lighting of the main and lidar views, the SDK's tasks, and the composite into
-    /// [`Self::hdr`] and [`Self::ldr`]. Returns the SDK's task, to be marked complete once the
-    /// GPU has run `encoder`'s submission (`None` when the SDK had nothing to do).
+    /// [`Self::hdr`] and [`Self::ldr`]. Returns the SDK's tasks, to be marked complete once the
+    /// GPU has run `encoder`'s submission.
     pub fn record_frame(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         camera: &Camera,
-    ) -> AnyResult<Option<ksrt::GpuTaskHandle>> {
+    ) -> AnyResult<Vec<ksrt::GpuTaskHandle>> {
         if self.frame == 0 {
             self.raster.record_shadow_map(encoder);
         }
@@ -200,7 +203,7 @@ impl Renderer {
             None
         };
         let discard_history = self.prev_view.is_none();
-        let task = self.sdk.record(
+        let tasks = self.sdk.record(
             encoder,
             &FrameInputs {
                 main: &self.main,
@@ -218,12 +221,13 @@ impl Renderer {
             &self.main,
             &self.sdk.outputs,
             produced,
+            self.show,
             &self.hdr.create_view(&Default::default()),
             &self.ldr.create_view(&Default::default()),
         );
         self.prev_view = Some(view);
         self.frame += 1;
-        Ok(task)
+        Ok(tasks)
     }
 
     /// Records, submits and waits for one frame, then marks its SDK task complete; returns the
@@ -238,24 +242,33 @@ impl Renderer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("ksrt frame"),
         });
-        let task = self.record_frame(device, queue, &mut encoder, camera)?;
+        let tasks = self.record_frame(device, queue, &mut encoder, camera)?;
         queue.submit([encoder.finish()]);
-        let Some(task) = task else {
-            device.poll(wgpu::PollType::wait_indefinitely())?;
-            return Ok(None);
-        };
-        let timings = if timing {
-            match self.sdk.ctx.wait_for_gpu_timings(task) {
+        self.finish(device, &tasks, timing)
+    }
+
+    /// After the frame of `tasks` was submitted: reads the first task's GPU timings when
+    /// `timing` (blocking), waits for the GPU and marks every task complete.
+    pub fn finish(
+        &self,
+        device: &wgpu::Device,
+        tasks: &[ksrt::GpuTaskHandle],
+        timing: bool,
+    ) -> AnyResult<Option<ksrt::GpuTimings>> {
+        let timings = match tasks.first() {
+            Some(&task) if timing => match self.sdk.ctx.wait_for_gpu_timings(task) {
                 Ok(t) => Some(t),
                 Err(e) => {
-                    log::warn!("no GPU timings: {e}");
+                    log::debug!("no GPU timings: {e}");
                     None
                 }
-            }
-        } else {
-            None
+            },
+            _ => None,
         };
-        gpu::complete(&self.sdk.ctx, device, task)?;
+        device.poll(wgpu::PollType::wait_indefinitely())?;
+        for &task in tasks {
+            gpu::complete(&self.sdk.ctx, device, task)?;
+        }
         Ok(timings)
     }
 }
