@@ -81,6 +81,9 @@ enum Command {
         /// Also write each image as linear OpenEXR (`<name>.exr`).
         #[arg(long)]
         hdr: bool,
+        /// Only the lit images: no CPU reference image and no debug views (benchmark runs).
+        #[arg(long)]
+        no_reference: bool,
     },
     /// Open a window on a scene: fly with WASD/QE and the mouse (hold the left button), toggle
     /// effects with 1–6, cycle debug views with V; SDK timings in the title bar.
@@ -156,6 +159,7 @@ struct RenderArgs {
     effects: String,
     seed: u32,
     hdr: bool,
+    no_reference: bool,
 }
 
 fn render(args: RenderArgs) -> AnyResult<()> {
@@ -170,6 +174,7 @@ fn render(args: RenderArgs) -> AnyResult<()> {
         effects,
         seed,
         hdr,
+        no_reference,
     } = args;
     let scene_name = scene_name.as_str();
     let (width, height) = parse_size(&size)?;
@@ -234,6 +239,9 @@ fn render(args: RenderArgs) -> AnyResult<()> {
         None => {
             println!("no SDK GPU timings (no SDK pass ran, or the device has no timestamp queries)")
         }
+    }
+    if no_reference {
+        return Ok(());
     }
     // Without --debug-view: the CPU reference image and every GPU debug view.
     let views = match debug_view {
@@ -308,6 +316,7 @@ fn main() {
             effects,
             seed,
             hdr,
+            no_reference,
         } => render(RenderArgs {
             size,
             out,
@@ -319,6 +328,7 @@ fn main() {
             effects,
             seed,
             hdr,
+            no_reference,
         }),
         Command::View {
             scene,
