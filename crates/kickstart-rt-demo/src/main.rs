@@ -1,11 +1,22 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
 mod bench;
+mod composite;
 mod debug_view;
+mod frame;
+#[cfg(test)]
+mod golden;
 mod gpu;
+mod lit;
+mod raster;
+mod readback;
 mod render;
+mod renderer;
 mod scene;
 mod sdk_glue;
+#[cfg(test)]
+mod testing;
+mod view;
 
 use std::path::PathBuf;
 
@@ -30,8 +41,11 @@ struct Cli {
 enum Command {
     /// Print the adapter, backend, and the features/limits the SDK needs or can use.
     Info,
-    /// Render a scene and write PNG images: `cpu-reference.png` (traced on the CPU reference
-    /// BVH), or with --debug-view the SDK's GPU debug view `debug-<view>.png`.
+    /// Render a scene with the rasteriser and the SDK's effects and write PNG images: `final.png`
+    /// and each channel (`direct`, `specular`, `diffuse`, `ao`, `shadow`, raw and `-denoised`),
+    /// then `cpu-reference.png` (traced on the CPU reference BVH) and the GPU debug views
+    /// `debug-<view>.png` (only the one asked for with --debug-view). Prints the GPU time of each
+    /// SDK pass.
     Render {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "1280x720")]
@@ -53,6 +67,49 @@ enum Command {
         /// framing the scene.
         #[arg(long, allow_hyphen_values = true)]
         camera: Option<String>,
+        /// Frames to run before writing the images (the lighting cache and the denoisers settle
+        /// over them).
+        #[arg(long, default_value_t = 32)]
+        frames: u32,
+        /// Effects, comma-separated, each NAME or NAME=on|off, applied in order to all on:
+        /// specular, diffuse, ao, shadow, denoise, lidar, or all/none (e.g. `none,ao`).
+        #[arg(long, default_value = "all")]
+        effects: String,
+        /// Seed of the SDK's ray noise.
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+        /// Also write each image as linear OpenEXR (`<name>.exr`).
+        #[arg(long)]
+        hdr: bool,
+        /// Only the lit images: no CPU reference image and no debug views (benchmark runs).
+        #[arg(long)]
+        no_reference: bool,
+    },
+    /// Open a window on a scene: fly with WASD/QE and the mouse (hold the left button), toggle
+    /// effects with 1–6, cycle debug views with V; SDK timings in the title bar.
+    View {
+        /// Scene (as for `render`).
+        #[arg(long, default_value = "default")]
+        scene: String,
+        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        #[arg(long)]
+        scenes: Option<PathBuf>,
+        /// Window size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1280x720")]
+        size: String,
+        /// Effects at start (as for `render`).
+        #[arg(long, default_value = "all")]
+        effects: String,
+        /// Start camera (as for `render`).
+        #[arg(long, allow_hyphen_values = true)]
+        camera: Option<String>,
+        /// Close after this many frames, writing the last one to --screenshot (for tests and
+        /// headless runs under Xvfb).
+        #[arg(long)]
+        frames: Option<u32>,
+        /// Where to write the last frame when --frames ends the run.
+        #[arg(long)]
+        screenshot: Option<PathBuf>,
     },
     /// Benchmark BLAS/TLAS builds and refits, BVH quality and ray throughput on the GPU.
     Bench {
@@ -79,7 +136,7 @@ enum Command {
 }
 
 /// Parses `--size WIDTHxHEIGHT`, each side in 1..=16384.
-fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
+pub(crate) fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
     let (w, h) = size
         .split_once('x')
         .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
@@ -90,15 +147,41 @@ fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
     Ok((w, h))
 }
 
-fn render(
-    size: &str,
+/// `ksrt render`'s options.
+struct RenderArgs {
+    size: String,
     out: PathBuf,
     debug_view: Option<debug_view::DebugView>,
-    scene_name: &str,
+    scene: String,
     scenes: Option<PathBuf>,
     camera: Option<String>,
-) -> AnyResult<()> {
-    let (width, height) = parse_size(size)?;
+    frames: u32,
+    effects: String,
+    seed: u32,
+    hdr: bool,
+    no_reference: bool,
+}
+
+fn render(args: RenderArgs) -> AnyResult<()> {
+    let RenderArgs {
+        size,
+        out,
+        debug_view,
+        scene: scene_name,
+        scenes,
+        camera,
+        frames,
+        effects,
+        seed,
+        hdr,
+        no_reference,
+    } = args;
+    let scene_name = scene_name.as_str();
+    let (width, height) = parse_size(&size)?;
+    let effects = frame::Effects::parse(&effects)?;
+    if frames == 0 {
+        return Err("--frames 0: render at least one frame".into());
+    }
     let camera = camera.as_deref().map(scene::parse_camera).transpose()?;
     let start = std::time::Instant::now();
     let scene = scene::load(scene_name, &scene::scenes_dir(scenes))?;
@@ -111,6 +194,55 @@ fn render(
     let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(scene_name)));
     let adapter = gpu::adapter()?;
     let (device, queue) = gpu::device(&adapter)?;
+    let start = std::time::Instant::now();
+    let result = lit::render(
+        &device,
+        &queue,
+        &scene,
+        &camera,
+        &lit::LitOptions {
+            size: (width, height),
+            frames,
+            effects,
+            seed,
+            progress: true,
+            gpu_timing: true,
+        },
+    )?;
+    let written = lit::write(&result, &out, hdr)?;
+    println!(
+        "wrote {} images to {} ({width}x{height}, {frames} frames in {:.2} s): {}",
+        written.len(),
+        out.display(),
+        start.elapsed().as_secs_f64(),
+        result
+            .channels
+            .iter()
+            .map(|c| c.name)
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    if !result.refused.is_empty() {
+        println!(
+            "this kickstart-rt refuses {:?} as unsupported: not rendered",
+            result.refused
+        );
+    }
+    if !result.missing.is_empty() {
+        println!(
+            "not written (effect off or unsupported): {}",
+            result.missing.join(", ")
+        );
+    }
+    match &result.timings {
+        Some(t) => print!("{}", lit::timing_table(t)),
+        None => {
+            println!("no SDK GPU timings (no SDK pass ran, or the device has no timestamp queries)")
+        }
+    }
+    if no_reference {
+        return Ok(());
+    }
     // Without --debug-view: the CPU reference image and every GPU debug view.
     let views = match debug_view {
         Some(v) => vec![v],
@@ -180,7 +312,41 @@ fn main() {
             scene,
             scenes,
             camera,
-        } => render(&size, out, debug_view, &scene, scenes, camera),
+            frames,
+            effects,
+            seed,
+            hdr,
+            no_reference,
+        } => render(RenderArgs {
+            size,
+            out,
+            debug_view,
+            scene,
+            scenes,
+            camera,
+            frames,
+            effects,
+            seed,
+            hdr,
+            no_reference,
+        }),
+        Command::View {
+            scene,
+            scenes,
+            size,
+            effects,
+            camera,
+            frames,
+            screenshot,
+        } => view::run(view::ViewArgs {
+            scene,
+            scenes_dir: scene::scenes_dir(scenes),
+            size,
+            effects,
+            camera,
+            frames,
+            screenshot,
+        }),
         Command::Bench {
             scenes,
             scene,

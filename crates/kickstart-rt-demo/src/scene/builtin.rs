@@ -4,7 +4,7 @@
 
 use glam::{Affine3A, Vec3};
 
-use super::{Camera, Instance, Mesh, Scene};
+use super::{Camera, Instance, Light, Mesh, Scene};
 
 /// A unit sphere: an icosahedron subdivided `subdivisions` times, vertices pushed onto the sphere.
 pub(crate) fn icosphere(subdivisions: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
@@ -180,6 +180,24 @@ pub fn default_scene() -> Scene {
         up: Vec3::Y,
         fov_y_deg: 50.0,
     });
+    // The room of the bug report: a warm sun over the walls' open side and a cool point light
+    // between the knot and the tube, so both shadow kinds and the colour bleeding show.
+    scene.lights = vec![
+        Light::Sun {
+            direction: Vec3::new(-0.5, -1.0, -0.45).normalize(),
+            irradiance: Vec3::new(3.0, 2.8, 2.5),
+            angular_diameter: 0.0093,
+        },
+        Light::Point {
+            position: Vec3::new(1.6, 2.2, 1.6),
+            intensity: Vec3::new(2.0, 2.4, 3.0),
+            range: 12.0,
+        },
+    ];
+    // A slightly glossy floor, to show reflections of the objects.
+    if let Some(floor) = scene.meshes.iter_mut().find(|m| m.name == "floor") {
+        floor.material.roughness = 0.25;
+    }
     scene
 }
 
@@ -348,5 +366,18 @@ pub fn cornell_box() -> Scene {
         up: Vec3::Y,
         fov_y_deg: 39.3,
     });
+    // The ceiling panel glows, and a spot just below it, aimed down, stands in for its light in
+    // the rasteriser (which has no area lights).
+    if let Some(light) = scene.meshes.iter_mut().find(|m| m.name == "light") {
+        light.material.emissive = Vec3::new(17.0, 12.0, 4.0);
+    }
+    scene.lights = vec![Light::Spot {
+        position: Vec3::new(0.278, h - 0.01, 0.2795),
+        direction: Vec3::NEG_Y,
+        intensity: Vec3::new(0.9, 0.8, 0.65),
+        range: 3.0,
+        inner_angle: 0.9,
+        outer_angle: 1.5,
+    }];
     scene
 }

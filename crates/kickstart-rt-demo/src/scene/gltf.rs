@@ -8,7 +8,9 @@ use std::path::Path;
 use glam::{Affine3A, Mat4, Vec3};
 use gltf::mesh::Mode;
 
-use super::{check_indices, compute_normals, Camera, Instance, Mesh, Scene, SceneError};
+use super::{
+    check_indices, compute_normals, Camera, Instance, Material, Mesh, Scene, SceneError, Texture,
+};
 
 /// Loads a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
@@ -36,6 +38,8 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
         .collect::<Result<Vec<_>, _>>()?;
 
     let mut scene = Scene::default();
+    let mut textures = TextureCache::default();
+    let mut skipped = 0usize;
     // glTF mesh index → the scene meshes of its triangle primitives, converted on first use so
     // meshes no node references cost nothing.
     let mut converted: HashMap<usize, Vec<usize>> = HashMap::new();
@@ -81,9 +85,18 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
                 None => {
                     let mut ids = Vec::new();
                     for prim in mesh.primitives() {
-                        if let Some(m) = convert_primitive(&mesh, &prim, &buffers).map_err(err)? {
-                            ids.push(scene.meshes.len());
-                            scene.meshes.push(m);
+                        match convert_primitive(&mesh, &prim, &buffers).map_err(err)? {
+                            Some(mut m) => {
+                                m.material = textures.material(
+                                    path,
+                                    &prim.material(),
+                                    &buffers,
+                                    &mut scene,
+                                )?;
+                                ids.push(scene.meshes.len());
+                                scene.meshes.push(m);
+                            }
+                            None => skipped += 1,
                         }
                     }
                     converted.insert(mesh.index(), ids.clone());
@@ -120,7 +133,102 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             stack.push((child, world));
         }
     }
+    if scene.instances.is_empty() && skipped > 0 {
+        return Err(err(format!(
+            "no triangles to render: all {skipped} primitive(s) the scene uses are points or lines (or lack positions)"
+        )));
+    }
     Ok(scene)
+}
+
+/// The scene textures made from the file's images, each decoded once however many materials use
+/// it.
+#[derive(Default)]
+struct TextureCache {
+    /// glTF image index → index in `Scene::textures`.
+    decoded: HashMap<usize, usize>,
+}
+
+impl TextureCache {
+    /// The metallic-roughness material of a glTF material, decoding the textures it references.
+    fn material(
+        &mut self,
+        path: &Path,
+        m: &gltf::Material,
+        buffers: &[Vec<u8>],
+        scene: &mut Scene,
+    ) -> Result<Material, SceneError> {
+        let pbr = m.pbr_metallic_roughness();
+        let mut texture = |info: Option<gltf::texture::Info>, what: &str| {
+            info.map(|i| self.texture(path, &i.texture(), buffers, scene, what))
+                .transpose()
+        };
+        let base_color_texture = texture(pbr.base_color_texture(), "base colour")?;
+        let metallic_roughness_texture =
+            texture(pbr.metallic_roughness_texture(), "metallic-roughness")?;
+        let emissive_texture = texture(m.emissive_texture(), "emissive")?;
+        Ok(Material {
+            base_color_texture,
+            metallic: pbr.metallic_factor().clamp(0.0, 1.0),
+            roughness: pbr.roughness_factor().clamp(0.0, 1.0),
+            metallic_roughness_texture,
+            emissive: Vec3::from(m.emissive_factor()).max(Vec3::ZERO),
+            emissive_texture,
+        })
+    }
+
+    /// Decodes the image of `texture` (PNG or JPEG: from a buffer view, a data URI or a file
+    /// next to the glTF) into `scene.textures` and returns its index.
+    fn texture(
+        &mut self,
+        path: &Path,
+        texture: &gltf::Texture,
+        buffers: &[Vec<u8>],
+        scene: &mut Scene,
+        what: &str,
+    ) -> Result<usize, SceneError> {
+        let img = texture.source();
+        if let Some(&k) = self.decoded.get(&img.index()) {
+            return Ok(k);
+        }
+        let name = img
+            .name()
+            .map_or_else(|| format!("image {}", img.index()), str::to_string);
+        let err = |e: String| SceneError::new(path, format!("{what} texture {name}: {e}"));
+        let bytes: Vec<u8> = match img.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buf = buffers
+                    .get(view.buffer().index())
+                    .ok_or_else(|| err("its buffer is missing".into()))?;
+                buf.get(view.offset()..view.offset() + view.length())
+                    .ok_or_else(|| err("its buffer view is out of its buffer".into()))?
+                    .to_vec()
+            }
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => uri
+                .split_once(";base64,")
+                .and_then(|(_, p)| decode_base64(p))
+                .ok_or_else(|| err("invalid data URI (only base64 is supported)".into()))?,
+            gltf::image::Source::Uri { uri, .. } => {
+                let file = path
+                    .parent()
+                    .unwrap_or_else(|| Path::new("."))
+                    .join(percent_decode(uri));
+                std::fs::read(&file)
+                    .map_err(|e| err(format!("cannot read {}: {e}", file.display())))?
+            }
+        };
+        let decoded = image::load_from_memory(&bytes)
+            .map_err(|e| err(format!("cannot decode the image: {e}")))?
+            .to_rgba8();
+        let k = scene.textures.len();
+        scene.textures.push(Texture {
+            name,
+            image: decoded,
+            nearest: texture.sampler().mag_filter() == Some(gltf::texture::MagFilter::Nearest),
+        });
+        self.decoded.insert(img.index(), k);
+        Ok(k)
+    }
 }
 
 /// The bytes of one buffer: the GLB binary chunk, a file next to the `.gltf`, or a base64
@@ -277,6 +385,18 @@ fn convert_primitive(
         None => compute_normals(&positions, &indices),
     };
     let [r, g, b, _] = prim.material().pbr_metallic_roughness().base_color_factor();
+    // Every texture of a material uses one coordinate set here: the base colour's (set 0 in
+    // practice).
+    let set = prim
+        .material()
+        .pbr_metallic_roughness()
+        .base_color_texture()
+        .map_or(0, |t| t.tex_coord());
+    let uvs: Vec<[f32; 2]> = reader
+        .read_tex_coords(set)
+        .map(|t| t.into_f32().collect())
+        .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len())
+        .unwrap_or_default();
     Ok(Some(Mesh {
         name: prim
             .material()
@@ -286,6 +406,8 @@ fn convert_primitive(
         normals,
         indices,
         color: Vec3::new(r, g, b),
+        uvs,
+        material: Material::default(),
     }))
 }
 

@@ -52,6 +52,97 @@ pub struct Mesh {
     pub indices: Vec<u32>,
     /// Linear RGB base colour (glTF `baseColorFactor`, OBJ `Kd`).
     pub color: Vec3,
+    /// Texture coordinates, one per position, or empty when the file has none (textures then
+    /// read their texel at (0, 0)).
+    pub uvs: Vec<[f32; 2]>,
+    /// The rest of the surface description: metallic-roughness, emission, textures.
+    pub material: Material,
+}
+
+/// A metallic-roughness material (glTF 2.0's core model; OBJ/MTL maps onto it). Texture values
+/// multiply the factors, as glTF specifies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    /// Index into [`Scene::textures`] of the sRGB base colour texture (RGB, alpha unused).
+    pub base_color_texture: Option<usize>,
+    /// Metalness, 0..=1.
+    pub metallic: f32,
+    /// Perceptual roughness, 0..=1.
+    pub roughness: f32,
+    /// Index into [`Scene::textures`] of the linear metallic-roughness texture (glTF: roughness in
+    /// G, metalness in B).
+    pub metallic_roughness_texture: Option<usize>,
+    /// Emitted radiance, linear RGB (glTF `emissiveFactor` × `emissive_strength`, OBJ `Ke`).
+    pub emissive: Vec3,
+    /// Index into [`Scene::textures`] of the sRGB emissive texture.
+    pub emissive_texture: Option<usize>,
+}
+
+impl Default for Material {
+    /// A rough dielectric: what a file without material data looks like best as.
+    fn default() -> Self {
+        Material {
+            base_color_texture: None,
+            metallic: 0.0,
+            roughness: 0.6,
+            metallic_roughness_texture: None,
+            emissive: Vec3::ZERO,
+            emissive_texture: None,
+        }
+    }
+}
+
+/// A decoded texture: RGBA8 texels, row 0 at the top.
+#[derive(Debug, Clone)]
+pub struct Texture {
+    /// A name for logs (the file or image index).
+    pub name: String,
+    /// The texels.
+    pub image: image::RgbaImage,
+    /// Magnified with nearest-texel sampling (glTF sampler `magFilter` NEAREST) rather than
+    /// bilinear.
+    pub nearest: bool,
+}
+
+/// A light of the rasteriser (and of the SDK's shadow task, for the sun). Radiometric values are
+/// linear RGB; lengths in world units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Light {
+    /// A directional light. `direction` is the way the light travels (unit); `irradiance` the
+    /// illuminance on a surface facing it.
+    Sun {
+        /// Direction of travel (unit).
+        direction: Vec3,
+        /// Irradiance, linear RGB.
+        irradiance: Vec3,
+        /// Apparent angular diameter, radians (soft shadow size).
+        angular_diameter: f32,
+    },
+    /// A point light with inverse-square falloff, windowed to zero at `range`.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Intensity (radiant intensity), linear RGB.
+        intensity: Vec3,
+        /// Distance at which it fades out.
+        range: f32,
+    },
+    /// A spot light: a point light restricted to a cone, smoothly from `inner_angle` to
+    /// `outer_angle` (half-angles, radians).
+    Spot {
+        /// Position.
+        position: Vec3,
+        /// Axis (unit), the way the light shines.
+        direction: Vec3,
+        /// Intensity on the axis, linear RGB.
+        intensity: Vec3,
+        /// Distance at which it fades out.
+        range: f32,
+        /// Full intensity inside this half-angle.
+        inner_angle: f32,
+        /// Zero outside this half-angle.
+        outer_angle: f32,
+    },
 }
 
 impl Mesh {
@@ -71,6 +162,8 @@ impl Mesh {
             normals,
             indices,
             color,
+            uvs: Vec::new(),
+            material: Material::default(),
         })
     }
 
@@ -234,6 +327,10 @@ pub struct Scene {
     pub instances: Vec<Instance>,
     /// The file's camera, if any.
     pub camera: Option<Camera>,
+    /// Decoded textures the materials index.
+    pub textures: Vec<Texture>,
+    /// The scene's lights; empty: [`Scene::lights_or_default`] adds a sun.
+    pub lights: Vec<Light>,
 }
 
 impl Scene {
@@ -301,6 +398,20 @@ impl Scene {
             up: Vec3::Y,
             fov_y_deg,
         }
+    }
+
+    /// The lights to render with: the scene's, or, when it has none (every file of the shared
+    /// scenes), a white sun from above and slightly behind the default camera's right, so that
+    /// shadows fall visibly onto the floor towards the viewer.
+    pub fn lights_or_default(&self) -> Vec<Light> {
+        if !self.lights.is_empty() {
+            return self.lights.clone();
+        }
+        vec![Light::Sun {
+            direction: Vec3::new(-0.4, -1.0, -0.3).normalize(),
+            irradiance: Vec3::splat(3.0),
+            angular_diameter: 0.0093,
+        }]
     }
 
     /// The camera to render with: `override_camera`, else the file's, else [`Self::default_camera`].
@@ -399,5 +510,7 @@ pub fn load_file(path: &Path) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
+#[cfg(test)]
+mod asset_tests;
 #[cfg(test)]
 mod tests;

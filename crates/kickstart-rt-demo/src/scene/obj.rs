@@ -5,7 +5,7 @@ use std::path::Path;
 
 use glam::{Affine3A, Vec3};
 
-use super::{check_indices, compute_normals, Instance, Mesh, Scene, SceneError};
+use super::{check_indices, compute_normals, Instance, Material, Mesh, Scene, SceneError};
 
 /// Colour of meshes without a material (or whose MTL file is missing): a light grey, so they
 /// still show shading in the images.
@@ -53,11 +53,20 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         } else {
             compute_normals(&positions, &m.indices)
         };
-        let color = m
-            .material_id
-            .and_then(|i| materials.get(i))
+        let mtl = m.material_id.and_then(|i| materials.get(i));
+        let color = mtl
             .and_then(|mat| mat.diffuse)
             .map_or(DEFAULT_COLOR, Vec3::from);
+        let material = mtl.map_or_else(Material::default, material_of);
+        let uvs = if m.texcoords.len() / 2 == positions.len() {
+            // OBJ's v runs up, textures' rows run down.
+            m.texcoords
+                .chunks_exact(2)
+                .map(|t| [t[0], 1.0 - t[1]])
+                .collect()
+        } else {
+            Vec::new()
+        };
         scene.instances.push(Instance {
             mesh: scene.meshes.len(),
             transform: Affine3A::IDENTITY,
@@ -68,7 +77,47 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
             normals,
             indices: m.indices,
             color,
+            uvs,
+            material,
         });
     }
     Ok(scene)
+}
+
+/// The metallic-roughness reading of an MTL material: `Ke` is the emission; the Phong exponent
+/// `Ns` becomes a roughness through the usual Blinn-Phong ↔ GGX match (α² = 2 / (Ns + 2), α =
+/// roughness²); `Pm`/`Pr` (the PBR extension of MTL) win where present. MTL textures are not
+/// loaded (the shared OBJ scenes have none): colours only.
+fn material_of(mtl: &tobj::Material) -> Material {
+    let param = |k: &str| {
+        mtl.unknown_param
+            .get(k)
+            .and_then(|v| v.trim().parse::<f32>().ok())
+            .filter(|v| v.is_finite())
+    };
+    let roughness = param("Pr").unwrap_or_else(|| {
+        mtl.shininess
+            .filter(|ns| ns.is_finite() && *ns >= 0.0)
+            .map_or(Material::default().roughness, |ns| {
+                (2.0 / (ns + 2.0)).sqrt().sqrt()
+            })
+    });
+    let emissive = param("Ke")
+        .map(Vec3::splat)
+        .or_else(|| {
+            let v: Vec<f32> = mtl
+                .unknown_param
+                .get("Ke")?
+                .split_whitespace()
+                .filter_map(|x| x.parse().ok())
+                .collect();
+            (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
+        })
+        .unwrap_or(Vec3::ZERO);
+    Material {
+        metallic: param("Pm").unwrap_or(0.0).clamp(0.0, 1.0),
+        roughness: roughness.clamp(0.0, 1.0),
+        emissive: emissive.max(Vec3::ZERO),
+        ..Material::default()
+    }
 }

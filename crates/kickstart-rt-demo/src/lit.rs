@@ -1,0 +1,229 @@
+//! `ksrt render`'s lit image: `frames` frames of the full pipeline (so the lighting cache and the
+//! denoisers settle), then the final image and every channel read back and written, and the GPU
+//! time of each SDK pass of the last frame.
+
+use std::path::Path;
+
+use kickstart_rt as ksrt;
+
+use crate::frame::Effects;
+use crate::readback::{read_texture, to_hdr, to_png, Encoding, Texels};
+use crate::renderer::{Renderer, RendererOptions};
+use crate::scene::{Camera, Scene};
+use crate::AnyResult;
+
+/// Options of the lit render.
+#[derive(Debug, Clone)]
+pub struct LitOptions {
+    /// Image size.
+    pub size: (u32, u32),
+    /// Frames to run (≥ 1); the images are of the last one.
+    pub frames: u32,
+    /// Effects on.
+    pub effects: Effects,
+    /// Noise seed.
+    pub seed: u32,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// Measure the SDK's passes on the last frame.
+    pub gpu_timing: bool,
+}
+
+/// One image of the render: its file stem, texels and how to display them.
+pub struct Channel {
+    /// File stem (`final`, `direct`, `specular-denoised`, …).
+    pub name: &'static str,
+    /// Linear texels (display values for `final`).
+    pub texels: Texels,
+    /// How the texels become an image.
+    pub encoding: Encoding,
+}
+
+/// What a lit render produced.
+pub struct LitResult {
+    /// The final image first, then the direct light and each SDK channel produced.
+    pub channels: Vec<Channel>,
+    /// Channels not written because their effect was off or the SDK refused its task.
+    pub missing: Vec<&'static str>,
+    /// SDK tasks refused as unsupported.
+    pub refused: Vec<crate::frame::Part>,
+    /// GPU time of the last frame's SDK passes, when measured.
+    pub timings: Option<ksrt::GpuTimings>,
+}
+
+impl LitResult {
+    /// The channel named `name`.
+    pub fn channel(&self, name: &str) -> Option<&Channel> {
+        self.channels.iter().find(|c| c.name == name)
+    }
+}
+
+/// Renders `opts.frames` frames of `scene` from `camera` and reads every image back.
+pub fn render(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    scene: &Scene,
+    camera: &Camera,
+    opts: &LitOptions,
+) -> AnyResult<LitResult> {
+    let mut ropts = RendererOptions::new(opts.size);
+    ropts.effects = opts.effects;
+    ropts.seed = opts.seed;
+    ropts.gpu_timing = opts.gpu_timing;
+    let mut renderer = Renderer::new(device, queue, scene, &ropts)?;
+    let frames = opts.frames.max(1);
+    let bar = if opts.progress {
+        let bar = indicatif::ProgressBar::new(frames as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "{msg} [{bar:40}] {pos}/{len} frames ({elapsed}, eta {eta})",
+        ) {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_message(format!("rendering {}", scene.name));
+        bar
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut timings = None;
+    for f in 0..frames {
+        let last = f + 1 == frames;
+        let t = renderer.render_frame(device, queue, camera, last && opts.gpu_timing)?;
+        if last {
+            timings = t;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let read = |t: &wgpu::Texture| read_texture(device, queue, t);
+    let mut channels = vec![
+        Channel {
+            name: "final",
+            texels: read(&renderer.ldr)?,
+            encoding: Encoding::Display,
+        },
+        Channel {
+            name: "direct",
+            texels: read(&renderer.main.direct)?,
+            encoding: Encoding::Radiance,
+        },
+    ];
+    let produced = renderer.sdk.produced();
+    let o = &renderer.sdk.outputs;
+    let sdk_channels: [(
+        &'static str,
+        &'static str,
+        (bool, bool),
+        &wgpu::Texture,
+        &wgpu::Texture,
+        Encoding,
+        Encoding,
+    ); 4] = [
+        (
+            "specular",
+            "specular-denoised",
+            produced.specular,
+            &o.specular,
+            &o.specular_denoised,
+            Encoding::Radiance,
+            Encoding::Radiance,
+        ),
+        (
+            "diffuse",
+            "diffuse-denoised",
+            produced.diffuse,
+            &o.diffuse,
+            &o.diffuse_denoised,
+            Encoding::Radiance,
+            Encoding::Radiance,
+        ),
+        (
+            "ao",
+            "ao-denoised",
+            produced.ao,
+            &o.ao,
+            &o.ao_denoised,
+            Encoding::Unit,
+            Encoding::Unit,
+        ),
+        (
+            "shadow",
+            "shadow-denoised",
+            produced.shadow,
+            &o.shadow,
+            &o.shadow_denoised,
+            Encoding::ShadowHitDistance,
+            Encoding::Unit,
+        ),
+    ];
+    let mut missing = Vec::new();
+    for (raw, den, (traced, denoised), traw, tden, eraw, eden) in sdk_channels {
+        if traced {
+            channels.push(Channel {
+                name: raw,
+                texels: read(traw)?,
+                encoding: eraw,
+            });
+        } else {
+            missing.push(raw);
+        }
+        if denoised {
+            channels.push(Channel {
+                name: den,
+                texels: read(tden)?,
+                encoding: eden,
+            });
+        } else {
+            missing.push(den);
+        }
+    }
+    Ok(LitResult {
+        channels,
+        missing,
+        refused: renderer.sdk.refused.iter().copied().collect(),
+        timings,
+    })
+}
+
+/// Writes every channel of `result` into `out` as `<name>.png`, and `<name>.exr` (linear) when
+/// `hdr`; returns the paths written.
+pub fn write(result: &LitResult, out: &Path, hdr: bool) -> AnyResult<Vec<std::path::PathBuf>> {
+    std::fs::create_dir_all(out)
+        .map_err(|e| format!("--out {}: cannot create: {e}", out.display()))?;
+    let mut written = Vec::new();
+    for c in &result.channels {
+        let path = out.join(format!("{}.png", c.name));
+        to_png(&c.texels, c.encoding)
+            .save(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        written.push(path);
+        if hdr {
+            let path = out.join(format!("{}.exr", c.name));
+            to_hdr(&c.texels, c.encoding)
+                .save(&path)
+                .map_err(|e| format!("{}: {e}", path.display()))?;
+            written.push(path);
+        }
+    }
+    Ok(written)
+}
+
+/// A table of the SDK's GPU passes: per label (task) the summed time, and each pass.
+pub fn timing_table(t: &ksrt::GpuTimings) -> String {
+    let mut out = String::from("GPU time per SDK pass (last frame):\n");
+    let mut labels: Vec<&'static str> = Vec::new();
+    for p in &t.passes {
+        if !labels.contains(&p.label) {
+            labels.push(p.label);
+        }
+    }
+    for label in labels {
+        out += &format!("  {label:<28} {:>9.3} ms\n", t.sum_ms(&[label]));
+        for p in t.passes.iter().filter(|p| p.label == label) {
+            out += &format!("    {:<26} {:>9.3} ms\n", p.pass, p.ms);
+        }
+    }
+    let total: f64 = t.passes.iter().map(|p| p.ms).sum();
+    out += &format!("  {:<28} {total:>9.3} ms\n", "total");
+    out
+}

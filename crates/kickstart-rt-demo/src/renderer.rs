@@ -1,0 +1,274 @@
+//! One `ksrt` frame end to end: rasterise the main view (and the lidar view), let the SDK inject,
+//! trace and denoise ([`crate::frame`]), composite, submit. `ksrt render` and `ksrt view` both
+//! drive this.
+
+use glam::Vec3;
+use kickstart_rt as ksrt;
+
+use crate::composite::Composite;
+use crate::frame::{Effects, FrameInputs, SdkFrame};
+use crate::gpu::{self, UploadedMesh};
+use crate::raster::{halton_jitter, FrameView, GpuScene, ViewTargets};
+use crate::scene::{Camera, Scene};
+use crate::AnyResult;
+
+/// How to render.
+#[derive(Debug, Clone)]
+pub struct RendererOptions {
+    /// Main view size, pixels.
+    pub size: (u32, u32),
+    /// Effects on.
+    pub effects: Effects,
+    /// Seed of the SDK's noise (added to the frame index).
+    pub seed: u32,
+    /// Side of the square lidar view, pixels.
+    pub lidar_size: u32,
+    /// Measure the SDK's passes with GPU timestamps.
+    pub gpu_timing: bool,
+    /// Format of the display image (`Rgba8UnormSrgb` for files, the surface's in the viewer).
+    pub ldr_format: wgpu::TextureFormat,
+}
+
+impl RendererOptions {
+    /// Defaults for `size`: every effect, seed 0, a 128² lidar view, no timing, sRGB RGBA8.
+    pub fn new(size: (u32, u32)) -> Self {
+        RendererOptions {
+            size,
+            effects: Effects::default(),
+            seed: 0,
+            lidar_size: 128,
+            gpu_timing: false,
+            ldr_format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        }
+    }
+}
+
+/// The renderer of one scene.
+pub struct Renderer {
+    /// The scene on the GPU and the rasteriser.
+    pub raster: GpuScene,
+    /// The main view's G-buffer and direct light.
+    pub main: ViewTargets,
+    lidar: ViewTargets,
+    /// The SDK side.
+    pub sdk: SdkFrame,
+    composite: Composite,
+    /// The composite, HDR linear (`Rgba16Float`).
+    pub hdr: wgpu::Texture,
+    /// The composite, tone mapped (`RendererOptions::ldr_format`).
+    pub ldr: wgpu::Texture,
+    /// Frames rendered so far.
+    pub frame: u32,
+    prev_view: Option<FrameView>,
+    lidar_on: bool,
+    /// What the composite shows.
+    pub show: crate::composite::Show,
+    _uploads: Vec<UploadedMesh>,
+    /// The scene's SDK handles.
+    pub handles: gpu::SceneHandles,
+}
+
+/// The lidar camera of frame `frame`: at the main camera's eye, looking along the `frame`-th of
+/// 64 directions spread evenly over the sphere (a Fibonacci lattice), 90° field of view, so 64
+/// frames see every direction around the viewer.
+pub fn lidar_camera(eye: Vec3, frame: u32) -> Camera {
+    let n = 64;
+    let k = frame % n;
+    let z = 1.0 - (2.0 * k as f32 + 1.0) / n as f32;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = k as f32 * 2.399_963;
+    let dir = Vec3::new(r * phi.cos(), z, r * phi.sin());
+    Camera {
+        eye,
+        at: eye + dir,
+        up: Vec3::Y,
+        fov_y_deg: 90.0,
+    }
+}
+
+impl Renderer {
+    /// Uploads `scene`, registers it with a new SDK context and builds its BVHs (waiting for the
+    /// GPU once), and makes the targets.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+        opts: &RendererOptions,
+    ) -> AnyResult<Renderer> {
+        let settings = ksrt::InitSettings {
+            gpu_timing: opts.gpu_timing,
+            ..Default::default()
+        };
+        let ctx = ksrt::ExecuteContext::new(device, queue, settings)?;
+        let uploads = gpu::upload_scene(device, scene);
+        let mut c = ctx.create_task_container();
+        let handles = gpu::schedule_scene(&ctx, &mut c, scene, &uploads, false, true);
+        c.schedule_bvh_task(crate::sdk_glue::bvh_build_task(
+            uploads.len().max(1) as u32,
+            Some(crate::sdk_glue::Tlas::Auto),
+        ));
+        ctx.invoke_gpu_task(c)?;
+        device.poll(wgpu::PollType::wait_indefinitely())?;
+        ctx.prepare_pipelines();
+        let raster = GpuScene::new(device, queue, scene, &uploads);
+        let size = (opts.size.0.max(1), opts.size.1.max(1));
+        let main = ViewTargets::new(device, &raster, size);
+        let lidar_size = opts.lidar_size.max(1);
+        let lidar = ViewTargets::new(device, &raster, (lidar_size, lidar_size));
+        let sdk = SdkFrame::new(
+            device,
+            ctx,
+            size,
+            opts.effects,
+            raster.shadow_light.as_ref(),
+            raster.scene_size,
+            opts.seed,
+        );
+        let target = |format, label| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: size.0,
+                    height: size.1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            })
+        };
+        Ok(Renderer {
+            composite: Composite::new(device, opts.ldr_format),
+            hdr: target(wgpu::TextureFormat::Rgba16Float, "ksrt hdr"),
+            ldr: target(opts.ldr_format, "ksrt ldr"),
+            raster,
+            main,
+            lidar,
+            sdk,
+            frame: 0,
+            prev_view: None,
+            lidar_on: opts.effects.lidar,
+            show: Default::default(),
+            _uploads: uploads,
+            handles,
+        })
+    }
+
+    /// Forgets the previous frame's camera: the next frame has no motion and drops the
+    /// denoisers' history (a camera cut).
+    pub fn cut(&mut self) {
+        self.prev_view = None;
+    }
+
+    /// Records one frame of `camera` into `encoder`: shadow map (first frame), G-buffer and
+    /// lighting of the main and lidar views, the SDK's tasks, and the composite into
+    /// [`Self::hdr`] and [`Self::ldr`]. Returns the SDK's tasks, to be marked complete once the
+    /// GPU has run `encoder`'s submission.
+    pub fn record_frame(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+    ) -> AnyResult<Vec<ksrt::GpuTaskHandle>> {
+        if self.frame == 0 {
+            self.raster.record_shadow_map(encoder);
+        }
+        let view = FrameView::new(
+            camera,
+            self.main.size,
+            self.raster.scene_size,
+            halton_jitter(self.frame),
+            self.prev_view.as_ref(),
+        );
+        self.main.set_view(queue, &view);
+        self.raster.record_view(encoder, &self.main.as_ref());
+        let lidar_view = if self.lidar_on && self.sdk.effects.lidar {
+            let v = FrameView::new(
+                &lidar_camera(camera.eye, self.frame),
+                self.lidar.size,
+                self.raster.scene_size,
+                glam::Vec2::ZERO,
+                None,
+            );
+            self.lidar.set_view(queue, &v);
+            self.raster.record_view(encoder, &self.lidar.as_ref());
+            Some(v)
+        } else {
+            None
+        };
+        let discard_history = self.prev_view.is_none();
+        let tasks = self.sdk.record(
+            encoder,
+            &FrameInputs {
+                main: &self.main,
+                view: &view,
+                lidar: lidar_view.as_ref().map(|v| (&self.lidar, v)),
+                frame: self.frame,
+                discard_history,
+            },
+        )?;
+        let produced = self.sdk.produced();
+        self.composite.record(
+            device,
+            queue,
+            encoder,
+            &self.main,
+            &self.sdk.outputs,
+            produced,
+            self.show,
+            &self.hdr.create_view(&Default::default()),
+            &self.ldr.create_view(&Default::default()),
+        );
+        self.prev_view = Some(view);
+        self.frame += 1;
+        Ok(tasks)
+    }
+
+    /// Records, submits and waits for one frame, then marks its SDK task complete; returns the
+    /// GPU timings of the SDK's passes when `timing` (and the device can measure them).
+    pub fn render_frame(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        camera: &Camera,
+        timing: bool,
+    ) -> AnyResult<Option<ksrt::GpuTimings>> {
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("ksrt frame"),
+        });
+        let tasks = self.record_frame(device, queue, &mut encoder, camera)?;
+        queue.submit([encoder.finish()]);
+        self.finish(device, &tasks, timing)
+    }
+
+    /// After the frame of `tasks` was submitted: reads the first task's GPU timings when
+    /// `timing` (blocking), waits for the GPU and marks every task complete.
+    pub fn finish(
+        &self,
+        device: &wgpu::Device,
+        tasks: &[ksrt::GpuTaskHandle],
+        timing: bool,
+    ) -> AnyResult<Option<ksrt::GpuTimings>> {
+        let timings = match tasks.first() {
+            Some(&task) if timing => match self.sdk.ctx.wait_for_gpu_timings(task) {
+                Ok(t) => Some(t),
+                Err(e) => {
+                    log::debug!("no GPU timings: {e}");
+                    None
+                }
+            },
+            _ => None,
+        };
+        device.poll(wgpu::PollType::wait_indefinitely())?;
+        for &task in tasks {
+            gpu::complete(&self.sdk.ctx, device, task)?;
+        }
+        Ok(timings)
+    }
+}

@@ -1,0 +1,88 @@
+//! Loader tests on generated assets: textures and emission read from glTF (text and binary), and
+//! each broken input's message.
+
+use super::*;
+use crate::testing;
+
+#[test]
+fn gltf_textures_uvs_and_emission_are_loaded() {
+    let dir = testing::temp_dir("gltf-textured");
+    let scene = load_file(&testing::textured_gltf(&dir)).expect("load");
+    assert_eq!(scene.meshes.len(), 2);
+    assert_eq!(scene.textures.len(), 1);
+    let tex = &scene.textures[0].image;
+    assert_eq!((tex.width(), tex.height()), (8, 8));
+    assert_eq!(tex.get_pixel(0, 0).0, [230, 20, 20, 255]);
+    assert_eq!(tex.get_pixel(1, 0).0, [20, 20, 230, 255]);
+    let floor = &scene.meshes[0];
+    assert_eq!(floor.material.base_color_texture, Some(0));
+    assert_eq!(floor.uvs.len(), 4);
+    assert_eq!(floor.uvs[2], [1.0, 1.0]);
+    assert!((floor.material.roughness - 0.9).abs() < 1e-6);
+    let lamp = &scene.meshes[1];
+    assert_eq!(lamp.material.emissive, Vec3::new(4.0, 3.0, 0.5));
+    assert_eq!(lamp.material.base_color_texture, None);
+    assert!(lamp.uvs.is_empty());
+}
+
+#[test]
+fn glb_with_an_embedded_texture_loads_like_the_gltf() {
+    let dir = testing::temp_dir("glb");
+    let path = dir.join("scene.glb");
+    std::fs::write(&path, testing::glb_bytes()).expect("write");
+    let scene = load_file(&path).expect("load glb");
+    assert_eq!(scene.textures.len(), 1);
+    assert_eq!(
+        scene.textures[0].image.get_pixel(1, 0).0,
+        [20, 20, 230, 255]
+    );
+    assert_eq!(scene.meshes[1].material.emissive, Vec3::new(4.0, 3.0, 0.5));
+}
+
+fn message(r: Result<Scene, SceneError>) -> String {
+    match r {
+        Ok(_) => panic!("a broken input loaded"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn missing_file_says_it_cannot_be_read() {
+    let m = message(load_file(Path::new("/nonexistent/ksrt/scene.glb")));
+    assert!(
+        m.contains("/nonexistent/ksrt/scene.glb") && m.contains("cannot read"),
+        "{m}"
+    );
+    let m = message(load("/nonexistent/ksrt/scene.obj", Path::new(".")));
+    assert!(m.contains("cannot read"), "{m}");
+}
+
+#[test]
+fn glb_truncated_to_half_is_an_error_naming_the_file() {
+    let dir = testing::temp_dir("glb-truncated");
+    let path = dir.join("half.glb");
+    let bytes = testing::glb_bytes();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).expect("write");
+    let m = message(load_file(&path));
+    assert!(m.contains("half.glb"), "{m}");
+    assert!(m.contains("not a valid glTF 2.0 file"), "{m}");
+}
+
+#[test]
+fn lines_only_scene_is_an_error_saying_there_are_no_triangles() {
+    let dir = testing::temp_dir("gltf-lines");
+    let m = message(load_file(&testing::lines_only_gltf(&dir)));
+    assert!(m.contains("lines.gltf"), "{m}");
+    assert!(m.contains("no triangles to render"), "{m}");
+}
+
+#[test]
+fn texture_that_fails_to_decode_is_an_error_naming_it() {
+    let dir = testing::temp_dir("gltf-bad-texture");
+    let m = message(load_file(&testing::bad_texture_gltf(&dir)));
+    assert!(m.contains("bad-texture.gltf"), "{m}");
+    assert!(
+        m.contains("base colour texture image 0: cannot decode the image"),
+        "{m}"
+    );
+}
