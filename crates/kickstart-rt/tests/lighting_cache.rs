@@ -423,7 +423,7 @@ fn two_cameras_in_one_container_fill_both_halves() {
         vec![RenderTask::DirectLightingInjection(injection(&rects, &left, Depth::Clip, |p, _| gradient(p)))],
     );
     let (lit, unlit) = check(&view(&ctx, &overview, DebugOutputType::DirectLightingCache, true), &[&left]);
-    assert!(lit > 1000 && unlit > 1000, "one camera: {lit} lit, {unlit} unlit pixels");
+    assert!(lit > 200 && unlit > 200, "one camera: {lit} lit, {unlit} unlit pixels");
     // Both cameras in one container (the second injects the same left half again).
     run_tasks(
         &ctx,
@@ -433,7 +433,7 @@ fn two_cameras_in_one_container_fill_both_halves() {
         ],
     );
     let (lit2, unlit2) = check(&view(&ctx, &overview, DebugOutputType::DirectLightingCache, true), &[&left, &right]);
-    assert!(lit2 > lit + 1000 && unlit2 == 0, "two cameras: {lit2} lit, {unlit2} unlit pixels");
+    assert!(lit2 > lit + 200 && unlit2 == 0, "two cameras: {lit2} lit, {unlit2} unlit pixels");
 }
 
 /// Per-pixel noise in [0, 1].
@@ -499,7 +499,7 @@ fn a_short_pool_gives_coarse_caches_at_once_and_grows_later() {
         &g.device,
         &g.queue,
         InitSettings {
-            lighting_cache_pool_bytes: 40 * 16,
+            lighting_cache_pool_bytes: 64 * 16,
             ..Default::default()
         },
     )
@@ -509,27 +509,26 @@ fn a_short_pool_gives_coarse_caches_at_once_and_grows_later() {
     let unit = 0.3;
     let edit = tile(unit);
     let offsets = [Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(-3.0, 0.0, 0.0)];
-    let (_, inst) = scene(
+    let cam = above();
+    // The registering task injects and reads the caches at once: they must be valid.
+    let c = Vec3::new(0.2, 0.4, 0.6);
+    let (before, before_out) = view_task(&cam, DebugOutputType::DirectLightingCache, true);
+    let (after, after_out) = view_task(&cam, DebugOutputType::DirectLightingCache, true);
+    let inject = RenderTask::DirectLightingInjection(injection(&[rect], &cam, Depth::Clip, move |_, _| c));
+    let (_, inst) = scene_with(
         &ctx,
         &[(&mesh, &edit)],
         &offsets.map(|o| (0, Affine3A::from_translation(o), MAGENTA, InstanceInclusionMask::ALL)),
+        vec![before, inject, after],
     );
-    let cam = above();
-    // Every instance got its coarse cache (9 vertex samples each: 27 of 40 surfels).
+    let centre = 32 * 64 + 32;
+    assert!((read_view(&before_out)[centre].truncate() - MAGENTA.truncate()).abs().max_element() < 1e-6);
+    assert!((read_view(&after_out)[centre].truncate() - c).abs().max_element() < 1e-5);
+    // Every instance got its coarse cache (9 vertex samples each: 27 of the 64 surfels).
     for h in &inst {
         let a = allocation(&ctx, *h);
         assert_eq!(a, CacheAllocation { surfels: 9, level: CacheLevel::Coarse });
     }
-    // A valid cache: reads give the initial colour, injection works on the vertex samples.
-    let img = view(&ctx, &cam, DebugOutputType::DirectLightingCache, true);
-    assert!((img[32 * 64 + 32].truncate() - MAGENTA.truncate()).abs().max_element() < 1e-6);
-    let c = Vec3::new(0.2, 0.4, 0.6);
-    run_tasks(
-        &ctx,
-        vec![RenderTask::DirectLightingInjection(injection(&[rect], &cam, Depth::Clip, move |_, _| c))],
-    );
-    let img = view(&ctx, &cam, DebugOutputType::DirectLightingCache, true);
-    assert!((img[32 * 64 + 32].truncate() - c).abs().max_element() < 1e-5);
     // The next task grows the pool and allocates full caches again.
     run_tasks(&ctx, vec![]);
     let world: Vec<[Vec3; 3]> = mesh.triangles();
@@ -541,7 +540,11 @@ fn a_short_pool_gives_coarse_caches_at_once_and_grows_later() {
         assert_eq!(a.surfels, expected_surfels(&world, &input));
     }
     let img = view(&ctx, &cam, DebugOutputType::DirectLightingCache, true);
-    assert!((img[32 * 64 + 32].truncate() - MAGENTA.truncate()).abs().max_element() < 1e-6);
+    assert!(
+        (img[32 * 64 + 32].truncate() - MAGENTA.truncate()).abs().max_element() < 1e-6,
+        "{:?}",
+        img[32 * 64 + 32]
+    );
     run_tasks(
         &ctx,
         vec![RenderTask::DirectLightingInjection(injection(&[rect], &cam, Depth::Clip, |p, _| gradient(p)))],
@@ -641,4 +644,60 @@ fn tile_view_shows_one_id_per_surfel() {
     let expected = expected_surfels(&mesh.triangles(), &input) as usize;
     assert_eq!(expected, 200);
     assert!(colours.len() > 150 && colours.len() <= expected, "{} tile colours", colours.len());
+}
+
+#[test]
+fn a_destroyed_instance_frees_its_cache_for_the_next() {
+    let g = gpu();
+    // Room for three caches of 17 surfels (the 2×2 quad at unit 1: 4 vertices, 4 edge samples,
+    // 3 on the diagonal, 3 inside each triangle).
+    let ctx = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            lighting_cache_pool_bytes: 64 * 16,
+            ..Default::default()
+        },
+    )
+    .expect("context");
+    let mesh = small_floor().mesh(1, false);
+    let edit = tile(1.0);
+    let (geoms, inst) = scene(
+        &ctx,
+        &[(&mesh, &edit)],
+        &[0.0, 3.0, 6.0].map(|x| {
+            (0, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)), MAGENTA, InstanceInclusionMask::ALL)
+        }),
+    );
+    for h in &inst {
+        assert_eq!(allocation(&ctx, *h), CacheAllocation { surfels: 17, level: CacheLevel::Full });
+    }
+    let bytes = ctx.resource_allocations().cache;
+    ctx.destroy_instance_handle(inst[1]).expect("destroy");
+    let fresh = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    let mut input = InstanceInput::new(geoms[0], Affine3A::from_translation(Vec3::new(9.0, 0.0, 0.0)));
+    input.initial_tile_color = MAGENTA;
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: fresh,
+        input,
+    });
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    // The fourth cache fits only in the freed one's place: full, and the pool did not grow.
+    assert_eq!(allocation(&ctx, fresh), CacheAllocation { surfels: 17, level: CacheLevel::Full });
+    run_tasks(&ctx, vec![]);
+    assert_eq!(ctx.resource_allocations().cache, bytes);
+    let cam = Camera {
+        eye: above().eye + Vec3::new(9.0, 0.0, 0.0),
+        target: Vec3::new(9.0, 0.0, 0.0),
+        ..above()
+    };
+    let img = view(&ctx, &cam, DebugOutputType::DirectLightingCache, true);
+    assert!(
+        (img[32 * 64 + 32] - MAGENTA.truncate().extend(1.0)).abs().max_element() < 1e-6,
+        "{:?}",
+        img[32 * 64 + 32]
+    );
 }

@@ -225,6 +225,13 @@ pub fn run_tasks(ctx: &ExecuteContext, tasks: Vec<RenderTask>) {
 
 /// The primary-ray debug view `kind` of `cam` (RGBA per pixel; alpha 0 on miss).
 pub fn view(ctx: &ExecuteContext, cam: &Camera, kind: DebugOutputType, bilinear: bool) -> Vec<Vec4> {
+    let (task, out) = view_task(cam, kind, bilinear);
+    run_tasks(ctx, vec![task]);
+    read_view(&out)
+}
+
+/// A trace task writing the debug view `kind` of `cam`, and its output texture.
+pub fn view_task(cam: &Camera, kind: DebugOutputType, bilinear: bool) -> (RenderTask, wgpu::Texture) {
     let (w, h) = (cam.w, cam.h);
     let out = gpu().device.create_texture(&wgpu::TextureDescriptor {
         label: None,
@@ -254,14 +261,17 @@ pub fn view(ctx: &ExecuteContext, cam: &Camera, kind: DebugOutputType, bilinear:
     common.view = cam.view();
     common.use_bilinear_sampling = bilinear;
     common.debug_parameters.debug_output_type = kind;
-    run_tasks(
-        ctx,
-        vec![RenderTask::TraceAmbientOcclusion(TraceAmbientOcclusionTask {
-            common,
-            output: out.create_view(&Default::default()),
-            ao_radius: 1.0,
-        })],
-    );
+    let task = RenderTask::TraceAmbientOcclusion(TraceAmbientOcclusionTask {
+        common,
+        output: out.create_view(&Default::default()),
+        ao_radius: 1.0,
+    });
+    (task, out)
+}
+
+/// The texels of a debug view's output.
+pub fn read_view(out: &wgpu::Texture) -> Vec<Vec4> {
+    let (w, h) = (out.width(), out.height());
     let row = (w * 16).div_ceil(256) * 256;
     let buf = gpu().device.create_buffer(&wgpu::BufferDescriptor {
         label: None,
@@ -298,7 +308,20 @@ pub fn scene(
     meshes: &[(&Mesh, &dyn Fn(&mut GeometryInput))],
     instances: &[(usize, glam::Affine3A, Vec4, InstanceInclusionMask)],
 ) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
+    scene_with(ctx, meshes, instances, vec![])
+}
+
+/// [`scene`], with render tasks in the same container (after the registrations).
+pub fn scene_with(
+    ctx: &ExecuteContext,
+    meshes: &[(&Mesh, &dyn Fn(&mut GeometryInput))],
+    instances: &[(usize, glam::Affine3A, Vec4, InstanceInclusionMask)],
+    render: Vec<RenderTask>,
+) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
     let mut c = ctx.create_task_container();
+    for t in render {
+        c.schedule_render_task(t);
+    }
     let mut gs = Vec::new();
     for (m, edit) in meshes {
         let g = ctx.create_geometry_handle();
