@@ -1077,8 +1077,12 @@ impl ExecuteContext {
         // Direct lighting cache: grow what a read-back asked for, allocate waiting instances
         // whose BLAS is built (DESIGN.md data flow step 5).
         let mut cache_uploads = Uploads::default();
-        s.cache
-            .prepare_task(encoder, &mut cache_uploads, s.instances.slot_count(), serial)?;
+        s.cache.prepare_task(
+            encoder,
+            &mut cache_uploads,
+            s.instances.slot_count(),
+            serial,
+        )?;
         ws.staging
             .extend(cache_uploads.flush(&self.device, &mut s.staging, encoder));
         let jobs = Self::cache_jobs(s);
@@ -1348,7 +1352,12 @@ impl ExecuteContext {
         let src = geometry(t.source, "source")?;
         let dst = geometry(t.target, "target")?;
         if t.source == t.target {
-            return Err(Error::input(TASK, "target", t.target, "must differ from the source"));
+            return Err(Error::input(
+                TASK,
+                "target",
+                t.target,
+                "must differ from the source",
+            ));
         }
         if !dst.allow_light_transfer_target {
             return Err(Error::input(
@@ -1396,7 +1405,10 @@ impl ExecuteContext {
             else {
                 continue;
             };
-            let Some(blas) = d.gpu.blas.filter(|_| d.gpu.pending != Some(PendingBvh::Build))
+            let Some(blas) = d
+                .gpu
+                .blas
+                .filter(|_| d.gpu.pending != Some(PendingBvh::Build))
             else {
                 continue;
             };

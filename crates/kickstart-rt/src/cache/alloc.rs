@@ -144,7 +144,11 @@ impl DirectLightingCache {
         debug_assert_eq!(first.map(|r| r.start), Some(0));
         drop(scratch_encoder);
         let state_words = ST_LOG + 4 * MAX_ALLOCS_PER_TASK as u64;
-        let state = storage(device, "kickstart-rt cache allocation state", state_words * 4);
+        let state = storage(
+            device,
+            "kickstart-rt cache allocation state",
+            state_words * 4,
+        );
         DirectLightingCache {
             device: device.clone(),
             max_binding,

@@ -173,7 +173,12 @@ impl Injector {
     fn resolve(&mut self, device: &wgpu::Device) -> wgpu::ComputePipeline {
         self.resolve
             .get_or_insert_with(|| {
-                compute_pipeline(device, "kickstart-rt injection resolve", RESOLVE_WGSL, "resolve")
+                compute_pipeline(
+                    device,
+                    "kickstart-rt injection resolve",
+                    RESOLVE_WGSL,
+                    "resolve",
+                )
             })
             .clone()
     }

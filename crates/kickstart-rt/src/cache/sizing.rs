@@ -85,7 +85,11 @@ mod tests {
     }
 
     fn right(size: f32) -> [Vec3; 3] {
-        [Vec3::ZERO, Vec3::new(size, 0.0, 0.0), Vec3::new(0.0, size, 0.0)]
+        [
+            Vec3::ZERO,
+            Vec3::new(size, 0.0, 0.0),
+            Vec3::new(0.0, size, 0.0),
+        ]
     }
 
     #[test]
@@ -111,19 +115,30 @@ mod tests {
             tile_resolution_limit: 48,
             ..mc
         };
-        assert_eq!(mc_edge_resolution(1e6, &odd), 32, "largest power of two ≤ 48");
+        assert_eq!(
+            mc_edge_resolution(1e6, &odd),
+            32,
+            "largest power of two ≤ 48"
+        );
     }
 
     #[test]
     fn slivers_follow_their_longest_edge() {
-        let sliver = [Vec3::ZERO, Vec3::new(10.0, 0.0, 0.0), Vec3::new(5.0, 1e-3, 0.0)];
+        let sliver = [
+            Vec3::ZERO,
+            Vec3::new(10.0, 0.0, 0.0),
+            Vec3::new(5.0, 1e-3, 0.0),
+        ];
         // Area 0.005 tiles: direct mapping in the tile grid.
         assert_eq!(wb_resolution(sliver, &params(false)), 1);
         // MeshColors: edges of 10, ~5, ~5 → E = 16, 8, 8; R = 16.
         let mc = params(true);
         assert_eq!(mc_edge_resolution(10.0, &mc), 16);
         assert_eq!(mc_edge_resolution(5.0000001, &mc), 8);
-        assert_eq!(mc_triangle_surfels(sliver, &mc), 3 + 15 + 7 + 7 + 15 * 14 / 2);
+        assert_eq!(
+            mc_triangle_surfels(sliver, &mc),
+            3 + 15 + 7 + 7 + 15 * 14 / 2
+        );
     }
 
     #[test]

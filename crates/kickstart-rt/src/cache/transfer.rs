@@ -73,6 +73,11 @@ impl Transferer {
             &[params.as_entire_binding()],
         );
         rec.scope = "light transfer";
-        rec.dispatch("cache transfer", &pipeline, &[&cache, &io], tri_count.div_ceil(64));
+        rec.dispatch(
+            "cache transfer",
+            &pipeline,
+            &[&cache, &io],
+            tri_count.div_ceil(64),
+        );
     }
 }

@@ -5,8 +5,8 @@
 
 #![allow(dead_code)]
 
-pub mod rt;
 pub mod cache;
+pub mod rt;
 
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
