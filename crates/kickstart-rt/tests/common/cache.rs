@@ -321,10 +321,13 @@ pub fn read_view(out: &wgpu::Texture) -> Vec<Vec4> {
     px
 }
 
+/// A mesh and the changes to its default geometry input.
+pub type MeshEdit<'a> = (&'a Mesh, &'a dyn Fn(&mut GeometryInput));
+
 /// Registers `mesh` with `input` changes, one instance per transform, and builds everything.
 pub fn scene(
     ctx: &ExecuteContext,
-    meshes: &[(&Mesh, &dyn Fn(&mut GeometryInput))],
+    meshes: &[MeshEdit<'_>],
     instances: &[(usize, glam::Affine3A, Vec4, InstanceInclusionMask)],
 ) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
     scene_with(ctx, meshes, instances, vec![])
@@ -333,7 +336,7 @@ pub fn scene(
 /// [`scene`], with render tasks in the same container (after the registrations).
 pub fn scene_with(
     ctx: &ExecuteContext,
-    meshes: &[(&Mesh, &dyn Fn(&mut GeometryInput))],
+    meshes: &[MeshEdit<'_>],
     instances: &[(usize, glam::Affine3A, Vec4, InstanceInclusionMask)],
     render: Vec<RenderTask>,
 ) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
