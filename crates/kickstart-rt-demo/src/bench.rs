@@ -15,6 +15,9 @@ use crate::scene::{self, Camera, Scene};
 use crate::sdk_glue::{self as glue, GpuHit, GpuRay, Query, Tlas};
 use crate::AnyResult;
 
+#[path = "bench_cache.rs"]
+mod cache;
+
 /// Scenes benchmarked when no `--scene` is given.
 pub const DEFAULT_SCENES: [&str; 2] = ["dragon", "apartment"];
 
@@ -148,6 +151,8 @@ pub struct SceneReport {
     pub peer_mrays_per_s: Option<f64>,
     /// Primary rays checked against the CPU reference BVH on this GPU (untimed).
     pub oracle: Option<OracleCheck>,
+    /// Direct lighting cache: bytes, injection time, cache error (`bench_cache.rs`).
+    pub cache: Option<cache::CacheReport>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
 }
@@ -591,6 +596,7 @@ fn bench_scene(
         rays: Vec::new(),
         peer_mrays_per_s: None,
         oracle: None,
+        cache: None,
         errors: Vec::new(),
     };
     let uploads = gpu::upload_scene(bench.device, scene);
@@ -630,6 +636,9 @@ fn bench_scene(
     });
     attempt(&mut errors, "rays", || {
         rays(bench, scene, &uploads, &camera, size, &mut r)
+    });
+    r.cache = attempt(&mut errors, "lighting cache", || {
+        cache::cache_bench(bench, scene, &uploads, &camera, size)
     });
     r.errors = errors;
     r
@@ -748,6 +757,20 @@ fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
             "  CPU oracle   {} of {} sampled primary rays disagree (hit/miss, or t beyond 1e-3)",
             o.disagreements, o.rays
         );
+    }
+    if let Some(c) = &r.cache {
+        println!(
+            "  cache        {:.1} MiB of surfels ({:.1} MiB held), {} degraded instances",
+            c.surfel_bytes as f64 / 1048576.0,
+            c.cache_bytes as f64 / 1048576.0,
+            c.degraded_instances
+        );
+        for (stride, t) in &c.injection {
+            println!("  injection    stride {stride}: {}", t.show());
+        }
+        for (tasks, e) in &c.error {
+            println!("  cache error  after {tasks:>2} injections: {:.4}", e);
+        }
     }
     for e in &r.errors {
         println!("  failed: {e}");

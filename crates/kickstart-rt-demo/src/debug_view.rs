@@ -16,6 +16,11 @@ pub enum DebugView {
     Barycentrics,
     /// A colour hashed from the instance index.
     MeshColor,
+    /// The SDK's direct lighting cache at the primary hits (interpolated): what was injected,
+    /// else each instance's initial tile colour.
+    Cache,
+    /// A colour hashed from the lighting cache's surfel (tile) id.
+    Tiles,
 }
 
 impl DebugView {
@@ -25,6 +30,8 @@ impl DebugView {
             DebugView::HitT => "hit-t",
             DebugView::Barycentrics => "barycentrics",
             DebugView::MeshColor => "mesh-color",
+            DebugView::Cache => "cache",
+            DebugView::Tiles => "tiles",
         }
     }
 
@@ -33,6 +40,8 @@ impl DebugView {
             DebugView::HitT => ksrt::DebugOutputType::HitT,
             DebugView::Barycentrics => ksrt::DebugOutputType::Barycentrics,
             DebugView::MeshColor => ksrt::DebugOutputType::RandomMeshColor,
+            DebugView::Cache => ksrt::DebugOutputType::DirectLightingCache,
+            DebugView::Tiles => ksrt::DebugOutputType::RandomTileColor,
         }
     }
 }
@@ -184,9 +193,10 @@ pub fn to_image(view: DebugView, texels: &[[f32; 4]], width: u32, height: u32) -
                 let g = byte(1.0 - 0.85 * s);
                 image::Rgb([g, g, g])
             }
-            DebugView::Barycentrics | DebugView::MeshColor => {
-                image::Rgb([byte(t[0]), byte(t[1]), byte(t[2])])
-            }
+            DebugView::Barycentrics
+            | DebugView::MeshColor
+            | DebugView::Cache
+            | DebugView::Tiles => image::Rgb([byte(t[0]), byte(t[1]), byte(t[2])]),
         };
     }
     img

@@ -121,7 +121,8 @@
 //! | `TraceMultiShadowTask` | `lights` | 1..=32 | 0 or > 32 |
 //! | `DirectLightingInjectionTask` | `average_window` | finite, ≥ 1 | otherwise |
 //! | `DirectLightingInjectionTask` | `injection_resolution_stride` | 1..=8 | otherwise |
-//! | `DirectLightTransferTask` | `source`, `target` | live, different instances | same or stale |
+//! | `DirectLightTransferTask` | `source`, `target` | live, different instances registered by an earlier task; the target's geometry has `allow_light_transfer_target` and as many triangles as the source's | same, stale, unregistered; no flag; another triangle count |
+//! | `DirectLightingInjectionTask` | `depth.texture`, `direct_lighting` | float colour or depth format (depth: `RClipSpace` only) | integer formats |
 //! | denoise tasks | `common.context` | live denoising context | stale: [`Error::InvalidHandle`] |
 //! | denoise tasks | `common.motion.scale` | finite | NaN/∞ |
 //! | `DenoisingContextInput` | `max_width/max_height` | 1..=16384 | otherwise |

@@ -40,11 +40,20 @@ impl Rect {
     /// its own three vertices (no shared indices).
     pub fn mesh(&self, n: u32, split: bool) -> Mesh {
         let mut m = Mesh::default();
-        let p = |i: u32, j: u32| self.origin + self.a * (i as f32 / n as f32) + self.b * (j as f32 / n as f32);
+        let p = |i: u32, j: u32| {
+            self.origin + self.a * (i as f32 / n as f32) + self.b * (j as f32 / n as f32)
+        };
         if split {
             for j in 0..n {
                 for i in 0..n {
-                    for v in [(i, j), (i + 1, j), (i + 1, j + 1), (i, j), (i + 1, j + 1), (i, j + 1)] {
+                    for v in [
+                        (i, j),
+                        (i + 1, j),
+                        (i + 1, j + 1),
+                        (i, j),
+                        (i + 1, j + 1),
+                        (i, j + 1),
+                    ] {
                         m.indices.push(m.positions.len() as u32);
                         m.positions.push(p(v.0, v.1));
                     }
@@ -224,7 +233,23 @@ pub fn run_tasks(ctx: &ExecuteContext, tasks: Vec<RenderTask>) {
 }
 
 /// The primary-ray debug view `kind` of `cam` (RGBA per pixel; alpha 0 on miss).
-pub fn view(ctx: &ExecuteContext, cam: &Camera, kind: DebugOutputType, bilinear: bool) -> Vec<Vec4> {
+pub fn view(
+    ctx: &ExecuteContext,
+    cam: &Camera,
+    kind: DebugOutputType,
+    bilinear: bool,
+) -> Vec<Vec4> {
+    let (task, out) = view_task(cam, kind, bilinear);
+    run_tasks(ctx, vec![task]);
+    read_view(&out)
+}
+
+/// A trace task writing the debug view `kind` of `cam`, and its output texture.
+pub fn view_task(
+    cam: &Camera,
+    kind: DebugOutputType,
+    bilinear: bool,
+) -> (RenderTask, wgpu::Texture) {
     let (w, h) = (cam.w, cam.h);
     let out = gpu().device.create_texture(&wgpu::TextureDescriptor {
         label: None,
@@ -254,14 +279,17 @@ pub fn view(ctx: &ExecuteContext, cam: &Camera, kind: DebugOutputType, bilinear:
     common.view = cam.view();
     common.use_bilinear_sampling = bilinear;
     common.debug_parameters.debug_output_type = kind;
-    run_tasks(
-        ctx,
-        vec![RenderTask::TraceAmbientOcclusion(TraceAmbientOcclusionTask {
-            common,
-            output: out.create_view(&Default::default()),
-            ao_radius: 1.0,
-        })],
-    );
+    let task = RenderTask::TraceAmbientOcclusion(TraceAmbientOcclusionTask {
+        common,
+        output: out.create_view(&Default::default()),
+        ao_radius: 1.0,
+    });
+    (task, out)
+}
+
+/// The texels of a debug view's output.
+pub fn read_view(out: &wgpu::Texture) -> Vec<Vec4> {
+    let (w, h) = (out.width(), out.height());
     let row = (w * 16).div_ceil(256) * 256;
     let buf = gpu().device.create_buffer(&wgpu::BufferDescriptor {
         label: None,
@@ -286,19 +314,36 @@ pub fn view(ctx: &ExecuteContext, cam: &Camera, kind: DebugOutputType, bilinear:
     let bytes = read_buffer(&buf);
     let mut px = Vec::new();
     for y in 0..h {
-        let line: &[f32] = bytemuck::cast_slice(&bytes[(y * row) as usize..(y * row + w * 16) as usize]);
+        let line: &[f32] =
+            bytemuck::cast_slice(&bytes[(y * row) as usize..(y * row + w * 16) as usize]);
         px.extend(line.chunks(4).map(|c| Vec4::new(c[0], c[1], c[2], c[3])));
     }
     px
 }
 
+/// A mesh and the changes to its default geometry input.
+pub type MeshEdit<'a> = (&'a Mesh, &'a dyn Fn(&mut GeometryInput));
+
 /// Registers `mesh` with `input` changes, one instance per transform, and builds everything.
 pub fn scene(
     ctx: &ExecuteContext,
-    meshes: &[(&Mesh, &dyn Fn(&mut GeometryInput))],
+    meshes: &[MeshEdit<'_>],
     instances: &[(usize, glam::Affine3A, Vec4, InstanceInclusionMask)],
 ) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
+    scene_with(ctx, meshes, instances, vec![])
+}
+
+/// [`scene`], with render tasks in the same container (after the registrations).
+pub fn scene_with(
+    ctx: &ExecuteContext,
+    meshes: &[MeshEdit<'_>],
+    instances: &[(usize, glam::Affine3A, Vec4, InstanceInclusionMask)],
+    render: Vec<RenderTask>,
+) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
     let mut c = ctx.create_task_container();
+    for t in render {
+        c.schedule_render_task(t);
+    }
     let mut gs = Vec::new();
     for (m, edit) in meshes {
         let g = ctx.create_geometry_handle();
@@ -367,7 +412,10 @@ pub fn expected_surfels(tris: &[[Vec3; 3]], input: &GeometryInput) -> u32 {
                 {
                     1
                 } else {
-                    let l = (*b - *a).length().max((*c - *b).length()).max((*a - *c).length());
+                    let l = (*b - *a)
+                        .length()
+                        .max((*c - *b).length())
+                        .max((*a - *c).length());
                     tiles(l, unit, limit)
                 };
                 n * n

@@ -5,9 +5,9 @@
 
 #![allow(dead_code)]
 
+pub mod cache;
 pub mod denoise;
 pub mod rt;
-pub mod cache;
 
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
