@@ -6,6 +6,7 @@
 #![allow(dead_code)]
 
 pub mod rt;
+pub mod trace;
 
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
