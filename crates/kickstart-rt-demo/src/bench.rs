@@ -1,6 +1,8 @@
 //! `ksrt bench`: BLAS build and refit times, BVH quality (SAH cost against the CPU reference
 //! builder), TLAS build and refit times, and ray throughput, all timed on the GPU with the SDK's
-//! timestamp queries. Ray generation and other CPU work between batches is not timed.
+//! timestamp queries, and the trace tasks (each alone at full and checkerboard resolution, multi-light
+//! shadows against the light count, the four together). Ray generation and other CPU work between
+//! batches is not timed.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -153,8 +155,26 @@ pub struct SceneReport {
     pub oracle: Option<OracleCheck>,
     /// Direct lighting cache: bytes, injection time, cache error (`bench_cache.rs`).
     pub cache: Option<cache::CacheReport>,
+    /// The SDK's trace tasks on a G-buffer of the primary hits (`trace …` passes).
+    pub trace_tasks: Vec<TraceTaskTime>,
+    /// Specular + diffuse + AO + one shadow in one GPU task, full resolution (first trace pass's
+    /// start to the last one's end).
+    pub trace_combined: Option<Stats>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
+}
+
+/// GPU time of one trace task at the bench size.
+#[derive(Debug, Clone, Serialize)]
+pub struct TraceTaskTime {
+    /// `specular`, `diffuse`, `ao`, `shadow` or `multi_shadow`.
+    pub task: &'static str,
+    /// Checkerboard half resolution.
+    pub checkerboard: bool,
+    /// Lights (shadow tasks; 0 otherwise).
+    pub lights: u32,
+    /// GPU time of the task's pass.
+    pub time: Stats,
 }
 
 /// A sample of primary rays traced again on the CPU reference BVH (world-space triangles): the
@@ -597,6 +617,8 @@ fn bench_scene(
         peer_mrays_per_s: None,
         oracle: None,
         cache: None,
+        trace_tasks: Vec::new(),
+        trace_combined: None,
         errors: Vec::new(),
     };
     let uploads = gpu::upload_scene(bench.device, scene);
@@ -639,6 +661,9 @@ fn bench_scene(
     });
     r.cache = attempt(&mut errors, "lighting cache", || {
         cache::cache_bench(bench, scene, &uploads, &camera, size)
+    });
+    attempt(&mut errors, "trace tasks", || {
+        trace_tasks(bench, scene, &uploads, &camera, size, &mut r)
     });
     r.errors = errors;
     r
@@ -772,9 +797,262 @@ fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
             println!("  cache error  after {tasks:>2} injections: {:.4}", e);
         }
     }
+    if !r.trace_tasks.is_empty() {
+        println!("  trace tasks at {w}x{h} (G-buffer of the primary hits):");
+    }
+    for t in &r.trace_tasks {
+        let lights = if t.lights > 0 {
+            format!(" {:>2} lights", t.lights)
+        } else {
+            String::new()
+        };
+        println!(
+            "    {:<12}{:<10}{}  {}",
+            t.task,
+            lights,
+            if t.checkerboard { " checkerboard" } else { "" },
+            t.time.show()
+        );
+    }
+    if let Some(c) = &r.trace_combined {
+        println!(
+            "    specular + diffuse + AO + shadow together: {}",
+            c.show()
+        );
+    }
     for e in &r.errors {
         println!("  failed: {e}");
     }
+}
+
+/// Light counts of the multi-shadow measurement.
+pub const SHADOW_LIGHT_COUNTS: [u32; 6] = [1, 2, 4, 8, 16, 32];
+
+/// A G-buffer texture (Rgba32Float, sampled) holding `texels`.
+fn gbuffer_texture(bench: &Bench, (w, h): (u32, u32), texels: &[[f32; 4]]) -> wgpu::TextureView {
+    bench
+        .device
+        .create_texture_with_data(
+            bench.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("bench g-buffer"),
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(texels),
+        )
+        .create_view(&Default::default())
+}
+
+/// A trace output of `format` at the bench size.
+fn trace_output(
+    bench: &Bench,
+    (w, h): (u32, u32),
+    format: wgpu::TextureFormat,
+) -> wgpu::TextureView {
+    bench
+        .device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some("bench trace output"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::STORAGE_BINDING,
+            view_formats: &[],
+        })
+        .create_view(&Default::default())
+}
+
+/// (f) The trace tasks on a G-buffer made from primary rays traced through the SDK (world
+/// positions and geometric normals of the hits, computed on the CPU from the hit records: no
+/// rasteriser involved). Each task alone at full and checkerboard resolution, multi-light
+/// shadows against the light count, and specular + diffuse + AO + one shadow together.
+fn trace_tasks(
+    bench: &Bench,
+    scene: &Scene,
+    uploads: &[UploadedMesh],
+    camera: &Camera,
+    (width, height): (u32, u32),
+    report: &mut SceneReport,
+) -> AnyResult<()> {
+    let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
+    let slots = handles.instance_of_slot();
+    let dirs: Vec<Vec3> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| camera.primary_dir(x, y, width, height))
+        .collect();
+    let primary: Vec<GpuRay> = dirs
+        .iter()
+        .map(|d| GpuRay {
+            origin: camera.eye.to_array(),
+            t_min: 0.0,
+            dir: d.to_array(),
+            t_max: f32::INFINITY,
+        })
+        .collect();
+    let (_, hits) = bench.trace(&ctx, &primary, Query::Closest)?;
+    let mut positions = vec![[f32::NAN; 4]; hits.len()];
+    let mut normals = vec![[0.0f32; 4]; hits.len()];
+    for (i, (h, d)) in hits.iter().zip(&dirs).enumerate() {
+        if let Some(s) = h.is_hit().then(|| surface(scene, &slots, h, *d)).flatten() {
+            positions[i] = s.point.extend(1.0).to_array();
+            normals[i] = s.normal.extend(0.0).to_array();
+        }
+    }
+    let size = (width, height);
+    let depth = gbuffer_texture(bench, size, &positions);
+    let normal = gbuffer_texture(bench, size, &normals);
+    let extent = scene.size();
+    let (world_to_view, view_to_clip) =
+        camera.matrices(width as f32 / height as f32, extent * 1e-4, extent * 4.0);
+    let mut common = ksrt::TraceTaskCommon::new(
+        ksrt::DepthInput {
+            texture: depth,
+            depth_type: ksrt::DepthType::RgbWorldSpace,
+        },
+        ksrt::NormalInput {
+            texture: normal,
+            normal_type: ksrt::NormalType::RgbVector,
+            normal_to_world: glam::Mat4::IDENTITY,
+        },
+    );
+    common.view.world_to_view = world_to_view;
+    common.view.view_to_clip = view_to_clip;
+    common.view.prev_world_to_view = world_to_view;
+    common.view.prev_view_to_clip = view_to_clip;
+    common.ray_offset.offset_type = ksrt::RayOffsetType::WorldPosition;
+    let radiance = trace_output(bench, size, wgpu::TextureFormat::Rgba16Float);
+    let radiance2 = trace_output(bench, size, wgpu::TextureFormat::Rgba16Float);
+    let scalar = trace_output(bench, size, wgpu::TextureFormat::R32Float);
+    let scalar2 = trace_output(bench, size, wgpu::TextureFormat::R32Float);
+    let packed = trace_output(bench, size, wgpu::TextureFormat::Rgba16Float);
+    // Lights around the camera, at a tenth of the view distance, so every light matters.
+    let reach = (camera.at - camera.eye).length().max(extent * 0.01);
+    let mut rng = Rng(0x5348_4457);
+    let lights: Vec<ksrt::LightInfo> = (0..32)
+        .map(|_| {
+            let d = Vec3::new(rng.f32() - 0.5, rng.f32() * 0.5, rng.f32() - 0.5);
+            ksrt::LightInfo::Point {
+                position: camera.eye + d * reach * 0.5,
+                radius: reach * 0.01,
+                range: extent * 4.0,
+            }
+        })
+        .collect();
+    let sun = ksrt::LightInfo::Directional {
+        direction: Vec3::new(0.3, -1.0, 0.2).normalize(),
+        angular_extent: 0.0093,
+    };
+    let tasks = |c: &ksrt::TraceTaskCommon| {
+        vec![
+            (
+                "specular",
+                0,
+                ksrt::RenderTask::TraceSpecular(ksrt::TraceSpecularTask {
+                    common: c.clone(),
+                    output: radiance.clone(),
+                    demodulate_specular: false,
+                    demodulation_output: None,
+                }),
+            ),
+            (
+                "diffuse",
+                0,
+                ksrt::RenderTask::TraceDiffuse(ksrt::TraceDiffuseTask {
+                    common: c.clone(),
+                    output: radiance2.clone(),
+                    diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
+                }),
+            ),
+            (
+                "ao",
+                0,
+                ksrt::RenderTask::TraceAmbientOcclusion(ksrt::TraceAmbientOcclusionTask {
+                    common: c.clone(),
+                    output: scalar.clone(),
+                    ao_radius: extent * 0.05,
+                }),
+            ),
+            (
+                "shadow",
+                1,
+                ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
+                    common: c.clone(),
+                    output: scalar2.clone(),
+                    light: sun,
+                    enable_first_hit_and_end_search: true,
+                }),
+            ),
+        ]
+    };
+    let multi = |c: &ksrt::TraceTaskCommon, n: u32| {
+        ksrt::RenderTask::TraceMultiShadow(ksrt::TraceMultiShadowTask {
+            common: c.clone(),
+            output0: packed.clone(),
+            output1: radiance2.clone(),
+            lights: lights[..n as usize].to_vec(),
+            enable_first_hit_and_end_search: true,
+        })
+    };
+    let time_one = |task: &ksrt::RenderTask| {
+        bench.repeat(|_| {
+            let mut c = ctx.create_task_container();
+            c.schedule_render_task(task.clone());
+            bench.timed(&ctx, c, &["trace "], |_| {})
+        })
+    };
+    for checkerboard in [false, true] {
+        let mut c = common.clone();
+        if checkerboard {
+            c.half_resolution_mode = ksrt::HalfResolutionMode::Checkerboard;
+        }
+        for (name, lights, task) in tasks(&c) {
+            report.trace_tasks.push(TraceTaskTime {
+                task: name,
+                checkerboard,
+                lights,
+                time: time_one(&task)?,
+            });
+        }
+        report.trace_tasks.push(TraceTaskTime {
+            task: "multi_shadow",
+            checkerboard,
+            lights: 4,
+            time: time_one(&multi(&c, 4))?,
+        });
+    }
+    for n in SHADOW_LIGHT_COUNTS {
+        report.trace_tasks.push(TraceTaskTime {
+            task: "multi_shadow",
+            checkerboard: false,
+            lights: n,
+            time: time_one(&multi(&common, n))?,
+        });
+    }
+    report.trace_combined = Some(bench.repeat(|_| {
+        let mut c = ctx.create_task_container();
+        for (_, _, t) in tasks(&common) {
+            c.schedule_render_task(t);
+        }
+        bench.timed(&ctx, c, &["trace "], |_| {})
+    })?);
+    Ok(())
 }
 
 /// `ksrt bench`.

@@ -16,8 +16,9 @@ fn tr_store_demodulation(texel: vec2<u32>, v: vec4<f32>) {
 
 // Largest finite f16: a miss's hit distance when the ray length is unbounded.
 const TR_MISS_DISTANCE: f32 = 65504.0;
-// The direct lighting texture is used where the hit lies within this fraction of its view
-// distance from the surface the G-buffer holds at the hit's pixel.
+// The direct lighting texture is used where the view distance of the surface the G-buffer holds
+// at the hit's pixel is within this fraction of the hit's own (a tolerance that scales with
+// distance; a depth test, since the hit may lie anywhere inside the texel's footprint).
 const TR_DIRECT_LIGHTING_TOLERANCE: f32 = 0.01;
 
 struct TrTraced {
@@ -43,7 +44,8 @@ fn tr_incoming(origin: vec3<f32>, dir: vec3<f32>, t_min: f32) -> TrTraced {
         if q.w > 0.0 && all(q.xy >= vec2<f32>(0.0)) && all(q.xy < size) {
             let texel = gb.viewport.xy + vec2<u32>(q.xy);
             let s = gb_surface(texel);
-            if s.valid && length(s.position - p) <= TR_DIRECT_LIGHTING_TOLERANCE * s.view_distance {
+            let d = gb_view_distance(p);
+            if s.valid && abs(s.view_distance - d) <= TR_DIRECT_LIGHTING_TOLERANCE * d {
                 r.radiance = textureLoad(tr_direct_lighting, texel, 0).xyz;
                 return r;
             }

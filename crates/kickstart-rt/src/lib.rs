@@ -119,6 +119,8 @@
 //! | `TraceAmbientOcclusionTask` | `ao_radius` | finite, > 0 | otherwise |
 //! | shadow tasks | `light.*` | unit directions, finite positions, radius ≥ 0, range > 0, apex in (0, π/2], extent in [0, π] | otherwise |
 //! | `TraceMultiShadowTask` | `lights` | 1..=32 | 0 or > 32 |
+//! | `TraceMultiShadowTask` | `output0`, `output1` | `Rgba16Float` or `Rgba32Float` (the packed format of docs/trace-tasks.md) | other formats |
+//! | `TraceSpecularTask` | `demodulation_output`, `common.direct_lighting` | cover the viewport | smaller |
 //! | `DirectLightingInjectionTask` | `average_window` | finite, ≥ 1 | otherwise |
 //! | `DirectLightingInjectionTask` | `injection_resolution_stride` | 1..=8 | otherwise |
 //! | `DirectLightTransferTask` | `source`, `target` | live, different instances registered by an earlier task; the target's geometry has `allow_light_transfer_target` and as many triangles as the source's | same, stale, unregistered; no flag; another triangle count |

@@ -8,6 +8,7 @@
 pub mod cache;
 pub mod denoise;
 pub mod rt;
+pub mod trace;
 
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;

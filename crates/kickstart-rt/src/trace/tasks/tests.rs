@@ -965,3 +965,107 @@ fn demodulation_divides_by_the_specular_albedo_it_writes() {
         }
     }
 }
+
+/// A mirror floor under a camera that also sees the wall the floor reflects: reflections whose
+/// hit is visible in the view read the engine's direct lighting texel there; those that leave
+/// the view (or with no direct lighting bound) read the cache.
+#[test]
+fn direct_lighting_is_used_where_the_hit_is_visible_in_it() {
+    const S: u32 = 32;
+    let wall_z = -3.0f32;
+    let wall = grid_wall(4, 4.0, wall_z);
+    let colours: Vec<Vec3> = (0..wall.len()).map(prim_colour).collect();
+    let scene = TestScene::single(wall);
+    let eye = Vec3::new(0.0, 1.0, 2.0);
+    let view = Mat4::look_at_rh(eye, Vec3::new(0.0, 0.6, wall_z), Vec3::Y);
+    let proj = Mat4::perspective_rh(1.2, 1.0, 0.1, 100.0);
+    let clip_to_world = (proj * view).inverse();
+    let world_to_clip = proj * view;
+    // CPU G-buffer: the first of floor (y = 0) and wall (z = wall_z) along each camera ray.
+    let surface = |x: u32, y: u32| -> Texel {
+        let ndc = glam::Vec2::new(
+            (x as f32 + 0.5) / S as f32 * 2.0 - 1.0,
+            1.0 - (y as f32 + 0.5) / S as f32 * 2.0,
+        );
+        let target = clip_to_world.project_point3(ndc.extend(0.5));
+        let d = (target - eye).normalize();
+        let t_floor = if d.y < 0.0 {
+            -eye.y / d.y
+        } else {
+            f32::INFINITY
+        };
+        let t_wall = if d.z < 0.0 {
+            (wall_z - eye.z) / d.z
+        } else {
+            f32::INFINITY
+        };
+        if t_floor < t_wall {
+            Some((eye + d * t_floor, Vec3::Y))
+        } else if t_wall.is_finite() {
+            Some((eye + d * t_wall, Vec3::Z))
+        } else {
+            None
+        }
+    };
+    let lighting: Vec<f32> = (0..S * S)
+        .flat_map(|i| [(i % S) as f32, (i / S) as f32, 1000.0, 1.0])
+        .collect();
+    let lighting = testing::texture_with(
+        wgpu::TextureFormat::Rgba32Float,
+        S,
+        S,
+        bytemuck::cast_slice(&lighting),
+    );
+    let out = output(S, S, -5.0);
+    let mut c = common(gbuffer(S, S, surface), eye);
+    c.view.world_to_view = view;
+    c.view.view_to_clip = proj;
+    c.roughness.global_roughness = 0.0;
+    c.direct_lighting = Some(lighting);
+    run_cached(&scene, std::slice::from_ref(&colours), &[specular(c, &out)]);
+    let img = read(&out);
+    let (mut from_screen, mut from_cache) = (0, 0);
+    for y in 0..S {
+        for x in 0..S {
+            let Some((p, n)) = surface(x, y) else {
+                continue;
+            };
+            if n != Vec3::Y {
+                continue; // wall pixels reflect away from the scene
+            }
+            let v = (eye - p).normalize();
+            let r = 2.0 * n.dot(v) * n - v;
+            if r.z >= 0.0 {
+                continue;
+            }
+            let hit = p + r * ((wall_z - p.z) / r.z);
+            let q = world_to_clip.project_point3(hit);
+            let tx = (q.x + 1.0) * 0.5 * S as f32;
+            let ty = (1.0 - q.y) * 0.5 * S as f32;
+            let got = img[(y * S + x) as usize];
+            let near_texel_edge = (tx - tx.round()).abs() < 0.02 || (ty - ty.round()).abs() < 0.02;
+            let inside = (0.0..S as f32).contains(&tx) && (0.0..S as f32).contains(&ty);
+            if inside && !near_texel_edge {
+                // The wall is never occluded in this view: the texel there holds the hit.
+                assert_eq!(
+                    [got[0], got[1], got[2]],
+                    [tx.floor(), ty.floor(), 1000.0],
+                    "pixel {x},{y}: hit {hit} at texel {tx},{ty}"
+                );
+                from_screen += 1;
+            } else if !inside
+                && (tx < -0.5 || ty < -0.5 || tx > S as f32 + 0.5 || ty > S as f32 + 0.5)
+            {
+                assert!(
+                    got[2] < 1000.0,
+                    "pixel {x},{y}: off screen, from the cache: {got:?}"
+                );
+                from_cache += 1;
+            }
+        }
+    }
+    assert!(
+        from_screen > 100 && from_cache > 5,
+        "{from_screen} on screen, {from_cache} off"
+    );
+}
