@@ -1,8 +1,10 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
 mod bench;
+mod bench_denoise;
 mod debug_view;
 mod gpu;
+mod quality;
 mod render;
 mod scene;
 mod sdk_glue;
@@ -75,6 +77,9 @@ enum Command {
         /// Size of the ray batches' image, WIDTHxHEIGHT.
         #[arg(long, default_value = "1920x1080")]
         size: String,
+        /// Only time the denoisers (every task and method, synthetic inputs at --size).
+        #[arg(long)]
+        denoisers: bool,
     },
 }
 
@@ -188,6 +193,16 @@ fn main() {
             camera,
             iterations,
             size,
+            denoisers: true,
+        } => parse_size(&size).and_then(|s| bench_denoise::run(s, iterations, json.as_deref())),
+        Command::Bench {
+            scenes,
+            scene,
+            json,
+            camera,
+            iterations,
+            size,
+            ..
         } => bench_command(scenes, scene, json, camera, iterations, &size),
     };
     if let Err(e) = result {
