@@ -293,7 +293,7 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
             })?;
             let task = inputs.task(handle, signal);
             let name = task.name().to_string();
-            let mut one = || -> AnyResult<f64> {
+            let one = || -> AnyResult<f64> {
                 let mut c = ctx.create_task_container();
                 c.schedule_render_task(task.clone());
                 let t = gpu::submit(&ctx, &device, &queue, c, |_| {})?;

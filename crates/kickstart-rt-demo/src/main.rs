@@ -187,13 +187,11 @@ fn main() {
             camera,
         } => render(&size, out, debug_view, &scene, scenes, camera),
         Command::Bench {
-            scenes,
-            scene,
             json,
-            camera,
             iterations,
             size,
             denoisers: true,
+            ..
         } => parse_size(&size).and_then(|s| bench_denoise::run(s, iterations, json.as_deref())),
         Command::Bench {
             scenes,
