@@ -1,6 +1,7 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
 mod bench;
+mod bench_denoise;
 mod composite;
 mod debug_view;
 mod frame;
@@ -8,6 +9,7 @@ mod frame;
 mod golden;
 mod gpu;
 mod lit;
+mod quality;
 mod raster;
 mod readback;
 mod render;
@@ -132,6 +134,9 @@ enum Command {
         /// Size of the ray batches' image, WIDTHxHEIGHT.
         #[arg(long, default_value = "1920x1080")]
         size: String,
+        /// Only time the denoisers (every task and method, synthetic inputs at --size).
+        #[arg(long)]
+        denoisers: bool,
     },
 }
 
@@ -348,12 +353,20 @@ fn main() {
             screenshot,
         }),
         Command::Bench {
+            json,
+            iterations,
+            size,
+            denoisers: true,
+            ..
+        } => parse_size(&size).and_then(|s| bench_denoise::run(s, iterations, json.as_deref())),
+        Command::Bench {
             scenes,
             scene,
             json,
             camera,
             iterations,
             size,
+            ..
         } => bench_command(scenes, scene, json, camera, iterations, &size),
     };
     if let Err(e) = result {

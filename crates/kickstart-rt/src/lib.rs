@@ -47,9 +47,10 @@
 //! core** — geometry ingestion on the GPU (vertex pulling of every supported format into shared,
 //! sub-allocated pools), GPU BLAS builds (LBVH) and refits, the TLAS (rebuild or refit), ray
 //! batches ([`TraceRaysTask`]) and the primary-ray debug views (`HitT`, `Barycentrics`,
-//! `RandomMeshColor`) of the trace tasks. Not implemented yet: the lighting cache, the trace
-//! tasks' real outputs and the denoisers: such a task is fully validated and then refused with
-//! [`Error::Unsupported`] naming it — never a silent no-op.
+//! `RandomMeshColor`) of the trace tasks, and the **denoisers** (every denoise task; see
+//! `docs/denoisers.md`). Not implemented yet: the lighting cache and the trace tasks' real
+//! outputs: such a task is fully validated and then refused with [`Error::Unsupported`] naming
+//! it — never a silent no-op.
 //!
 //! ## Ray tracing: how geometry becomes rays
 //!
@@ -127,7 +128,9 @@
 //! | `DirectLightingInjectionTask` | `depth.texture`, `direct_lighting` | float colour or depth format (depth: `RClipSpace` only) | integer formats |
 //! | denoise tasks | `common.context` | live denoising context | stale: [`Error::InvalidHandle`] |
 //! | denoise tasks | `common.motion.scale` | finite | NaN/∞ |
-//! | `DenoisingContextInput` | `max_width/max_height` | 1..=16384 | otherwise |
+//! | `DenoisingContextInput` | `max_width/max_height` | 1..=16384, 16 B × pixels within the device's storage binding size | otherwise |
+//! | denoise tasks | `common.context` | created for the task's `SignalType` | another signal type |
+//! | denoise tasks | `viewport` | within the context's `max_width × max_height` | larger |
 
 #![warn(missing_docs)]
 

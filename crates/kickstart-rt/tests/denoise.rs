@@ -17,13 +17,20 @@ fn static_gbuffer() -> GBuffer {
     gbuffer(EYE, Vec3::ZERO, EYE, Vec3::ZERO)
 }
 
+/// PSNR per signal per frame, the last frame's outputs, and the last noisy inputs' PSNR.
+struct StaticRun {
+    psnrs: Vec<Vec<f64>>,
+    last: Vec<Vec<Vec4>>,
+    noisy: Vec<f64>,
+}
+
 fn run_static(
     signal: SignalType,
     method: DenoisingMethod,
     frames: u32,
     refs: &[Vec<Vec4>],
     seed: u64,
-) -> (GBuffer, Vec<Vec<f64>>, Vec<Vec<Vec4>>, Vec<f64>) {
+) -> StaticRun {
     let g = static_gbuffer();
     let h = Harness::new(signal, method);
     let mut rng = Rng(seed);
@@ -40,7 +47,11 @@ fn run_static(
             psnrs[k].push(psnr(&g, &last[k], r));
         }
     }
-    (g, psnrs, last, noisy_psnr)
+    StaticRun {
+        psnrs,
+        last,
+        noisy: noisy_psnr,
+    }
 }
 
 fn assert_converges(name: &str, psnrs: &[f64], noisy: f64) {
@@ -65,7 +76,7 @@ fn assert_converges(name: &str, psnrs: &[f64], noisy: f64) {
 fn static_camera_error_falls_and_ends_10db_better() {
     let g = static_gbuffer();
     let diffuse = reference_image(&g, reference);
-    let (_, psnrs, _, noisy) = run_static(
+    let StaticRun { psnrs, noisy, .. } = run_static(
         SignalType::Diffuse,
         DenoisingMethod::HighQuality,
         16,
@@ -76,10 +87,40 @@ fn static_camera_error_falls_and_ends_10db_better() {
 }
 
 #[test]
+fn jittered_camera_converges() {
+    // A static camera whose projection is jittered by a 4-sample pattern (as for TAA); the
+    // G-buffer is rendered jittered, and the denoiser compensates with ViewInfo::jitter.
+    let pattern = [
+        glam::Vec2::new(0.25, -0.25),
+        glam::Vec2::new(-0.25, 0.25),
+        glam::Vec2::new(-0.25, -0.25),
+        glam::Vec2::new(0.25, 0.25),
+    ];
+    let h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+    let mut rng = Rng(13);
+    let mut psnrs = Vec::new();
+    let mut noisy_psnr = 0.0;
+    for f in 0..16 {
+        let g = gbuffer_jittered(EYE, Vec3::ZERO, EYE, Vec3::ZERO, pattern[f % 4]);
+        let r = reference_image(&g, reference);
+        let input = noisy(&r, &mut rng);
+        noisy_psnr = psnr(&g, &input, &r);
+        let out = h.frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue);
+        psnrs.push(psnr(&g, &out[0], &r));
+    }
+    eprintln!("jittered: noisy {noisy_psnr:.2} dB, denoised {psnrs:.2?}");
+    let last = psnrs[15];
+    assert!(
+        last >= noisy_psnr + 10.0,
+        "{last:.2} dB, noisy {noisy_psnr:.2} dB"
+    );
+}
+
+#[test]
 fn fast_method_also_converges() {
     let g = static_gbuffer();
     let diffuse = reference_image(&g, reference);
-    let (_, psnrs, _, noisy) = run_static(
+    let StaticRun { psnrs, noisy, .. } = run_static(
         SignalType::Diffuse,
         DenoisingMethod::Fast,
         16,
@@ -102,7 +143,7 @@ fn specular_and_diffuse_denoise_both_signals_in_one_task() {
             Vec3::new(r.z, r.y, r.x) * 0.5
         }
     });
-    let (_, psnrs, _, noisy) = run_static(
+    let StaticRun { psnrs, noisy, .. } = run_static(
         SignalType::SpecularAndDiffuse,
         DenoisingMethod::HighQuality,
         16,
@@ -171,7 +212,7 @@ fn edge_pixels(g: &GBuffer, reference: &[Vec4], step: f32) -> Vec<usize> {
 fn edges_survive_depth_and_normal_discontinuities() {
     let g = static_gbuffer();
     let r = reference_image(&g, reference);
-    let (_, _, last, _) = run_static(
+    let StaticRun { last, .. } = run_static(
         SignalType::Diffuse,
         DenoisingMethod::HighQuality,
         16,
@@ -231,7 +272,7 @@ fn edges_survive_depth_and_normal_discontinuities() {
 fn flat_uniform_wall_stays_flat() {
     let g = static_gbuffer();
     let flat = reference_image(&g, |_| Vec3::splat(0.5));
-    let (_, _, last, _) = run_static(
+    let StaticRun { last, .. } = run_static(
         SignalType::Diffuse,
         DenoisingMethod::HighQuality,
         16,

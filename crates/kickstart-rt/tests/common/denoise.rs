@@ -111,6 +111,18 @@ pub fn cast(o: Vec3, d: Vec3, box_offset: Vec3) -> Option<Surface> {
 /// The G-buffer of the scene from `eye` with the box at `box_offset`; the previous frame had
 /// the camera at `prev_eye` and the box at `prev_box`.
 pub fn gbuffer(eye: Vec3, box_offset: Vec3, prev_eye: Vec3, prev_box: Vec3) -> GBuffer {
+    gbuffer_jittered(eye, box_offset, prev_eye, prev_box, Vec2::ZERO)
+}
+
+/// As [`gbuffer`], rendered with the projection shifted by `jitter` pixels (x right, y down): the
+/// pixel centre `c` shows the point at unjittered pixel coordinate `c − jitter`.
+pub fn gbuffer_jittered(
+    eye: Vec3,
+    box_offset: Vec3,
+    prev_eye: Vec3,
+    prev_box: Vec3,
+    jitter: Vec2,
+) -> GBuffer {
     let (w2v, v2c) = camera(eye);
     let (pw2v, pv2c) = camera(prev_eye);
     let inv = (v2c * w2v).inverse();
@@ -122,8 +134,8 @@ pub fn gbuffer(eye: Vec3, box_offset: Vec3, prev_eye: Vec3, prev_box: Vec3) -> G
     for y in 0..SIZE {
         for x in 0..SIZE {
             let ndc = Vec2::new(
-                (x as f32 + 0.5) / SIZE as f32 * 2.0 - 1.0,
-                1.0 - (y as f32 + 0.5) / SIZE as f32 * 2.0,
+                (x as f32 + 0.5 - jitter.x) / SIZE as f32 * 2.0 - 1.0,
+                1.0 - (y as f32 + 0.5 - jitter.y) / SIZE as f32 * 2.0,
             );
             let a = inv.project_point3(ndc.extend(0.0));
             let b = inv.project_point3(ndc.extend(0.5));
@@ -153,7 +165,7 @@ pub fn gbuffer(eye: Vec3, box_offset: Vec3, prev_eye: Vec3, prev_box: Vec3) -> G
             view_to_clip: v2c,
             prev_world_to_view: pw2v,
             prev_view_to_clip: pv2c,
-            jitter: Vec2::ZERO,
+            jitter,
         },
         surfaces,
         world_motion,
