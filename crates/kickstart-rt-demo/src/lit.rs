@@ -52,7 +52,8 @@ pub struct LitResult {
 }
 
 impl LitResult {
-    /// The channel named `name`.
+    /// The channel named `name` (the tests look channels up; `ksrt render` writes them all).
+    #[cfg(test)]
     pub fn channel(&self, name: &str) -> Option<&Channel> {
         self.channels.iter().find(|c| c.name == name)
     }
@@ -110,54 +111,49 @@ pub fn render(
     ];
     let produced = renderer.sdk.produced();
     let o = &renderer.sdk.outputs;
-    let sdk_channels: [(
-        &'static str,
-        &'static str,
-        (bool, bool),
-        &wgpu::Texture,
-        &wgpu::Texture,
-        Encoding,
-        Encoding,
-    ); 4] = [
-        (
-            "specular",
-            "specular-denoised",
-            produced.specular,
-            &o.specular,
-            &o.specular_denoised,
-            Encoding::Radiance,
-            Encoding::Radiance,
-        ),
-        (
-            "diffuse",
-            "diffuse-denoised",
-            produced.diffuse,
-            &o.diffuse,
-            &o.diffuse_denoised,
-            Encoding::Radiance,
-            Encoding::Radiance,
-        ),
-        (
-            "ao",
-            "ao-denoised",
-            produced.ao,
-            &o.ao,
-            &o.ao_denoised,
-            Encoding::Unit,
-            Encoding::Unit,
-        ),
-        (
-            "shadow",
-            "shadow-denoised",
-            produced.shadow,
-            &o.shadow,
-            &o.shadow_denoised,
-            Encoding::ShadowHitDistance,
-            Encoding::Unit,
-        ),
+    // (raw name, denoised name, produced, raw texture, denoised texture, raw and denoised
+    // encodings)
+    struct SdkChannel<'a> {
+        raw: &'static str,
+        denoised: &'static str,
+        produced: (bool, bool),
+        textures: (&'a wgpu::Texture, &'a wgpu::Texture),
+        encodings: (Encoding, Encoding),
+    }
+    let sdk_channels = [
+        SdkChannel {
+            raw: "specular",
+            denoised: "specular-denoised",
+            produced: produced.specular,
+            textures: (&o.specular, &o.specular_denoised),
+            encodings: (Encoding::Radiance, Encoding::Radiance),
+        },
+        SdkChannel {
+            raw: "diffuse",
+            denoised: "diffuse-denoised",
+            produced: produced.diffuse,
+            textures: (&o.diffuse, &o.diffuse_denoised),
+            encodings: (Encoding::Radiance, Encoding::Radiance),
+        },
+        SdkChannel {
+            raw: "ao",
+            denoised: "ao-denoised",
+            produced: produced.ao,
+            textures: (&o.ao, &o.ao_denoised),
+            encodings: (Encoding::Unit, Encoding::Unit),
+        },
+        SdkChannel {
+            raw: "shadow",
+            denoised: "shadow-denoised",
+            produced: produced.shadow,
+            textures: (&o.shadow, &o.shadow_denoised),
+            encodings: (Encoding::ShadowHitDistance, Encoding::Unit),
+        },
     ];
     let mut missing = Vec::new();
-    for (raw, den, (traced, denoised), traw, tden, eraw, eden) in sdk_channels {
+    for c in sdk_channels {
+        let (raw, den, (traced, denoised)) = (c.raw, c.denoised, c.produced);
+        let ((traw, tden), (eraw, eden)) = (c.textures, c.encodings);
         if traced {
             channels.push(Channel {
                 name: raw,
