@@ -1,7 +1,7 @@
 //! The composite: the rasterised direct light plus the SDK's channels, tone mapped.
 //!
-//! `final = direct + sun × (shadow_rt − shadow_map) + diffuse_albedo × diffuse_gi × ao
-//! + specular_radiance × EnvBRDF(F0, roughness, n·v)`, where the SDK's specular and diffuse
+//! `final = direct + sun × (shadow_rt − shadow_map) + diffuse_albedo × diffuse_gi × ao +
+//! specular_radiance × EnvBRDF(F0, roughness, n·v)`, where the SDK's specular and diffuse
 //! outputs are incoming radiance (the engine applies the BRDF, as the reference says): the
 //! diffuse one is weighted by the Lambertian albedo, the specular one by the split-sum BRDF
 //! integral in Karis's analytic fit ("Physically Based Shading on Mobile", 2014). Without diffuse

@@ -114,7 +114,8 @@ impl Effects {
 /// A part of the frame that can be dropped when the SDK refuses its task.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Part {
-    /// Both injection tasks.
+    /// Both injection tasks (scheduled while specular or diffuse is on, or the cache's debug
+    /// view is shown).
     Injection,
     /// The specular trace.
     Specular,
@@ -324,7 +325,12 @@ impl SdkFrame {
         let e = &self.effects;
         !self.refused.contains(&part)
             && match part {
-                Part::Injection => true,
+                // Only reflections, GI and the cache's debug view read the lighting cache.
+                Part::Injection => {
+                    e.specular
+                        || e.diffuse
+                        || self.debug_view == Some(ksrt::DebugOutputType::DirectLightingCache)
+                }
                 Part::Specular => e.specular,
                 Part::Diffuse => e.diffuse,
                 Part::Ao => e.ao,
@@ -605,6 +611,8 @@ mod tests {
         assert_eq!(Effects::parse("").unwrap(), Effects::default());
         let e = Effects::parse("none,ao").unwrap();
         assert!(e.ao && !e.specular && !e.diffuse && !e.shadow && !e.denoise && !e.lidar);
+        let e = Effects::parse("all=off,lidar=on").unwrap();
+        assert!(e.lidar && !e.ao && !e.specular);
         let e = Effects::parse("denoise=off, specular=off").unwrap();
         assert!(!e.denoise && !e.specular && e.diffuse && e.ao);
         let err = Effects::parse("reflections").unwrap_err();

@@ -12,6 +12,9 @@ use crate::renderer::{Renderer, RendererOptions};
 use crate::scene::{Camera, Scene};
 use crate::AnyResult;
 
+/// Frames at the end of a render whose SDK passes are timed (the earlier ones warm up).
+pub const TIMED_FRAMES: u32 = 8;
+
 /// Options of the lit render.
 #[derive(Debug, Clone)]
 pub struct LitOptions {
@@ -47,12 +50,14 @@ pub struct LitResult {
     pub missing: Vec<&'static str>,
     /// SDK tasks refused as unsupported.
     pub refused: Vec<crate::frame::Part>,
-    /// GPU time of the last frame's SDK passes, when measured.
-    pub timings: Option<ksrt::GpuTimings>,
+    /// GPU time of the SDK's passes in each of the last [`TIMED_FRAMES`] frames, when measured
+    /// (empty otherwise).
+    pub timings: Vec<ksrt::GpuTimings>,
 }
 
 impl LitResult {
-    /// The channel named `name`.
+    /// The channel named `name` (the tests look channels up; `ksrt render` writes them all).
+    #[cfg(test)]
     pub fn channel(&self, name: &str) -> Option<&Channel> {
         self.channels.iter().find(|c| c.name == name)
     }
@@ -84,12 +89,11 @@ pub fn render(
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let mut timings = None;
+    let mut timings = Vec::new();
     for f in 0..frames {
-        let last = f + 1 == frames;
-        let t = renderer.render_frame(device, queue, camera, last && opts.gpu_timing)?;
-        if last {
-            timings = t;
+        let timed = opts.gpu_timing && f + TIMED_FRAMES >= frames;
+        if let Some(t) = renderer.render_frame(device, queue, camera, timed)? {
+            timings.push(t);
         }
         bar.inc(1);
     }
@@ -110,54 +114,49 @@ pub fn render(
     ];
     let produced = renderer.sdk.produced();
     let o = &renderer.sdk.outputs;
-    let sdk_channels: [(
-        &'static str,
-        &'static str,
-        (bool, bool),
-        &wgpu::Texture,
-        &wgpu::Texture,
-        Encoding,
-        Encoding,
-    ); 4] = [
-        (
-            "specular",
-            "specular-denoised",
-            produced.specular,
-            &o.specular,
-            &o.specular_denoised,
-            Encoding::Radiance,
-            Encoding::Radiance,
-        ),
-        (
-            "diffuse",
-            "diffuse-denoised",
-            produced.diffuse,
-            &o.diffuse,
-            &o.diffuse_denoised,
-            Encoding::Radiance,
-            Encoding::Radiance,
-        ),
-        (
-            "ao",
-            "ao-denoised",
-            produced.ao,
-            &o.ao,
-            &o.ao_denoised,
-            Encoding::Unit,
-            Encoding::Unit,
-        ),
-        (
-            "shadow",
-            "shadow-denoised",
-            produced.shadow,
-            &o.shadow,
-            &o.shadow_denoised,
-            Encoding::ShadowHitDistance,
-            Encoding::Unit,
-        ),
+    // (raw name, denoised name, produced, raw texture, denoised texture, raw and denoised
+    // encodings)
+    struct SdkChannel<'a> {
+        raw: &'static str,
+        denoised: &'static str,
+        produced: (bool, bool),
+        textures: (&'a wgpu::Texture, &'a wgpu::Texture),
+        encodings: (Encoding, Encoding),
+    }
+    let sdk_channels = [
+        SdkChannel {
+            raw: "specular",
+            denoised: "specular-denoised",
+            produced: produced.specular,
+            textures: (&o.specular, &o.specular_denoised),
+            encodings: (Encoding::Radiance, Encoding::Radiance),
+        },
+        SdkChannel {
+            raw: "diffuse",
+            denoised: "diffuse-denoised",
+            produced: produced.diffuse,
+            textures: (&o.diffuse, &o.diffuse_denoised),
+            encodings: (Encoding::Radiance, Encoding::Radiance),
+        },
+        SdkChannel {
+            raw: "ao",
+            denoised: "ao-denoised",
+            produced: produced.ao,
+            textures: (&o.ao, &o.ao_denoised),
+            encodings: (Encoding::Unit, Encoding::Unit),
+        },
+        SdkChannel {
+            raw: "shadow",
+            denoised: "shadow-denoised",
+            produced: produced.shadow,
+            textures: (&o.shadow, &o.shadow_denoised),
+            encodings: (Encoding::ShadowHitDistance, Encoding::Unit),
+        },
     ];
     let mut missing = Vec::new();
-    for (raw, den, (traced, denoised), traw, tden, eraw, eden) in sdk_channels {
+    for c in sdk_channels {
+        let (raw, den, (traced, denoised)) = (c.raw, c.denoised, c.produced);
+        let ((traw, tden), (eraw, eden)) = (c.textures, c.encodings);
         if traced {
             channels.push(Channel {
                 name: raw,
@@ -208,22 +207,143 @@ pub fn write(result: &LitResult, out: &Path, hdr: bool) -> AnyResult<Vec<std::pa
     Ok(written)
 }
 
-/// A table of the SDK's GPU passes: per label (task) the summed time, and each pass.
-pub fn timing_table(t: &ksrt::GpuTimings) -> String {
-    let mut out = String::from("GPU time per SDK pass (last frame):\n");
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => v[n / 2],
+        n => (v[n / 2 - 1] + v[n / 2]) / 2.0,
+    }
+}
+
+/// Median GPU milliseconds over `frames` of each (label, pass) in first-seen order, each label's
+/// summed passes, and the frame's total: `(label, pass or "" for the label's sum, ms)`.
+pub fn timing_medians(frames: &[ksrt::GpuTimings]) -> Vec<(&'static str, &'static str, f64)> {
+    let mut keys: Vec<(&'static str, &'static str)> = Vec::new();
+    for t in frames {
+        for p in &t.passes {
+            if !keys.contains(&(p.label, p.pass)) {
+                keys.push((p.label, p.pass));
+            }
+        }
+    }
+    let mut out = Vec::new();
     let mut labels: Vec<&'static str> = Vec::new();
-    for p in &t.passes {
-        if !labels.contains(&p.label) {
-            labels.push(p.label);
+    for (l, _) in &keys {
+        if !labels.contains(l) {
+            labels.push(l);
         }
     }
     for label in labels {
-        out += &format!("  {label:<28} {:>9.3} ms\n", t.sum_ms(&[label]));
-        for p in t.passes.iter().filter(|p| p.label == label) {
-            out += &format!("    {:<26} {:>9.3} ms\n", p.pass, p.ms);
+        out.push((
+            label,
+            "",
+            median(frames.iter().map(|t| t.sum_ms(&[label])).collect()),
+        ));
+        for &(l, pass) in keys.iter().filter(|(l, _)| *l == label) {
+            out.push((
+                l,
+                pass,
+                median(
+                    frames
+                        .iter()
+                        .map(|t| {
+                            t.passes
+                                .iter()
+                                .filter(|p| p.label == l && p.pass == pass)
+                                .map(|p| p.ms)
+                                .sum()
+                        })
+                        .collect(),
+                ),
+            ));
         }
     }
-    let total: f64 = t.passes.iter().map(|p| p.ms).sum();
-    out += &format!("  {:<28} {total:>9.3} ms\n", "total");
+    out.push((
+        "total",
+        "",
+        median(
+            frames
+                .iter()
+                .map(|t| t.passes.iter().map(|p| p.ms).sum())
+                .collect(),
+        ),
+    ));
     out
+}
+
+/// A table of the SDK's GPU passes: per label (task) the summed time, then each pass; medians
+/// over the timed frames.
+pub fn timing_table(frames: &[ksrt::GpuTimings]) -> String {
+    let mut out = format!(
+        "GPU time per SDK pass (median of the last {} frames):\n",
+        frames.len()
+    );
+    for (label, pass, ms) in timing_medians(frames) {
+        if pass.is_empty() {
+            out += &format!("  {label:<28} {ms:>9.3} ms\n");
+        } else {
+            out += &format!("    {pass:<26} {ms:>9.3} ms\n");
+        }
+    }
+    out
+}
+
+/// The timing medians as JSON (`ksrt render --json`): scene, size, frames and one record per
+/// row of [`timing_table`].
+pub fn timing_json(
+    scene: &str,
+    size: (u32, u32),
+    frames: u32,
+    timed: &[ksrt::GpuTimings],
+) -> serde_json::Value {
+    serde_json::json!({
+        "scene": scene,
+        "width": size.0,
+        "height": size.1,
+        "frames": frames,
+        "timed_frames": timed.len(),
+        "passes": timing_medians(timed)
+            .into_iter()
+            .map(|(label, pass, ms)| serde_json::json!({"label": label, "pass": pass, "median_ms": ms}))
+            .collect::<Vec<_>>(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn medians_per_label_and_pass() {
+        let frame = |a: f64, b: f64| ksrt::GpuTimings {
+            passes: vec![
+                ksrt::PassTiming {
+                    label: "trace",
+                    pass: "specular",
+                    start_ms: 0.0,
+                    ms: a,
+                },
+                ksrt::PassTiming {
+                    label: "trace",
+                    pass: "diffuse",
+                    start_ms: a,
+                    ms: b,
+                },
+                ksrt::PassTiming {
+                    label: "denoise",
+                    pass: "spatial",
+                    start_ms: a + b,
+                    ms: 1.0,
+                },
+            ],
+        };
+        let rows = timing_medians(&[frame(1.0, 2.0), frame(3.0, 4.0), frame(2.0, 9.0)]);
+        assert_eq!(rows[0], ("trace", "", 7.0));
+        assert_eq!(rows[1], ("trace", "specular", 2.0));
+        assert_eq!(rows[2], ("trace", "diffuse", 4.0));
+        assert_eq!(rows[3], ("denoise", "", 1.0));
+        assert_eq!(rows.last(), Some(&("total", "", 8.0)));
+        assert!(timing_table(&[]).contains("last 0 frames"));
+    }
 }

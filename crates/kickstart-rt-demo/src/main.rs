@@ -86,6 +86,9 @@ enum Command {
         /// Only the lit images: no CPU reference image and no debug views (benchmark runs).
         #[arg(long)]
         no_reference: bool,
+        /// Also write the SDK pass timings (medians of the last frames) as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
     /// Open a window on a scene: fly with WASD/QE and the mouse (hold the left button), toggle
     /// effects with 1–6, cycle debug views with V; SDK timings in the title bar.
@@ -165,6 +168,7 @@ struct RenderArgs {
     seed: u32,
     hdr: bool,
     no_reference: bool,
+    json: Option<PathBuf>,
 }
 
 fn render(args: RenderArgs) -> AnyResult<()> {
@@ -180,6 +184,7 @@ fn render(args: RenderArgs) -> AnyResult<()> {
         seed,
         hdr,
         no_reference,
+        json,
     } = args;
     let scene_name = scene_name.as_str();
     let (width, height) = parse_size(&size)?;
@@ -239,11 +244,16 @@ fn render(args: RenderArgs) -> AnyResult<()> {
             result.missing.join(", ")
         );
     }
-    match &result.timings {
-        Some(t) => print!("{}", lit::timing_table(t)),
-        None => {
-            println!("no SDK GPU timings (no SDK pass ran, or the device has no timestamp queries)")
-        }
+    if result.timings.is_empty() {
+        println!("no SDK GPU timings (no SDK pass ran, or the device has no timestamp queries)");
+    } else {
+        print!("{}", lit::timing_table(&result.timings));
+    }
+    if let Some(path) = &json {
+        let value = lit::timing_json(&scene.name, (width, height), frames, &result.timings);
+        std::fs::write(path, serde_json::to_string_pretty(&value)?)
+            .map_err(|e| format!("--json {}: {e}", path.display()))?;
+        println!("wrote {}", path.display());
     }
     if no_reference {
         return Ok(());
@@ -322,6 +332,7 @@ fn main() {
             seed,
             hdr,
             no_reference,
+            json,
         } => render(RenderArgs {
             size,
             out,
@@ -334,6 +345,7 @@ fn main() {
             seed,
             hdr,
             no_reference,
+            json,
         }),
         Command::View {
             scene,

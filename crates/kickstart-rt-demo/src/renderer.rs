@@ -64,8 +64,6 @@ pub struct Renderer {
     /// What the composite shows.
     pub show: crate::composite::Show,
     _uploads: Vec<UploadedMesh>,
-    /// The scene's SDK handles.
-    pub handles: gpu::SceneHandles,
 }
 
 /// The lidar camera of frame `frame`: at the main camera's eye, looking along the `frame`-th of
@@ -102,7 +100,7 @@ impl Renderer {
         let ctx = ksrt::ExecuteContext::new(device, queue, settings)?;
         let uploads = gpu::upload_scene(device, scene);
         let mut c = ctx.create_task_container();
-        let handles = gpu::schedule_scene(&ctx, &mut c, scene, &uploads, false, true);
+        gpu::schedule_scene(&ctx, &mut c, scene, &uploads, false, true);
         c.schedule_bvh_task(crate::sdk_glue::bvh_build_task(
             uploads.len().max(1) as u32,
             Some(crate::sdk_glue::Tlas::Auto),
@@ -155,7 +153,6 @@ impl Renderer {
             lidar_on: opts.effects.lidar,
             show: Default::default(),
             _uploads: uploads,
-            handles,
         })
     }
 

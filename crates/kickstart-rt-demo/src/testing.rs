@@ -187,7 +187,7 @@ pub fn glb_bytes() -> Vec<u8> {
     let image_offset = bin.len();
     let image = png(&checker());
     bin.extend_from_slice(&image);
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let mut json = scene_json("", "", 4);
@@ -212,7 +212,7 @@ pub fn glb_bytes() -> Vec<u8> {
             ),
         );
     let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();

@@ -262,7 +262,11 @@ impl App {
         let Some(gpu) = self.gpu.as_mut() else {
             return;
         };
-        gpu.renderer.sdk.effects = self.effects;
+        if toggle.is_some() {
+            gpu.renderer.sdk.effects = self.effects;
+            // The denoisers' history was made with the other set of inputs.
+            gpu.renderer.cut();
+        }
         match code {
             KeyCode::KeyV => {
                 self.show = (self.show + 1) % Show::ALL.len();
@@ -478,15 +482,13 @@ impl ApplicationHandler for App {
                 self.looking = state == ElementState::Pressed;
                 self.last_cursor = None;
             }
-            WindowEvent::CursorMoved { position, .. } => {
-                if self.looking {
-                    if let Some((x, y)) = self.last_cursor {
-                        self.fly.yaw += (position.x - x) as f32 * 0.004;
-                        self.fly.pitch =
-                            (self.fly.pitch - (position.y - y) as f32 * 0.004).clamp(-1.55, 1.55);
-                    }
-                    self.last_cursor = Some((position.x, position.y));
+            WindowEvent::CursorMoved { position, .. } if self.looking => {
+                if let Some((x, y)) = self.last_cursor {
+                    self.fly.yaw += (position.x - x) as f32 * 0.004;
+                    self.fly.pitch =
+                        (self.fly.pitch - (position.y - y) as f32 * 0.004).clamp(-1.55, 1.55);
                 }
+                self.last_cursor = Some((position.x, position.y));
             }
             WindowEvent::RedrawRequested => {
                 if let Err(e) = self.redraw(event_loop) {

@@ -91,8 +91,6 @@ pub struct GpuScene {
     /// The light whose shadow the SDK traces and the composite swaps in: the first sun, else the
     /// first light. The lighting pass writes its unshadowed radiance apart (`ViewTargets::sun`).
     pub shadow_light: Option<Light>,
-    /// The lights as the scene gave them (for the SDK's shadow task).
-    pub scene_lights: Vec<Light>,
     /// The scene's diameter, for clip planes and ray lengths.
     pub scene_size: f32,
 }
@@ -700,7 +698,6 @@ impl GpuScene {
             shadow_bind_group,
             has_shadow: shadow_view_proj.is_some(),
             shadow_light: shadowed.and_then(|k| scene_lights.get(k).copied()),
-            scene_lights,
             scene_size: scene.size(),
         }
     }

@@ -118,6 +118,9 @@ pub fn clip_planes(camera: &Camera, scene_size: f32) -> (f32, f32) {
 }
 
 #[cfg(test)]
+mod gbuffer_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
 

@@ -86,3 +86,37 @@ fn texture_that_fails_to_decode_is_an_error_naming_it() {
         "{m}"
     );
 }
+
+#[test]
+fn obj_mtl_colours_emission_roughness_and_diffuse_map_are_loaded() {
+    let dir = testing::temp_dir("obj-mtl");
+    std::fs::write(dir.join("checker.png"), testing::png(&testing::checker())).expect("write");
+    std::fs::write(
+        dir.join("scene.mtl"),
+        "newmtl lamp\nKd 0.1 0.2 0.3\nKe 5 4 3\nNs 0\n\nnewmtl floor\nKd 1 1 1\nmap_Kd checker.png\nNs 998\n",
+    )
+    .expect("write");
+    std::fs::write(
+        dir.join("scene.obj"),
+        "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 0 1\nvt 0 0\nvt 1 0\nvt 1 1\n\
+         o lamp\nusemtl lamp\nf 1/1 2/2 3/3\no floor\nusemtl floor\nf 1/1 3/3 2/2\n",
+    )
+    .expect("write");
+    let scene = load_file(&dir.join("scene.obj")).expect("load");
+    assert_eq!(scene.meshes.len(), 2);
+    let lamp = &scene.meshes[0];
+    assert_eq!(lamp.color, Vec3::new(0.1, 0.2, 0.3));
+    assert_eq!(lamp.material.emissive, Vec3::new(5.0, 4.0, 3.0));
+    // Ns 0: the roughest; Ns 998: α² = 2/1000, roughness = α^½ ≈ 0.211.
+    assert!((lamp.material.roughness - 1.0).abs() < 1e-6);
+    let floor = &scene.meshes[1];
+    assert!((floor.material.roughness - 0.002f32.sqrt().sqrt()).abs() < 1e-4);
+    assert_eq!(floor.material.base_color_texture, Some(0));
+    assert_eq!(
+        scene.textures[0].image.get_pixel(1, 0).0,
+        [20, 20, 230, 255]
+    );
+    // OBJ's v runs up: stored flipped for the rasteriser.
+    assert_eq!(floor.uvs.len(), 3);
+    assert!(floor.uvs.contains(&[1.0, 0.0]));
+}

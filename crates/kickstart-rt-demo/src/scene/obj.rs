@@ -5,7 +5,7 @@ use std::path::Path;
 
 use glam::{Affine3A, Vec3};
 
-use super::{check_indices, compute_normals, Instance, Material, Mesh, Scene, SceneError};
+use super::{check_indices, compute_normals, Instance, Material, Mesh, Scene, SceneError, Texture};
 
 /// Colour of meshes without a material (or whose MTL file is missing): a light grey, so they
 /// still show shading in the images.
@@ -33,6 +33,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         Vec::new()
     });
     let mut scene = Scene::default();
+    let mut textures = std::collections::HashMap::new();
     for model in models {
         let m = model.mesh;
         if m.indices.is_empty() {
@@ -57,7 +58,10 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let color = mtl
             .and_then(|mat| mat.diffuse)
             .map_or(DEFAULT_COLOR, Vec3::from);
-        let material = mtl.map_or_else(Material::default, material_of);
+        let mut material = mtl.map_or_else(Material::default, material_of);
+        if let Some(file) = mtl.and_then(|m| m.diffuse_texture.as_deref()) {
+            material.base_color_texture = Some(texture(path, file, &mut scene, &mut textures)?);
+        }
         let uvs = if m.texcoords.len() / 2 == positions.len() {
             // OBJ's v runs up, textures' rows run down.
             m.texcoords
@@ -86,8 +90,8 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 
 /// The metallic-roughness reading of an MTL material: `Ke` is the emission; the Phong exponent
 /// `Ns` becomes a roughness through the usual Blinn-Phong ↔ GGX match (α² = 2 / (Ns + 2), α =
-/// roughness²); `Pm`/`Pr` (the PBR extension of MTL) win where present. MTL textures are not
-/// loaded (the shared OBJ scenes have none): colours only.
+/// roughness²); `Pm`/`Pr` (the PBR extension of MTL) win where present. Textures: `map_Kd`
+/// (the base colour, loaded by [`load`]).
 fn material_of(mtl: &tobj::Material) -> Material {
     let param = |k: &str| {
         mtl.unknown_param
@@ -102,22 +106,37 @@ fn material_of(mtl: &tobj::Material) -> Material {
                 (2.0 / (ns + 2.0)).sqrt().sqrt()
             })
     });
-    let emissive = param("Ke")
-        .map(Vec3::splat)
-        .or_else(|| {
-            let v: Vec<f32> = mtl
-                .unknown_param
-                .get("Ke")?
-                .split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect();
-            (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
-        })
-        .unwrap_or(Vec3::ZERO);
+    let emissive = mtl.emissive.map_or(Vec3::ZERO, Vec3::from);
     Material {
         metallic: param("Pm").unwrap_or(0.0).clamp(0.0, 1.0),
         roughness: roughness.clamp(0.0, 1.0),
         emissive: emissive.max(Vec3::ZERO),
         ..Material::default()
     }
+}
+
+/// The scene texture of the MTL map `file` (relative to the OBJ's folder), decoded once.
+fn texture(
+    obj: &Path,
+    file: &str,
+    scene: &mut Scene,
+    decoded: &mut std::collections::HashMap<String, usize>,
+) -> Result<usize, SceneError> {
+    if let Some(&k) = decoded.get(file) {
+        return Ok(k);
+    }
+    let full = obj.parent().unwrap_or_else(|| Path::new(".")).join(file);
+    let err = |e: String| SceneError::new(obj, format!("base colour texture {file}: {e}"));
+    let bytes =
+        std::fs::read(&full).map_err(|e| err(format!("cannot read {}: {e}", full.display())))?;
+    let image = image::load_from_memory(&bytes)
+        .map_err(|e| err(format!("cannot decode the image: {e}")))?
+        .to_rgba8();
+    scene.textures.push(Texture {
+        name: file.to_string(),
+        image,
+        nearest: false,
+    });
+    decoded.insert(file.to_string(), scene.textures.len() - 1);
+    Ok(scene.textures.len() - 1)
 }
