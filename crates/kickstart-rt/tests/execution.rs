@@ -499,6 +499,7 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
     register_instance(&mut c, i, g, Affine3A::IDENTITY);
     build_submit_complete(&ctx, c);
     let mut peak = 0;
+    let mut base = 0;
     for frame in 0..30 {
         let mut c = ctx.create_task_container();
         let x = frame as f32;
@@ -508,11 +509,19 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
             input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0))),
         });
         build_submit_complete(&ctx, c);
+        // The first frames also carry one-off uploads (the lighting cache's initial state);
+        // from then on only the instance record is uploaded.
+        if frame == 1 {
+            base = ctx.resource_allocations().staging;
+        }
         peak = peak.max(ctx.resource_allocations().staging);
         let table = read_buffer(&ctx.instance_table().unwrap());
         let words: &[f32] = bytemuck::cast_slice(&table);
         assert_eq!(words[i.index() as usize * 16 + 3], x, "frame {frame}");
     }
     // Each frame needs one 256-byte buffer; a leak would reach 30 of them.
-    assert!(peak <= 3 * 256, "staging grew to {peak} bytes");
+    assert!(
+        peak <= base + 3 * 256,
+        "staging grew from {base} to {peak} bytes"
+    );
 }

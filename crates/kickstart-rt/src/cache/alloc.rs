@@ -419,7 +419,7 @@ impl DirectLightingCache {
             let words = new_slots * HEADER_WORDS;
             let range = self
                 .meta
-                .alloc(&self.device, encoder, words, self.max_binding / 4)
+                .alloc(&self.device, encoder, words, self.max_binding)
                 .ok_or_else(|| Error::OutOfDeviceMemory {
                     what: "lighting cache headers".into(),
                     bytes: words as u64 * 4,
@@ -503,7 +503,7 @@ impl DirectLightingCache {
             let words = j.tri_count.max(1) * RECORD_WORDS;
             let r = self
                 .meta
-                .alloc(&self.device, rec.encoder, words, self.max_binding / 4)
+                .alloc(&self.device, rec.encoder, words, self.max_binding)
                 .ok_or_else(|| Error::OutOfDeviceMemory {
                     what: "lighting cache triangle records".into(),
                     bytes: words as u64 * 4,
