@@ -3,7 +3,7 @@
 //!   each, from the SDK's allocation read-back, after the pool has grown to hold them all at full
 //!   resolution) and the whole `cache` kind of `resource_allocations()`;
 //! - **injection time** of one `DirectLightingInjectionTask` at the bench size for strides 1, 2
-//!   and 4 (`cache inject` + `cache resolve` passes);
+//!   and 4 (the `injection` passes: inject and resolve);
 //! - **cache error**: the mean relative difference `Σ|cache − E| / ΣE` over the primary hits,
 //!   where `E = max(0, N·L)` is the exact direct lighting of a white directional light (no
 //!   shadows) with the geometric normal, after 1, 8 and 64 injection tasks of that image (default
@@ -197,7 +197,7 @@ pub fn cache_bench(
         let stats = bench.repeat(|_| {
             let mut c = ctx.create_task_container();
             c.schedule_render_task(injection(stride));
-            bench.timed(&ctx, c, &["cache inject", "cache resolve"], |_| {})
+            bench.timed(&ctx, c, &["injection"], |_| {})
         })?;
         times.push((stride, stats));
     }

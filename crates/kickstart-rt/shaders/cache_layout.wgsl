@@ -1,9 +1,9 @@
 // Direct lighting cache: addressing of one instance's surfels (layouts in src/cache/mod.rs).
-// The includer replaces CACHE_GROUP with a bind group number and CACHE_SURFEL_ACCESS with
-// `read` or `read_write`.
+// The includer replaces CACHE_GROUP with a bind group number; the surfels binding becomes
+// `read_write` where a pass writes surfels (src/cache/mod.rs: sample_wgsl).
 
 @group(CACHE_GROUP) @binding(0) var<storage, read> cache_meta: array<u32>;
-@group(CACHE_GROUP) @binding(1) var<storage, CACHE_SURFEL_ACCESS> cache_surfels: array<vec4<f32>>;
+@group(CACHE_GROUP) @binding(1) var<storage, read> cache_surfels: array<vec4<f32>>;
 
 const CACHE_FLAG_VALID: u32 = 1u;
 const CACHE_FLAG_MESH_COLORS: u32 = 2u;

@@ -1098,15 +1098,8 @@ impl ExecuteContext {
 
         // Direct lighting cache: grow what a read-back asked for, allocate waiting instances
         // whose BLAS is built (DESIGN.md data flow step 5).
-        let mut cache_uploads = Uploads::default();
-        s.cache.prepare_task(
-            encoder,
-            &mut cache_uploads,
-            s.instances.slot_count(),
-            serial,
-        )?;
-        ws.staging
-            .extend(cache_uploads.flush(&self.device, &mut s.staging, encoder));
+        s.cache
+            .prepare_task(encoder, s.instances.slot_count(), serial)?;
         let jobs = Self::cache_jobs(s);
         if !jobs.is_empty() {
             let mut rec = Recorder {
@@ -1115,14 +1108,8 @@ impl ExecuteContext {
                 timestamps: timestamps.as_mut(),
                 scope: "cache allocation",
             };
-            s.cache.record_allocations(
-                &mut rec,
-                &mut s.staging,
-                s.scene.triangles.buffer(),
-                &jobs,
-                serial,
-                &mut ws.staging,
-            )?;
+            s.cache
+                .record_allocations(&mut rec, s.scene.triangles.buffer(), &jobs, serial)?;
         }
 
         // 7. Render tasks, in the order scheduled.

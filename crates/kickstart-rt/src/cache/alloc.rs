@@ -12,9 +12,8 @@ use super::{inject::Injector, storage_entry, transfer::Transferer, CacheParams};
 use crate::error::{Error, Result};
 use crate::gpu::shader::assemble;
 use crate::gpu::Recorder;
-use crate::scene::gpu_scene::{storage, Uploads};
+use crate::scene::gpu_scene::storage;
 use crate::scene::pool::{Pool, Range};
-use crate::staging::{StagingBuffer, StagingPool};
 
 const ALLOC_WGSL: &str = include_str!("../../shaders/cache_alloc.wgsl");
 
@@ -410,10 +409,10 @@ impl DirectLightingCache {
     pub fn prepare_task(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
-        uploads: &mut Uploads,
         slots: u32,
         serial: u64,
     ) -> Result<()> {
+        let device = self.device.clone();
         if slots > self.header_slots {
             let new_slots = slots.next_power_of_two().max(64);
             let words = new_slots * HEADER_WORDS;
@@ -434,13 +433,12 @@ impl DirectLightingCache {
                 encoder.copy_buffer_to_buffer(&tmp, 0, &meta, range.start as u64 * 4, bytes);
                 self.meta.free_after(self.headers, serial);
             }
-            let zeros = vec![0u8; ((new_slots - self.header_slots) * HEADER_WORDS * 4) as usize];
-            uploads.push(
+            encoder.clear_buffer(
                 &meta,
                 (range.start + self.header_slots * HEADER_WORDS) as u64 * 4,
-                &zeros,
+                Some(((new_slots - self.header_slots) * HEADER_WORDS) as u64 * 4),
             );
-            uploads.push(&meta, 0, bytemuck::cast_slice(&[range.start, new_slots]));
+            upload(&device, encoder, &meta, 0, &[range.start, new_slots]);
             self.headers = range;
             self.header_slots = new_slots;
         }
@@ -453,7 +451,7 @@ impl DirectLightingCache {
             encoder.copy_buffer_to_buffer(&self.surfels, 0, &new, 0, self.surfels.size());
             self.surfels = new;
             self.capacity = new_cap;
-            uploads.push(&self.state, 4, bytemuck::bytes_of(&new_cap));
+            upload(&device, encoder, &self.state, 4, &[new_cap]);
             // Degraded caches are allocated again at full resolution.
             let degraded: Vec<u32> = self
                 .instances
@@ -466,16 +464,16 @@ impl DirectLightingCache {
             }
         }
         if !self.state_ready {
-            uploads.push(&self.state, 0, bytemuck::cast_slice(&[0u32, self.capacity]));
+            upload(&device, encoder, &self.state, 0, &[0, self.capacity]);
             self.state_ready = true;
         }
         // Headers of released slots read "no cache" from this task on.
         for slot in std::mem::take(&mut self.cleared) {
             if slot < self.header_slots {
-                uploads.push(
+                encoder.clear_buffer(
                     self.meta.buffer(),
                     (self.headers.start + slot * HEADER_WORDS) as u64 * 4,
-                    &[0u8; HEADER_WORDS as usize * 4],
+                    Some(HEADER_WORDS as u64 * 4),
                 );
             }
         }
@@ -487,11 +485,9 @@ impl DirectLightingCache {
     pub fn record_allocations(
         &mut self,
         rec: &mut Recorder<'_>,
-        staging: &mut StagingPool,
         triangles: &wgpu::Buffer,
         jobs: &[AllocJob],
         serial: u64,
-        ws_staging: &mut Vec<StagingBuffer>,
     ) -> Result<()> {
         let jobs = &jobs[..jobs.len().min(MAX_ALLOCS_PER_TASK)];
         if jobs.is_empty() {
@@ -536,15 +532,11 @@ impl DirectLightingCache {
         for (s, _) in &blocks {
             self.free.remove(s);
         }
-        let mut uploads = Uploads::default();
-        let mut head = vec![0u32; ST_LOG as usize - 2];
-        head[0] = blocks.len() as u32;
-        for (i, (s, l)) in blocks.iter().enumerate() {
-            head[2 + 2 * i] = *s;
-            head[2 + 2 * i + 1] = *l;
+        let mut head = vec![blocks.len() as u32, 0];
+        for (s, l) in &blocks {
+            head.extend([*s, *l]);
         }
-        uploads.push(&self.state, 8, bytemuck::cast_slice(&head));
-        ws_staging.extend(uploads.flush(&self.device, staging, rec.encoder));
+        upload(&self.device, rec.encoder, &self.state, 8, &head);
 
         let headers_start = self.headers.start;
         let meta = self.meta.buffer().clone();
@@ -645,6 +637,24 @@ impl DirectLightingCache {
             Surfels::Pending { .. } => None,
         }
     }
+}
+
+/// Copies `words` into `dst` at byte `offset` inside `encoder`, through a buffer written at
+/// creation (never `queue.write_buffer`: earlier unsubmitted work may read `dst`).
+fn upload(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    dst: &wgpu::Buffer,
+    offset: u64,
+    words: &[u32],
+) {
+    use wgpu::util::DeviceExt;
+    let src = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("kickstart-rt cache upload"),
+        contents: bytemuck::cast_slice(words),
+        usage: wgpu::BufferUsages::COPY_SRC,
+    });
+    encoder.copy_buffer_to_buffer(&src, 0, dst, offset, words.len() as u64 * 4);
 }
 
 fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {

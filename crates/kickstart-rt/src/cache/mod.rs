@@ -97,16 +97,15 @@ pub(crate) const SAMPLE_WGSL: &str = concat!(
 
 /// [`SAMPLE_WGSL`] with its group number and surfel access filled in.
 pub(crate) fn sample_wgsl(group: u32, surfels_writable: bool) -> String {
-    SAMPLE_WGSL
-        .replace("CACHE_GROUP", &group.to_string())
-        .replace(
-            "CACHE_SURFEL_ACCESS",
-            if surfels_writable {
-                "read_write"
-            } else {
-                "read"
-            },
+    let source = SAMPLE_WGSL.replace("CACHE_GROUP", &group.to_string());
+    if surfels_writable {
+        source.replace(
+            "var<storage, read> cache_surfels",
+            "var<storage, read_write> cache_surfels",
         )
+    } else {
+        source
+    }
 }
 
 /// Cache layout settings of a geometry (from its `GeometryInput`).
