@@ -109,9 +109,11 @@ fn jittered_camera_converges() {
         psnrs.push(psnr(&g, &out[0], &r));
     }
     eprintln!("jittered: noisy {noisy_psnr:.2} dB, denoised {psnrs:.2?}");
+    // Compensated, the history keeps accumulating (~26 dB better here); with the jitter applied
+    // the wrong way round it stalls ~17 dB better, as the edges' history keeps being rejected.
     let last = psnrs[15];
     assert!(
-        last >= noisy_psnr + 10.0,
+        last >= noisy_psnr + 20.0,
         "{last:.2} dB, noisy {noisy_psnr:.2} dB"
     );
 }
