@@ -25,7 +25,6 @@ pub(crate) fn compute_pipeline(
 /// A compute pipeline from WGSL `source` with explicit bind group layouts (`layouts[i]` is group
 /// `i`): needed where a shared module declares bindings a pass may not use (the G-buffer), since
 /// an automatic layout would drop them.
-#[allow(dead_code)] // Used by the trace, injection and denoise passes (landing).
 pub(crate) fn compute_pipeline_with_layouts(
     device: &wgpu::Device,
     label: &str,

@@ -19,9 +19,6 @@
 //! - Normals are decoded by type (octahedral: Cigolle et al. 2014), transformed by
 //!   `normal_to_world` and normalised.
 
-// The trace, injection and denoise passes that use this module are landing on other branches.
-#![allow(dead_code)]
-
 use crate::tasks::{
     DenoiseTaskCommon, DepthInput, DepthType, NormalInput, NormalType, RoughnessInput,
     SpecularInput, TextureInput, TraceTaskCommon, ViewInfo, Viewport,
@@ -287,6 +284,11 @@ impl GBufferBinder {
             layout,
             placeholder,
         }
+    }
+
+    /// The 1×1 texture bound where an optional input is absent.
+    pub fn placeholder(&self) -> &wgpu::TextureView {
+        &self.placeholder
     }
 
     /// The bind group layout (for pipeline layouts).

@@ -42,7 +42,6 @@ pub(crate) struct SceneBuffers<'a> {
 impl SceneBuffers<'_> {
     /// The explicit layout of the `@group(0)` scene bindings (five read-only storage buffers), for
     /// pipelines built with explicit layouts.
-    #[allow(dead_code)] // Used by the trace, injection and denoise passes (landing).
     pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         let entry = |binding| wgpu::BindGroupLayoutEntry {
             binding,

@@ -136,25 +136,12 @@ pub(crate) struct TracePasses {
 impl TracePasses {
     /// Creates the layouts and the blue-noise tile (pipelines come on first use).
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
-        let placeholder = device
-            .create_texture(&wgpu::TextureDescriptor {
-                label: Some("kickstart-rt trace placeholder"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8Unorm,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-            .create_view(&Default::default());
+        let gbuffer = GBufferBinder::new(device);
+        // Absent optional textures bind the G-buffer's 1×1 placeholder.
+        let placeholder = gbuffer.placeholder().clone();
         TracePasses {
             scene_layout: SceneBuffers::layout(device),
-            gbuffer: GBufferBinder::new(device),
+            gbuffer,
             blue_noise: blue_noise_texture(device, queue),
             placeholder,
             cache_layout: device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
