@@ -47,10 +47,12 @@
 //! core** — geometry ingestion on the GPU (vertex pulling of every supported format into shared,
 //! sub-allocated pools), GPU BLAS builds (LBVH) and refits, the TLAS (rebuild or refit), ray
 //! batches ([`TraceRaysTask`]) and the primary-ray debug views (`HitT`, `Barycentrics`,
-//! `RandomMeshColor`) of the trace tasks, and the **denoisers** (every denoise task; see
-//! `docs/denoisers.md`). Not implemented yet: the lighting cache and the trace tasks' real
-//! outputs: such a task is fully validated and then refused with [`Error::Unsupported`] naming
-//! it — never a silent no-op.
+//! `RandomMeshColor`, plus `DirectLightingCache` and `RandomTileColor`) of the trace tasks, the
+//! **direct lighting cache** (GPU allocation, injection, transfer, sampling;
+//! `docs/lighting-cache.md`), the **trace tasks** (specular, diffuse, AO, shadow, multi-shadow;
+//! `docs/trace-tasks.md`) and the **denoisers** (every denoise task; `docs/denoisers.md`). Not
+//! implemented yet: the `Normal`, `Roughness` and `WorldPosition` debug views: such a task is
+//! fully validated and then refused with [`Error::Unsupported`] naming it — never a silent no-op.
 //!
 //! ## Ray tracing: how geometry becomes rays
 //!
