@@ -17,6 +17,8 @@ struct InjectParams {
     offset: vec4<u32>,
     // NDC depth of orthographic ray origins, relative depth tolerance, average window, unused.
     f: vec4<f32>,
+    // xy: the camera jitter, pixels (the depth at pixel c + jitter holds unjittered pixel c).
+    jitter: vec4<f32>,
 }
 
 @group(1) @binding(2) var<storage, read_write> accum: array<atomic<u32>>;
@@ -66,9 +68,11 @@ fn inject(
         return;
     }
     let pixel = vec2<i32>(vec2<u32>(params.viewport.x + lx, params.viewport.y + ly));
+    // The ray goes through where the (jittered) depth was sampled, so that it meets the surface
+    // the pixel shows even at grazing angles.
     let ndc = vec2<f32>(
-        (f32(lx) + 0.5) / f32(params.viewport.z) * 2.0 - 1.0,
-        1.0 - (f32(ly) + 0.5) / f32(params.viewport.w) * 2.0,
+        (f32(lx) + 0.5 - params.jitter.x) / f32(params.viewport.z) * 2.0 - 1.0,
+        1.0 - (f32(ly) + 0.5 - params.jitter.y) / f32(params.viewport.w) * 2.0,
     );
     let d = DEPTH_LOAD;
     var goal: vec3<f32>;

@@ -29,7 +29,8 @@ const CLAMP_SIGMAS: f32 = 2.0;
 // The noisy input of signal `s` at `texel` as (rgb, hit distance); scalar signals repeat their
 // value in rgb. Occlusion: normalised hit distance (1 = open). Shadow: visibility 1 where the
 // input is negative (the light is visible), 0 where a hit was found; the hit distance is kept
-// for the penumbra estimate. Multi-shadow: input0.r is the visibility, input0.g the hit distance.
+// for the penumbra estimate. Multi-shadow: the trace's packed output0, r = fraction of lights visible, g = closest
+// occluder distance (-1 when none).
 fn dn_load_input(s: u32, texel: vec2<u32>) -> vec4<f32> {
     var t: vec4<f32>;
     if s == 0u {
@@ -62,8 +63,9 @@ fn dn_traced(p: vec2<u32>) -> bool {
     if dp.checkerboard == 0u {
         return true;
     }
-    let texel = p + dp.viewport.xy;
-    return ((texel.x + texel.y) & 1u) == dp.checkerboard - 1u;
+    // Viewport-relative parity, the rule the trace tasks use (trace_common.wgsl, tr_pixel), so a
+    // viewport at an odd offset still reads the pixels that were traced.
+    return ((p.x + p.y) & 1u) == dp.checkerboard - 1u;
 }
 
 fn dn_in_viewport(p: vec2<i32>) -> bool {
@@ -149,12 +151,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = p.y * dp.viewport.z + p.x;
     let texel = p + dp.viewport.xy;
 
-    var surf = gb_surface(texel);
-    if surf.valid && gb.depth_type == 1u {
-        // The depth was rendered with the jittered projection: unproject where it sampled.
-        let z = textureLoad(gb_depth, texel, 0).x;
-        surf.position = gb_unproject(gb_ndc_of(vec2<f32>(texel) + 0.5 - dp.jitter.xy), z);
-    }
+    // gb_surface unprojects the jittered depth where it was sampled (gbuffer.wgsl).
+    let surf = gb_surface(texel);
     let pos = surf.position;
     let n = surf.normal;
 

@@ -39,9 +39,11 @@ struct GBufferParams {
     min_roughness: f32,
     max_roughness: f32,
     global_metalness: f32,
+    // ViewInfo::jitter, pixels: a point at unjittered pixel coordinate c was rendered at
+    // c + jitter, so a texel's depth is unprojected at its centre minus the jitter.
+    jitter_x: f32,
+    jitter_y: f32,
     pad0: f32,
-    pad1: f32,
-    pad2: f32,
 }
 
 @group(GBUFFER_GROUP) @binding(0) var<uniform> gb: GBufferParams;
@@ -144,6 +146,11 @@ fn gb_view_distance(p: vec3<f32>) -> f32 {
 }
 
 // Decodes the surface at `texel`.
+// This frame's camera jitter, pixels (x right, y down).
+fn gb_jitter() -> vec2<f32> {
+    return vec2<f32>(gb.jitter_x, gb.jitter_y);
+}
+
 fn gb_surface(texel: vec2<u32>) -> GbSurface {
     var s: GbSurface;
     s.valid = false;
@@ -154,7 +161,7 @@ fn gb_surface(texel: vec2<u32>) -> GbSurface {
         if d.x == gb.far_ndc || gb_non_finite(d.x) {
             return s;
         }
-        s.position = gb_unproject(gb_ndc_of(vec2<f32>(texel) + 0.5), d.x);
+        s.position = gb_unproject(gb_ndc_of(vec2<f32>(texel) + 0.5 - gb_jitter()), d.x);
     }
     if gb_non_finite(s.position.x) || gb_non_finite(s.position.y) || gb_non_finite(s.position.z) {
         return s;
@@ -196,7 +203,8 @@ fn gb_mask(texel: vec2<u32>) -> bool {
 }
 
 // Projects a world-space point with `m` (a world-to-clip matrix): xy = viewport-relative texel
-// coordinates (continuous; texel centres at +0.5), z = NDC depth, w = clip w (≤ 0: behind).
+// coordinates (continuous; texel centres at +0.5) of the unjittered projection (the G-buffer
+// holds the point at xy + gb_jitter()), z = NDC depth, w = clip w (≤ 0: behind).
 fn gb_project_with(m: mat4x4<f32>, p: vec3<f32>) -> vec4<f32> {
     let c = m * vec4<f32>(p, 1.0);
     let ndc = c.xyz / c.w;

@@ -40,9 +40,11 @@ fn tr_incoming(origin: vec3<f32>, dir: vec3<f32>, t_min: f32) -> TrTraced {
     let p = origin + dir * hit.t;
     if tr_flag(TR_FLAG_DIRECT_LIGHTING) {
         let q = gb_project(p);
+        // Where the G-buffer holds the point: the jittered position.
+        let xy = q.xy + gb_jitter();
         let size = vec2<f32>(gb.viewport.zw);
-        if q.w > 0.0 && all(q.xy >= vec2<f32>(0.0)) && all(q.xy < size) {
-            let texel = gb.viewport.xy + vec2<u32>(q.xy);
+        if q.w > 0.0 && all(xy >= vec2<f32>(0.0)) && all(xy < size) {
+            let texel = gb.viewport.xy + vec2<u32>(xy);
             let s = gb_surface(texel);
             let d = gb_view_distance(p);
             if s.valid && abs(s.view_distance - d) <= TR_DIRECT_LIGHTING_TOLERANCE * d {

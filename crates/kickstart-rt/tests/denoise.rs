@@ -538,18 +538,34 @@ fn large_light_penumbra_is_smooth() {
 
 #[test]
 fn checkerboard_input_is_resolved_to_every_pixel() {
-    for mode in [
-        HalfResolutionMode::Checkerboard,
-        HalfResolutionMode::CheckerboardInverted,
+    // The viewport offset by one column checks that the traced cells are found by the
+    // viewport-relative parity the trace tasks write (trace_common.wgsl), not the texel's.
+    for (mode, x0) in [
+        (HalfResolutionMode::Checkerboard, 0),
+        (HalfResolutionMode::CheckerboardInverted, 0),
+        (HalfResolutionMode::Checkerboard, 1),
     ] {
         let g = static_gbuffer();
         let mut h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
         h.half_resolution_mode = mode;
+        h.viewport = Some(Viewport {
+            x: x0,
+            y: 0,
+            width: SIZE - x0,
+            height: SIZE,
+        });
         let r = reference_image(&g, reference);
         let traced_parity = if mode == HalfResolutionMode::Checkerboard {
             0
         } else {
             1
+        };
+        // Pixels left of the viewport are not the task's: scored as the reference.
+        let inside = |img: &[Vec4]| -> Vec<Vec4> {
+            img.iter()
+                .enumerate()
+                .map(|(i, v)| if (i as u32 % SIZE) < x0 { r[i] } else { *v })
+                .collect()
         };
         let mut rng = Rng(11);
         let mut out = Vec::new();
@@ -557,10 +573,10 @@ fn checkerboard_input_is_resolved_to_every_pixel() {
         for _ in 0..16 {
             // Untraced cells hold garbage the denoiser must never show.
             let mut input = noisy(&r, &mut rng);
-            noisy_psnr = psnr(&g, &input, &r);
+            noisy_psnr = psnr(&g, &inside(&input), &r);
             for (i, v) in input.iter_mut().enumerate() {
                 let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
-                if (x + y) % 2 != traced_parity {
+                if (x + y + x0) % 2 != traced_parity {
                     *v = Vec4::new(1000.0, -50.0, f32::NAN, 3.0);
                 }
             }
@@ -568,8 +584,8 @@ fn checkerboard_input_is_resolved_to_every_pixel() {
                 .frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue)
                 .remove(0);
         }
-        let p = psnr(&g, &out, &r);
-        eprintln!("{mode:?}: {p:.2} dB (noisy full-resolution input {noisy_psnr:.2} dB)");
+        let p = psnr(&g, &inside(&out), &r);
+        eprintln!("{mode:?} at x {x0}: {p:.2} dB (noisy full-resolution input {noisy_psnr:.2} dB)");
         // An untraced pixel none of whose 4-neighbours is on its surface (a box corner) has no
         // sample of its own colour at all: it is not checked.
         let s_ = SIZE as usize;
@@ -580,7 +596,10 @@ fn checkerboard_input_is_resolved_to_every_pixel() {
         for (i, s) in g.surfaces.iter().enumerate() {
             if let Some(a) = s {
                 let (x, y) = (i % s_, i / s_);
-                let traced = (x + y) % 2 == traced_parity as usize;
+                if x < x0 as usize {
+                    continue;
+                }
+                let traced = (x + y + x0 as usize) % 2 == traced_parity as usize;
                 let neighbours = [
                     (x > 0).then(|| i - 1),
                     (x + 1 < s_).then(|| i + 1),

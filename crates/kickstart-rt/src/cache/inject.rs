@@ -35,6 +35,8 @@ struct InjectParams {
     grid: [u32; 4],
     offset: [u32; 4],
     f: [f32; 4],
+    /// `ViewInfo::jitter` in xy (pixels), zw unused.
+    jitter: [f32; 4],
 }
 
 #[repr(C)]
@@ -277,6 +279,7 @@ impl Injector {
                     capacity,
                 ],
                 f: [z_origin, DEPTH_TOLERANCE, task.average_window, 0.0],
+                jitter: [task.view.jitter.x, task.view.jitter.y, 0.0, 0.0],
             },
         );
         let index = if depth_is_depth { 0 } else { 1 };

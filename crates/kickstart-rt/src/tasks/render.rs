@@ -252,7 +252,11 @@ pub struct ViewInfo {
     pub prev_world_to_view: Mat4,
     /// Previous frame's view to clip (denoisers).
     pub prev_view_to_clip: Mat4,
-    /// Sub-pixel jitter of this frame, pixels.
+    /// Sub-pixel jitter of this frame, pixels, x right and y down: a point at unjittered pixel
+    /// coordinate `c` was rendered at `c + jitter` (the depth was rasterised with the jittered
+    /// projection, `view_to_clip` is the unjittered one). Every task that reads clip-space depth
+    /// unprojects each texel where it was sampled; a wrong jitter puts surfaces off their planes
+    /// at grazing angles (self-shadowing, light leaks).
     pub jitter: glam::Vec2,
 }
 

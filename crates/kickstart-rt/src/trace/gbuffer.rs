@@ -15,6 +15,9 @@
 //! - `RClipSpace` depth is unprojected with `inverse(view_to_clip · world_to_view)`, computed in
 //!   f64; a texel equal to the far plane's NDC depth (1 for normal Z, 0 for reverse Z, derived
 //!   from the matrices) holds no surface. `RgbWorldSpace` depth is the position itself.
+//! - `RClipSpace` depth was rendered with the jittered projection (`ViewInfo::jitter`): each
+//!   texel is unprojected at its centre minus the jitter, so surfaces stay on their planes (at
+//!   grazing angles a pixel of jitter is a large step in depth).
 //! - A non-finite position or a zero normal also means "no surface" (nothing is traced there).
 //! - Normals are decoded by type (octahedral: Cigolle et al. 2014), transformed by
 //!   `normal_to_world` and normalised.
@@ -55,7 +58,8 @@ pub(crate) struct GBufferParams {
     min_roughness: f32,
     max_roughness: f32,
     global_metalness: f32,
-    pad: [f32; 3],
+    jitter: [f32; 2],
+    pad: f32,
 }
 
 const HAS_ROUGHNESS: u32 = 1;
@@ -220,7 +224,8 @@ impl<'a> GBufferInputs<'a> {
             min_roughness: r.min_roughness,
             max_roughness: r.max_roughness,
             global_metalness: sp.global_metalness,
-            pad: [0.0; 3],
+            jitter: self.view.jitter.to_array(),
+            pad: 0.0,
         }
     }
 }

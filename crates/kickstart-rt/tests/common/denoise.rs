@@ -307,6 +307,8 @@ pub struct Harness {
     inputs: Vec<wgpu::TextureView>,
     pub outputs: Vec<wgpu::TextureView>,
     pub half_resolution_mode: HalfResolutionMode,
+    /// The task's viewport (`None`: the whole texture).
+    pub viewport: Option<Viewport>,
 }
 
 impl Harness {
@@ -341,6 +343,7 @@ impl Harness {
                 .map(|_| make_texture(wgpu::TextureFormat::Rgba32Float, write))
                 .collect(),
             half_resolution_mode: HalfResolutionMode::Off,
+            viewport: None,
         }
     }
 
@@ -348,7 +351,7 @@ impl Harness {
     pub fn common(&self, g: &GBuffer, motion: Motion, mode: DenoiseMode) -> DenoiseTaskCommon {
         DenoiseTaskCommon {
             context: self.handle,
-            viewport: None,
+            viewport: self.viewport,
             depth: DepthInput {
                 texture: self.depth.clone(),
                 depth_type: DepthType::RClipSpace,

@@ -129,13 +129,19 @@ fn cameras() -> Vec<(&'static str, Mat4, Mat4)> {
 
 /// The analytic surface at each viewport pixel: position (None: the ray misses the plane).
 fn analytic(cam: &CameraFrame) -> Vec<Option<DVec3>> {
+    analytic_jittered(cam, DVec2::ZERO)
+}
+
+/// As [`analytic`] for a projection jittered by `jitter` pixels: texel (x, y) shows the point at
+/// unjittered pixel coordinate (x + 0.5, y + 0.5) − jitter.
+fn analytic_jittered(cam: &CameraFrame, jitter: DVec2) -> Vec<Option<DVec3>> {
     let n = PLANE_N.normalize();
     let mut out = Vec::new();
     for py in 0..VP.height {
         for px in 0..VP.width {
             let uv = DVec2::new(
-                (px as f64 + 0.5) / VP.width as f64,
-                (py as f64 + 0.5) / VP.height as f64,
+                (px as f64 + 0.5 - jitter.x) / VP.width as f64,
+                (py as f64 + 0.5 - jitter.y) / VP.height as f64,
             );
             let ndc = DVec2::new(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0);
             let a = cam.clip_to_world.project_point3(ndc.extend(0.5));
@@ -351,6 +357,94 @@ fn every_depth_and_normal_type_decodes_the_same_scene() {
 }
 
 /// Roughness (texture channel by mask, multiplier, clamps), specular and the input mask.
+/// A depth buffer rasterised with a jittered projection decodes onto the surface the texel
+/// shows (not the unjittered ray through the texel centre), for each camera; without the jitter
+/// the same texels land a fraction of a pixel away, far outside the tolerance on this tilted
+/// plane.
+#[test]
+fn jittered_clip_depth_is_unprojected_where_it_was_sampled() {
+    let jitter = DVec2::new(0.37, -0.41);
+    let normals = random_normals(3);
+    let normal_tex = testing::texture_with(
+        wgpu::TextureFormat::Rgba32Float,
+        TEX_W,
+        TEX_H,
+        &texels([0.0; 4], |i| {
+            encode_normal(NormalType::RgbVector, normals[i])
+        }),
+    );
+    for (name, w2v, v2c) in cameras() {
+        let cam = CameraFrame::new(w2v, v2c);
+        let surf = analytic_jittered(&cam, jitter);
+        let clip_depth = texels([cam.far_ndc as f32], |i| match surf[i] {
+            Some(p) => [cam.world_to_clip.project_point3(p).z as f32],
+            None => [cam.far_ndc as f32],
+        });
+        let depth = DepthInput {
+            texture: testing::texture_with(
+                wgpu::TextureFormat::R32Float,
+                TEX_W,
+                TEX_H,
+                &clip_depth,
+            ),
+            depth_type: DepthType::RClipSpace,
+        };
+        let normal = NormalInput {
+            texture: normal_tex.clone(),
+            normal_type: NormalType::RgbVector,
+            normal_to_world: Mat4::IDENTITY,
+        };
+        let mut worst_unjittered = 0.0f64;
+        for with_jitter in [true, false] {
+            let view = ViewInfo {
+                world_to_view: w2v,
+                view_to_clip: v2c,
+                prev_world_to_view: w2v,
+                prev_view_to_clip: v2c,
+                jitter: if with_jitter {
+                    jitter.as_vec2()
+                } else {
+                    glam::Vec2::ZERO
+                },
+            };
+            let inputs = GBufferInputs {
+                depth: &depth,
+                normal: &normal,
+                roughness: None,
+                specular: None,
+                input_mask: None,
+                view: &view,
+                viewport: VP,
+            };
+            let out = probe(&inputs);
+            for (i, expected) in surf.iter().enumerate() {
+                let Some(p) = expected else { continue };
+                let o = &out[i * STRIDE..(i + 1) * STRIDE];
+                let got = DVec3::new(o[1] as f64, o[2] as f64, o[3] as f64);
+                let scale = 1e-4 * (1.0 + (p - cam.eye).length());
+                if with_jitter {
+                    for k in 0..3 {
+                        close(
+                            o[1 + k],
+                            p[k],
+                            scale,
+                            &format!("{name}: pixel {i} position"),
+                        );
+                    }
+                } else {
+                    worst_unjittered = worst_unjittered.max((got - *p).length() / scale);
+                }
+            }
+        }
+        // The check above would not notice a decoder that ignores the jitter unless ignoring it
+        // costs more than the tolerance here.
+        assert!(
+            worst_unjittered > 10.0,
+            "{name}: ignoring the jitter moves points only {worst_unjittered} tolerances"
+        );
+    }
+}
+
 #[test]
 fn roughness_specular_and_mask_textures_are_read_per_texel() {
     let (_, w2v, v2c) = cameras()[0];
