@@ -81,111 +81,142 @@ fn gradient_injected_from_one_camera_reads_back_from_another() {
         (Depth::Clip, SurfelType::MeshColors),
         (Depth::World, SurfelType::WarpedBarycentricStorage),
     ] {
-        let ctx = context(4);
-        let rects = room();
-        let floor = rects[0].mesh(4, false);
-        let wall = rects[1].mesh(4, false);
-        // A quad standing on the floor without DIRECT_LIGHT_INJECTION_TARGET: both cameras
-        // see it, injection skips it (and the floor it hides from the overview).
-        let hidden = Rect {
-            origin: Vec3::new(0.2, 0.0, 0.0),
-            a: Vec3::new(1.0, 0.0, 0.0),
-            b: Vec3::new(0.0, 0.8, 0.0),
-        };
-        let unit = 0.4;
-        let edit = move |g: &mut GeometryInput| {
-            g.tile_unit_length = unit;
-            g.surfel_type = surfel_type;
-        };
-        let hidden_mesh = hidden.mesh(1, false);
-        let (_, inst) = scene(
-            &ctx,
-            &[(&floor, &edit), (&wall, &edit), (&hidden_mesh, &edit)],
-            &[
-                (
-                    0,
-                    Affine3A::IDENTITY,
-                    Vec4::ZERO,
-                    InstanceInclusionMask::ALL,
-                ),
-                (
-                    1,
-                    Affine3A::IDENTITY,
-                    Vec4::ZERO,
-                    InstanceInclusionMask::ALL,
-                ),
-                (
-                    2,
-                    Affine3A::IDENTITY,
-                    MAGENTA,
-                    InstanceInclusionMask::VISIBLE_IN_RT,
-                ),
-            ],
-        );
-        assert_eq!(inst.len(), 3);
-        let all = [rects[0], rects[1], hidden];
-        let a = overview();
-        run_tasks(
-            &ctx,
-            vec![RenderTask::DirectLightingInjection(injection(
-                &all,
-                &a,
-                depth,
-                |p, _| gradient(p),
-            ))],
-        );
-        let b = side();
-        let hits = b.hits(&all);
-        for bilinear in [false, true] {
-            let img = view(&ctx, &b, DebugOutputType::DirectLightingCache, bilinear);
-            let (mut n, mut sum, mut worst, mut hidden_px) = (0, 0.0, 0.0f32, 0);
-            for (i, h) in hits.iter().enumerate() {
-                let Some(p) = h else {
-                    assert_eq!(img[i].w, 0.0, "pixel {i} misses");
-                    continue;
-                };
-                if p.z.abs() < 1e-4 && p.y > 1e-3 {
-                    // The quad that is no injection target keeps its initial colour.
-                    {
-                        assert!(
-                            (img[i].truncate() - MAGENTA.truncate()).abs().max_element() < 1e-6,
-                            "hidden quad pixel {i}: {:?}",
-                            img[i]
-                        );
-                        hidden_px += 1;
-                    }
-                    continue;
+        inject_gradient_and_check(depth, surfel_type);
+    }
+}
+
+/// Injects [`gradient`] into the room from the overview camera with depth stored as `depth`,
+/// reads the cache back through the side camera's DirectLightingCache view (nearest, then
+/// bilinear) and checks it against the gradient; returns both views.
+fn inject_gradient_and_check(depth: Depth, surfel_type: SurfelType) -> [Vec<Vec4>; 2] {
+    let mut views = Vec::new();
+    let ctx = context(4);
+    let rects = room();
+    let floor = rects[0].mesh(4, false);
+    let wall = rects[1].mesh(4, false);
+    // A quad standing on the floor without DIRECT_LIGHT_INJECTION_TARGET: both cameras
+    // see it, injection skips it (and the floor it hides from the overview).
+    let hidden = Rect {
+        origin: Vec3::new(0.2, 0.0, 0.0),
+        a: Vec3::new(1.0, 0.0, 0.0),
+        b: Vec3::new(0.0, 0.8, 0.0),
+    };
+    let unit = 0.4;
+    let edit = move |g: &mut GeometryInput| {
+        g.tile_unit_length = unit;
+        g.surfel_type = surfel_type;
+    };
+    let hidden_mesh = hidden.mesh(1, false);
+    let (_, inst) = scene(
+        &ctx,
+        &[(&floor, &edit), (&wall, &edit), (&hidden_mesh, &edit)],
+        &[
+            (
+                0,
+                Affine3A::IDENTITY,
+                Vec4::ZERO,
+                InstanceInclusionMask::ALL,
+            ),
+            (
+                1,
+                Affine3A::IDENTITY,
+                Vec4::ZERO,
+                InstanceInclusionMask::ALL,
+            ),
+            (
+                2,
+                Affine3A::IDENTITY,
+                MAGENTA,
+                InstanceInclusionMask::VISIBLE_IN_RT,
+            ),
+        ],
+    );
+    assert_eq!(inst.len(), 3);
+    let all = [rects[0], rects[1], hidden];
+    let a = overview();
+    run_tasks(
+        &ctx,
+        vec![RenderTask::DirectLightingInjection(injection(
+            &all,
+            &a,
+            depth,
+            |p, _| gradient(p),
+        ))],
+    );
+    let b = side();
+    let hits = b.hits(&all);
+    for bilinear in [false, true] {
+        let img = view(&ctx, &b, DebugOutputType::DirectLightingCache, bilinear);
+        let (mut n, mut sum, mut worst, mut hidden_px) = (0, 0.0, 0.0f32, 0);
+        for (i, h) in hits.iter().enumerate() {
+            let Some(p) = h else {
+                assert_eq!(img[i].w, 0.0, "pixel {i} misses");
+                continue;
+            };
+            if p.z.abs() < 1e-4 && p.y > 1e-3 {
+                // The quad that is no injection target keeps its initial colour.
+                {
+                    assert!(
+                        (img[i].truncate() - MAGENTA.truncate()).abs().max_element() < 1e-6,
+                        "hidden quad pixel {i}: {:?}",
+                        img[i]
+                    );
+                    hidden_px += 1;
                 }
-                // Surfels on a surface's border hold half cells, and the overview sees the foot of
-                // the wall at a grazing angle: compare inside the surfaces.
-                let inside = p.x.abs() < 2.0 - unit && p.z > -2.0 + unit && p.y < 2.0 - unit;
-                // Interpolated reads mix the samples within a tile: all of them must have been seen.
-                let (u, v) = if p.y.abs() < 1e-4 {
-                    (Vec3::X, Vec3::Z)
-                } else {
-                    (Vec3::X, Vec3::Y)
-                };
-                let around = [u, -u, v, -v].map(|d| *p + d * unit);
-                if !inside || !around.iter().chain([p]).all(|q| sees(&a, &all, *q, 2.0)) {
-                    continue;
-                }
-                let err = (img[i].truncate() - gradient(*p)).abs().max_element();
-                sum += err;
-                n += 1;
-                worst = worst.max(err);
+                continue;
             }
-            let mean = sum / n as f32;
-            eprintln!("{depth:?} {surfel_type:?} bilinear {bilinear}: {n} px, mean {mean}, worst {worst}, hidden {hidden_px}");
-            assert!(n > 1000, "too few pixels compared: {n}");
+            // Surfels on a surface's border hold half cells, and the overview sees the foot of
+            // the wall at a grazing angle: compare inside the surfaces.
+            let inside = p.x.abs() < 2.0 - unit && p.z > -2.0 + unit && p.y < 2.0 - unit;
+            // Interpolated reads mix the samples within a tile: all of them must have been seen.
+            let (u, v) = if p.y.abs() < 1e-4 {
+                (Vec3::X, Vec3::Z)
+            } else {
+                (Vec3::X, Vec3::Y)
+            };
+            let around = [u, -u, v, -v].map(|d| *p + d * unit);
+            if !inside || !around.iter().chain([p]).all(|q| sees(&a, &all, *q, 2.0)) {
+                continue;
+            }
+            let err = (img[i].truncate() - gradient(*p)).abs().max_element();
+            sum += err;
+            n += 1;
+            worst = worst.max(err);
+        }
+        let mean = sum / n as f32;
+        eprintln!("{depth:?} {surfel_type:?} bilinear {bilinear}: {n} px, mean {mean}, worst {worst}, hidden {hidden_px}");
+        assert!(n > 1000, "too few pixels compared: {n}");
+        assert!(
+            hidden_px > 50,
+            "the hidden quad must be in view: {hidden_px}"
+        );
+        // A tile spans `unit`; a surfel holds the average over its cell.
+        assert!(worst < GRADIENT_SLOPE * unit * 1.5, "worst {worst}");
+        assert!(mean < GRADIENT_SLOPE * unit * 0.35, "mean {mean}");
+        views.push(img);
+    }
+    views.try_into().expect("two views")
+}
+
+/// An engine's own `Depth32Float` depth attachment as the injection depth (the other injection
+/// tests store clip depth in `R32Float`): the gradient reads back as well as with `R32Float`
+/// (the same analytic bounds), and the cache equals the one injected from an `R32Float` texture
+/// holding the same depth values bit for bit (fresh contexts draw the same injection offsets, so
+/// any difference is the depth-format path reading another depth).
+#[test]
+fn depth32float_depth_buffer_injects_like_r32float() {
+    let started = std::time::Instant::now();
+    let from_depth_buffer = inject_gradient_and_check(Depth::Depth32, SurfelType::MeshColors);
+    let from_r32 = inject_gradient_and_check(Depth::Clip, SurfelType::MeshColors);
+    for (k, (a, b)) in from_depth_buffer.iter().zip(&from_r32).enumerate() {
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
             assert!(
-                hidden_px > 50,
-                "the hidden quad must be in view: {hidden_px}"
+                (*x - *y).abs().max_element() <= 1e-6,
+                "view {k} pixel {i}: Depth32Float {x}, R32Float {y}"
             );
-            // A tile spans `unit`; a surfel holds the average over its cell.
-            assert!(worst < GRADIENT_SLOPE * unit * 1.5, "worst {worst}");
-            assert!(mean < GRADIENT_SLOPE * unit * 0.35, "mean {mean}");
         }
     }
+    eprintln!("took {:?}", started.elapsed());
 }
 
 #[test]

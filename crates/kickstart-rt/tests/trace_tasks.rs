@@ -4,10 +4,11 @@
 //! inputs the trace tasks name.
 
 mod common;
+use common::cache::{cast, Rect};
 use common::rt::*;
 use common::trace::*;
 use common::*;
-use glam::{Affine3A, Quat, Vec3};
+use glam::{Affine3A, DAffine3, DQuat, DVec3, Mat4, Quat, Vec3};
 use kickstart_rt::*;
 use wgpu::{TextureFormat as F, TextureUsages as U};
 
@@ -433,5 +434,707 @@ fn specular_demodulation_output_must_match_the_viewport() {
             demodulation_output: Some(texture(F::Rgba16Float, 4, 4, U::STORAGE_BINDING)),
         }),
         "viewport",
+    );
+}
+
+// --- Every depth and normal encoding of one G-buffer traces to the same result ---------------
+
+/// The encoding test's box: local extent, yaw about y and position (its base on the ground).
+const BOX_LO: Vec3 = Vec3::new(-0.4, 0.0, -0.4);
+const BOX_HI: Vec3 = Vec3::new(0.4, 0.7, 0.4);
+const BOX_YAW: f32 = 0.5;
+const BOX_AT: Vec3 = Vec3::new(0.2, 0.0, -0.1);
+/// Half size of the ground slab (top at y = 0).
+const GROUND: f64 = 8.0;
+
+fn box_transform() -> Affine3A {
+    Affine3A::from_rotation_translation(Quat::from_rotation_y(BOX_YAW), BOX_AT)
+}
+
+/// Entry distance and outward normal of a ray with an axis-aligned box (`None` when it starts
+/// on or inside the box, or misses).
+fn slab(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, DVec3)> {
+    let inv = d.recip();
+    let t0 = (lo - o) * inv;
+    let t1 = (hi - o) * inv;
+    let (tmin, tmax) = (t0.min(t1), t0.max(t1));
+    let (near, far) = (tmin.max_element(), tmax.min_element());
+    if near > far || near <= 1e-9 {
+        return None;
+    }
+    let axis = (0..3).find(|&k| tmin[k] == near).unwrap();
+    let mut n = DVec3::ZERO;
+    n[axis] = -d[axis].signum();
+    Some((near, n))
+}
+
+/// The encoding test's scene on the CPU, in f64: the ground slab's top and the rotated box.
+struct GroundAndBox {
+    to_world: DAffine3,
+    to_local: DAffine3,
+}
+
+impl GroundAndBox {
+    fn new() -> Self {
+        let to_world = DAffine3::from_rotation_translation(
+            DQuat::from_rotation_y(BOX_YAW as f64),
+            BOX_AT.as_dvec3(),
+        );
+        GroundAndBox {
+            to_world,
+            to_local: to_world.inverse(),
+        }
+    }
+
+    /// The box along a ray: (distance, world normal).
+    fn box_hit(&self, o: DVec3, d: DVec3) -> Option<(f64, DVec3)> {
+        slab(
+            self.to_local.transform_point3(o),
+            self.to_local.transform_vector3(d),
+            BOX_LO.as_dvec3(),
+            BOX_HI.as_dvec3(),
+        )
+        .map(|(t, n)| (t, self.to_world.transform_vector3(n)))
+    }
+
+    /// What a camera ray sees: (position, normal, object: 0 ground, 1 box).
+    fn cast(&self, o: DVec3, d: DVec3) -> Option<(DVec3, DVec3, u32)> {
+        let mut best: Option<(f64, DVec3, u32)> = None;
+        if d.y < 0.0 {
+            let t = -o.y / d.y;
+            let p = o + d * t;
+            if p.x.abs() <= GROUND && p.z.abs() <= GROUND {
+                best = Some((t, DVec3::Y, 0));
+            }
+        }
+        if let Some((t, n)) = self.box_hit(o, d) {
+            if best.is_none_or(|b| t < b.0) {
+                best = Some((t, n, 1));
+            }
+        }
+        best.map(|(t, n, k)| (o + d * t, n, k))
+    }
+
+    /// Distance from `p` to the box.
+    fn distance_to_box(&self, p: DVec3) -> f64 {
+        let q = self.to_local.transform_point3(p);
+        (q - q.clamp(BOX_LO.as_dvec3(), BOX_HI.as_dvec3())).length()
+    }
+}
+
+/// Per-pixel comparison of two traces of one scene: (AO, shadow) values, R channel.
+struct Traced {
+    ao: Vec<f32>,
+    shadow: Vec<f32>,
+}
+
+/// Pixels of `b` that differ from `a`: AO by more than `ao_tol`, shadow in kind (lit −1,
+/// facing away 0, occluded > 0) or, occluded in both, in distance by more than `t_tol`.
+fn differing(a: &Traced, b: &Traced, ao_tol: f32, t_tol: f32) -> (usize, usize) {
+    let ao =
+        a.ao.iter()
+            .zip(&b.ao)
+            .filter(|(x, y)| (*x - *y).abs() > ao_tol || x.is_nan() != y.is_nan())
+            .count();
+    let kind = |v: f32| {
+        if v < 0.0 {
+            0
+        } else if v == 0.0 {
+            1
+        } else {
+            2
+        }
+    };
+    let shadow = a
+        .shadow
+        .iter()
+        .zip(&b.shadow)
+        .filter(|(x, y)| kind(**x) != kind(**y) || (kind(**x) == 2 && (*x - *y).abs() > t_tol))
+        .count();
+    (ao, shadow)
+}
+
+/// One camera sees a ground slab and a rotated box; the G-buffer is written once per depth
+/// encoding (RgbWorldSpace; RClipSpace in R32Float and in a Depth32Float depth buffer, each with
+/// a normal-Z and a reverse-Z infinite projection of the same frustum) and once per normal
+/// encoding (all six NormalTypes, world-space, rotated or view-space via `normal_to_world`, in
+/// Rgba32Float and in 8-bit formats). An AO task and a hard directional shadow task at a fixed
+/// frame index must give every encoding the reference encoding's result per pixel.
+///
+/// The reference itself is checked against the CPU: its shadow (kind and distance) against an
+/// analytic ray–box test away from shadow and object boundaries, its AO exactly 1 wherever
+/// nothing lies within the AO radius above the surface. Two wrong G-buffers on purpose (normals
+/// flipped, depth 0.5 % too far) must fail the comparison: the bounds catch wrong decodes.
+#[test]
+fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
+    let started = std::time::Instant::now();
+    let ctx = context(4);
+    let mut c = ctx.create_task_container();
+    add(
+        &ctx,
+        &mut c,
+        &Mesh::cuboid(
+            Vec3::new(-GROUND as f32, -0.1, -GROUND as f32),
+            Vec3::new(GROUND as f32, 0.0, GROUND as f32),
+        ),
+        Affine3A::IDENTITY,
+        Vec3::ONE,
+    );
+    add(
+        &ctx,
+        &mut c,
+        &Mesh::cuboid(BOX_LO, BOX_HI),
+        box_transform(),
+        Vec3::ONE,
+    );
+    build(&ctx, c);
+    let scene = GroundAndBox::new();
+
+    const W: u32 = 48;
+    const H: u32 = 48;
+    let fov = 0.8;
+    let world_to_view =
+        Mat4::look_at_rh(Vec3::new(1.8, 2.2, 2.4), Vec3::new(0.1, 0.3, -0.1), Vec3::Y);
+    let normal_z = Mat4::perspective_rh(fov, 1.0, 0.1, 50.0);
+    let reverse_z = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1);
+    let view_of = |view_to_clip| ViewInfo {
+        world_to_view,
+        view_to_clip,
+        prev_world_to_view: world_to_view,
+        prev_view_to_clip: view_to_clip,
+        ..Default::default()
+    };
+    let surfaces: Vec<Option<(DVec3, DVec3, u32)>> = (0..W * H)
+        .map(|i| {
+            let (o, d) = pixel_ray(&view_of(normal_z), W, H, i % W, i / W);
+            scene.cast(o, d)
+        })
+        .collect();
+    let positions: Vec<Option<DVec3>> = surfaces.iter().map(|s| s.map(|s| s.0)).collect();
+    // Where nothing was rendered the normal points down, away from the light: a decode that
+    // took the far plane for a surface would write "shadowed at distance 0" there, not "lit".
+    let normals: Vec<DVec3> = surfaces
+        .iter()
+        .map(|s| s.map_or(DVec3::NEG_Y, |s| s.1))
+        .collect();
+    let n_surface = surfaces.iter().filter(|s| s.is_some()).count();
+    let n_box = surfaces
+        .iter()
+        .filter(|s| s.is_some_and(|s| s.2 == 1))
+        .count();
+    assert!(
+        n_surface < (W * H) as usize - 40 && n_box > 150,
+        "the view shows sky ({}), ground and box ({n_box})",
+        (W * H) as usize - n_surface
+    );
+
+    let to_light = DVec3::new(-1.0, 0.9, -0.6).normalize();
+    let light = LightInfo::Directional {
+        direction: -to_light.as_vec3(),
+        angular_extent: 0.0,
+    };
+    let ao_radius = 0.5;
+    let trace = |depth: DepthInput, normal: NormalInput, view_to_clip: Mat4| -> Traced {
+        let mut common = TraceTaskCommon::new(depth, normal);
+        common.view = view_of(view_to_clip);
+        common.ray_offset.offset_type = RayOffsetType::WorldPosition;
+        common.debug_parameters.frame_index = 5;
+        let (ao, shadow) = (output(W, H), output(W, H));
+        run_tasks(
+            &ctx,
+            vec![
+                RenderTask::TraceAmbientOcclusion(TraceAmbientOcclusionTask {
+                    common: common.clone(),
+                    output: ao.clone(),
+                    ao_radius,
+                }),
+                RenderTask::TraceShadow(TraceShadowTask {
+                    common,
+                    output: shadow.clone(),
+                    light,
+                    enable_first_hit_and_end_search: false,
+                }),
+            ],
+        );
+        Traced {
+            ao: read_rgba32(&ao).iter().map(|v| v[0]).collect(),
+            shadow: read_rgba32(&shadow).iter().map(|v| v[0]).collect(),
+        }
+    };
+    let depth = |enc, view_to_clip, scale| {
+        encode_depth(enc, W, H, &view_of(view_to_clip), &positions, scale)
+    };
+    let normal =
+        |ty, format, normal_to_world| encode_normals(ty, format, normal_to_world, W, H, &normals);
+
+    // The reference: world positions and world-space float normals.
+    let reference = trace(
+        depth(DepthEncoding::WorldPosition, normal_z, 1.0),
+        normal(NormalType::RgbVector, F::Rgba32Float, Mat4::IDENTITY),
+        normal_z,
+    );
+
+    // The reference against the CPU. Shadow: away from the boundaries of (object, kind) regions.
+    let labels: Vec<Option<(u32, u32, Option<f64>)>> = surfaces
+        .iter()
+        .map(|s| {
+            s.map(|(p, n, k)| {
+                if n.dot(to_light) <= 0.0 {
+                    (k, 1, None)
+                } else if let Some((t, _)) = scene.box_hit(p, to_light) {
+                    (k, 2, Some(t))
+                } else {
+                    (k, 0, None)
+                }
+            })
+        })
+        .collect();
+    let kinds: Vec<Option<(u32, u32)>> = labels.iter().map(|l| l.map(|l| (l.0, l.1))).collect();
+    let mut checked = [0usize; 3];
+    for (i, label) in labels.iter().enumerate() {
+        let got = reference.shadow[i];
+        let Some((_, kind, t)) = *label else {
+            assert_eq!(got, -1.0, "pixel {i} shows nothing: lit");
+            assert_eq!(reference.ao[i], 1.0, "pixel {i} shows nothing: open");
+            continue;
+        };
+        if !away_from_boundaries(&kinds, W, H, i as u32 % W, i as u32 / W, 1) {
+            continue;
+        }
+        checked[kind as usize] += 1;
+        match kind {
+            0 => assert_eq!(got, -1.0, "pixel {i}: the light is visible"),
+            1 => assert_eq!(got, 0.0, "pixel {i}: faces away from the light"),
+            _ => {
+                let t = t.unwrap();
+                assert!(
+                    (got as f64 - t).abs() < 2e-3 * (1.0 + t),
+                    "pixel {i}: occluder at {t}, traced {got}"
+                );
+            }
+        }
+    }
+    assert!(
+        checked.iter().all(|&n| n > 40),
+        "lit / facing away / shadowed pixels checked: {checked:?}"
+    );
+    // AO: exactly 1 where no geometry lies within the radius above the surface (ground far
+    // from the box, the box's top); below 1 only where the box or the ground is within it.
+    let (mut open, mut occluded) = (0, 0);
+    for (i, s) in surfaces.iter().enumerate() {
+        let Some((p, n, k)) = s else { continue };
+        let ground_open = *k == 0 && scene.distance_to_box(*p) > ao_radius as f64 + 1e-3;
+        if ground_open || (*k == 1 && n.y > 0.5) {
+            assert_eq!(
+                reference.ao[i], 1.0,
+                "pixel {i} at {p}: nothing within the radius"
+            );
+            open += 1;
+        }
+        if reference.ao[i] < 1.0 {
+            let near = if *k == 0 {
+                scene.distance_to_box(*p) < ao_radius as f64
+            } else {
+                p.y < ao_radius as f64
+            };
+            assert!(near, "pixel {i} at {p}: occluded with nothing near");
+            occluded += 1;
+        }
+    }
+    assert!(
+        open > 300 && occluded > 40,
+        "open {open}, occluded {occluded}"
+    );
+
+    // The encodings. A rotation whose inverse takes the ground's normal to z > 0 and the box's
+    // front face to z < 0, so both branches of the octahedral decode are used.
+    let rotated = Mat4::from_rotation_x(-2.2);
+    let view_space = world_to_view.inverse();
+    let stored_z: Vec<f64> = surfaces
+        .iter()
+        .flatten()
+        .map(|s| rotated.as_dmat4().inverse().transform_vector3(s.1).z)
+        .collect();
+    assert!(
+        stored_z.iter().filter(|z| **z < -0.1).count() > 50
+            && stored_z.iter().filter(|z| **z > 0.1).count() > 50,
+        "both octahedral hemispheres are used"
+    );
+    let f32_normals = |ty| normal(ty, F::Rgba32Float, Mat4::IDENTITY);
+    // (name, depth, normal, projection, 8-bit normals)
+    let mut variants: Vec<(String, DepthInput, NormalInput, Mat4, bool)> = Vec::new();
+    for (enc, proj, proj_name) in [
+        (DepthEncoding::ClipR32Float, normal_z, "normal Z"),
+        (DepthEncoding::ClipR32Float, reverse_z, "reverse-Z infinite"),
+        (DepthEncoding::ClipDepth32Float, normal_z, "normal Z"),
+        (
+            DepthEncoding::ClipDepth32Float,
+            reverse_z,
+            "reverse-Z infinite",
+        ),
+    ] {
+        variants.push((
+            format!("{enc:?} {proj_name}"),
+            depth(enc, proj, 1.0),
+            f32_normals(NormalType::RgbVector),
+            proj,
+            false,
+        ));
+    }
+    for (ty, format, to_world, space) in [
+        (NormalType::RgbVector, F::Rgba32Float, rotated, "rotated"),
+        (
+            NormalType::RgbNormalizedVector,
+            F::Rgba32Float,
+            rotated,
+            "rotated",
+        ),
+        (NormalType::RgOctahedron, F::Rgba32Float, rotated, "rotated"),
+        (
+            NormalType::BaOctahedron,
+            F::Rgba32Float,
+            view_space,
+            "view space",
+        ),
+        (
+            NormalType::RgNormalizedOctahedron,
+            F::Rgba32Float,
+            view_space,
+            "view space",
+        ),
+        (
+            NormalType::BaNormalizedOctahedron,
+            F::Rgba32Float,
+            rotated,
+            "rotated",
+        ),
+        (
+            NormalType::RgbNormalizedVector,
+            F::Rgba8Unorm,
+            Mat4::IDENTITY,
+            "world",
+        ),
+        (NormalType::RgOctahedron, F::Rgba8Snorm, rotated, "rotated"),
+        (
+            NormalType::BaNormalizedOctahedron,
+            F::Rgba8Unorm,
+            view_space,
+            "view space",
+        ),
+    ] {
+        variants.push((
+            format!("{ty:?} {format:?} {space}"),
+            depth(DepthEncoding::WorldPosition, normal_z, 1.0),
+            normal(ty, format, to_world),
+            normal_z,
+            format != F::Rgba32Float,
+        ));
+    }
+    // A typical engine G-buffer: a reverse-Z depth buffer and 8-bit view-space octahedral normals.
+    variants.push((
+        "ClipDepth32Float reverse-Z infinite + RgNormalizedOctahedron Rgba8Unorm view space".into(),
+        depth(DepthEncoding::ClipDepth32Float, reverse_z, 1.0),
+        normal(
+            NormalType::RgNormalizedOctahedron,
+            F::Rgba8Unorm,
+            view_space,
+        ),
+        reverse_z,
+        true,
+    ));
+
+    // Bounds. Float encodings decode to within f32 rounding of the reference surface (clip depth:
+    // ~1e-5 of position, normals ~1e-7): a pixel can differ only where its AO ray grazes an
+    // edge of the box, which such a shift turns from hit to miss — at most 0.25 % of the surface
+    // pixels (lavapipe: none). 8-bit normals are off by up to ~0.5° (half a step of 1/255 or
+    // 1/127 per component, octahedral steps up to twice that): the AO ray turns by as much, its
+    // hit distance moves by ~t·0.01 and a ray near a box edge may hit or miss — at most 1 % of
+    // the pixels may differ by more than 0.05 (lavapipe: 1 pixel). Shadow rays depend on the
+    // normal only through the ray offset and the facing test (every face is ≥ 20° from the
+    // light's direction), so the float bound holds for them with every encoding. A wrong decode
+    // changes most pixels (the two wrong G-buffers below: > 90 %).
+    let float_allowed = n_surface / 400;
+    let quantised_allowed = n_surface / 100;
+    for (name, d, n, proj, quantised) in variants {
+        let got = trace(d, n, proj);
+        let (ao_tol, allowed_ao) = if quantised {
+            (0.05, quantised_allowed)
+        } else {
+            (2e-3, float_allowed)
+        };
+        let (ao, shadow) = differing(&reference, &got, ao_tol, 2e-3);
+        eprintln!("{name}: {ao} AO and {shadow} shadow pixels differ (of {n_surface})");
+        assert!(
+            ao <= allowed_ao && shadow <= float_allowed,
+            "{name}: {ao} AO pixels (allowed {allowed_ao}) and {shadow} shadow pixels (allowed \
+             {float_allowed}) differ from the reference"
+        );
+    }
+
+    // The bounds catch wrong decodes: flipped normals, and a depth 0.5 % too far.
+    let flipped: Vec<DVec3> = normals.iter().map(|n| -*n).collect();
+    for (name, d, n) in [
+        (
+            "flipped normals",
+            depth(DepthEncoding::WorldPosition, normal_z, 1.0),
+            encode_normals(
+                NormalType::RgbVector,
+                F::Rgba32Float,
+                Mat4::IDENTITY,
+                W,
+                H,
+                &flipped,
+            ),
+        ),
+        (
+            "depth 0.5 % too far",
+            depth(DepthEncoding::ClipR32Float, normal_z, 1.005),
+            f32_normals(NormalType::RgbVector),
+        ),
+    ] {
+        let got = trace(d, n, normal_z);
+        let (ao, shadow) = differing(&reference, &got, 0.05, 2e-3);
+        eprintln!("wrong on purpose, {name}: {ao} AO and {shadow} shadow pixels differ");
+        assert!(
+            ao > 10 * quantised_allowed || shadow > 10 * quantised_allowed,
+            "{name}: the comparison must reject it ({ao} AO, {shadow} shadow pixels differ)"
+        );
+    }
+    eprintln!("took {:?}", started.elapsed());
+}
+
+// --- Multi-shadow trace → multi-shadow denoiser, checkerboard, viewport at an odd x ----------
+
+/// A ground quad and a horizontal quad above it, lit by two directional lights tilted ±x: the
+/// fraction of the lights visible on the ground is 0 under both shadows, 1/2 under one and 1
+/// elsewhere. TraceMultiShadowTask traces the checkerboard of a viewport at x = 1 for 12 frames
+/// of a static camera, and DenoiseMultiShadowTask (same viewport and mode) denoises its output0
+/// as is. Checked:
+/// - the trace's output0 at traced cells (viewport-relative (x + y) even): R the analytic
+///   fraction exactly, G and B the analytic closest and mean occluder distance within 2 % (the
+///   lights' extent; -1 without an occluder), A the light count; untraced cells and the column
+///   left of the viewport keep what they held;
+/// - the denoised output, traced and untraced cells alike, 2 pixels away from every region
+///   boundary: the analytic fraction within 0.02 in R, G and B (the lights are small enough
+///   that visibility is deterministic once a few frames are in: lavapipe is within 5e-4, the f16
+///   history's rounding); the column left of the viewport untouched.
+///
+/// Untraced cells hold a plausible wrong value (0.25): a denoiser that took the texel's parity
+/// for the viewport's would read them as samples and miss by ≥ 0.125 everywhere.
+#[test]
+fn checkerboard_multi_shadow_at_an_odd_viewport_denoises_to_the_fraction_of_lights_visible() {
+    let started = std::time::Instant::now();
+    const W: u32 = 64;
+    const H: u32 = 64;
+    let vp = Viewport {
+        x: 1,
+        y: 0,
+        width: W - 1,
+        height: H,
+    };
+    let ground = Rect {
+        origin: Vec3::new(-6.0, 0.0, -6.0),
+        a: Vec3::new(0.0, 0.0, 12.0),
+        b: Vec3::new(12.0, 0.0, 0.0),
+    };
+    let occluder = Rect {
+        origin: Vec3::new(-0.8, 0.8, -0.5),
+        a: Vec3::new(0.0, 0.0, 1.0),
+        b: Vec3::new(1.6, 0.0, 0.0),
+    };
+    let ctx = context(4);
+    let mut c = ctx.create_task_container();
+    add(
+        &ctx,
+        &mut c,
+        &ground.mesh(1, false),
+        Affine3A::IDENTITY,
+        Vec3::ONE,
+    );
+    add(
+        &ctx,
+        &mut c,
+        &occluder.mesh(1, false),
+        Affine3A::IDENTITY,
+        Vec3::ONE,
+    );
+    build(&ctx, c);
+
+    let to_lights = [
+        Vec3::new(0.35, 1.0, -0.7).normalize(),
+        Vec3::new(-0.35, 1.0, -0.7).normalize(),
+    ];
+    let lights: Vec<LightInfo> = to_lights
+        .iter()
+        .map(|l| LightInfo::Directional {
+            direction: -*l,
+            angular_extent: 0.01,
+        })
+        .collect();
+    let w2v = Mat4::look_at_rh(Vec3::new(0.0, 3.2, 3.4), Vec3::new(0.0, 0.0, 0.4), Vec3::Y);
+    let v2c = Mat4::perspective_rh(0.75, W as f32 / H as f32, 0.1, 50.0);
+    let view = ViewInfo {
+        world_to_view: w2v,
+        view_to_clip: v2c,
+        prev_world_to_view: w2v,
+        prev_view_to_clip: v2c,
+        ..Default::default()
+    };
+
+    // The analytic answer per pixel: (object, lights visible, closest occluder distance).
+    let quads = [ground, occluder];
+    let mut positions = Vec::new();
+    let mut labels = Vec::new();
+    let mut closest = Vec::new();
+    let mut mean = Vec::new();
+    for i in 0..W * H {
+        let (o, d) = pixel_ray(&view, W, H, i % W, i / W);
+        let (o, d) = (o.as_vec3(), d.as_vec3());
+        let (t, object) = cast(&quads, o, d).expect("every pixel shows the ground or the quad");
+        let p = o + d * t;
+        let hits: Vec<Option<f32>> = to_lights
+            .iter()
+            .map(|l| occluder.hit(p, *l).filter(|t| *t > 1e-3))
+            .collect();
+        positions.push(Some(p.as_dvec3()));
+        labels.push((object, hits.iter().filter(|h| h.is_none()).count() as u32));
+        closest.push(hits.iter().flatten().copied().reduce(f32::min));
+        let occluded: Vec<f32> = hits.iter().flatten().copied().collect();
+        mean.push(
+            (!occluded.is_empty()).then(|| occluded.iter().sum::<f32>() / occluded.len() as f32),
+        );
+    }
+    let depth = encode_depth(DepthEncoding::ClipR32Float, W, H, &view, &positions, 1.0);
+    let normal = encode_normals(
+        NormalType::RgbVector,
+        F::Rgba32Float,
+        Mat4::IDENTITY,
+        W,
+        H,
+        &vec![DVec3::Y; (W * H) as usize],
+    );
+
+    let garbage = [0.25f32, 0.05, 0.05, 9.0];
+    let filled = |v: [f32; 4], usage| {
+        let data: Vec<f32> = (0..W * H).flat_map(|_| v).collect();
+        texture_with(F::Rgba32Float, W, H, usage, bytemuck::cast_slice(&data))
+    };
+    let output0 = filled(
+        garbage,
+        U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
+    );
+    let output1 = filled([0.0; 4], U::STORAGE_BINDING | U::TEXTURE_BINDING);
+    let untouched = 7.0;
+    let denoised = filled([untouched; 4], U::STORAGE_BINDING | U::COPY_SRC);
+    let handle = ctx
+        .create_denoising_context_handle(DenoisingContextInput {
+            max_width: W,
+            max_height: H,
+            signal_type: SignalType::MultiShadow,
+            method: DenoisingMethod::HighQuality,
+        })
+        .expect("denoising context");
+    for frame in 0..12 {
+        let mut common = TraceTaskCommon::new(depth.clone(), normal.clone());
+        common.viewport = Some(vp);
+        common.view = view;
+        common.ray_offset.offset_type = RayOffsetType::WorldPosition;
+        common.half_resolution_mode = HalfResolutionMode::Checkerboard;
+        common.debug_parameters.frame_index = frame;
+        let denoise_common = DenoiseTaskCommon {
+            context: handle,
+            viewport: Some(vp),
+            depth: depth.clone(),
+            normal: normal.clone(),
+            roughness: RoughnessInput::default(),
+            motion: None,
+            view,
+            half_resolution_mode: HalfResolutionMode::Checkerboard,
+            mode: DenoiseMode::Continue,
+        };
+        run_tasks(
+            &ctx,
+            vec![
+                RenderTask::TraceMultiShadow(TraceMultiShadowTask {
+                    common,
+                    output0: output0.clone(),
+                    output1: output1.clone(),
+                    lights: lights.clone(),
+                    enable_first_hit_and_end_search: false,
+                }),
+                RenderTask::DenoiseMultiShadow(DenoiseMultiShadowTask {
+                    common: denoise_common,
+                    input0: output0.clone(),
+                    input1: output1.clone(),
+                    output: denoised.clone(),
+                }),
+            ],
+        );
+    }
+
+    let traced_img = read_rgba32(&output0);
+    let out = read_rgba32(&denoised);
+    // [region (visible count)][traced, untraced] pixels compared.
+    let mut compared = [[0usize; 2]; 3];
+    let mut worst = 0.0f32;
+    for i in 0..(W * H) as usize {
+        let (x, y) = (i as u32 % W, i as u32 / W);
+        if x < vp.x {
+            assert_eq!(
+                traced_img[i], garbage,
+                "trace wrote ({x}, {y}) left of the viewport"
+            );
+            assert_eq!(
+                out[i], [untouched; 4],
+                "denoiser wrote ({x}, {y}) left of the viewport"
+            );
+            continue;
+        }
+        let traced = (x - vp.x + y - vp.y).is_multiple_of(2);
+        if !traced {
+            assert_eq!(
+                traced_img[i], garbage,
+                "trace wrote the untraced cell ({x}, {y})"
+            );
+        }
+        if !away_from_boundaries(&labels, W, H, x, y, 2) {
+            continue;
+        }
+        let (object, visible) = labels[i];
+        let fraction = visible as f32 / 2.0;
+        if traced {
+            let t = traced_img[i];
+            assert_eq!(
+                t[0], fraction,
+                "trace R at ({x}, {y}), object {object}: {t:?}"
+            );
+            assert_eq!(t[3], 2.0, "trace A (light count) at ({x}, {y}): {t:?}");
+            for (k, want, what) in [(1, closest[i], "closest"), (2, mean[i], "mean")] {
+                match want {
+                    None => assert_eq!(t[k], -1.0, "trace output0[{k}] at ({x}, {y}): no occluder"),
+                    Some(d) => assert!(
+                        (t[k] - d).abs() < 0.02 * d,
+                        "trace output0[{k}] at ({x}, {y}): {what} occluder distance {d}, got {t:?}"
+                    ),
+                }
+            }
+        }
+        let o = out[i];
+        let err = (0..3).map(|k| (o[k] - fraction).abs()).fold(0.0, f32::max);
+        worst = worst.max(err);
+        assert!(
+            err <= 0.02,
+            "denoised ({x}, {y}) ({}), object {object}: {o:?}, fraction visible {fraction}",
+            if traced { "traced" } else { "untraced" }
+        );
+        compared[visible as usize][usize::from(!traced)] += 1;
+    }
+    eprintln!(
+        "compared [0, 1/2, 1 visible][traced, untraced]: {compared:?}, worst {worst}, took {:?}",
+        started.elapsed()
+    );
+    assert!(
+        compared.iter().flatten().all(|&n| n >= 20),
+        "too few pixels away from the boundaries: {compared:?}"
     );
 }

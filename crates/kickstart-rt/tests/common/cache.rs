@@ -182,8 +182,12 @@ pub fn texture_with(format: F, w: u32, h: u32, data: &[f32]) -> wgpu::TextureVie
 /// How an injection image is made.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Depth {
+    /// `RClipSpace` in an `R32Float` texture.
     Clip,
+    /// `RgbWorldSpace` in an `Rgba32Float` texture.
     World,
+    /// `RClipSpace` in a `Depth32Float` depth buffer (the engine's own depth attachment).
+    Depth32,
 }
 
 /// An injection task of `cam`'s view of `rects`, lit by `light(point, pixel)`.
@@ -199,21 +203,31 @@ pub fn injection(
     for (i, h) in hits.iter().enumerate() {
         let px = (i as u32 % cam.w, i as u32 / cam.w);
         match (h, depth) {
-            (Some(p), Depth::Clip) => depth_data.push(cam.project(*p).1),
-            (None, Depth::Clip) => depth_data.push(1.0),
+            (Some(p), Depth::Clip | Depth::Depth32) => depth_data.push(cam.project(*p).1),
+            (None, Depth::Clip | Depth::Depth32) => depth_data.push(1.0),
             (Some(p), Depth::World) => depth_data.extend([p.x, p.y, p.z, 1.0]),
             (None, Depth::World) => depth_data.extend([f32::NAN, f32::NAN, f32::NAN, 0.0]),
         }
         let c = h.map_or(Vec3::splat(100.0), |p| light(p, px));
         colour.extend(c.extend(1.0).to_array());
     }
-    let (format, depth_type) = match depth {
-        Depth::Clip => (F::R32Float, DepthType::RClipSpace),
-        Depth::World => (F::Rgba32Float, DepthType::RgbWorldSpace),
+    let (texture, depth_type) = match depth {
+        Depth::Clip => (
+            texture_with(F::R32Float, cam.w, cam.h, &depth_data),
+            DepthType::RClipSpace,
+        ),
+        Depth::World => (
+            texture_with(F::Rgba32Float, cam.w, cam.h, &depth_data),
+            DepthType::RgbWorldSpace,
+        ),
+        Depth::Depth32 => (
+            super::depth32float_texture(cam.w, cam.h, &depth_data),
+            DepthType::RClipSpace,
+        ),
     };
     let mut t = DirectLightingInjectionTask::new(
         DepthInput {
-            texture: texture_with(format, cam.w, cam.h, &depth_data),
+            texture,
             depth_type,
         },
         texture_with(F::Rgba32Float, cam.w, cam.h, &colour),

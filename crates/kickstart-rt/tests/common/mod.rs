@@ -224,3 +224,161 @@ pub fn register_instance(
         input: kickstart_rt::InstanceInput::new(geometry, transform),
     });
 }
+
+/// A `Depth32Float` depth buffer (`TEXTURE_BINDING | RENDER_ATTACHMENT | COPY_SRC`) of `w × h` holding
+/// `depth` (row-major, in [0, 1]). Depth formats cannot be copy destinations, so the values go
+/// through an `R32Float` texture and a full-screen pass that writes them as `frag_depth`
+/// (bit-exact for a 32-bit float depth buffer). Waits for the GPU.
+pub fn depth32float_texture(w: u32, h: u32, depth: &[f32]) -> wgpu::TextureView {
+    assert_eq!(depth.len(), (w * h) as usize);
+    let g = gpu();
+    let src = trace::texture_with(
+        wgpu::TextureFormat::R32Float,
+        w,
+        h,
+        wgpu::TextureUsages::TEXTURE_BINDING,
+        bytemuck::cast_slice(depth),
+    );
+    let dst = texture(
+        wgpu::TextureFormat::Depth32Float,
+        w,
+        h,
+        wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::COPY_SRC,
+    );
+    let module = g.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("depth copy"),
+        source: wgpu::ShaderSource::Wgsl(
+            r#"
+@group(0) @binding(0) var src: texture_2d<f32>;
+@vertex fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
+    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
+}
+@fragment fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
+    return textureLoad(src, vec2<u32>(pos.xy), 0).x;
+}
+"#
+            .into(),
+        ),
+    });
+    let layout = g
+        .device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: None,
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            }],
+        });
+    let pipeline_layout = g
+        .device
+        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: None,
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+    let pipeline = g
+        .device
+        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("depth copy"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Always),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs"),
+                compilation_options: Default::default(),
+                targets: &[],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+    let bind = g.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::TextureView(&src),
+        }],
+    });
+    let mut e = encoder();
+    {
+        let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("depth copy"),
+            color_attachments: &[],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &dst,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.5),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.draw(0..3, 0..1);
+    }
+    submit(e);
+    // The depth buffer must hold the values exactly (a test input, not a result under test).
+    let row = (w * 4).div_ceil(256) * 256;
+    let buf = g.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: (row * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let mut e = encoder();
+    e.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture: dst.texture(),
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::DepthOnly,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buf,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(h),
+            },
+        },
+        dst.texture().size(),
+    );
+    submit(e);
+    let bytes = read_buffer(&buf);
+    for y in 0..h as usize {
+        let line: &[f32] =
+            bytemuck::cast_slice(&bytes[y * row as usize..y * row as usize + w as usize * 4]);
+        for (x, v) in line.iter().enumerate() {
+            let want = depth[y * w as usize + x];
+            assert_eq!(v.to_bits(), want.to_bits(), "depth buffer texel ({x}, {y})");
+        }
+    }
+    dst
+}

@@ -1,7 +1,8 @@
 //! Helpers of the trace-task tests: G-buffers of known surfaces (world-position depth, vector
-//! normals) and reading Rgba32Float outputs back.
+//! normals; or any depth and normal encoding of the SDK, written from analytic surfaces) and
+//! reading Rgba32Float outputs back.
 
-use glam::{Mat4, Vec3};
+use glam::{DVec2, DVec3, DVec4, Mat4, Vec3};
 use kickstart_rt::*;
 use wgpu::{TextureFormat as F, TextureUsages as U};
 
@@ -139,4 +140,193 @@ pub fn run_tasks(ctx: &ExecuteContext, tasks: Vec<RenderTask>) {
         c.schedule_render_task(t);
     }
     super::build_submit_complete(ctx, c);
+}
+
+/// The camera ray through the centre of pixel (x, y) of a `w × h` view, in f64: (eye, unit
+/// direction). The pixel-to-NDC mapping is the documented one (x right, y down, centres at +0.5).
+pub fn pixel_ray(view: &ViewInfo, w: u32, h: u32, x: u32, y: u32) -> (DVec3, DVec3) {
+    let w2v = view.world_to_view.as_dmat4();
+    let inv = (view.view_to_clip.as_dmat4() * w2v).inverse();
+    let eye = w2v.inverse().transform_point3(DVec3::ZERO);
+    let ndc = DVec2::new(
+        (x as f64 + 0.5) / w as f64 * 2.0 - 1.0,
+        1.0 - (y as f64 + 0.5) / h as f64 * 2.0,
+    );
+    let p = inv.project_point3(ndc.extend(0.5));
+    (eye, (p - eye).normalize())
+}
+
+/// The NDC depth a projection gives "nothing rendered" (its far plane): 1 for normal Z, 0 for
+/// reverse Z.
+pub fn far_ndc(view_to_clip: Mat4) -> f32 {
+    let c = view_to_clip.as_dmat4() * DVec4::new(0.0, 0.0, -1e30, 1.0);
+    if (c.z / c.w).clamp(0.0, 1.0) >= 0.5 {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// How a test G-buffer stores depth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DepthEncoding {
+    /// `RgbWorldSpace` in `Rgba32Float` (NaN where nothing was rendered).
+    WorldPosition,
+    /// `RClipSpace` in `R32Float` (the far plane's depth where nothing was rendered).
+    ClipR32Float,
+    /// `RClipSpace` in a `Depth32Float` depth buffer (written by a render pass).
+    ClipDepth32Float,
+}
+
+/// The depth input of a `w × h` G-buffer whose texel i shows `positions[i]` (world space, `None`:
+/// nothing rendered), seen with `view`; `depth_scale` multiplies each clip-space view distance
+/// (1 for the true depth; tests use another value to make a wrong depth on purpose).
+pub fn encode_depth(
+    enc: DepthEncoding,
+    w: u32,
+    h: u32,
+    view: &ViewInfo,
+    positions: &[Option<DVec3>],
+    depth_scale: f64,
+) -> DepthInput {
+    assert_eq!(positions.len(), (w * h) as usize);
+    let w2v = view.world_to_view.as_dmat4();
+    let world_to_clip = view.view_to_clip.as_dmat4() * w2v;
+    let eye = w2v.inverse().transform_point3(DVec3::ZERO);
+    let far = far_ndc(view.view_to_clip);
+    let clip: Vec<f32> = positions
+        .iter()
+        .map(|p| match p {
+            Some(p) => {
+                let q = eye + (*p - eye) * depth_scale;
+                world_to_clip.project_point3(q).z as f32
+            }
+            None => far,
+        })
+        .collect();
+    match enc {
+        DepthEncoding::WorldPosition => {
+            let data: Vec<f32> = positions
+                .iter()
+                .flat_map(|p| match p {
+                    Some(p) => {
+                        let q = eye + (*p - eye) * depth_scale;
+                        [q.x as f32, q.y as f32, q.z as f32, 1.0]
+                    }
+                    None => [f32::NAN; 4],
+                })
+                .collect();
+            DepthInput {
+                texture: texture_with(
+                    F::Rgba32Float,
+                    w,
+                    h,
+                    U::TEXTURE_BINDING,
+                    bytemuck::cast_slice(&data),
+                ),
+                depth_type: DepthType::RgbWorldSpace,
+            }
+        }
+        DepthEncoding::ClipR32Float => DepthInput {
+            texture: texture_with(
+                F::R32Float,
+                w,
+                h,
+                U::TEXTURE_BINDING,
+                bytemuck::cast_slice(&clip),
+            ),
+            depth_type: DepthType::RClipSpace,
+        },
+        DepthEncoding::ClipDepth32Float => DepthInput {
+            texture: super::depth32float_texture(w, h, &clip),
+            depth_type: DepthType::RClipSpace,
+        },
+    }
+}
+
+/// Octahedral encoding in [-1, 1]² of unit `n` (Cigolle et al. 2014; the inverse of the
+/// documented decode).
+pub fn oct_encode(n: DVec3) -> DVec2 {
+    let p = n / (n.x.abs() + n.y.abs() + n.z.abs());
+    if p.z >= 0.0 {
+        p.truncate()
+    } else {
+        let s = DVec2::new(
+            if p.x >= 0.0 { 1.0 } else { -1.0 },
+            if p.y >= 0.0 { 1.0 } else { -1.0 },
+        );
+        (DVec2::ONE - DVec2::new(p.y.abs(), p.x.abs())) * s
+    }
+}
+
+/// The texel of unit normal `n` in `ty`'s encoding (channels the type does not use hold filler).
+pub fn encode_normal(ty: NormalType, n: DVec3) -> [f64; 4] {
+    let o = oct_encode(n);
+    let h = o * 0.5 + 0.5;
+    match ty {
+        NormalType::RgbVector => [n.x, n.y, n.z, 0.7],
+        NormalType::RgbNormalizedVector => [n.x * 0.5 + 0.5, n.y * 0.5 + 0.5, n.z * 0.5 + 0.5, 0.7],
+        NormalType::RgOctahedron => [o.x, o.y, 0.3, 0.9],
+        NormalType::BaOctahedron => [0.3, 0.9, o.x, o.y],
+        NormalType::RgNormalizedOctahedron => [h.x, h.y, 0.3, 0.9],
+        NormalType::BaNormalizedOctahedron => [0.3, 0.9, h.x, h.y],
+    }
+}
+
+/// The normal input of a `w × h` G-buffer whose texel i has the unit world normal `normals[i]`:
+/// stored as `normalize(inverse(normal_to_world) · n)` in `ty`'s encoding, in `format`
+/// (`Rgba32Float`, or the 8-bit `Rgba8Unorm` / `Rgba8Snorm`, rounded to nearest).
+pub fn encode_normals(
+    ty: NormalType,
+    format: F,
+    normal_to_world: Mat4,
+    w: u32,
+    h: u32,
+    normals: &[DVec3],
+) -> NormalInput {
+    assert_eq!(normals.len(), (w * h) as usize);
+    let inv = normal_to_world.as_dmat4().inverse();
+    let texels: Vec<[f64; 4]> = normals
+        .iter()
+        .map(|n| encode_normal(ty, inv.transform_vector3(*n).normalize()))
+        .collect();
+    let bytes: Vec<u8> = match format {
+        F::Rgba32Float => texels
+            .iter()
+            .flatten()
+            .flat_map(|v| (*v as f32).to_ne_bytes())
+            .collect(),
+        F::Rgba8Unorm => texels
+            .iter()
+            .flatten()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect(),
+        F::Rgba8Snorm => texels
+            .iter()
+            .flatten()
+            .map(|v| (v.clamp(-1.0, 1.0) * 127.0).round() as i8 as u8)
+            .collect(),
+        other => panic!("encode_normals: unsupported format {other:?}"),
+    };
+    NormalInput {
+        texture: texture_with(format, w, h, U::TEXTURE_BINDING, &bytes),
+        normal_type: ty,
+        normal_to_world,
+    }
+}
+
+/// Whether every pixel within `r` pixels (Chebyshev, clipped to the `w × h` image) of (x, y)
+/// has the same label as (x, y): the pixel is away from the boundaries of its region.
+pub fn away_from_boundaries<T: PartialEq>(
+    labels: &[T],
+    w: u32,
+    h: u32,
+    x: u32,
+    y: u32,
+    r: u32,
+) -> bool {
+    let l = &labels[(y * w + x) as usize];
+    (y.saturating_sub(r)..(y + r + 1).min(h)).all(|yy| {
+        (x.saturating_sub(r)..(x + r + 1).min(w)).all(|xx| labels[(yy * w + xx) as usize] == *l)
+    })
 }
