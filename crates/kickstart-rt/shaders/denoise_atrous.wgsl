@@ -9,9 +9,15 @@
 //
 // The first iteration estimates the noise variance of the accumulated value (see
 // dn_variance_estimate).
-// Later iterations propagate it (Σ w² var / (Σ w)²).
+// Later iterations propagate it (Σ w² var / (Σ w)²). The last iteration (DN_LAST) writes the
+// output textures instead of an intermediate buffer (dn_write_output, defined by the prelude).
 //
-// Included after denoise_common.wgsl.
+// Cost: per tap one guide and one record read, one log2 (normal weight) and per signal one exp2:
+// the plane, luminance, normal and distance weights are multiplied as one exponential, with
+// their per-pixel factors (reciprocal widths, the distance term of the two tap distances)
+// computed once per pixel.
+//
+// Included after denoise_common.wgsl and a record file.
 
 struct AtrousParams {
     step: u32,
@@ -24,22 +30,22 @@ struct AtrousParams {
 @group(0) @binding(1) var<uniform> ap: AtrousParams;
 
 @group(1) @binding(0) var<storage, read> guide: array<vec4<u32>>;
-@group(1) @binding(1) var<storage, read> src0: array<vec4<u32>>;
-@group(1) @binding(2) var<storage, read> src1: array<vec4<u32>>;
-@group(1) @binding(3) var<storage, read_write> dst0: array<vec4<u32>>;
-@group(1) @binding(4) var<storage, read_write> dst1: array<vec4<u32>>;
+@group(1) @binding(1) var<storage, read> src0: array<DnRecord>;
+@group(1) @binding(2) var<storage, read> src1: array<DnRecord>;
+@group(1) @binding(3) var<storage, read_write> dst0: array<DnRecord>;
+@group(1) @binding(4) var<storage, read_write> dst1: array<DnRecord>;
 
 // Luminance edge-stopping strength, in standard deviations of the noise.
 const SIGMA_L: f32 = 4.0;
 
-fn dn_src(s: u32, i: u32) -> vec4<u32> {
+fn dn_src(s: u32, i: u32) -> DnRecord {
     if s == 0u {
         return src0[i];
     }
     return src1[i];
 }
 
-fn dn_dst(s: u32, i: u32, v: vec4<u32>) {
+fn dn_dst(s: u32, i: u32, v: DnRecord) {
     if s == 0u {
         dst0[i] = v;
     } else {
@@ -70,10 +76,10 @@ fn dn_variance_estimate(s: u32, p: vec2<i32>, centre: DnGuide, dist: f32) -> f32
             }
             let h = dn_src(s, j);
             let l = dn_luminance(dn_value(h).xyz);
-            let n = max(bitcast<f32>(h.w), 1.0);
+            let n = max(dn_rec_len(h), 1.0);
             m1 += l;
             m2 += l * l;
-            temporal += max(bitcast<f32>(h.z) - l * l, 0.0) / n;
+            temporal += max(dn_rec_z(h) - l * l, 0.0) / n;
             len += n;
             cnt += 1.0;
         }
@@ -111,6 +117,19 @@ fn dn_radius(s: u32, value: vec4<f32>, len: f32, roughness: f32, dist: f32) -> f
     return max(r, 0.5);
 }
 
+// log2(e): exp(x) = exp2(x · LOG2E).
+const LOG2E: f32 = 1.4426950408889634;
+
+// Stores the filtered record of signal `s`: to the next intermediate, or (last iteration) to the
+// output texture.
+fn dn_emit(s: u32, i: u32, p: vec2<u32>, value: vec4<f32>, z: f32, len: f32) {
+    if DN_LAST {
+        dn_write_output(s, p + dp.viewport.xy, value);
+    } else {
+        dn_dst(s, i, dn_pack_signal(value, z, len));
+    }
+}
+
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
@@ -120,80 +139,105 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.y * dp.viewport.z + gid.x;
     let gp = dn_unpack_guide(guide[i]);
     if !gp.valid {
-        for (var s = 0u; s < dp.signal_count; s++) {
+        // No surface: the accumulated input passes through.
+        for (var s = 0u; s < DN_SIGNALS; s++) {
             let h = dn_src(s, i);
-            dn_dst(s, i, vec4<u32>(h.xy, bitcast<u32>(0.0), h.w));
+            dn_emit(s, i, gid.xy, dn_value(h), 0.0, dn_rec_len(h));
         }
         return;
     }
     let dist = max(dn_view_distance(gp.position), 1e-6);
     let step = i32(ap.step);
+    let stepf = f32(ap.step);
+    // Tap distances of the 3×3 pattern: edge and corner.
+    let d_edge = stepf;
+    let d_corner = stepf * 1.4142135;
+    // Plane weight exp(-plane / (dist · 0.004 · (1 + d))), as log2 factors per tap distance.
+    let z_edge = LOG2E / (dist * 0.004 * (1.0 + d_edge));
+    let z_corner = LOG2E / (dist * 0.004 * (1.0 + d_corner));
 
-    var centre: array<vec4<f32>, 2>;
-    var var_c = array<f32, 2>(0.0, 0.0);
-    var lum_c = array<f32, 2>(0.0, 0.0);
-    var radius = array<f32, 2>(1.0, 1.0);
-    var len_c = array<f32, 2>(0.0, 0.0);
-    var n_exp = array<f32, 2>(64.0, 64.0);
-    for (var s = 0u; s < dp.signal_count; s++) {
+    var centre: array<vec4<f32>, DN_SIGNALS>;
+    var var_c: array<f32, DN_SIGNALS>;
+    var lum_c: array<f32, DN_SIGNALS>;
+    var len_c: array<f32, DN_SIGNALS>;
+    var n_exp: array<f32, DN_SIGNALS>;
+    // log2 factor of the luminance weight exp(-|Δl| / (σ_l √var + ε)).
+    var l_fac: array<f32, DN_SIGNALS>;
+    // log2 of the distance weight exp(-d² / (2 r²)) at an edge and a corner tap.
+    var r_edge: array<f32, DN_SIGNALS>;
+    var r_corner: array<f32, DN_SIGNALS>;
+    for (var s = 0u; s < DN_SIGNALS; s++) {
         let h = dn_src(s, i);
         centre[s] = dn_value(h);
-        len_c[s] = bitcast<f32>(h.w);
+        len_c[s] = dn_rec_len(h);
         if ap.first != 0u {
             var_c[s] = dn_variance_estimate(s, p, gp, dist);
         } else {
-            var_c[s] = bitcast<f32>(h.z);
+            var_c[s] = dn_rec_z(h);
         }
         lum_c[s] = dn_luminance(centre[s].xyz);
-        radius[s] = dn_radius(s, centre[s], len_c[s], gp.roughness, dist);
+        let radius = dn_radius(s, centre[s], len_c[s], gp.roughness, dist);
+        let r2 = LOG2E / (2.0 * radius * radius);
+        r_edge[s] = -d_edge * d_edge * r2;
+        r_corner[s] = -d_corner * d_corner * r2;
+        l_fac[s] = LOG2E / (SIGMA_L * sqrt(var_c[s]) + 1e-4 + 0.01 * abs(lum_c[s]));
+        n_exp[s] = 64.0;
         if dn_kind(s) == DN_KIND_SPECULAR {
             n_exp[s] = mix(256.0, 32.0, gp.roughness);
         }
     }
 
-    var sum: array<vec4<f32>, 2>;
-    var wsum = array<f32, 2>(0.0, 0.0);
-    var vsum = array<f32, 2>(0.0, 0.0);
-    let kernel = array<f32, 3>(0.25, 0.5, 0.25);
-    for (var dy = -1; dy <= 1; dy++) {
-        for (var dx = -1; dx <= 1; dx++) {
-            let q = p + vec2<i32>(dx, dy) * step;
-            if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
-                continue;
+    // The centre tap: kernel weight 0.5 × 0.5, every other factor 1.
+    var sum: array<vec4<f32>, DN_SIGNALS>;
+    var wsum: array<f32, DN_SIGNALS>;
+    var vsum: array<f32, DN_SIGNALS>;
+    for (var s = 0u; s < DN_SIGNALS; s++) {
+        sum[s] = 0.25 * centre[s];
+        wsum[s] = 0.25;
+        vsum[s] = 0.0625 * var_c[s];
+    }
+    for (var k = 0; k < 9; k++) {
+        if k == 4 {
+            continue;
+        }
+        let dx = k % 3 - 1;
+        let dy = k / 3 - 1;
+        let q = p + vec2<i32>(dx, dy) * step;
+        if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
+            continue;
+        }
+        let j = u32(q.y) * dp.viewport.z + u32(q.x);
+        let gq = dn_unpack_guide(guide[j]);
+        if !gq.valid {
+            continue;
+        }
+        let cos_n = dot(gp.normal, gq.normal);
+        if cos_n <= 0.0 {
+            continue; // pow(0, e) = 0
+        }
+        let corner = dx != 0 && dy != 0;
+        // B-spline kernel (0.25, 0.5, 0.25)²: an edge tap 0.125, a corner 0.0625.
+        let kernel = select(0.125, 0.0625, corner);
+        let plane = abs(dot(gp.normal, gq.position - gp.position));
+        let e_geo = -plane * select(z_edge, z_corner, corner);
+        let log_n = log2(cos_n);
+        for (var s = 0u; s < DN_SIGNALS; s++) {
+            let h = dn_src(s, j);
+            let v = dn_value(h);
+            var var_q = var_c[s];
+            if ap.first == 0u {
+                var_q = dn_rec_z(h);
             }
-            let j = u32(q.y) * dp.viewport.z + u32(q.x);
-            let gq = dn_unpack_guide(guide[j]);
-            if !gq.valid {
-                continue;
-            }
-            let d_px = length(vec2<f32>(q - p));
-            let plane = abs(dot(gp.normal, gq.position - gp.position));
-            let w_z = exp(-plane / (dist * 0.004 * (1.0 + d_px)));
-            let cos_n = max(dot(gp.normal, gq.normal), 0.0);
-            let w_geo = kernel[dx + 1] * kernel[dy + 1] * w_z;
-            for (var s = 0u; s < dp.signal_count; s++) {
-                let h = dn_src(s, j);
-                let v = dn_value(h);
-                var var_q = var_c[s];
-                if ap.first == 0u {
-                    var_q = bitcast<f32>(h.z);
-                }
-                let dl = abs(dn_luminance(v.xyz) - lum_c[s]);
-                let w_l = exp(-dl / (SIGMA_L * sqrt(var_c[s]) + 1e-4 + 0.01 * abs(lum_c[s])));
-                let w_n = pow(cos_n, n_exp[s]);
-                let w_r = exp(-d_px * d_px / (2.0 * radius[s] * radius[s]));
-                var w = w_geo * w_n * w_l * w_r;
-                if j == i {
-                    w = w_geo;
-                }
-                sum[s] += w * v;
-                wsum[s] += w;
-                vsum[s] += w * w * var_q;
-            }
+            let dl = abs(dn_luminance(v.xyz) - lum_c[s]);
+            let e = e_geo + n_exp[s] * log_n - dl * l_fac[s] + select(r_edge[s], r_corner[s], corner);
+            let w = kernel * exp2(e);
+            sum[s] += w * v;
+            wsum[s] += w;
+            vsum[s] += w * w * var_q;
         }
     }
-    for (var s = 0u; s < dp.signal_count; s++) {
+    for (var s = 0u; s < DN_SIGNALS; s++) {
         let ws = max(wsum[s], 1e-8);
-        dn_dst(s, i, dn_pack_signal(sum[s] / ws, vsum[s] / (ws * ws), len_c[s]));
+        dn_emit(s, i, gid.xy, sum[s] / ws, vsum[s] / (ws * ws), len_c[s]);
     }
 }

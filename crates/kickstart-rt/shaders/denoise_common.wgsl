@@ -1,12 +1,19 @@
 // kickstart-rt denoisers: parameters and packing shared by every denoise pass
 // (src/denoise/mod.rs fills DenoiseParams).
 //
+// Every pass is compiled per signal set: src/denoise/mod.rs puts a prelude in front that defines
+// DN_SIGNALS (1 or 2), DN_KIND0 / DN_KIND1 (DN_KIND_*), DN_LAST (the last à-trous iteration,
+// which writes the output textures) and dn_write_output, so that signal loops have constant
+// bounds (their arrays stay in registers) and kind switches fold away; and one of
+// denoise_record_rgba.wgsl (radiance) or denoise_record_scalar.wgsl (occlusion, shadows), which
+// define the signal record `DnRecord` and its accessors.
+//
 // Per-pixel buffers are indexed by viewport-relative pixel, row-major with the viewport's width.
 // - guide (vec4<u32>): world position xyz (f32 bits); w = octahedral normal (12 + 12 bits) and
 //   roughness (8 bits), or DN_INVALID where the G-buffer holds no surface.
-// - signal (vec4<u32>, history and filter intermediates): x = rg (2×f16), y = b and the hit
-//   distance (2×f16), z = history: second moment of luminance (f32) / filter: variance of the
-//   value's noise (f32), w = history length in frames (f32).
+// - signal (DnRecord, history and filter intermediates): the value (rgb or scalar), the hit
+//   distance, z = history: second moment of luminance / filter: variance of the value's noise,
+//   and the history length in frames (layouts in the record files).
 
 struct DenoiseParams {
     // x, y, width, height of the viewport in texels.
@@ -116,16 +123,6 @@ fn dn_unpack_guide(g: vec4<u32>) -> DnGuide {
     return r;
 }
 
-// Value (rgb, hit distance) of a packed signal.
-fn dn_value(s: vec4<u32>) -> vec4<f32> {
-    return vec4<f32>(unpack2x16float(s.x), unpack2x16float(s.y));
-}
-
-fn dn_pack_signal(value: vec4<f32>, z: f32, len: f32) -> vec4<u32> {
-    let v = dn_sanitize(value);
-    return vec4<u32>(pack2x16float(v.xy), pack2x16float(v.zw), bitcast<u32>(z), bitcast<u32>(len));
-}
-
 fn dn_pixel_count() -> u32 {
     return dp.viewport.z * dp.viewport.w;
 }
@@ -154,5 +151,5 @@ fn dn_to_eye(p: vec3<f32>) -> vec3<f32> {
 }
 
 fn dn_kind(s: u32) -> u32 {
-    return select(dp.kind0, dp.kind1, s == 1u);
+    return select(DN_KIND0, DN_KIND1, s == 1u);
 }

@@ -18,13 +18,15 @@
 
 @group(2) @binding(0) var<storage, read> guide_prev: array<vec4<u32>>;
 @group(2) @binding(1) var<storage, read_write> guide_cur: array<vec4<u32>>;
-@group(2) @binding(2) var<storage, read> hist_prev0: array<vec4<u32>>;
-@group(2) @binding(3) var<storage, read> hist_prev1: array<vec4<u32>>;
-@group(2) @binding(4) var<storage, read_write> hist_cur0: array<vec4<u32>>;
-@group(2) @binding(5) var<storage, read_write> hist_cur1: array<vec4<u32>>;
+@group(2) @binding(2) var<storage, read> hist_prev0: array<DnRecord>;
+@group(2) @binding(3) var<storage, read> hist_prev1: array<DnRecord>;
+@group(2) @binding(4) var<storage, read_write> hist_cur0: array<DnRecord>;
+@group(2) @binding(5) var<storage, read_write> hist_cur1: array<DnRecord>;
 
 // Width of the history clamp, in standard deviations of the neighbourhood.
 const CLAMP_SIGMAS: f32 = 2.0;
+// History length from which the pixel's own sample spread (its moments) is trusted.
+const TEMPORAL_SPREAD_FRAMES: f32 = 4.0;
 
 // The noisy input of signal `s` at `texel` as (rgb, hit distance); scalar signals repeat their
 // value in rgb. Occlusion: normalised hit distance (1 = open). Shadow: visibility 1 where the
@@ -110,14 +112,14 @@ fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) ->
     return any_sum / max(any_count, 1.0);
 }
 
-fn dn_load_hist(s: u32, i: u32) -> vec4<u32> {
+fn dn_load_hist(s: u32, i: u32) -> DnRecord {
     if s == 0u {
         return hist_prev0[i];
     }
     return hist_prev1[i];
 }
 
-fn dn_store_hist(s: u32, i: u32, v: vec4<u32>) {
+fn dn_store_hist(s: u32, i: u32, v: DnRecord) {
     if s == 0u {
         hist_cur0[i] = v;
     } else {
@@ -158,7 +160,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     if !surf.valid {
         guide_cur[i] = vec4<u32>(DN_INVALID);
-        for (var s = 0u; s < dp.signal_count; s++) {
+        for (var s = 0u; s < DN_SIGNALS; s++) {
             let v = dn_sample(s, p, false, pos, n);
             dn_store_hist(s, i, dn_pack_signal(v, 0.0, 0.0));
         }
@@ -211,7 +213,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
 
-    for (var s = 0u; s < dp.signal_count; s++) {
+    for (var s = 0u; s < DN_SIGNALS; s++) {
         var cur = dn_sample(s, p, true, pos, n);
 
         // Neighbourhood statistics of the current input (traced pixels only).
@@ -239,14 +241,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let mean = m1 / max(cnt, 1.0);
         let sigma = sqrt(max(m2 / max(cnt, 1.0) - mean * mean, vec4<f32>(0.0)));
         let kind = dn_kind(s);
-        if (kind == DN_KIND_SPECULAR || kind == DN_KIND_DIFFUSE) && cnt > 2.0 {
-            // Fireflies: a sample far above all its neighbours is clamped to them.
-            let cn = cnt - select(0.0, 1.0, dn_traced(p));
-            let mean_nc = m1_nc / max(cn, 1.0);
-            let sigma_nc = sqrt(max(m2_nc / max(cn, 1.0) - mean_nc * mean_nc, vec4<f32>(0.0)));
-            let hi = mean_nc + 4.0 * sigma_nc + 0.1 * abs(mean_nc);
-            cur = vec4<f32>(min(cur.xyz, hi.xyz), cur.w);
-        }
 
         var hist = vec4<f32>(0.0);
         var hist_m2 = 0.0;
@@ -257,19 +251,43 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let h = dn_load_hist(s, taps[k]);
                     let w = weights[k] / wsum;
                     hist += w * dn_value(h);
-                    hist_m2 += w * bitcast<f32>(h.z);
-                    hist_len += w * bitcast<f32>(h.w);
+                    hist_m2 += w * dn_rec_z(h);
+                    hist_len += w * dn_rec_len(h);
                 }
             }
-            // Ghosting: the history may not leave the current neighbourhood's range. The range
-            // has a floor: 3×3 samples of a sparse signal (a penumbra's visibility, dark
-            // radiance with rare bright samples) are often all equal, and clamping to them
-            // would bias the history towards one sample.
+        }
+        // The spread of the samples this pixel has seen (its luminance moments over the
+        // history), once a few frames back it. A 3×3 neighbourhood of a sparse 1-spp signal
+        // (dark radiance with rare bright hits, a penumbra's 0/1 visibility) is often all alike,
+        // so its spread alone would call the rare samples the mean is made of outliers and
+        // clamp them away: a darkening bias that grows with every frame of history.
+        let temporal = hist_len >= TEMPORAL_SPREAD_FRAMES;
+        var sigma_t = 0.0;
+        if temporal {
+            let hl = dn_luminance(hist.xyz);
+            sigma_t = sqrt(max(hist_m2 - hl * hl, 0.0));
+        }
+        if (kind == DN_KIND_SPECULAR || kind == DN_KIND_DIFFUSE) && cnt > 2.0 && temporal {
+            // Fireflies: a sample far above all its neighbours and far above what this pixel's
+            // history has seen is clamped (not before the history can tell: early frames keep
+            // their samples, whose weight fades as 1 / length).
+            let cn = cnt - select(0.0, 1.0, dn_traced(p));
+            let mean_nc = m1_nc / max(cn, 1.0);
+            let sigma_nc = sqrt(max(m2_nc / max(cn, 1.0) - mean_nc * mean_nc, vec4<f32>(0.0)));
+            let hi_spatial = mean_nc + 4.0 * sigma_nc + 0.1 * abs(mean_nc);
+            let hi_temporal = hist + vec4<f32>(4.0 * sigma_t) + 0.1 * abs(hist);
+            let hi = max(hi_spatial, hi_temporal);
+            cur = vec4<f32>(min(cur.xyz, hi.xyz), cur.w);
+        }
+        if wsum > 1e-3 {
+            // Ghosting: the history may not leave the range the current neighbourhood and the
+            // pixel's own sample spread allow. The range has a floor too, for the first frames
+            // of a sparse signal, when neither spread is known yet.
             var floor = 0.25 * max(abs(mean), abs(hist));
             if kind != DN_KIND_SPECULAR && kind != DN_KIND_DIFFUSE {
                 floor += vec4<f32>(0.2);
             }
-            let half = CLAMP_SIGMAS * sigma + floor;
+            let half = CLAMP_SIGMAS * max(sigma, vec4<f32>(sigma_t)) + floor;
             hist = clamp(hist, mean - half, mean + half);
         }
         let len = min(hist_len + 1.0, dp.max_history);

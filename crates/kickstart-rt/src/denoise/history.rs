@@ -1,13 +1,23 @@
 //! The GPU memory of one denoising context: guides, history and filter intermediates, sized by
-//! the context's maximum resolution. Every buffer holds one 16-byte record per pixel (see
-//! `shaders/denoise_common.wgsl`); a signal's buffers are separate so that each binding stays
-//! under WebGPU's default 128 MiB binding limit up to 4K.
+//! the context's maximum resolution. Guides hold 16 bytes per pixel, a signal's history and
+//! intermediates 16 (radiance) or 8 (occlusion, shadows) bytes per pixel (see
+//! `shaders/denoise_common.wgsl` and the record files); a signal's buffers are separate so that
+//! each binding stays under WebGPU's default 128 MiB binding limit up to 4K.
 
 use crate::context::{DenoisingContextInput, SignalType};
 use crate::tasks::Viewport;
 
-/// Bytes of one per-pixel record.
+/// Bytes of the largest per-pixel record (a guide, a radiance signal).
 pub(crate) const RECORD_BYTES: u64 = 16;
+
+/// Bytes per pixel of a signal record of a context of `signal_type`: scalar signals keep one
+/// value (`shaders/denoise_record_scalar.wgsl`).
+pub(crate) fn signal_record_bytes(signal_type: SignalType) -> u64 {
+    match signal_type {
+        SignalType::DiffuseOcclusion | SignalType::Shadow | SignalType::MultiShadow => 8,
+        _ => 16,
+    }
+}
 
 /// Signals a context of `signal_type` filters in one pass.
 pub(crate) fn signal_count(signal_type: SignalType) -> usize {
@@ -17,9 +27,14 @@ pub(crate) fn signal_count(signal_type: SignalType) -> usize {
     }
 }
 
-/// Bytes of one per-pixel buffer of a context of `input`'s size.
+/// Bytes of the largest per-pixel buffer (a guide) of a context of `input`'s size.
 pub(crate) fn buffer_bytes(input: &DenoisingContextInput) -> u64 {
     input.max_width as u64 * input.max_height as u64 * RECORD_BYTES
+}
+
+/// Bytes of one signal buffer (history, intermediate) of a context of `input`'s size.
+fn signal_buffer_bytes(input: &DenoisingContextInput) -> u64 {
+    input.max_width as u64 * input.max_height as u64 * signal_record_bytes(input.signal_type)
 }
 
 /// One context's buffers and the state carried between its frames.
@@ -46,8 +61,7 @@ impl History {
     /// Allocates the buffers of a context (contents undefined until the first frame, which
     /// starts without history).
     pub fn new(device: &wgpu::Device, input: DenoisingContextInput) -> Self {
-        let size = buffer_bytes(&input);
-        let buffer = |label: &str| {
+        let buffer = |label: &str, size: u64| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
@@ -56,12 +70,18 @@ impl History {
             })
         };
         let n = signal_count(input.signal_type);
-        let set = |label: &str| (0..n).map(|_| buffer(label)).collect::<Vec<_>>();
+        let signal_size = signal_buffer_bytes(&input);
+        let set = |label: &str| {
+            (0..n)
+                .map(|_| buffer(label, signal_size))
+                .collect::<Vec<_>>()
+        };
+        let guide_size = buffer_bytes(&input);
         History {
             input,
             guides: [
-                buffer("kickstart-rt denoiser guide"),
-                buffer("kickstart-rt denoiser guide"),
+                buffer("kickstart-rt denoiser guide", guide_size),
+                buffer("kickstart-rt denoiser guide", guide_size),
             ],
             history: [
                 set("kickstart-rt denoiser history"),
@@ -81,6 +101,6 @@ impl History {
     /// GPU bytes held.
     pub fn bytes(&self) -> u64 {
         let n = signal_count(self.input.signal_type) as u64;
-        buffer_bytes(&self.input) * (2 + 4 * n)
+        buffer_bytes(&self.input) * 2 + signal_buffer_bytes(&self.input) * 4 * n
     }
 }

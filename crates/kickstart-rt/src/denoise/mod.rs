@@ -49,7 +49,8 @@ use history::History;
 const COMMON_WGSL: &str = include_str!("../../shaders/denoise_common.wgsl");
 const TEMPORAL_WGSL: &str = include_str!("../../shaders/denoise_temporal.wgsl");
 const ATROUS_WGSL: &str = include_str!("../../shaders/denoise_atrous.wgsl");
-const OUTPUT_WGSL: &str = include_str!("../../shaders/denoise_output.wgsl");
+const RECORD_RGBA_WGSL: &str = include_str!("../../shaders/denoise_record_rgba.wgsl");
+const RECORD_SCALAR_WGSL: &str = include_str!("../../shaders/denoise_record_scalar.wgsl");
 
 /// Invocations per workgroup side of every denoise pass (`@workgroup_size(8, 8)`).
 const TILE: u32 = 8;
@@ -81,13 +82,96 @@ fn method_settings(method: DenoisingMethod) -> MethodSettings {
 }
 
 /// Signal kinds of the shaders (`DN_KIND_*`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 enum Kind {
     Specular = 0,
     Diffuse = 1,
     Occlusion = 2,
     Shadow = 3,
     MultiShadow = 4,
+}
+
+impl Kind {
+    /// One value per pixel (stored in the 8-byte scalar record).
+    fn scalar(self) -> bool {
+        matches!(self, Kind::Occlusion | Kind::Shadow | Kind::MultiShadow)
+    }
+}
+
+/// The signals a context filters together; every pass is compiled per signal set (constant loop
+/// bounds, folded kind switches, the record layout).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+struct SignalSet {
+    kinds: [Kind; 2],
+    count: usize,
+}
+
+impl SignalSet {
+    fn of(signal_type: SignalType) -> Self {
+        let one = |k| SignalSet {
+            kinds: [k, k],
+            count: 1,
+        };
+        match signal_type {
+            SignalType::Specular => one(Kind::Specular),
+            SignalType::Diffuse => one(Kind::Diffuse),
+            SignalType::SpecularAndDiffuse => SignalSet {
+                kinds: [Kind::Specular, Kind::Diffuse],
+                count: 2,
+            },
+            SignalType::DiffuseOcclusion => one(Kind::Occlusion),
+            SignalType::Shadow => one(Kind::Shadow),
+            SignalType::MultiShadow => one(Kind::MultiShadow),
+        }
+    }
+
+    fn scalar(self) -> bool {
+        self.kinds[..self.count].iter().all(|k| k.scalar())
+    }
+
+    /// The WGSL in front of a pass of this set: constants, the record layout and (`outputs`:
+    /// the last à-trous iteration) the output textures of group 2.
+    fn prelude(self, outputs: Option<&[wgpu::TextureFormat]>) -> String {
+        let mut s = format!(
+            "const DN_SIGNALS: u32 = {}u;\nconst DN_KIND0: u32 = {}u;\nconst DN_KIND1: u32 = {}u;\n",
+            self.count, self.kinds[0] as u32, self.kinds[1] as u32
+        );
+        s += if self.scalar() {
+            RECORD_SCALAR_WGSL
+        } else {
+            RECORD_RGBA_WGSL
+        };
+        match outputs {
+            None => {
+                s += "\nconst DN_LAST: bool = false;\n\
+                      fn dn_write_output(s: u32, texel: vec2<u32>, v: vec4<f32>) {}\n";
+            }
+            Some(formats) => {
+                s += "\nconst DN_LAST: bool = true;\n";
+                for (k, f) in formats.iter().enumerate() {
+                    let name = wgsl_format(*f).unwrap_or("rgba16float");
+                    s += &format!(
+                        "@group(2) @binding({k}) var dn_out{k}: texture_storage_2d<{name}, write>;\n"
+                    );
+                }
+                // Radiance: rgb and the filtered hit distance; occlusion and shadows: the value
+                // in every channel.
+                s += "fn dn_write_output(s: u32, texel: vec2<u32>, v: vec4<f32>) {\n\
+                      var out = v;\n\
+                      if dn_kind(s) != DN_KIND_SPECULAR && dn_kind(s) != DN_KIND_DIFFUSE {\n\
+                      out = vec4<f32>(v.x);\n\
+                      }\n\
+                      if s == 0u {\n\
+                      textureStore(dn_out0, texel, out);\n\
+                      }\n";
+                if formats.len() > 1 {
+                    s += "if s == 1u {\ntextureStore(dn_out1, texel, out);\n}\n";
+                }
+                s += "}\n";
+            }
+        }
+        s
+    }
 }
 
 /// The uniform of `shaders/denoise_common.wgsl` (`DenoiseParams`).
@@ -301,6 +385,19 @@ fn bind(
     })
 }
 
+/// The pipelines of one signal set.
+struct SetPipelines {
+    temporal: wgpu::ComputePipeline,
+    atrous: wgpu::ComputePipeline,
+    /// The last à-trous iteration per output formats (one per signal): the output textures'
+    /// layout (group 2) and the pipeline.
+    last: Vec<(
+        Vec<wgpu::TextureFormat>,
+        wgpu::BindGroupLayout,
+        wgpu::ComputePipeline,
+    )>,
+}
+
 /// Bind group layouts and pipelines of the denoise passes (created on first use).
 struct Pipelines {
     gbuffer: GBufferBinder,
@@ -308,14 +405,7 @@ struct Pipelines {
     temporal_buffers: wgpu::BindGroupLayout,
     atrous_params: wgpu::BindGroupLayout,
     atrous_buffers: wgpu::BindGroupLayout,
-    temporal: wgpu::ComputePipeline,
-    atrous: wgpu::ComputePipeline,
-    /// Output pass per storage format: its layout and pipeline.
-    output: Vec<(
-        wgpu::TextureFormat,
-        wgpu::BindGroupLayout,
-        wgpu::ComputePipeline,
-    )>,
+    sets: HashMap<SignalSet, SetPipelines>,
     /// Bound where a pass has no texture (no motion vectors, one signal).
     placeholder_texture: wgpu::TextureView,
     /// Bound where a pass has no second signal: one to read, one to write (a dispatch may not
@@ -364,20 +454,6 @@ impl Pipelines {
                 storage_entry(4, false),
             ],
         );
-        let temporal = compute_pipeline_with_layouts(
-            device,
-            "kickstart-rt denoise temporal",
-            &assemble(&[&gbuffer_wgsl(0), COMMON_WGSL, TEMPORAL_WGSL]),
-            "main",
-            &[gbuffer.layout(), &temporal_inputs, &temporal_buffers],
-        );
-        let atrous = compute_pipeline_with_layouts(
-            device,
-            "kickstart-rt denoise a-trous",
-            &assemble(&[COMMON_WGSL, ATROUS_WGSL]),
-            "main",
-            &[&atrous_params, &atrous_buffers],
-        );
         let placeholder_texture = device
             .create_texture(&wgpu::TextureDescriptor {
                 label: Some("kickstart-rt denoise placeholder"),
@@ -408,56 +484,85 @@ impl Pipelines {
             temporal_buffers,
             atrous_params,
             atrous_buffers,
-            temporal,
-            atrous,
-            output: Vec::new(),
+            sets: HashMap::new(),
             placeholder_texture,
             placeholder_buffers: [placeholder_buffer(), placeholder_buffer()],
         }
     }
 
-    /// The output pass writing `format` (one of the writable output formats).
-    fn output(
+    /// The temporal and à-trous pipelines of `set`.
+    fn set(&mut self, device: &wgpu::Device, set: SignalSet) -> &mut SetPipelines {
+        let (gbuffer, inputs, buffers, params, atrous_buffers) = (
+            &self.gbuffer,
+            &self.temporal_inputs,
+            &self.temporal_buffers,
+            &self.atrous_params,
+            &self.atrous_buffers,
+        );
+        self.sets.entry(set).or_insert_with(|| {
+            let prelude = set.prelude(None);
+            SetPipelines {
+                temporal: compute_pipeline_with_layouts(
+                    device,
+                    "kickstart-rt denoise temporal",
+                    &assemble(&[&gbuffer_wgsl(0), &prelude, COMMON_WGSL, TEMPORAL_WGSL]),
+                    "main",
+                    &[gbuffer.layout(), inputs, buffers],
+                ),
+                atrous: compute_pipeline_with_layouts(
+                    device,
+                    "kickstart-rt denoise a-trous",
+                    &assemble(&[&prelude, COMMON_WGSL, ATROUS_WGSL]),
+                    "main",
+                    &[params, atrous_buffers],
+                ),
+                last: Vec::new(),
+            }
+        })
+    }
+
+    /// The last à-trous iteration of `set` writing textures of `formats` (one per signal; each
+    /// one of the writable output formats): its output layout and pipeline.
+    fn last(
         &mut self,
         device: &wgpu::Device,
-        format: wgpu::TextureFormat,
-    ) -> Option<&(
-        wgpu::TextureFormat,
-        wgpu::BindGroupLayout,
-        wgpu::ComputePipeline,
-    )> {
-        if let Some(i) = self.output.iter().position(|(f, _, _)| *f == format) {
-            return self.output.get(i);
+        set: SignalSet,
+        formats: &[wgpu::TextureFormat],
+    ) -> Option<(wgpu::BindGroupLayout, wgpu::ComputePipeline)> {
+        if formats.iter().any(|f| wgsl_format(*f).is_none()) {
+            return None;
         }
-        let name = wgsl_format(format)?;
-        let layout = layout(
-            device,
-            "kickstart-rt denoise output",
-            &[
-                uniform_entry(0),
-                uniform_entry(1),
-                storage_entry(2, true),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
+        let params = self.atrous_params.clone();
+        let buffers = self.atrous_buffers.clone();
+        let sp = self.set(device, set);
+        if let Some((_, l, p)) = sp.last.iter().find(|(f, _, _)| f == formats) {
+            return Some((l.clone(), p.clone()));
+        }
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = formats
+            .iter()
+            .enumerate()
+            .map(|(k, format)| wgpu::BindGroupLayoutEntry {
+                binding: k as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: *format,
+                    view_dimension: wgpu::TextureViewDimension::D2,
                 },
-            ],
-        );
+                count: None,
+            })
+            .collect();
+        let out_layout = layout(device, "kickstart-rt denoise output", &entries);
         let pipeline = compute_pipeline_with_layouts(
             device,
-            "kickstart-rt denoise output",
-            &assemble(&[COMMON_WGSL, &OUTPUT_WGSL.replace("OUTPUT_FORMAT", name)]),
+            "kickstart-rt denoise a-trous (last, output)",
+            &assemble(&[&set.prelude(Some(formats)), COMMON_WGSL, ATROUS_WGSL]),
             "main",
-            &[&layout],
+            &[&params, &buffers, &out_layout],
         );
-        self.output.push((format, layout, pipeline));
-        self.output.last()
+        sp.last
+            .push((formats.to_vec(), out_layout.clone(), pipeline.clone()));
+        Some((out_layout, pipeline))
     }
 }
 
@@ -490,8 +595,25 @@ impl Denoisers {
     pub fn prepare_pipelines(&mut self) {
         let device = self.device.clone();
         let p = self.pipelines();
-        for format in crate::WRITABLE_OUTPUT_FORMATS {
-            let _ = p.output(&device, format);
+        let formats = crate::WRITABLE_OUTPUT_FORMATS;
+        for signal_type in [
+            SignalType::Specular,
+            SignalType::Diffuse,
+            SignalType::SpecularAndDiffuse,
+            SignalType::DiffuseOcclusion,
+            SignalType::Shadow,
+            SignalType::MultiShadow,
+        ] {
+            let set = SignalSet::of(signal_type);
+            for f0 in formats {
+                if set.count == 1 {
+                    let _ = p.last(&device, set, &[f0]);
+                } else {
+                    for f1 in formats {
+                        let _ = p.last(&device, set, &[f0, f1]);
+                    }
+                }
+            }
         }
     }
 
@@ -558,6 +680,16 @@ fn record_job(
     let device = rec.device;
     let c = job.common;
     let settings = method_settings(h.input.method);
+    let set = SignalSet::of(h.input.signal_type);
+    let formats: Vec<wgpu::TextureFormat> =
+        job.outputs.iter().map(|o| o.texture().format()).collect();
+    let Some((out_layout, last)) = p.last(device, set, &formats) else {
+        return; // unreachable: validation admits writable formats only
+    };
+    let (temporal, atrous) = {
+        let sp = p.set(device, set);
+        (sp.temporal.clone(), sp.atrous.clone())
+    };
     let mut inputs = GBufferInputs::of_denoise(c, job.inputs[0]);
     inputs.viewport = resolve_viewport(c.viewport, job.inputs[0].texture().size());
     let vp = inputs.viewport;
@@ -654,9 +786,19 @@ fn record_job(
             hist_cur1.as_entire_binding(),
         ],
     );
-    rec.dispatch_2d("denoise temporal", &p.temporal, &[&g0, &g1, &g2], groups);
+    rec.dispatch_2d("denoise temporal", &temporal, &[&g0, &g1, &g2], groups);
 
-    // 2. À-trous iterations: history → temp[0] → temp[1] → …
+    // 2. À-trous iterations: history → temp[0] → temp[1] → … → the output textures (the last
+    // iteration writes them).
+    let outputs = bind(
+        device,
+        "kickstart-rt denoise output",
+        &out_layout,
+        &job.outputs
+            .iter()
+            .map(|o| wgpu::BindingResource::TextureView(o))
+            .collect::<Vec<_>>(),
+    );
     let mut src: [wgpu::Buffer; 2] = [h.history[cur][0].clone(), second(&h.history[cur], false)];
     for it in 0..settings.iterations {
         let dst_set = &h.temp[(it % 2) as usize];
@@ -687,35 +829,17 @@ fn record_job(
                 dst[1].as_entire_binding(),
             ],
         );
-        rec.dispatch_2d("denoise a-trous", &p.atrous, &[&a0, &a1], groups);
+        if it + 1 == settings.iterations {
+            rec.dispatch_2d(
+                "denoise a-trous + output",
+                &last,
+                &[&a0, &a1, &outputs],
+                groups,
+            );
+        } else {
+            rec.dispatch_2d("denoise a-trous", &atrous, &[&a0, &a1], groups);
+        }
         src = [dst_set[0].clone(), second(dst_set, false)];
-    }
-
-    // 3. Output.
-    for (s, output) in job.outputs.iter().enumerate() {
-        let Some((_, layout, pipeline)) = p.output(device, output.texture().format()) else {
-            continue; // unreachable: validation admits writable formats only
-        };
-        let signal = rec.uniform(
-            "kickstart-rt denoise output signal",
-            &StepParams {
-                value: s as u32,
-                first: 0,
-                pad: [0; 2],
-            },
-        );
-        let o0 = bind(
-            device,
-            "kickstart-rt denoise output",
-            layout,
-            &[
-                params.as_entire_binding(),
-                signal.as_entire_binding(),
-                src[s].as_entire_binding(),
-                wgpu::BindingResource::TextureView(output),
-            ],
-        );
-        rec.dispatch_2d("denoise output", pipeline, &[&o0], groups);
     }
     rec.scope = previous_scope;
 
