@@ -86,6 +86,51 @@ fn static_camera_error_falls_and_ends_10db_better() {
     assert_converges("diffuse (high quality)", &psnrs[0], noisy[0]);
 }
 
+/// A sparse 1-spp signal — most samples 0, one in ten 10× the mean (diffuse GI lit by rare
+/// bright hits) — keeps most of its energy: clamping the rare samples (as fireflies, or the
+/// history to a 3×3 neighbourhood that is all zeros) darkens it frame after frame.
+#[test]
+fn sparse_signal_keeps_its_energy() {
+    let g = static_gbuffer();
+    let r = reference_image(&g, reference);
+    let h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+    let mut rng = Rng(21);
+    let mut out = Vec::new();
+    let mut noisy_psnr = 0.0;
+    for _ in 0..32 {
+        let input: Vec<Vec4> = r
+            .iter()
+            .map(|v| {
+                let k = if rng.f() < 0.1 { 10.0 } else { 0.0 };
+                (v.truncate() * k).extend(v.w)
+            })
+            .collect();
+        noisy_psnr = psnr(&g, &input, &r);
+        out = h
+            .frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue)
+            .remove(0);
+    }
+    let (mut sum_out, mut sum_ref) = (0.0f64, 0.0f64);
+    for (i, s) in g.surfaces.iter().enumerate() {
+        if s.is_some() {
+            sum_out += out[i].truncate().element_sum() as f64;
+            sum_ref += r[i].truncate().element_sum() as f64;
+        }
+    }
+    let ratio = sum_out / sum_ref;
+    let p = psnr(&g, &out, &r);
+    eprintln!("sparse: denoised/reference energy {ratio:.3}, {p:.2} dB (noisy {noisy_psnr:.2} dB)");
+    // Measured 0.78 after 32 frames: the temporal pass no longer clamps the rare samples away,
+    // but the edge-stopping spatial filter still loses energy on a sparse signal (its first
+    // frame keeps 0.44), which fades only as the history grows. The bound holds that gain; the
+    // remaining bias is open work (docs/denoisers.md).
+    assert!(
+        (0.75..=1.1).contains(&ratio),
+        "the denoised sparse signal holds {ratio:.3} of the reference's energy"
+    );
+    assert!(p > noisy_psnr + 10.0, "{p:.2} dB, noisy {noisy_psnr:.2} dB");
+}
+
 #[test]
 fn jittered_camera_converges() {
     // A static camera whose projection is jittered by a 4-sample pattern (as for TAA); the
