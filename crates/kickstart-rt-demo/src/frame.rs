@@ -257,6 +257,14 @@ pub struct SdkFrame {
     debug_common: Option<ksrt::TraceTaskCommon>,
     scene_size: f32,
     seed: u32,
+    /// No injection: the lighting cache keeps what it holds (`ksrt quality` measures against a
+    /// reference traced through the same, frozen, cache).
+    pub freeze_cache: bool,
+    /// One roughness for every pixel instead of the G-buffer's (`ksrt quality`'s specular at
+    /// roughness 0.3), for the traces and the denoisers.
+    pub roughness_override: Option<f32>,
+    /// Set while [`Self::record_traces`] builds: the trace tasks only, white noise of this index.
+    traces_only: Option<u32>,
 }
 
 /// The SDK's description of a scene light, for its shadow task. Point and spot lights get an
@@ -318,18 +326,29 @@ impl SdkFrame {
             debug_common: None,
             scene_size,
             seed,
+            freeze_cache: false,
+            roughness_override: None,
+            traces_only: None,
         }
     }
 
     fn on(&self, part: Part) -> bool {
         let e = &self.effects;
+        let denoise_part = matches!(
+            part,
+            Part::DenoiseSpecularDiffuse | Part::DenoiseAo | Part::DenoiseShadow
+        );
+        if self.traces_only.is_some() && (part == Part::Injection || denoise_part) {
+            return false;
+        }
         !self.refused.contains(&part)
             && match part {
                 // Only reflections, GI and the cache's debug view read the lighting cache.
                 Part::Injection => {
-                    e.specular
-                        || e.diffuse
-                        || self.debug_view == Some(ksrt::DebugOutputType::DirectLightingCache)
+                    !self.freeze_cache
+                        && (e.specular
+                            || e.diffuse
+                            || self.debug_view == Some(ksrt::DebugOutputType::DirectLightingCache))
                 }
                 Part::Specular => e.specular,
                 Part::Diffuse => e.diffuse,
@@ -405,6 +424,21 @@ impl SdkFrame {
         Ok(handles)
     }
 
+    /// Records the trace tasks of `inputs` alone (no injection, no denoisers, no debug view)
+    /// with per-pixel white noise of index `sample` — one sample of a converged reference,
+    /// accumulated by the caller from the raw outputs. Returns the GPU task, if any trace is on.
+    pub fn record_traces(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        inputs: &FrameInputs<'_>,
+        sample: u32,
+    ) -> ksrt::Result<Option<ksrt::GpuTaskHandle>> {
+        self.traces_only = Some(sample);
+        let result = self.record_frame(encoder, inputs);
+        self.traces_only = None;
+        result
+    }
+
     fn record_frame(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -450,9 +484,16 @@ impl SdkFrame {
         };
         // The specular target holds F0 in RGB and roughness in A: the roughness mask stays the
         // default (alpha), and the same texture is the specular input.
-        let roughness = ksrt::RoughnessInput {
-            texture: Some(view(&main.specular)),
-            ..Default::default()
+        let roughness = match self.roughness_override {
+            Some(r) => ksrt::RoughnessInput {
+                texture: None,
+                global_roughness: r,
+                ..Default::default()
+            },
+            None => ksrt::RoughnessInput {
+                texture: Some(view(&main.specular)),
+                ..Default::default()
+            },
         };
         let sdk_view = inputs.view.sdk_view();
         let mut tasks = Vec::new();
@@ -482,6 +523,12 @@ impl SdkFrame {
         common.ray_offset.offset_type = ksrt::RayOffsetType::CamDistance;
         common.debug_parameters.frame_index =
             self.seed.wrapping_mul(7919).wrapping_add(inputs.frame);
+        if let Some(sample) = self.traces_only {
+            // A reference accumulates thousands of samples: white noise, not a blue-noise
+            // sequence that repeats.
+            common.debug_parameters.random_number_generator = ksrt::RandomNumberGenerator::Xorshift;
+            common.debug_parameters.frame_index = sample;
+        }
         let o = &self.outputs;
         if self.on(Part::Specular) {
             tasks.push(ksrt::RenderTask::TraceSpecular(ksrt::TraceSpecularTask {

@@ -116,6 +116,50 @@ enum Command {
         #[arg(long)]
         screenshot: Option<PathBuf>,
     },
+    /// Measure the denoisers: along a slow pan, each frame's 1-spp diffuse, specular (roughness
+    /// 0.3) and shadow traces, raw and denoised, against a converged reference of the same frame
+    /// (the same traces through the frozen lighting cache, averaged over --reference-samples);
+    /// prints PSNR and FLIP per frame on the tone-mapped 8-bit sRGB images (exposure 1, Reinhard,
+    /// sRGB; shadow visibility linear) and writes noisy | denoised | reference strips.
+    Quality {
+        /// Scene (as for `render`).
+        #[arg(long, default_value = "apartment")]
+        scene: String,
+        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        #[arg(long)]
+        scenes: Option<PathBuf>,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1920x1080")]
+        size: String,
+        /// Start camera (as for `render`) [default: the issue's for apartment and dragon, else
+        /// the file's or one framing the scene].
+        #[arg(long, allow_hyphen_values = true)]
+        camera: Option<String>,
+        /// Measured frames along the pan.
+        #[arg(long, default_value_t = 32)]
+        frames: u32,
+        /// Frames warming the lighting cache before it is frozen.
+        #[arg(long, default_value_t = 64)]
+        warmup: u32,
+        /// Samples per pixel of each frame's reference.
+        #[arg(long, default_value_t = 2048)]
+        reference_samples: u32,
+        /// Yaw of the whole pan, degrees.
+        #[arg(long, default_value_t = 8.0, allow_hyphen_values = true)]
+        pan_degrees: f32,
+        /// Seed of the measured frames' noise.
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+        /// Output folder for the strips.
+        #[arg(long, default_value = "out/quality")]
+        out: PathBuf,
+        /// Which frames' strips to write.
+        #[arg(long, value_enum, default_value = "all")]
+        images: quality::run::Images,
+        /// Also write every frame's scores as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Benchmark BLAS/TLAS builds and refits, BVH quality and ray throughput on the GPU.
     Bench {
         /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
@@ -297,6 +341,78 @@ fn render(args: RenderArgs) -> AnyResult<()> {
     Ok(())
 }
 
+/// `ksrt quality`'s options.
+struct QualityArgs {
+    scene: String,
+    scenes: Option<PathBuf>,
+    size: String,
+    camera: Option<String>,
+    opts: quality::run::QualityOptions,
+    json: Option<PathBuf>,
+}
+
+fn quality_command(args: QualityArgs) -> AnyResult<()> {
+    let mut opts = args.opts;
+    opts.size = parse_size(&args.size)?;
+    let camera = args
+        .camera
+        .as_deref()
+        .map(scene::parse_camera)
+        .transpose()?;
+    let scene = scene::load(&args.scene, &scene::scenes_dir(args.scenes))?;
+    let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(&args.scene)));
+    let adapter = gpu::adapter()?;
+    let (device, queue) = gpu::device(&adapter)?;
+    println!(
+        "ksrt quality: {} at {}x{}, {} frames panning {}°, cache warmed {} frames then frozen, \
+         reference {} spp; scores on 8-bit sRGB (exposure {}, Reinhard; shadow linear)",
+        scene.name,
+        opts.size.0,
+        opts.size.1,
+        opts.frames,
+        opts.pan_degrees,
+        opts.warmup,
+        opts.reference_samples,
+        quality::metrics::EXPOSURE
+    );
+    let start = std::time::Instant::now();
+    let mut header = false;
+    let frames = quality::run::run(&device, &queue, &scene, &camera, &opts, |f| {
+        if !header {
+            println!("{}", quality::run::table_header(&f.signals));
+            header = true;
+        }
+        println!("{}", quality::run::table_row(f));
+    })?;
+    println!(
+        "{} frames in {:.1} s; strips in {}",
+        frames.len(),
+        start.elapsed().as_secs_f64(),
+        opts.out
+            .as_deref()
+            .unwrap_or(std::path::Path::new("-"))
+            .display()
+    );
+    if let Some(path) = &args.json {
+        let value = serde_json::json!({
+            "scene": scene.name,
+            "size": [opts.size.0, opts.size.1],
+            "frames": opts.frames,
+            "warmup": opts.warmup,
+            "reference_samples": opts.reference_samples,
+            "pan_degrees": opts.pan_degrees,
+            "specular_roughness": quality::run::SPECULAR_ROUGHNESS,
+            "exposure": quality::metrics::EXPOSURE,
+            "tone_map": "exposure, Reinhard c/(1+c), sRGB, 8 bit; shadow visibility linear 8 bit",
+            "scores": frames,
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&value)?)
+            .map_err(|e| format!("--json {}: {e}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
 fn bench_command(
     scenes: Option<PathBuf>,
     names: Vec<String>,
@@ -363,6 +479,36 @@ fn main() {
             camera,
             frames,
             screenshot,
+        }),
+        Command::Quality {
+            scene,
+            scenes,
+            size,
+            camera,
+            frames,
+            warmup,
+            reference_samples,
+            pan_degrees,
+            seed,
+            out,
+            images,
+            json,
+        } => quality_command(QualityArgs {
+            scene,
+            scenes,
+            size,
+            camera,
+            opts: quality::run::QualityOptions {
+                size: (0, 0),
+                frames,
+                warmup,
+                reference_samples,
+                pan_degrees,
+                seed,
+                out: Some(out),
+                images,
+            },
+            json,
         }),
         Command::Bench {
             json,

@@ -227,6 +227,27 @@ impl Renderer {
         Ok(tasks)
     }
 
+    /// Records the trace tasks alone once more on the last frame's G-buffer, with white noise of
+    /// index `sample`, into the raw outputs (see [`SdkFrame::record_traces`](crate::frame::SdkFrame::record_traces)).
+    pub fn record_traces(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        sample: u32,
+    ) -> AnyResult<Option<ksrt::GpuTaskHandle>> {
+        let view = self
+            .prev_view
+            .as_ref()
+            .ok_or("record_traces: no frame has been rendered yet")?;
+        let inputs = FrameInputs {
+            main: &self.main,
+            view,
+            lidar: None,
+            frame: self.frame,
+            discard_history: false,
+        };
+        Ok(self.sdk.record_traces(encoder, &inputs, sample)?)
+    }
+
     /// Records, submits and waits for one frame, then marks its SDK task complete; returns the
     /// GPU timings of the SDK's passes when `timing` (and the device can measure them).
     pub fn render_frame(

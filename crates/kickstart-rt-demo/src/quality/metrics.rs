@@ -11,7 +11,6 @@
 //! L*a*b*, HyAB distance compressed and redistributed, and edge/point feature differences from
 //! Gaussian derivative filters of the luminance. The result is the mean per-pixel error in
 //! [0, 1]: 0 for identical images.
-#![allow(dead_code)] // Used by `ksrt quality`, which lands with the trace tasks.
 
 /// Exposure applied to linear radiance before tone mapping.
 pub const EXPOSURE: f32 = 1.0;
