@@ -29,7 +29,7 @@ struct AtrousParams {
 @group(0) @binding(0) var<uniform> dp: DenoiseParams;
 @group(0) @binding(1) var<uniform> ap: AtrousParams;
 
-@group(1) @binding(0) var<storage, read> guide: array<vec2<u32>>;
+@group(1) @binding(0) var<storage, read> guide: array<vec4<u32>>;
 @group(1) @binding(1) var<storage, read> src0: array<DnRecord>;
 @group(1) @binding(2) var<storage, read> src1: array<DnRecord>;
 @group(1) @binding(3) var<storage, read_write> dst0: array<DnRecord>;
@@ -70,7 +70,7 @@ fn dn_variance_estimate(s: u32, p: vec2<i32>, centre: DnGuide, dist: f32) -> f32
                 continue;
             }
             let j = u32(q.y) * dp.viewport.z + u32(q.x);
-            let g = dn_unpack_guide(guide[j], q);
+            let g = dn_unpack_guide(guide[j]);
             if !g.valid || abs(dot(centre.normal, g.position - centre.position)) > 0.02 * dist {
                 continue;
             }
@@ -137,7 +137,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let p = vec2<i32>(gid.xy);
     let i = gid.y * dp.viewport.z + gid.x;
-    let gp = dn_unpack_guide(guide[i], p);
+    let gp = dn_unpack_guide(guide[i]);
     if !gp.valid {
         // No surface: the accumulated input passes through.
         for (var s = 0u; s < DN_SIGNALS; s++) {
@@ -207,7 +207,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             continue;
         }
         let j = u32(q.y) * dp.viewport.z + u32(q.x);
-        let gq = dn_unpack_guide(guide[j], q);
+        let gq = dn_unpack_guide(guide[j]);
         if !gq.valid {
             continue;
         }

@@ -9,13 +9,8 @@
 // define the signal record `DnRecord` and its accessors.
 //
 // Per-pixel buffers are indexed by viewport-relative pixel, row-major with the viewport's width.
-// - guide (vec2<u32>, 8 bytes): x = view depth d = dot(position − eye, forward) (f32 bits); y =
-//   octahedral normal (12 + 12 bits) and roughness (8 bits), or DN_INVALID where the G-buffer
-//   holds no surface. The position is rebuilt from the depth on the pixel's camera ray:
-//   position = O(x, y) + d · R(x, y), O and R affine in the pixel coordinates (perspective: O is
-//   the eye; orthographic: R is the view direction), with the frame's jitter folded in
-//   (dn_guide_position; the frame that wrote the guide gives O and R: DenoiseParams recon and
-//   prev_recon).
+// - guide (vec4<u32>): world position xyz (f32 bits); w = octahedral normal (12 + 12 bits) and
+//   roughness (8 bits), or DN_INVALID where the G-buffer holds no surface.
 // - signal (DnRecord, history and filter intermediates): the value (rgb or scalar), the hit
 //   distance, z = history: second moment of luminance / filter: variance of the value's noise,
 //   and the history length in frames (layouts in the record files).
@@ -51,11 +46,6 @@ struct DenoiseParams {
     checkerboard: u32,
     // Base radius of the spatial filter, pixels.
     base_radius: f32,
-    // Position of a guide's depth d at viewport-relative pixel p (integer; the texel centre):
-    // (o0 + p.x·ox + p.y·oy) + d · (r0 + p.x·rx + p.y·ry), as [o0, ox, oy, r0, rx, ry]; this
-    // frame's and the previous frame's (the one its guide was written with).
-    recon: array<vec4<f32>, 6>,
-    prev_recon: array<vec4<f32>, 6>,
 }
 
 const DN_INVALID: u32 = 0xffffffffu;
@@ -106,13 +96,11 @@ fn dn_oct_decode(e: vec2<f32>) -> vec3<f32> {
     return normalize(n);
 }
 
-// The guide of a surface at `p` (world position) with normal `n`.
-fn dn_pack_guide(p: vec3<f32>, n: vec3<f32>, roughness: f32) -> vec2<u32> {
+fn dn_pack_guide(p: vec3<f32>, n: vec3<f32>, roughness: f32) -> vec4<u32> {
     let e = clamp(dn_oct_encode(n) * 0.5 + 0.5, vec2<f32>(0.0), vec2<f32>(1.0));
     let q = vec2<u32>(round(e * 4095.0));
     let r = u32(round(clamp(roughness, 0.0, 1.0) * 254.0));
-    let d = dot(p - dp.eye.xyz, dp.forward.xyz);
-    return vec2<u32>(bitcast<u32>(d), q.x | (q.y << 12u) | (r << 24u));
+    return vec4<u32>(bitcast<vec3<u32>>(p), q.x | (q.y << 12u) | (r << 24u));
 }
 
 struct DnGuide {
@@ -122,42 +110,17 @@ struct DnGuide {
     roughness: f32,
 }
 
-// World position of depth `d` at viewport-relative pixel `p`, this frame (`prev` false) or the
-// previous one.
-fn dn_guide_position(prev: bool, p: vec2<i32>, d: f32) -> vec3<f32> {
-    let x = f32(p.x);
-    let y = f32(p.y);
-    if prev {
-        let o = dp.prev_recon[0].xyz + x * dp.prev_recon[1].xyz + y * dp.prev_recon[2].xyz;
-        let r = dp.prev_recon[3].xyz + x * dp.prev_recon[4].xyz + y * dp.prev_recon[5].xyz;
-        return o + d * r;
-    }
-    let o = dp.recon[0].xyz + x * dp.recon[1].xyz + y * dp.recon[2].xyz;
-    let r = dp.recon[3].xyz + x * dp.recon[4].xyz + y * dp.recon[5].xyz;
-    return o + d * r;
-}
-
-fn dn_unpack_guide_with(prev: bool, g: vec2<u32>, p: vec2<i32>) -> DnGuide {
+fn dn_unpack_guide(g: vec4<u32>) -> DnGuide {
     var r: DnGuide;
-    r.valid = g.y != DN_INVALID;
+    r.valid = g.w != DN_INVALID;
     if !r.valid {
         return r;
     }
-    r.position = dn_guide_position(prev, p, bitcast<f32>(g.x));
-    let e = vec2<f32>(f32(g.y & 4095u), f32((g.y >> 12u) & 4095u)) / 4095.0;
+    r.position = bitcast<vec3<f32>>(g.xyz);
+    let e = vec2<f32>(f32(g.w & 4095u), f32((g.w >> 12u) & 4095u)) / 4095.0;
     r.normal = dn_oct_decode(e * 2.0 - 1.0);
-    r.roughness = f32(g.y >> 24u) / 254.0;
+    r.roughness = f32(g.w >> 24u) / 254.0;
     return r;
-}
-
-// This frame's guide `g` of viewport-relative pixel `p`.
-fn dn_unpack_guide(g: vec2<u32>, p: vec2<i32>) -> DnGuide {
-    return dn_unpack_guide_with(false, g, p);
-}
-
-// The previous frame's guide `g` of viewport-relative pixel `p`.
-fn dn_unpack_guide_prev(g: vec2<u32>, p: vec2<i32>) -> DnGuide {
-    return dn_unpack_guide_with(true, g, p);
 }
 
 fn dn_pixel_count() -> u32 {

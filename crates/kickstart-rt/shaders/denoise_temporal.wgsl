@@ -16,8 +16,8 @@
 @group(1) @binding(2) var dn_input0: texture_2d<f32>;
 @group(1) @binding(3) var dn_input1: texture_2d<f32>;
 
-@group(2) @binding(0) var<storage, read> guide_prev: array<vec2<u32>>;
-@group(2) @binding(1) var<storage, read_write> guide_cur: array<vec2<u32>>;
+@group(2) @binding(0) var<storage, read> guide_prev: array<vec4<u32>>;
+@group(2) @binding(1) var<storage, read_write> guide_cur: array<vec4<u32>>;
 @group(2) @binding(2) var<storage, read> hist_prev0: array<DnRecord>;
 @group(2) @binding(3) var<storage, read> hist_prev1: array<DnRecord>;
 @group(2) @binding(4) var<storage, read_write> hist_cur0: array<DnRecord>;
@@ -159,7 +159,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n = surf.normal;
 
     if !surf.valid {
-        guide_cur[i] = vec2<u32>(DN_INVALID);
+        guide_cur[i] = vec4<u32>(DN_INVALID);
         for (var s = 0u; s < DN_SIGNALS; s++) {
             let v = dn_sample(s, p, false, pos, n);
             dn_store_hist(s, i, dn_pack_signal(v, 0.0, 0.0));
@@ -201,7 +201,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 continue;
             }
             let j = u32(q.y) * dp.viewport.z + u32(q.x);
-            let g = dn_unpack_guide_prev(guide_prev[j], q);
+            let g = dn_unpack_guide(guide_prev[j]);
             if !g.valid || !dn_reusable(g, pos, n, pred) {
                 continue;
             }

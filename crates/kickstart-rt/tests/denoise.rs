@@ -724,9 +724,8 @@ fn history_memory_is_created_lazily_counted_and_released_after_destroy() {
         t
     };
     let t = build(ctx);
-    // Guides ×2 at 8 bytes per pixel, and per signal (radiance: 16 bytes per pixel): history ×2
-    // and intermediates ×2.
-    let bytes = (SIZE * SIZE * (8 * 2 + 16 * 4 * 2)) as u64;
+    // Guides ×2, and per signal: history ×2 and intermediates ×2; 16 bytes per pixel each.
+    let bytes = (SIZE * SIZE * 16 * (2 + 4 * 2)) as u64;
     assert_eq!(ctx.resource_allocations().denoiser, bytes);
     ctx.mark_gpu_task_completed(t).unwrap();
     let r = reference_image(&g, reference);

@@ -1,5 +1,5 @@
 //! The GPU memory of one denoising context: guides, history and filter intermediates, sized by
-//! the context's maximum resolution. Guides hold 8 bytes per pixel, a signal's history and
+//! the context's maximum resolution. Guides hold 16 bytes per pixel, a signal's history and
 //! intermediates 16 (radiance) or 8 (occlusion, shadows) bytes per pixel (see
 //! `shaders/denoise_common.wgsl` and the record files); a signal's buffers are separate so that
 //! each binding stays under WebGPU's default 128 MiB binding limit up to 4K.
@@ -7,11 +7,8 @@
 use crate::context::{DenoisingContextInput, SignalType};
 use crate::tasks::Viewport;
 
-/// Bytes of the largest per-pixel record (a radiance signal).
+/// Bytes of the largest per-pixel record (a guide, a radiance signal).
 pub(crate) const RECORD_BYTES: u64 = 16;
-
-/// Bytes of a guide (depth, packed normal and roughness).
-pub(crate) const GUIDE_BYTES: u64 = 8;
 
 /// Bytes per pixel of a signal record of a context of `signal_type`: scalar signals keep one
 /// value (`shaders/denoise_record_scalar.wgsl`).
@@ -30,8 +27,7 @@ pub(crate) fn signal_count(signal_type: SignalType) -> usize {
     }
 }
 
-/// Bytes of the largest per-pixel buffer a context of `input`'s size may need (the binding limit
-/// check).
+/// Bytes of the largest per-pixel buffer (a guide) of a context of `input`'s size.
 pub(crate) fn buffer_bytes(input: &DenoisingContextInput) -> u64 {
     input.max_width as u64 * input.max_height as u64 * RECORD_BYTES
 }
@@ -57,8 +53,6 @@ pub(crate) struct History {
     pub last_viewport: Option<Viewport>,
     /// The previous frame's camera jitter, pixels.
     pub prev_jitter: glam::Vec2,
-    /// How the previous frame's guide rebuilds positions (`super::recon`).
-    pub prev_recon: super::Recon,
     /// Serial of the last GPU task that used it.
     pub last_used: u64,
 }
@@ -82,7 +76,7 @@ impl History {
                 .map(|_| buffer(label, signal_size))
                 .collect::<Vec<_>>()
         };
-        let guide_size = input.max_width as u64 * input.max_height as u64 * GUIDE_BYTES;
+        let guide_size = buffer_bytes(&input);
         History {
             input,
             guides: [
@@ -100,7 +94,6 @@ impl History {
             frame: 0,
             last_viewport: None,
             prev_jitter: glam::Vec2::ZERO,
-            prev_recon: [[0.0; 4]; 6],
             last_used: 0,
         }
     }
@@ -108,7 +101,6 @@ impl History {
     /// GPU bytes held.
     pub fn bytes(&self) -> u64 {
         let n = signal_count(self.input.signal_type) as u64;
-        let guides = self.input.max_width as u64 * self.input.max_height as u64 * GUIDE_BYTES;
-        guides * 2 + signal_buffer_bytes(&self.input) * 4 * n
+        buffer_bytes(&self.input) * 2 + signal_buffer_bytes(&self.input) * 4 * n
     }
 }

@@ -193,52 +193,6 @@ struct DenoiseParams {
     discard_history: u32,
     checkerboard: u32,
     base_radius: f32,
-    recon: Recon,
-    prev_recon: Recon,
-}
-
-/// How a guide's depth becomes a position (`DenoiseParams::recon` in
-/// `shaders/denoise_common.wgsl`): `[o0, ox, oy, r0, rx, ry]`, the position of depth `d` at
-/// viewport-relative pixel `p` being `(o0 + p.x·ox + p.y·oy) + d·(r0 + p.x·rx + p.y·ry)`.
-pub(crate) type Recon = [[f32; 4]; 6];
-
-/// The reconstruction of `cam`'s guides for a viewport of `width × height` rendered with
-/// `jitter` (pixels), computed in f64: the depth is `dot(position − eye, forward)`, and a pixel
-/// is unprojected where the G-buffer decode does (`gb_surface`: its centre minus the jitter).
-/// Exact for perspective and orthographic projections, whose points at one depth are affine in
-/// the pixel coordinates.
-fn recon(cam: &CameraFrame, jitter: glam::Vec2, width: u32, height: u32) -> Recon {
-    let (w, h) = (width.max(1) as f64, height.max(1) as f64);
-    let unproject = |x: f64, y: f64, z: f64| {
-        let ndc_x = (x - jitter.x as f64) / w * 2.0 - 1.0;
-        let ndc_y = 1.0 - (y - jitter.y as f64) / h * 2.0;
-        let p = cam.clip_to_world * glam::DVec4::new(ndc_x, ndc_y, z, 1.0);
-        p.truncate() / p.w
-    };
-    // Origin and direction of the ray through pixel (x, y), parametrised by the depth.
-    let ray = |x: f64, y: f64| {
-        let (p0, p1) = (unproject(x, y, 0.25), unproject(x, y, 0.75));
-        let (d0, d1) = (
-            (p0 - cam.eye).dot(cam.forward),
-            (p1 - cam.eye).dot(cam.forward),
-        );
-        let dd = d1 - d0;
-        let r = if dd.abs() > 1e-30 {
-            (p1 - p0) / dd
-        } else {
-            cam.forward
-        };
-        (p0 - r * d0, r)
-    };
-    let (o, r) = ray(0.5, 0.5);
-    let (ox, rx) = ray(1.5, 0.5);
-    let (oy, ry) = ray(0.5, 1.5);
-    let v = |v: glam::DVec3| v.as_vec3().extend(0.0).to_array();
-    let (ox, oy, rx, ry) = (ox - o, oy - o, rx - r, ry - r);
-    if ![o, ox, oy, r, rx, ry].iter().all(|v| v.is_finite()) {
-        return [[0.0; 4]; 6];
-    }
-    [v(o), v(ox), v(oy), v(r), v(rx), v(ry)]
 }
 
 #[repr(C)]
@@ -783,10 +737,7 @@ fn record_job(
             HalfResolutionMode::CheckerboardInverted => 2,
         },
         base_radius: settings.base_radius,
-        recon: recon(&cam, c.view.jitter, vp.width, vp.height),
-        prev_recon: h.prev_recon,
     };
-    let this_recon = params.recon;
     let params = rec.uniform("kickstart-rt denoise params", &params);
     let gb_params = rec.uniform("kickstart-rt denoise g-buffer", &inputs.params());
 
@@ -895,6 +846,5 @@ fn record_job(
     h.frame += 1;
     h.last_viewport = Some(vp);
     h.prev_jitter = c.view.jitter;
-    h.prev_recon = this_recon;
     h.last_used = serial;
 }
