@@ -25,6 +25,13 @@
 
 // Width of the history clamp, in standard deviations of the neighbourhood.
 const CLAMP_SIGMAS: f32 = 2.0;
+
+// The workgroup's 8×8 pixels and a 1-pixel border of the decoded input (dn_load_input), loaded
+// once per workgroup (100 loads for 64 pixels instead of 9 per pixel) for the 3×3 neighbourhood
+// statistics; dn_tile_ok: inside the viewport and traced.
+const DN_TILE: u32 = 10u;
+var<workgroup> dn_tile: array<array<vec4<f32>, 100>, DN_SIGNALS>;
+var<workgroup> dn_tile_ok: array<u32, 100>;
 // History length from which the pixel's own sample spread (its moments) is trusted.
 const TEMPORAL_SPREAD_FRAMES: f32 = 4.0;
 
@@ -144,8 +151,33 @@ fn dn_reusable(g: DnGuide, pos: vec3<f32>, n: vec3<f32>, pred: vec3<f32>) -> boo
     return plane_ok || abs(dn_prev_view_distance(g.position) - d) < (0.03 / ndv) * d;
 }
 
+// Loads the workgroup's tile (every invocation takes part, before any returns).
+fn dn_fill_tile(wg: vec2<u32>, lid: u32) {
+    let origin = vec2<i32>(wg * 8u) - vec2<i32>(1);
+    for (var t = lid; t < DN_TILE * DN_TILE; t += 64u) {
+        let q = origin + vec2<i32>(i32(t % DN_TILE), i32(t / DN_TILE));
+        var ok = false;
+        if dn_in_viewport(q) {
+            ok = dn_traced(vec2<u32>(q));
+        }
+        dn_tile_ok[t] = select(0u, 1u, ok);
+        if ok {
+            for (var s = 0u; s < DN_SIGNALS; s++) {
+                dn_tile[s][t] = dn_load_input(s, vec2<u32>(q) + dp.viewport.xy);
+            }
+        }
+    }
+}
+
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn main(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(local_invocation_index) lindex: u32,
+) {
+    dn_fill_tile(wg.xy, lindex);
+    workgroupBarrier();
     if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
         return;
     }
@@ -224,11 +256,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var m2_nc = vec4<f32>(0.0);
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
-                let q = vec2<i32>(p) + vec2<i32>(dx, dy);
-                if !dn_in_viewport(q) || !dn_traced(vec2<u32>(q)) {
+                let t = (lid.y + u32(1 + dy)) * DN_TILE + lid.x + u32(1 + dx);
+                if dn_tile_ok[t] == 0u {
                     continue;
                 }
-                let v = dn_load_input(s, vec2<u32>(q) + dp.viewport.xy);
+                let v = dn_tile[s][t];
                 m1 += v;
                 m2 += v * v;
                 cnt += 1.0;
