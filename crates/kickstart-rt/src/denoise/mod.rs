@@ -10,8 +10,11 @@
 //! 2. **à-trous** (`shaders/denoise_atrous.wgsl`), 3 (Fast) or 5 (HighQuality) iterations of
 //!    an edge-stopping wavelet filter guided by normal, plane distance and the estimated noise
 //!    (SVGF), with a radius that follows roughness, hit distance, the occluder distance of a
-//!    shadow (its penumbra width) and the history length;
-//! 3. **output** (`shaders/denoise_output.wgsl`): writes each signal to its output texture.
+//!    shadow (its penumbra width) and the history length; one chain of dispatches per signal,
+//!    whose last iteration writes the signal's output texture.
+//!
+//! Every pass is compiled per [`SignalSet`] (constant signal loops, folded kind switches, the
+//! record layout: 16 bytes for radiance, 8 for occlusion and shadows).
 //!
 //! Shadows use the same passes with the visibility as the signal. That makes the filter
 //! penumbra-guided: a hard shadow's visibility is deterministic, so once a few frames are
@@ -19,7 +22,7 @@
 //! large light's penumbra is noisy and is smoothed over a radius that grows with the occluder
 //! distance.
 //!
-//! History lives in SDK-owned storage buffers (16 bytes per pixel and buffer; see
+//! History lives in SDK-owned storage buffers (16 or 8 bytes per pixel and buffer; see
 //! [`history::History`]), created in the first `build_gpu_task` after the handle is created,
 //! released lazily after destruction once no in-flight task uses it, and counted as
 //! [`crate::ResourceAllocations::denoiser`]. A viewport of another size than the previous
