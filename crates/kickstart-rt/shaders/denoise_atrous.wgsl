@@ -117,6 +117,69 @@ fn dn_radius(s: u32, value: vec4<f32>, len: f32, roughness: f32, dist: f32) -> f
     return max(r, 0.5);
 }
 
+// Per-pixel constants of the tap weights (see main).
+struct DnCentre {
+    p: vec2<i32>,
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    z_edge: f32,
+    z_corner: f32,
+    r_edge: f32,
+    r_corner: f32,
+    l_fac: f32,
+    n_exp: f32,
+    lum: f32,
+    variance: f32,
+}
+
+// Weighted sums of the taps.
+struct DnAcc {
+    sum: vec4<f32>,
+    wsum: f32,
+    vsum: f32,
+}
+
+// Index of the tap `o` (in steps) of pixel `p`, clamped into the viewport (taps outside are
+// dropped by dn_tap).
+fn dn_tap_index(p: vec2<i32>, o: vec2<i32>, step: i32) -> u32 {
+    let q = clamp(p + o * step, vec2<i32>(0), vec2<i32>(dp.viewport.zw) - vec2<i32>(1));
+    return u32(q.y) * dp.viewport.z + u32(q.x);
+}
+
+// Adds the tap `o` (guide `g`, record `h`) of the centre `c`.
+fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnRecord) -> DnAcc {
+    let q = c.p + o * step;
+    if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
+        return acc;
+    }
+    let gq = dn_unpack_guide(g);
+    if !gq.valid {
+        return acc;
+    }
+    let cos_n = dot(c.normal, gq.normal);
+    if cos_n <= 0.0 {
+        return acc; // pow(0, e) = 0
+    }
+    let corner = o.x != 0 && o.y != 0;
+    // B-spline kernel (0.25, 0.5, 0.25)²: an edge tap 0.125, a corner 0.0625.
+    let kernel = select(0.125, 0.0625, corner);
+    let plane = abs(dot(c.normal, gq.position - c.position));
+    let v = dn_value(h);
+    var var_q = c.variance;
+    if ap.first == 0u {
+        var_q = dn_rec_z(h);
+    }
+    let dl = abs(dn_luminance(v.xyz) - c.lum);
+    let e = -plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * log2(cos_n) - dl * c.l_fac
+        + select(c.r_edge, c.r_corner, corner);
+    let w = kernel * exp2(e);
+    var r = acc;
+    r.sum += w * v;
+    r.wsum += w;
+    r.vsum += w * w * var_q;
+    return r;
+}
+
 // log2(e): exp(x) = exp2(x · LOG2E).
 const LOG2E: f32 = 1.4426950408889634;
 
@@ -196,48 +259,58 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         wsum[s] = 0.25;
         vsum[s] = 0.0625 * var_c[s];
     }
-    for (var k = 0; k < 9; k++) {
-        if k == 4 {
-            continue;
-        }
-        let dx = k % 3 - 1;
-        let dy = k / 3 - 1;
-        let q = p + vec2<i32>(dx, dy) * step;
-        if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
-            continue;
-        }
-        let j = u32(q.y) * dp.viewport.z + u32(q.x);
-        let gq = dn_unpack_guide(guide[j]);
-        if !gq.valid {
-            continue;
-        }
-        let cos_n = dot(gp.normal, gq.normal);
-        if cos_n <= 0.0 {
-            continue; // pow(0, e) = 0
-        }
-        let corner = dx != 0 && dy != 0;
-        // B-spline kernel (0.25, 0.5, 0.25)²: an edge tap 0.125, a corner 0.0625.
-        let kernel = select(0.125, 0.0625, corner);
-        let plane = abs(dot(gp.normal, gq.position - gp.position));
-        let e_geo = -plane * select(z_edge, z_corner, corner);
-        let log_n = log2(cos_n);
-        for (var s = 0u; s < DN_SIGNALS; s++) {
-            let h = dn_src(s, j);
-            let v = dn_value(h);
-            var var_q = var_c[s];
-            if ap.first == 0u {
-                var_q = dn_rec_z(h);
-            }
-            let dl = abs(dn_luminance(v.xyz) - lum_c[s]);
-            let e = e_geo + n_exp[s] * log_n - dl * l_fac[s] + select(r_edge[s], r_corner[s], corner);
-            let w = kernel * exp2(e);
-            sum[s] += w * v;
-            wsum[s] += w;
-            vsum[s] += w * w * var_q;
-        }
-    }
-    for (var s = 0u; s < DN_SIGNALS; s++) {
-        let ws = max(wsum[s], 1e-8);
-        dn_emit(s, i, gid.xy, sum[s] / ws, vsum[s] / (ws * ws), len_c[s]);
-    }
+    // The eight taps, written out: every guide and record load is issued before any is used
+    // (no arrays, which would live in local memory), so that their latencies overlap. One
+    // signal per dispatch (SpecularAndDiffuse runs a chain per signal): the records are
+    // signal 0's.
+    var c: DnCentre;
+    c.p = p;
+    c.position = gp.position;
+    c.normal = gp.normal;
+    c.z_edge = z_edge;
+    c.z_corner = z_corner;
+    c.r_edge = r_edge[0];
+    c.r_corner = r_corner[0];
+    c.l_fac = l_fac[0];
+    c.n_exp = n_exp[0];
+    c.lum = lum_c[0];
+    c.variance = var_c[0];
+    let j0 = dn_tap_index(p, vec2<i32>(-1, -1), step);
+    let j1 = dn_tap_index(p, vec2<i32>(0, -1), step);
+    let j2 = dn_tap_index(p, vec2<i32>(1, -1), step);
+    let j3 = dn_tap_index(p, vec2<i32>(-1, 0), step);
+    let j4 = dn_tap_index(p, vec2<i32>(1, 0), step);
+    let j5 = dn_tap_index(p, vec2<i32>(-1, 1), step);
+    let j6 = dn_tap_index(p, vec2<i32>(0, 1), step);
+    let j7 = dn_tap_index(p, vec2<i32>(1, 1), step);
+    let g0 = guide[j0];
+    let g1 = guide[j1];
+    let g2 = guide[j2];
+    let g3 = guide[j3];
+    let g4 = guide[j4];
+    let g5 = guide[j5];
+    let g6 = guide[j6];
+    let g7 = guide[j7];
+    let h0 = src0[j0];
+    let h1 = src0[j1];
+    let h2 = src0[j2];
+    let h3 = src0[j3];
+    let h4 = src0[j4];
+    let h5 = src0[j5];
+    let h6 = src0[j6];
+    let h7 = src0[j7];
+    var acc: DnAcc;
+    acc.sum = 0.25 * centre[0];
+    acc.wsum = 0.25;
+    acc.vsum = 0.0625 * var_c[0];
+    acc = dn_tap(acc, c, vec2<i32>(-1, -1), step, g0, h0);
+    acc = dn_tap(acc, c, vec2<i32>(0, -1), step, g1, h1);
+    acc = dn_tap(acc, c, vec2<i32>(1, -1), step, g2, h2);
+    acc = dn_tap(acc, c, vec2<i32>(-1, 0), step, g3, h3);
+    acc = dn_tap(acc, c, vec2<i32>(1, 0), step, g4, h4);
+    acc = dn_tap(acc, c, vec2<i32>(-1, 1), step, g5, h5);
+    acc = dn_tap(acc, c, vec2<i32>(0, 1), step, g6, h6);
+    acc = dn_tap(acc, c, vec2<i32>(1, 1), step, g7, h7);
+    let ws = max(acc.wsum, 1e-8);
+    dn_emit(0u, i, gid.xy, acc.sum / ws, acc.vsum / (ws * ws), len_c[0]);
 }
