@@ -119,11 +119,30 @@ fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) ->
     return any_sum / max(any_count, 1.0);
 }
 
-fn dn_load_hist(s: u32, i: u32) -> DnRecord {
-    if s == 0u {
-        return hist_prev0[i];
+// Row-major index of viewport pixel `q` clamped into the viewport.
+fn dn_clamped_index(q: vec2<i32>) -> u32 {
+    let c = clamp(q, vec2<i32>(0), vec2<i32>(dp.viewport.zw) - vec2<i32>(1));
+    return u32(c.y) * dp.viewport.z + u32(c.x);
+}
+
+// Weight of the previous frame's pixel `q` (guide `g`, bilinear weight `bw`) for this pixel's
+// history: 0 outside the viewport or where it shows another surface.
+fn dn_history_weight(
+    q: vec2<i32>,
+    g: vec4<u32>,
+    bw: f32,
+    pos: vec3<f32>,
+    n: vec3<f32>,
+    pred: vec3<f32>,
+) -> f32 {
+    if !dn_in_viewport(q) {
+        return 0.0;
     }
-    return hist_prev1[i];
+    let gq = dn_unpack_guide(g);
+    if !gq.valid || !dn_reusable(gq, pos, n, pred) {
+        return 0.0;
+    }
+    return max(bw, 1e-4);
 }
 
 fn dn_store_hist(s: u32, i: u32, v: DnRecord) {
@@ -219,31 +238,50 @@ fn main(
         }
     }
 
-    // Bilinear taps of the previous frame that show this surface.
-    var taps: array<u32, 4>;
-    var weights = array<f32, 4>(0.0, 0.0, 0.0, 0.0);
-    var wsum = 0.0;
-    if dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6)) {
-        let base = floor(prev_xy - 0.5);
-        let f = prev_xy - 0.5 - base;
-        for (var k = 0; k < 4; k++) {
-            let o = vec2<f32>(f32(k & 1), f32(k >> 1));
-            let q = vec2<i32>(base + o);
-            if !dn_in_viewport(q) {
-                continue;
-            }
-            let j = u32(q.y) * dp.viewport.z + u32(q.x);
-            let g = dn_unpack_guide(guide_prev[j]);
-            if !g.valid || !dn_reusable(g, pos, n, pred) {
-                continue;
-            }
-            let bw = mix(1.0 - f.x, f.x, o.x) * mix(1.0 - f.y, f.y, o.y);
-            let w = max(bw, 1e-4);
-            taps[k] = j;
-            weights[k] = w;
-            wsum += w;
-        }
+    // Bilinear taps of the previous frame that show this surface, written out: the four
+    // previous guides and history records are loaded before any is used (indices clamped into
+    // the viewport; unusable taps get weight 0), so that their latencies overlap.
+    let use_history = dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6));
+    let base_f = select(vec2<f32>(0.0), floor(prev_xy - 0.5), use_history);
+    let f = prev_xy - 0.5 - base_f;
+    let base = vec2<i32>(base_f);
+    let q0 = base;
+    let q1 = base + vec2<i32>(1, 0);
+    let q2 = base + vec2<i32>(0, 1);
+    let q3 = base + vec2<i32>(1, 1);
+    let j0 = dn_clamped_index(q0);
+    let j1 = dn_clamped_index(q1);
+    let j2 = dn_clamped_index(q2);
+    let j3 = dn_clamped_index(q3);
+    let pg0 = guide_prev[j0];
+    let pg1 = guide_prev[j1];
+    let pg2 = guide_prev[j2];
+    let pg3 = guide_prev[j3];
+    var h00 = hist_prev0[j0];
+    var h01 = hist_prev0[j1];
+    var h02 = hist_prev0[j2];
+    var h03 = hist_prev0[j3];
+    var h10 = h00;
+    var h11 = h01;
+    var h12 = h02;
+    var h13 = h03;
+    if DN_SIGNALS > 1u {
+        h10 = hist_prev1[j0];
+        h11 = hist_prev1[j1];
+        h12 = hist_prev1[j2];
+        h13 = hist_prev1[j3];
     }
+    var w0 = 0.0;
+    var w1 = 0.0;
+    var w2 = 0.0;
+    var w3 = 0.0;
+    if use_history {
+        w0 = dn_history_weight(q0, pg0, (1.0 - f.x) * (1.0 - f.y), pos, n, pred);
+        w1 = dn_history_weight(q1, pg1, f.x * (1.0 - f.y), pos, n, pred);
+        w2 = dn_history_weight(q2, pg2, (1.0 - f.x) * f.y, pos, n, pred);
+        w3 = dn_history_weight(q3, pg3, f.x * f.y, pos, n, pred);
+    }
+    let wsum = w0 + w1 + w2 + w3;
 
     for (var s = 0u; s < DN_SIGNALS; s++) {
         var cur = dn_sample(s, p, true, pos, n);
@@ -278,15 +316,16 @@ fn main(
         var hist_m2 = 0.0;
         var hist_len = 0.0;
         if wsum > 1e-3 {
-            for (var k = 0; k < 4; k++) {
-                if weights[k] > 0.0 {
-                    let h = dn_load_hist(s, taps[k]);
-                    let w = weights[k] / wsum;
-                    hist += w * dn_value(h);
-                    hist_m2 += w * dn_rec_z(h);
-                    hist_len += w * dn_rec_len(h);
-                }
-            }
+            let second = s == 1u;
+            let ha = select(h00, h10, second);
+            let hb = select(h01, h11, second);
+            let hc = select(h02, h12, second);
+            let hd = select(h03, h13, second);
+            let inv = 1.0 / wsum;
+            hist = (w0 * dn_value(ha) + w1 * dn_value(hb) + w2 * dn_value(hc) + w3 * dn_value(hd)) * inv;
+            hist_m2 = (w0 * dn_rec_z(ha) + w1 * dn_rec_z(hb) + w2 * dn_rec_z(hc) + w3 * dn_rec_z(hd)) * inv;
+            hist_len = (w0 * dn_rec_len(ha) + w1 * dn_rec_len(hb) + w2 * dn_rec_len(hc)
+                + w3 * dn_rec_len(hd)) * inv;
         }
         // The spread of the samples this pixel has seen (its luminance moments over the
         // history), once a few frames back it. A 3×3 neighbourhood of a sparse 1-spp signal
