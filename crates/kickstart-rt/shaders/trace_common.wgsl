@@ -207,6 +207,20 @@ fn tr_environment(d: vec3<f32>) -> vec3<f32> {
     return mix(mix(a, b, w.x), mix(c, e, w.x), w.y);
 }
 
+// The pixel this invocation traces: `valid` false past the dispatch's pixels, outside the
+// viewport, or where the input mask rejects it (every trace entry point returns then).
+fn tr_invocation_pixel(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> TrPixel {
+    let i = tr_index(wid, nwg, lid);
+    if i >= tr_pixel_count() {
+        var none: TrPixel;
+        none.valid = false;
+        return none;
+    }
+    var px = tr_pixel(i);
+    px.valid = px.valid && gb_mask(px.texel);
+    return px;
+}
+
 // Linear index of this invocation (dispatches are split in 2-D past 65535 workgroups).
 fn tr_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return (wid.y * nwg.x + wid.x) * RT_WORKGROUP_SIZE + lid;

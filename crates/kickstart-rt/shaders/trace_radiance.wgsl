@@ -94,12 +94,8 @@ fn specular(
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = tr_index(wid, nwg, lid);
-    if i >= tr_pixel_count() {
-        return;
-    }
-    let px = tr_pixel(i);
-    if !px.valid || !gb_mask(px.texel) {
+    let px = tr_invocation_pixel(wid, nwg, lid);
+    if !px.valid {
         return;
     }
     let s = gb_surface(px.texel);
@@ -157,12 +153,8 @@ fn diffuse(
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = tr_index(wid, nwg, lid);
-    if i >= tr_pixel_count() {
-        return;
-    }
-    let px = tr_pixel(i);
-    if !px.valid || !gb_mask(px.texel) {
+    let px = tr_invocation_pixel(wid, nwg, lid);
+    if !px.valid {
         return;
     }
     let s = gb_surface(px.texel);

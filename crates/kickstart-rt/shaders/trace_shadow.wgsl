@@ -81,12 +81,8 @@ fn shadow(
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = tr_index(wid, nwg, lid);
-    if i >= tr_pixel_count() {
-        return;
-    }
-    let px = tr_pixel(i);
-    if !px.valid || !gb_mask(px.texel) {
+    let px = tr_invocation_pixel(wid, nwg, lid);
+    if !px.valid {
         return;
     }
     let s = gb_surface(px.texel);
@@ -111,12 +107,8 @@ fn multi_shadow(
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let i = tr_index(wid, nwg, lid);
-    if i >= tr_pixel_count() {
-        return;
-    }
-    let px = tr_pixel(i);
-    if !px.valid || !gb_mask(px.texel) {
+    let px = tr_invocation_pixel(wid, nwg, lid);
+    if !px.valid {
         return;
     }
     let s = gb_surface(px.texel);
