@@ -416,6 +416,37 @@ mod tests {
         assert!(d1.x < 0.0);
     }
 
+    #[test]
+    fn zero_frames_or_samples_are_refused_by_name() {
+        let (device, queue) = crate::testing::device();
+        let scene = crate::scene::load("cornell", Path::new(".")).expect("built-in scene");
+        let camera = scene.camera_or_default(None);
+        let base = QualityOptions {
+            size: (8, 8),
+            frames: 1,
+            warmup: 0,
+            reference_samples: 1,
+            pan_degrees: 0.0,
+            seed: 0,
+            out: None,
+            images: Images::None,
+        };
+        for (frames, samples) in [(0, 1), (1, 0)] {
+            let opts = QualityOptions {
+                frames,
+                reference_samples: samples,
+                ..base.clone()
+            };
+            let err = run(device, queue, &scene, &camera, &opts, |_| {})
+                .expect_err("refused")
+                .to_string();
+            assert!(
+                err.contains("--frames") && err.contains("--reference-samples"),
+                "{err}"
+            );
+        }
+    }
+
     /// The Cornell box at 48², 6 frames, 64 reference samples: the command runs end to end,
     /// scores every signal, writes the last frame's strips, and the denoisers beat the noisy
     /// input for diffuse and specular on the last frame (the shadow stays close to the
