@@ -12,6 +12,7 @@ use kickstart_rt as ksrt;
 use serde::Serialize;
 use wgpu::util::DeviceExt;
 
+use crate::bench_profile::{self as prof, PassProfile};
 use crate::gpu::{self, UploadedMesh};
 use crate::scene::{self, Camera, Scene};
 use crate::sdk_glue::{self as glue, GpuHit, GpuRay, Query, Tlas};
@@ -140,10 +141,14 @@ pub struct SceneReport {
     pub camera: [f32; 7],
     /// All BLASes built in one task (`ingest` + `blas build` passes).
     pub blas_build: Option<Stats>,
+    /// Where the last timed BLAS build's GPU time went.
+    pub blas_build_profile: Vec<PassProfile>,
     /// Geometry triangles / median BLAS build time, millions per second.
     pub blas_build_mtri_per_s: Option<f64>,
     /// All BLASes refit after a vertex update (`ingest` + `blas refit` passes).
     pub blas_refit: Option<Stats>,
+    /// Where the last timed refit's GPU time went.
+    pub blas_refit_profile: Vec<PassProfile>,
     /// BVH quality of the largest geometry.
     pub sah: Option<SahReport>,
     /// Primary, AO and diffuse batches.
@@ -194,8 +199,12 @@ pub struct TlasReport {
     pub instances: u32,
     /// Rebuild after every transform changed (`tlas build` passes).
     pub build: Option<Stats>,
+    /// Where the last timed rebuild's GPU time went.
+    pub build_profile: Vec<PassProfile>,
     /// Refit after every transform changed (`tlas refit` passes).
     pub refit: Option<Stats>,
+    /// Where the last timed refit's GPU time went.
+    pub refit_profile: Vec<PassProfile>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
 }
@@ -273,6 +282,8 @@ struct Bench<'a> {
     device: &'a wgpu::Device,
     queue: &'a wgpu::Queue,
     iterations: u32,
+    /// The passes of the last task `timed` measured, for the figure's profile.
+    last_passes: std::cell::RefCell<Vec<ksrt::PassTiming>>,
 }
 
 impl Bench<'_> {
@@ -291,9 +302,22 @@ impl Bench<'_> {
         after: impl FnOnce(&mut wgpu::CommandEncoder),
     ) -> AnyResult<f64> {
         let task = gpu::submit(ctx, self.device, self.queue, container, after)?;
-        let ms = glue::wait_span_ms(ctx, task, span);
+        let timings = ctx.wait_for_gpu_timings(task);
         gpu::complete(ctx, self.device, task)?;
-        ms
+        let timings = timings?;
+        let ms = timings.span_ms(span).ok_or_else(|| {
+            format!(
+                "no GPU pass labelled {span:?} in this task (passes: {:?})",
+                timings.passes.iter().map(|p| p.label).collect::<Vec<_>>()
+            )
+        })?;
+        *self.last_passes.borrow_mut() = timings.passes;
+        Ok(ms)
+    }
+
+    /// The profile of the last task `timed` measured.
+    fn last_profile(&self) -> Vec<PassProfile> {
+        prof::profile(&self.last_passes.borrow())
     }
 
     /// Runs `one` untimed for at least half a second (warm-up: GPU clocks ramp up from idle,
@@ -610,8 +634,10 @@ fn bench_scene(
             camera.fov_y_deg,
         ],
         blas_build: None,
+        blas_build_profile: Vec::new(),
         blas_build_mtri_per_s: None,
         blas_refit: None,
+        blas_refit_profile: Vec::new(),
         sah: None,
         rays: Vec::new(),
         peer_mrays_per_s: None,
@@ -626,6 +652,7 @@ fn bench_scene(
     if let Some((stats, ctx, h)) = attempt(&mut errors, "BLAS build", || {
         bench.blas_build(scene, &uploads)
     }) {
+        r.blas_build_profile = bench.last_profile();
         r.blas_build_mtri_per_s = Some(r.geometry_triangles as f64 / (stats.median_ms * 1e3));
         r.blas_build = Some(stats);
         r.sah = attempt(&mut errors, "SAH cost", || {
@@ -656,6 +683,9 @@ fn bench_scene(
     r.blas_refit = attempt(&mut errors, "BLAS refit", || {
         bench.blas_refit(scene, &uploads)
     });
+    if r.blas_refit.is_some() {
+        r.blas_refit_profile = bench.last_profile();
+    }
     attempt(&mut errors, "rays", || {
         rays(bench, scene, &uploads, &camera, size, &mut r)
     });
@@ -730,15 +760,19 @@ fn bench_tlas(bench: &Bench, count: u32) -> TlasReport {
         &format!("TLAS build, {count} instances"),
         || run(Tlas::Rebuild, "tlas build"),
     );
+    let build_profile = build.as_ref().map_or(Vec::new(), |_| bench.last_profile());
     let refit = attempt(
         &mut errors,
         &format!("TLAS refit, {count} instances"),
         || run(Tlas::Refit, "tlas refit"),
     );
+    let refit_profile = refit.as_ref().map_or(Vec::new(), |_| bench.last_profile());
     TlasReport {
         instances: count,
         build,
+        build_profile,
         refit,
+        refit_profile,
         errors,
     }
 }
@@ -755,7 +789,13 @@ fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
         r.blas_build_mtri_per_s
             .map_or(String::new(), |m| format!("  {m:.1} Mtri/s"))
     );
+    if !r.blas_build_profile.is_empty() {
+        println!("    profile    {}", prof::show(&r.blas_build_profile));
+    }
     println!("  BLAS refit   {}", opt(&r.blas_refit));
+    if !r.blas_refit_profile.is_empty() {
+        println!("    profile    {}", prof::show(&r.blas_refit_profile));
+    }
     match &r.sah {
         Some(s) => println!(
             "  SAH cost     GPU {:.2} / CPU {:.2} = {:.3} ({}, {} triangles)",
@@ -1095,6 +1135,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         device: &device,
         queue: &queue,
         iterations: opts.iterations,
+        last_passes: Default::default(),
     };
     let mut report = Report {
         sdk_version: ksrt::VERSION.to_string(),
@@ -1128,6 +1169,11 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             opt(&t.build),
             opt(&t.refit)
         );
+        for p in [&t.build_profile, &t.refit_profile] {
+            if !p.is_empty() {
+                println!("    profile    {}", prof::show(p));
+            }
+        }
         for e in &t.errors {
             println!("    failed: {e}");
         }

@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_denoise;
+mod bench_profile;
 mod composite;
 mod debug_view;
 mod frame;
