@@ -335,26 +335,12 @@ fn out_hi(b: Box) -> vec3<u32> {
     return bitcast<vec3<u32>>(select(b.hi, vec3<f32>(-EMPTY_OUT), is_empty(b)));
 }
 
-// Nodes are BVH4 records of NODE_VEC4S vec4s (docs/ray-tracing-core.md, "BVH4 node"): inner
-// node i of the binary tree owns record i, holding its four grandchildren in two halves, one per
-// binary child. A half is written whole by exactly one invocation: by the climber that finished
-// the child (an inner child: its two children's boxes and refs), or by the parent's climber (a
-// leaf child: its box and ref beside an empty slot). So no two invocations write the same words,
-// and the refit rewrites every record as the build does. `aux` keeps the binary child ref, from
-// which the CPU recovers the binary tree for checks and SAH.
-const NODE_VEC4S: u32 = 8u;
-
-fn write_half(node: u32, side: u32, a: Box, aref: u32, b: Box, bref: u32, aux: u32) {
-    let at = NODE_VEC4S * (params.node_base + node) + 4u * side;
-    nodes[at] = vec4<u32>(out_lo(a), aref);
-    nodes[at + 1u] = vec4<u32>(out_hi(a), aux);
-    nodes[at + 2u] = vec4<u32>(out_lo(b), bref);
-    nodes[at + 3u] = vec4<u32>(out_hi(b), 0u);
-}
-
-// The half of a leaf (or empty) binary child: its own box and ref, then an empty slot.
-fn write_leaf_half(node: u32, side: u32, b: Box, r: u32) {
-    write_half(node, side, b, r, empty_box(), LEAF_BIT, r);
+fn write_node(node: u32, l: Box, lref: u32, r: Box, rref: u32) {
+    let at = 4u * (params.node_base + node);
+    nodes[at] = vec4<u32>(out_lo(l), lref);
+    nodes[at + 1u] = vec4<u32>(out_hi(l), rref);
+    nodes[at + 2u] = vec4<u32>(out_lo(r), 0u);
+    nodes[at + 3u] = vec4<u32>(out_hi(r), 0u);
 }
 
 fn write_bounds(b: Box) {
@@ -412,8 +398,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
                 l = leaf_box(0u);
                 lref = out_ref(LEAF_BIT);
             }
-            write_leaf_half(0u, 0u, l, lref);
-            write_leaf_half(0u, 1u, none, LEAF_BIT);
+            write_node(0u, l, lref, none, LEAF_BIT);
             write_bounds(l);
         }
         return;
@@ -476,24 +461,12 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             } else {
                 lb = child_box(lc);
             }
-            let lref = out_ref(lc);
-            let rref = out_ref(rc);
-            if (lc & LEAF_BIT) != 0u {
-                write_leaf_half(parent, 0u, lb, lref);
-            }
-            if (rc & LEAF_BIT) != 0u {
-                write_leaf_half(parent, 1u, rb, rref);
-            }
+            write_node(parent, lb, out_ref(lc), rb, out_ref(rc));
             bx = union_box(lb, rb);
             node = parent;
             if parent == 0u {
                 write_bounds(bx);
                 climbing = false;
-            } else {
-                // This node's children are its grandparent's grandchildren.
-                let grand = topology[inner_parents + parent];
-                let side = select(1u, 0u, topology[params.topo_base + 2u * grand] == parent);
-                write_half(grand, side, lb, lref, rb, rref, parent);
             }
         }
     }

@@ -35,9 +35,7 @@ struct RtHit {
 @group(0) @binding(3) var<storage, read> rt_blas_nodes: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> rt_triangles: array<vec4<f32>>;
 
-const RT_STACK_SIZE: u32 = 96u;
-// vec4s of one BVH4 record (docs/ray-tracing-core.md, "BVH4 node").
-const RT_NODE_VEC4S: u32 = 8u;
+const RT_STACK_SIZE: u32 = 64u;
 const RT_MAX_VISITS: u32 = 1048576u;
 const RT_LEAF_BIT: u32 = 0x80000000u;
 const RT_FIRST_MASK: u32 = 0x0fffffffu;
@@ -48,44 +46,33 @@ const RT_FLT_MAX: f32 = 3.40282347e38;
 // box that a grazing ray touches.
 const RT_FAR_WIDEN: f32 = 1.0000004;
 
-// Traversal stack: one private array per invocation of (node reference, order-preserving key of
-// the entry distance), for both levels. A BVH4 record pushes up to three children (the nearest
-// is visited at once, without the stack), so the depth is 96: 32 BVH4 levels of the TLAS and a
-// BLAS together at three entries each.
+// Traversal stack: one private array per invocation (node reference and entry distance), 64
+// entries for both levels.
 //
 // Measured on the H100 (BENCHMARKS.md, 2026-11-23): moving the shallow part of the stack into
 // workgroup memory (per-lane slices of 16–24 entries) made incoherent rays 1.5–2.3× *slower*
-// than a private stack; the workgroup carve-out costs occupancy and L1 for node fetches more
+// than this private stack; the workgroup carve-out costs occupancy and L1 for node fetches more
 // than local-memory stack traffic costs. Keep the stack private unless a measurement says
 // otherwise.
 //
 // Passes that include this module dispatch RT_WORKGROUP_SIZE invocations per workgroup.
 const RT_WORKGROUP_SIZE: u32 = 64u;
-var<private> rt_stack: array<vec2<u32>, RT_STACK_SIZE>;
+var<private> rt_stack_ref: array<u32, RT_STACK_SIZE>;
+var<private> rt_stack_t: array<f32, RT_STACK_SIZE>;
 
-// u32 key that orders like the f32 (negative values: all bits flipped; others: sign bit set).
-// Missed children get RT_MISS_KEY, above every finite key, so sorting keys puts hits first.
-const RT_MISS_KEY: u32 = 0xffffffffu;
-
-fn rt_key(t: f32) -> u32 {
-    let b = bitcast<u32>(t);
-    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
+// Stack entry i (< RT_STACK_SIZE): node reference and entry distance.
+fn rt_stack_store(i: u32, node: u32, t: f32) {
+    rt_stack_ref[i] = node;
+    rt_stack_t[i] = t;
 }
 
-fn rt_unkey(k: u32) -> f32 {
-    return bitcast<f32>(select(~k, k & 0x7fffffffu, (k & 0x80000000u) != 0u));
+struct RtStackEntry {
+    node: u32,
+    t: f32,
 }
 
-// One compare-exchange of a sorting network over (key, ref) pairs: the smaller key to `a`.
-fn rt_order(ka: ptr<function, u32>, ra: ptr<function, u32>, kb: ptr<function, u32>,
-            rb: ptr<function, u32>) {
-    let swap = *kb < *ka;
-    let k = *ka;
-    let r = *ra;
-    *ka = select(k, *kb, swap);
-    *ra = select(r, *rb, swap);
-    *kb = select(*kb, k, swap);
-    *rb = select(*rb, r, swap);
+fn rt_stack_load(i: u32) -> RtStackEntry {
+    return RtStackEntry(rt_stack_ref[i], rt_stack_t[i]);
 }
 
 fn rt_is_finite(x: f32) -> bool {
@@ -268,11 +255,10 @@ fn rt_miss() -> RtHit {
     return RtHit(-1.0, 0.0, 0.0, RT_NO_INDEX, RT_NO_INDEX, 0u);
 }
 
-// Traverses TLAS and BLASes with one stack, four children per record. The nearest child that
-// is hit becomes the current node at once; the others are pushed farthest first. Entries at stack
-// index >= `blas_sp` belong to the BLAS of the instance being traversed; popping one below it
-// means that BLAS is done. Each entry keeps the entry distance of its box, so subtrees behind a
-// closer hit are skipped. `any_hit` returns at the first hit found.
+// Traverses TLAS and BLASes with one stack. Entries at stack index >= `blas_sp` belong to the
+// BLAS of the instance being traversed; popping an entry below it means that BLAS is done. Each
+// entry keeps the entry distance of its box, so subtrees behind a closer hit are skipped.
+// `any_hit` returns at the first hit found.
 fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
     var best = rt_miss();
     if !rt_is_finite3(ray.origin) || !rt_is_finite3(ray.dir) || all(ray.dir == vec3<f32>(0.0)) {
@@ -291,51 +277,38 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         return best;
     }
     let world = rt_space(ray.origin, ray.dir);
-    // The space of the level being traversed: `world` in the TLAS, the instance's in a BLAS.
-    var space = world;
-    var sp = 0u;
+    var local = world;
+    rt_stack_store(0u, 0u, t_min);
+    var sp = 1u;
     var blas_sp = RT_STACK_SIZE + 1u;
-    var in_blas = false;
     var node_base = 0u;
     var tri_base = 0u;
     var cur_inst = 0u;
-    // The node to visit next without a pop: the TLAS root first.
-    var cur = 0u;
-    var have_cur = true;
     var visits = 0u;
-    loop {
-        if !have_cur {
-            if sp == 0u {
-                break;
-            }
-            sp -= 1u;
-            let popped = rt_stack[sp];
-            if sp < blas_sp && in_blas {
-                in_blas = false;
-                blas_sp = RT_STACK_SIZE + 1u;
-                space = world;
-            }
-            // Pushed before a closer hit was found: the box test would now fail.
-            if rt_unkey(popped.y) > t_max * RT_FAR_WIDEN {
-                continue;
-            }
-            cur = popped.x;
-        }
-        have_cur = false;
+    while sp > 0u && visits < RT_MAX_VISITS {
         visits += 1u;
-        if visits > RT_MAX_VISITS {
-            break;
+        sp -= 1u;
+        let popped = rt_stack_load(sp);
+        let entry = popped.node;
+        let entry_t = popped.t;
+        let in_blas = sp >= blas_sp;
+        if !in_blas {
+            blas_sp = RT_STACK_SIZE + 1u;
         }
-        if (cur & RT_LEAF_BIT) != 0u {
-            let first = cur & RT_FIRST_MASK;
-            let count = ((cur >> 28u) & 7u) + 1u;
+        // Pushed before a closer hit was found: the box test would now fail.
+        if entry_t > t_max * RT_FAR_WIDEN {
+            continue;
+        }
+        if (entry & RT_LEAF_BIT) != 0u {
+            let first = entry & RT_FIRST_MASK;
+            let count = ((entry >> 28u) & 7u) + 1u;
             if in_blas {
                 for (var i = 0u; i < count; i += 1u) {
                     let slot = (tri_base + first + i) * 3u;
                     let v0 = rt_triangles[slot];
                     let v1 = rt_triangles[slot + 1u];
                     let v2 = rt_triangles[slot + 2u];
-                    let h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                    let h = rt_triangle(local, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
                     if !h.hit {
                         continue;
                     }
@@ -354,11 +327,9 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 }
             } else {
                 // A TLAS leaf of several instances: enter the first now and re-push the rest
-                // (below the BLAS entries, so they come after this BLAS is done). Their entry
-                // distance is not known here; t_min never culls them.
+                // (below the BLAS entries, so they come after this BLAS is done).
                 if count > 1u && sp < RT_STACK_SIZE {
-                    rt_stack[sp] = vec2<u32>(
-                        RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), rt_key(t_min));
+                    rt_stack_store(sp, RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), entry_t);
                     sp += 1u;
                 }
                 let inst = rt_instances[first];
@@ -366,22 +337,21 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                     continue;
                 }
                 let geo = rt_geometries[inst.geometry];
-                if (geo.flags & 1u) == 0u {
+                if (geo.flags & 1u) == 0u || sp >= RT_STACK_SIZE {
                     continue;
                 }
                 // No renormalisation: t means the same in object and world space.
                 let m = inst.world_to_object;
-                space = rt_space(
+                local = rt_space(
                     rt_transform(m, ray.origin, 1.0),
                     rt_transform(m, ray.dir, 0.0),
                 );
                 node_base = geo.node_base;
                 tri_base = geo.tri_base;
                 cur_inst = first;
-                in_blas = true;
                 blas_sp = sp;
-                cur = 0u;
-                have_cur = true;
+                rt_stack_store(sp, 0u, entry_t);
+                sp += 1u;
             }
             continue;
         }
@@ -389,68 +359,50 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         var n1: vec4<f32>;
         var n2: vec4<f32>;
         var n3: vec4<f32>;
-        var n4: vec4<f32>;
-        var n5: vec4<f32>;
-        var n6: vec4<f32>;
-        var n7: vec4<f32>;
+        var space = world;
         if in_blas {
-            let base = (node_base + cur) * RT_NODE_VEC4S;
+            let base = (node_base + entry) * 4u;
             n0 = rt_blas_nodes[base];
             n1 = rt_blas_nodes[base + 1u];
             n2 = rt_blas_nodes[base + 2u];
             n3 = rt_blas_nodes[base + 3u];
-            n4 = rt_blas_nodes[base + 4u];
-            n5 = rt_blas_nodes[base + 5u];
-            n6 = rt_blas_nodes[base + 6u];
-            n7 = rt_blas_nodes[base + 7u];
+            space = local;
         } else {
-            let base = cur * RT_NODE_VEC4S;
+            let base = entry * 4u;
             n0 = rt_tlas_nodes[base];
             n1 = rt_tlas_nodes[base + 1u];
             n2 = rt_tlas_nodes[base + 2u];
             n3 = rt_tlas_nodes[base + 3u];
-            n4 = rt_tlas_nodes[base + 4u];
-            n5 = rt_tlas_nodes[base + 5u];
-            n6 = rt_tlas_nodes[base + 6u];
-            n7 = rt_tlas_nodes[base + 7u];
         }
-        let h0 = rt_box(n0.xyz, n1.xyz, space, t_min, t_max);
-        let h1 = rt_box(n2.xyz, n3.xyz, space, t_min, t_max);
-        let h2 = rt_box(n4.xyz, n5.xyz, space, t_min, t_max);
-        let h3 = rt_box(n6.xyz, n7.xyz, space, t_min, t_max);
-        var k0 = select(RT_MISS_KEY, rt_key(h0.near), h0.hit);
-        var k1 = select(RT_MISS_KEY, rt_key(h1.near), h1.hit);
-        var k2 = select(RT_MISS_KEY, rt_key(h2.near), h2.hit);
-        var k3 = select(RT_MISS_KEY, rt_key(h3.near), h3.hit);
-        var r0 = bitcast<u32>(n0.w);
-        var r1 = bitcast<u32>(n2.w);
-        var r2 = bitcast<u32>(n4.w);
-        var r3 = bitcast<u32>(n6.w);
-        // Sorting network for four: nearest first, misses last.
-        rt_order(&k0, &r0, &k1, &r1);
-        rt_order(&k2, &r2, &k3, &r3);
-        rt_order(&k0, &r0, &k2, &r2);
-        rt_order(&k1, &r1, &k3, &r3);
-        rt_order(&k1, &r1, &k2, &r2);
-        if k0 == RT_MISS_KEY {
-            continue;
-        }
-        // Farthest first, so the nearer ones are popped first. When the stack is full the
-        // farther children are dropped (trees deeper than the stack allows are not built).
-        if k3 != RT_MISS_KEY && sp < RT_STACK_SIZE {
-            rt_stack[sp] = vec2<u32>(r3, k3);
+        let hl = rt_box(n0.xyz, n1.xyz, space, t_min, t_max);
+        let hr = rt_box(n2.xyz, n3.xyz, space, t_min, t_max);
+        let lref = bitcast<u32>(n0.w);
+        let rref = bitcast<u32>(n1.w);
+        // Push the farther child first so the nearer one is visited next. When the stack is
+        // full the farther child is dropped (it cannot happen for trees of depth < 32 per level).
+        if hl.hit && hr.hit {
+            var near_ref = lref;
+            var near_t = hl.near;
+            var far_ref = rref;
+            var far_t = hr.near;
+            if hr.near < hl.near {
+                near_ref = rref;
+                near_t = hr.near;
+                far_ref = lref;
+                far_t = hl.near;
+            }
+            if sp + 1u < RT_STACK_SIZE {
+                rt_stack_store(sp, far_ref, far_t);
+                sp += 1u;
+            }
+            if sp < RT_STACK_SIZE {
+                rt_stack_store(sp, near_ref, near_t);
+                sp += 1u;
+            }
+        } else if (hl.hit || hr.hit) && sp < RT_STACK_SIZE {
+            rt_stack_store(sp, select(rref, lref, hl.hit), select(hr.near, hl.near, hl.hit));
             sp += 1u;
         }
-        if k2 != RT_MISS_KEY && sp < RT_STACK_SIZE {
-            rt_stack[sp] = vec2<u32>(r2, k2);
-            sp += 1u;
-        }
-        if k1 != RT_MISS_KEY && sp < RT_STACK_SIZE {
-            rt_stack[sp] = vec2<u32>(r1, k1);
-            sp += 1u;
-        }
-        cur = r0;
-        have_cur = true;
     }
     return best;
 }

@@ -1,5 +1,4 @@
-//! A GPU BVH read back to the CPU (its BVH4 records seen as the binary tree they were made from,
-//! `docs/ray-tracing-core.md`), and
+//! A GPU BVH read back to the CPU (nodes in the BVH2 format of `docs/ray-tracing-core.md`), and
 //! its SAH cost with the same constants as [`super::CpuBvh::sah_cost`], so the two compare.
 
 use super::{SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
@@ -57,19 +56,16 @@ fn area(min: Vec3, max: Vec3) -> f32 {
 }
 
 impl BlasReadback {
-    /// Decodes raw BVH4 records (32 words each) and triangles (12 floats each: three `vec4`,
-    /// the primitive index in the bits of the first `w`).
-    pub fn new(raw_nodes: Vec<[u32; 32]>, raw_tris: Vec<[f32; 12]>) -> Self {
-        let words: Vec<u32> = raw_nodes.iter().flatten().copied().collect();
-        let binary = crate::scene::bvh4::binary_from_wide(&words);
-        let nodes: Vec<[Bvh2Child; 2]> = binary
-            .chunks_exact(16)
-            .map(|w| {
-                let n = |i: usize| f32::from_bits(w[i]);
+    /// Decodes raw nodes (16 floats each) and triangles (12 floats each: three `vec4`, the
+    /// primitive index in the bits of the first `w`).
+    pub fn new(raw_nodes: Vec<[f32; 16]>, raw_tris: Vec<[f32; 12]>) -> Self {
+        let nodes: Vec<[Bvh2Child; 2]> = raw_nodes
+            .iter()
+            .map(|n| {
                 let child = |o: usize, r: usize| Bvh2Child {
-                    min: Vec3::new(n(o), n(o + 1), n(o + 2)),
-                    max: Vec3::new(n(o + 4), n(o + 5), n(o + 6)),
-                    reference: w[r],
+                    min: Vec3::new(n[o], n[o + 1], n[o + 2]),
+                    max: Vec3::new(n[o + 4], n[o + 5], n[o + 6]),
+                    reference: n[r].to_bits(),
                 };
                 [child(0, 3), child(8, 7)]
             })

@@ -4,7 +4,6 @@
 
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
-use crate::scene::bvh4::{NODE_BYTES, NODE_WORDS};
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs};
 use crate::scene::pool::{Pool, Range};
@@ -15,6 +14,8 @@ use crate::trace::rays::{RayTracer, SceneBuffers};
 
 /// Bytes of one triangle of the soup (three `vec4<f32>`).
 pub(crate) const TRIANGLE_BYTES: u64 = 48;
+/// Bytes of one BVH2 node.
+pub(crate) const NODE_BYTES: u64 = 64;
 /// Bytes of one geometry table record.
 pub(crate) const GEOMETRY_RECORD_SIZE: u64 = 48;
 /// Bytes of one instance table record.
@@ -735,16 +736,15 @@ impl GpuScene {
     }
 }
 
-/// A TLAS node buffer holding one root record with four empty slots: before the first TLAS build,
+/// A TLAS node buffer holding one root with two empty children: before the first TLAS build,
 /// every ray misses at once (a zeroed node would be a self-referencing inner node).
 fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
     use wgpu::util::DeviceExt;
     let e = f32::from_bits(0x8000_0000);
-    let empty_half = [
-        1e30, 1e30, 1e30, e, -1e30, -1e30, -1e30, e, 1e30, 1e30, 1e30, e, -1e30, -1e30, -1e30, 0.0,
+    let root: [f32; 16] = [
+        1e30, 1e30, 1e30, e, -1e30, -1e30, -1e30, e, 1e30, 1e30, 1e30, 0.0, -1e30, -1e30, -1e30,
+        0.0,
     ];
-    // Two empty halves: four empty slots.
-    let root: Vec<f32> = [empty_half, empty_half].concat();
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("kickstart-rt TLAS nodes"),
         contents: bytemuck::cast_slice(&root),
@@ -754,8 +754,8 @@ fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
     })
 }
 
-/// A BLAS as read back: raw BVH4 records (32 words each) and triangles (12 floats each).
-pub(crate) type RawBlas = (Vec<[u32; NODE_WORDS]>, Vec<[f32; 12]>);
+/// A BLAS as read back: raw nodes (16 floats each) and triangles (12 floats each).
+pub(crate) type RawBlas = (Vec<[f32; 16]>, Vec<[f32; 12]>);
 
 /// A STORAGE | COPY_SRC | COPY_DST buffer (at least 256 bytes, zeroed by wgpu).
 pub(crate) fn storage(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {

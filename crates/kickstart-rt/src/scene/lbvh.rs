@@ -48,8 +48,7 @@ pub(crate) struct LbvhBuild<'a> {
     pub aabb_base: u32,
     /// Number of primitives (at most 2^28).
     pub count: u32,
-    /// Output: [`Lbvh::node_count`] BVH4 records (128 bytes each, `scene::bvh4`) from record index
-    /// `node_base`.
+    /// Output: [`Lbvh::node_count`] nodes (64 bytes each) from node index `node_base`.
     pub nodes: &'a wgpu::Buffer,
     /// First node of this BVH; child refs are relative to it.
     pub node_base: u32,
@@ -367,7 +366,6 @@ mod tests {
     use super::*;
     use crate::cpu::{CpuBvh, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
     use crate::gpu::testing::{buffer_with, gpu, read_back, run};
-    use crate::scene::bvh4::{binary_from_wide, NODE_WORDS};
     use glam::Vec3;
 
     /// A primitive box (min, max) as the AABB input holds it.
@@ -520,7 +518,7 @@ mod tests {
             n,
             bases,
             leaf_refs,
-            nodes: sentinel_buffer((u64::from(bases.node) + node_count + 1) * NODE_WORDS as u64),
+            nodes: sentinel_buffer((u64::from(bases.node) + node_count + 1) * 16),
             order: sentinel_buffer(u64::from(bases.order + n) + 1),
             topology: sentinel_buffer(u64::from(bases.topo) + topo_words + 1),
             bounds: sentinel_buffer((u64::from(bases.bounds) + 3) * 4),
@@ -561,19 +559,16 @@ mod tests {
         let node_words = read_words(&tree.nodes);
         assert_untouched(
             &node_words,
-            b.node as usize * NODE_WORDS,
-            Lbvh::node_count(n) as usize * NODE_WORDS,
+            b.node as usize * 16,
+            Lbvh::node_count(n) as usize * 16,
             "nodes",
         );
         let order_words = read_words(&tree.order);
         assert_untouched(&order_words, b.order as usize, n as usize, "order");
         let bounds = read_words(&tree.bounds);
         assert_untouched(&bounds, b.bounds as usize * 4, 8, "bounds_out");
-        // Checked as the binary tree the records were made from.
-        tree.node_words = binary_from_wide(
-            &node_words[b.node as usize * NODE_WORDS..]
-                [..Lbvh::node_count(n) as usize * NODE_WORDS],
-        );
+        tree.node_words =
+            node_words[b.node as usize * 16..][..Lbvh::node_count(n) as usize * 16].to_vec();
         tree.order_words = order_words[b.order as usize..][..n as usize].to_vec();
         let (root, sah) = check_tree(
             aabbs,
@@ -799,7 +794,7 @@ mod tests {
         let large = hard_soup(5000, 2);
         let n = [small.len() as u32, large.len() as u32];
         let inputs = [aabb_buffer(&small, 0), aabb_buffer(&large, 0)];
-        let nodes = n.map(|n| sentinel_buffer(u64::from(Lbvh::node_count(n)) * NODE_WORDS as u64));
+        let nodes = n.map(|n| sentinel_buffer(u64::from(Lbvh::node_count(n)) * 16));
         let order = n.map(|n| sentinel_buffer(u64::from(n)));
         run(|rec| {
             for i in 0..2 {
@@ -825,7 +820,7 @@ mod tests {
         for (i, aabbs) in [&small, &large].into_iter().enumerate() {
             check_tree(
                 aabbs,
-                &binary_from_wide(&read_words(&nodes[i])),
+                &read_words(&nodes[i]),
                 &read_words(&order[i]),
                 LeafRefs::SortedPosition,
                 true,

@@ -1,7 +1,6 @@
 //! The scene on the GPU: shared pools, ingestion, BLAS/TLAS builds. Layouts:
 //! `docs/ray-tracing-core.md`.
 
-pub(crate) mod bvh4;
 pub(crate) mod gpu_scene;
 pub(crate) mod ingest;
 pub(crate) mod lbvh;

@@ -6,7 +6,6 @@
 use super::rays::SceneBuffers;
 use crate::cpu::{intersect_triangle, CpuBvh, Ray, TriangleHit};
 use crate::gpu::testing;
-use crate::scene::bvh4::wide_from_binary;
 use bytemuck::{Pod, Zeroable};
 use glam::{Affine3A, Vec3};
 
@@ -245,10 +244,9 @@ impl TestScene {
         let mut geo_records = Vec::new();
         for tris in &geometries {
             let bvh = CpuBvh::build(tris);
-            // Traversal reads BVH4 records (8 entries each) made from the binary tree.
-            let node_base = blas.len() as u32 / 8;
+            let node_base = blas.len() as u32 / 4;
             let tri_base = soup.len() as u32 / 3;
-            blas.extend(wide_from_binary(&pack_blas(&bvh)));
+            blas.extend(pack_blas(&bvh));
             for &p in &bvh.primitive_indices {
                 let [a, b, c] = tris[p as usize];
                 soup.push(entry(a, p));
@@ -300,7 +298,7 @@ impl TestScene {
                 items.push((i as u32, lo - eps, hi + eps));
             }
         }
-        let tlas = wide_from_binary(&pack_tlas(items));
+        let tlas = pack_tlas(items);
         TestScene {
             geometries,
             instances,
