@@ -231,9 +231,12 @@ fn print_mesh(m: &PeerMesh) {
     }
 }
 
-/// `--cpu-peers`: every target mesh of [`CPU_PEER_SCENES`]; a scene that fails to load is an
-/// error in the report, the others still run.
-pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path) -> CpuPeersReport {
+/// Scenes of `--cpu-peers --quick` (a smoke test).
+pub const QUICK_SCENES: [&str; 2] = ["cornell-obj", "bunny"];
+
+/// `--cpu-peers` over `scenes`; a scene that fails to load is an error in the report, the others
+/// still run.
+pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, scenes: &[&str]) -> CpuPeersReport {
     let mut report = CpuPeersReport {
         cpu_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
         cpu_model: cpu_model(),
@@ -243,7 +246,7 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path) -> CpuPeersReport 
         "  CPU: {} ({} threads); obvhs runs on all of them, our CPU builder on one",
         report.cpu_model, report.cpu_threads
     );
-    for name in CPU_PEER_SCENES {
+    for &name in scenes {
         let Some(scene) = attempt(&mut report.errors, &format!("load {name}"), || {
             super::load(name, scenes_dir)
         }) else {

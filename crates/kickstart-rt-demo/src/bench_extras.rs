@@ -40,6 +40,10 @@ pub struct ExtraArgs {
     /// Frames of each frames-in-flight run (the first quarter is left out as warm-up).
     #[arg(long, default_value_t = 120)]
     pub fif_frames: u32,
+    /// Tiny series on the small scenes for the passes above (a smoke test on software Vulkan;
+    /// not the figures).
+    #[arg(long)]
+    pub quick: bool,
     /// Leave out the default per-scene measurements and the TLAS table (run only the passes
     /// asked for).
     #[arg(long)]
@@ -114,18 +118,33 @@ pub(super) fn run(
     if args.cpu_peers {
         println!("\nCPU peers: BVH build time and SAH cost, same meshes");
         let start = std::time::Instant::now();
-        report.cpu_peers = Some(cpu_peers::run(bench, scenes_dir));
+        let scenes: &[&str] = if args.quick {
+            &cpu_peers::QUICK_SCENES
+        } else {
+            &cpu_peers::CPU_PEER_SCENES
+        };
+        report.cpu_peers = Some(cpu_peers::run(bench, scenes_dir, scenes));
         println!("CPU peers done in {:.1} s", start.elapsed().as_secs_f64());
     }
     if args.scaling {
         println!("\nScaling");
         let start = std::time::Instant::now();
-        report.scaling = Some(scaling::run(bench, scenes_dir, size));
+        let plan = if args.quick {
+            scaling::Plan::quick()
+        } else {
+            scaling::Plan::full()
+        };
+        report.scaling = Some(scaling::run(bench, scenes_dir, size, &plan, args.quick));
         println!("scaling done in {:.1} s", start.elapsed().as_secs_f64());
     }
     if args.frames_in_flight {
         println!("\nFrames in flight");
-        report.frames_in_flight = Some(fif::run(bench, scenes_dir, size, args.fif_frames));
+        let scene = if args.quick {
+            "cornell-obj"
+        } else {
+            fif::FIF_SCENE
+        };
+        report.frames_in_flight = Some(fif::run(bench, scenes_dir, size, args.fif_frames, scene));
     }
     if let Some(dir) = &args.plots {
         plots::draw_all(report, dir)?;

@@ -46,10 +46,11 @@ pub(in crate::bench) fn run(
     scenes_dir: &Path,
     size: (u32, u32),
     frames: u32,
+    scene_name: &'static str,
 ) -> FifReport {
     let warmup = frames / 4;
     let mut report = FifReport {
-        scene: FIF_SCENE.to_string(),
+        scene: scene_name.to_string(),
         width: size.0,
         height: size.1,
         frames,
@@ -57,12 +58,12 @@ pub(in crate::bench) fn run(
         cpu_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
         ..Default::default()
     };
-    let Some(scene) = attempt(&mut report.errors, &format!("load {FIF_SCENE}"), || {
-        super::load(FIF_SCENE, scenes_dir)
+    let Some(scene) = attempt(&mut report.errors, &format!("load {scene_name}"), || {
+        super::load(scene_name, scenes_dir)
     }) else {
         return report;
     };
-    let camera = issue_camera(FIF_SCENE).unwrap_or_else(|| scene.camera_or_default(None));
+    let camera = issue_camera(scene_name).unwrap_or_else(|| scene.camera_or_default(None));
     for depth in DEPTHS {
         let records = attempt(
             &mut report.errors,
@@ -97,7 +98,7 @@ pub(in crate::bench) fn run(
         }
     }
     println!(
-        "  {FIF_SCENE} {}x{}, {frames} frames each, medians after {warmup} warm-up frames:\n{}",
+        "  {scene_name} {}x{}, {frames} frames each, medians after {warmup} warm-up frames:\n{}",
         size.0,
         size.1,
         fif::table(&report.summaries)

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::prelude::*;
 
 use super::ExtrasReport;
@@ -121,6 +122,81 @@ fn range(values: impl Iterator<Item = f64>, log: bool, from_zero: bool) -> (f64,
     (lo, hi)
 }
 
+/// A linear f64 axis with given ticks (plotters' `WithKeyPoints` over f64 has no label
+/// formatter, so `configure_mesh` refuses it; this one formats through our formatter).
+struct Axis {
+    lo: f64,
+    hi: f64,
+    /// Labelled ticks.
+    bold: Vec<f64>,
+    /// Minor grid lines.
+    light: Vec<f64>,
+}
+
+impl Ranged for Axis {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let t = (value - self.lo) / (self.hi - self.lo);
+        limit.0 + (f64::from(limit.1 - limit.0) * t).round() as i32
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            self.light.clone()
+        } else {
+            self.bold.clone()
+        }
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.lo..self.hi
+    }
+}
+
+/// Plotters' own tick positions over `lo..hi` (linear).
+fn linear_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    plotters::coord::types::RangedCoordf64::from(lo..hi).key_points(10usize)
+}
+
+/// Positions (log10 of values) in `lo..hi` of the values m × 10^k for the mantissas `m`.
+fn decade_ticks(lo: f64, hi: f64, mantissas: &[f64]) -> Vec<f64> {
+    let mut out = Vec::new();
+    for k in (lo.floor() as i32 - 1)..=(hi.ceil() as i32) {
+        for m in mantissas {
+            let v = f64::from(k) + m.log10();
+            if (lo..=hi).contains(&v) {
+                out.push(v);
+            }
+        }
+    }
+    out
+}
+
+/// Labelled ticks and minor grid lines of an axis over `lo..hi` (log10 values on a log axis):
+/// on a log axis the powers of ten, or 1-2-5 steps, or every digit, whichever gives a handful;
+/// on a span too short for those, linear steps of the values.
+fn ticks(lo: f64, hi: f64, log: bool) -> (Vec<f64>, Vec<f64>) {
+    if !log {
+        return (linear_ticks(lo, hi), Vec::new());
+    }
+    let digits: Vec<f64> = (1..10).map(f64::from).collect();
+    let minor = decade_ticks(lo, hi, &digits);
+    for set in [&[1.0][..], &[1.0, 2.0, 5.0], &digits] {
+        let t = decade_ticks(lo, hi, set);
+        if t.len() >= 3 && t.len() <= 12 {
+            return (t, minor);
+        }
+    }
+    let t: Vec<f64> = linear_ticks(10f64.powf(lo), 10f64.powf(hi))
+        .into_iter()
+        .filter(|v| *v > 0.0)
+        .map(f64::log10)
+        .collect();
+    (t, Vec::new())
+}
+
 /// Draws `chart` into `dir/<file>.png`; `None` when it has no point to show.
 pub fn draw(chart: &Chart, dir: &Path) -> AnyResult<Option<PathBuf>> {
     register_font()?;
@@ -146,6 +222,7 @@ pub fn draw(chart: &Chart, dir: &Path) -> AnyResult<Option<PathBuf>> {
     let all = || series.iter().flat_map(|(_, p)| p.iter().copied());
     let (x0, x1) = range(all().map(|p| p.0), chart.log_x, false);
     let (y0, y1) = range(all().map(|p| p.1), chart.log_y, true);
+    let (xt, yt) = (ticks(x0, x1, chart.log_x), ticks(y0, y1, chart.log_y));
     let (w, h) = CHART_SIZE;
     let mut pixels = vec![0u8; (w * h * 3) as usize];
     {
@@ -156,7 +233,20 @@ pub fn draw(chart: &Chart, dir: &Path) -> AnyResult<Option<PathBuf>> {
             .margin(16)
             .x_label_area_size(52)
             .y_label_area_size(72)
-            .build_cartesian_2d(x0..x1, y0..y1)
+            .build_cartesian_2d(
+                Axis {
+                    lo: x0,
+                    hi: x1,
+                    bold: xt.0,
+                    light: xt.1,
+                },
+                Axis {
+                    lo: y0,
+                    hi: y1,
+                    bold: yt.0,
+                    light: yt.1,
+                },
+            )
             .map_err(|e| e.to_string())?;
         let (log_x, log_y) = (chart.log_x, chart.log_y);
         let fx = move |v: &f64| human(if log_x { 10f64.powf(*v) } else { *v });
@@ -288,8 +378,11 @@ pub fn charts(report: &ExtrasReport) -> Vec<Chart> {
         out.push(chart(
             "scaling-lights",
             &format!(
-                "SDK frame time against lights ({}, 1920x1080)",
-                s.frame_scene
+                "SDK frame time against lights ({}, {})",
+                s.frame_scene,
+                s.lights
+                    .first()
+                    .map_or("—".to_string(), |p| format!("{}x{}", p.width, p.height))
             ),
             "lights in the multi-light shadow",
             "ms (GPU, SDK passes)",
@@ -434,6 +527,28 @@ mod tests {
     }
 
     #[test]
+    fn log_ticks_are_round_values() {
+        let vals =
+            |t: Vec<f64>| -> Vec<String> { t.iter().map(|v| human(10f64.powf(*v))).collect() };
+        // Six decades: the powers of ten.
+        assert_eq!(
+            vals(ticks(0.0, 6.0, true).0),
+            ["1", "10", "100", "1k", "10k", "100k", "1M"]
+        );
+        // One decade: 1-2-5.
+        assert_eq!(vals(ticks(0.9, 2.1, true).0), ["10", "20", "50", "100"]);
+        // Half a decade: every digit.
+        assert_eq!(
+            vals(ticks(1.2, 1.8, true).0),
+            ["20", "30", "40", "50", "60"]
+        );
+        // A sliver: linear steps, still inside the range.
+        let t = ticks(1.2, 1.21, true).0;
+        assert!(!t.is_empty() && t.iter().all(|v| (1.2..=1.21).contains(v)));
+        assert!(!ticks(0.0, 5.0, false).0.is_empty());
+    }
+
+    #[test]
     fn ranges_pad_and_log_axes_drop_non_positive_values() {
         assert_eq!(axis_value(100.0, true), Some(2.0));
         assert_eq!(axis_value(0.0, true), None);
@@ -489,6 +604,7 @@ mod tests {
         };
         ExtrasReport {
             scaling: Some(scaling::ScalingReport {
+                quick: true,
                 ray_size: (64, 36),
                 triangles: vec![
                     tri("cornell", 36, 0, 900.0),

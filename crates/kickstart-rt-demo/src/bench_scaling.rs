@@ -27,6 +27,8 @@ use crate::AnyResult;
 
 /// Scenes of the triangle series.
 pub const SCALING_SCENES: [&str; 4] = ["cornell-obj", "bunny", "apartment", "dragon"];
+/// The instanced scene.
+pub const INSTANCED_SCENE: &str = "dragon";
 /// Copies of the instanced dragon.
 pub const DRAGON_COPIES: [u32; 4] = [1, 10, 100, 1000];
 /// Frame sizes of the resolution series.
@@ -42,9 +44,64 @@ const WARMUP_FRAMES: u32 = 16;
 /// Timed frames of each frame measurement (median).
 const TIMED_FRAMES: u32 = 8;
 
+/// What the pass measures: the issue's series, or tiny ones for a smoke test on software Vulkan
+/// (`--quick`).
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// Scenes of the triangle series.
+    pub scenes: Vec<&'static str>,
+    /// The scene whose largest mesh is instanced (must be in `scenes`).
+    pub instanced: &'static str,
+    /// Its copies.
+    pub copies: Vec<u32>,
+    /// Frame sizes.
+    pub resolutions: Vec<(u32, u32)>,
+    /// Frame size of the light series.
+    pub light_size: (u32, u32),
+    /// Light counts.
+    pub lights: Vec<u32>,
+    /// TLAS instance counts.
+    pub tlas: Vec<u32>,
+    /// The frame series' scene (must be in `scenes`).
+    pub frame_scene: &'static str,
+}
+
+impl Plan {
+    /// The issue's series.
+    pub fn full() -> Plan {
+        Plan {
+            scenes: SCALING_SCENES.to_vec(),
+            instanced: INSTANCED_SCENE,
+            copies: DRAGON_COPIES.to_vec(),
+            resolutions: RESOLUTIONS.to_vec(),
+            light_size: (1920, 1080),
+            lights: LIGHT_COUNTS.to_vec(),
+            tlas: TLAS_COUNTS.to_vec(),
+            frame_scene: FRAME_SCENE,
+        }
+    }
+
+    /// Tiny series on the small scenes (seconds on lavapipe).
+    pub fn quick() -> Plan {
+        Plan {
+            scenes: vec!["cornell-obj", "bunny"],
+            instanced: "bunny",
+            copies: vec![1, 4],
+            resolutions: vec![(64, 36), (128, 72)],
+            light_size: (64, 36),
+            lights: vec![1, 4],
+            tlas: vec![100, 1000],
+            frame_scene: "cornell-obj",
+        }
+    }
+}
+
 /// The whole `--scaling` result.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct ScalingReport {
+    /// `--quick`: tiny smoke-test series, not the issue's.
+    #[serde(default)]
+    pub quick: bool,
     /// Ray batch image size.
     pub ray_size: (u32, u32),
     /// Triangle series, in the order measured.
@@ -53,7 +110,7 @@ pub struct ScalingReport {
     pub frame_scene: String,
     /// Frame time against resolution (single-light shadow, as `ksrt render`).
     pub resolution: Vec<FramePoint>,
-    /// Frame time against light count at 1920×1080.
+    /// Frame time against light count (at 1920×1080).
     pub lights: Vec<FramePoint>,
     /// TLAS build and refit against instance count.
     pub tlas: Vec<TlasPoint>,
@@ -125,15 +182,16 @@ pub struct TlasPoint {
     pub errors: Vec<String>,
 }
 
-/// `copies` instances of the dragon's largest mesh on a square grid in the xz plane, 1.25 mesh
-/// widths apart, each with the file's own transform of that mesh.
-pub fn instanced(dragon: &Scene, copies: u32) -> AnyResult<Scene> {
+/// `copies` instances of the scene's (the dragon's) largest mesh on a square grid in the xz
+/// plane, 1.25 mesh widths apart, each with the file's own transform of that mesh; named
+/// `<name> x<copies>`.
+pub fn instanced(dragon: &Scene, name: &str, copies: u32) -> AnyResult<Scene> {
     let (k, mesh) = dragon
         .meshes
         .iter()
         .enumerate()
         .max_by_key(|(_, m)| m.triangle_count())
-        .ok_or("the dragon scene has no mesh")?;
+        .ok_or_else(|| format!("{name}: the scene has no mesh"))?;
     let base = dragon
         .instances
         .iter()
@@ -159,7 +217,7 @@ pub fn instanced(dragon: &Scene, copies: u32) -> AnyResult<Scene> {
         })
         .collect();
     Ok(Scene {
-        name: format!("dragon x{copies}"),
+        name: format!("{name} x{copies}"),
         meshes: vec![mesh.clone()],
         instances,
         ..Default::default()
@@ -386,10 +444,17 @@ fn print_frame(what: &str, p: &FramePoint) {
 }
 
 /// `--scaling`. Failures are kept in the report; the other points still run.
-pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, size: (u32, u32)) -> ScalingReport {
+pub(in crate::bench) fn run(
+    bench: &Bench,
+    scenes_dir: &Path,
+    size: (u32, u32),
+    plan: &Plan,
+    quick: bool,
+) -> ScalingReport {
     let mut report = ScalingReport {
+        quick,
         ray_size: size,
-        frame_scene: FRAME_SCENE.to_string(),
+        frame_scene: plan.frame_scene.to_string(),
         ..Default::default()
     };
     let errors = &mut report.errors;
@@ -399,7 +464,7 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, size: (u32, u32)) 
     );
     let mut dragon = None;
     let mut frame_scene = None;
-    for name in SCALING_SCENES {
+    for &name in &plan.scenes {
         let Some(scene) = attempt(errors, &format!("load {name}"), || {
             super::load(name, scenes_dir)
         }) else {
@@ -408,16 +473,19 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, size: (u32, u32)) 
         let camera = issue_camera(name).unwrap_or_else(|| scene.camera_or_default(None));
         let p = triangle_point(bench, name, &scene, 0, &camera, size, errors);
         report.triangles.push(p);
-        match name {
-            "dragon" => dragon = Some(scene),
-            FRAME_SCENE => frame_scene = Some(scene),
-            _ => {}
+        if name == plan.frame_scene {
+            frame_scene = Some(scene.clone());
+        }
+        if name == plan.instanced {
+            dragon = Some(scene);
         }
     }
     if let Some(dragon) = &dragon {
-        for copies in DRAGON_COPIES {
-            let label = format!("dragon x{copies}");
-            if let Some(scene) = attempt(errors, &label, || instanced(dragon, copies)) {
+        for &copies in &plan.copies {
+            let label = format!("{} x{copies}", plan.instanced);
+            if let Some(scene) =
+                attempt(errors, &label, || instanced(dragon, plan.instanced, copies))
+            {
                 let camera = scene.default_camera();
                 let p = triangle_point(bench, &label, &scene, copies, &camera, size, errors);
                 report.triangles.push(p);
@@ -425,9 +493,13 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, size: (u32, u32)) 
         }
     }
     if let Some(scene) = &frame_scene {
-        let camera = issue_camera(FRAME_SCENE).unwrap_or_else(|| scene.camera_or_default(None));
-        println!("  SDK frame time of `ksrt render` ({FRAME_SCENE}) against resolution:");
-        for res in RESOLUTIONS {
+        let camera =
+            issue_camera(plan.frame_scene).unwrap_or_else(|| scene.camera_or_default(None));
+        println!(
+            "  SDK frame time of `ksrt render` ({}) against resolution:",
+            plan.frame_scene
+        );
+        for &res in &plan.resolutions {
             let what = format!("{}x{}", res.0, res.1);
             if let Some(p) = attempt(errors, &format!("frame {what}"), || {
                 frame_point(bench, scene, &camera, res, None)
@@ -436,11 +508,12 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, size: (u32, u32)) 
                 report.resolution.push(p);
             }
         }
-        println!("  … against the light count (multi-light shadow, 1920x1080):");
-        for n in LIGHT_COUNTS {
+        let (lw, lh) = plan.light_size;
+        println!("  … against the light count (multi-light shadow, {lw}x{lh}):");
+        for &n in &plan.lights {
             let what = format!("{n} lights");
             if let Some(p) = attempt(errors, &format!("frame {what}"), || {
-                frame_point(bench, scene, &camera, (1920, 1080), Some(n))
+                frame_point(bench, scene, &camera, plan.light_size, Some(n))
             }) {
                 print_frame(&what, &p);
                 report.lights.push(p);
@@ -448,7 +521,7 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, size: (u32, u32)) 
         }
     }
     println!("  TLAS against instances (80-triangle spheres, random transforms):");
-    for count in TLAS_COUNTS {
+    for &count in &plan.tlas {
         let t = bench_tlas(bench, count);
         let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
         println!(
@@ -497,7 +570,7 @@ mod tests {
     #[test]
     fn instanced_copies_sit_on_a_grid_without_overlap() {
         for copies in [1, 10, 100] {
-            let s = instanced(&dragon(), copies).unwrap();
+            let s = instanced(&dragon(), "dragon", copies).unwrap();
             assert_eq!(s.instances.len(), copies as usize);
             assert_eq!(s.meshes.len(), 1);
             assert_eq!(s.triangle_count(), copies as usize);
@@ -522,10 +595,10 @@ mod tests {
             }
         }
         // 10 copies: a 4-wide grid, the 10th in the third row.
-        let s = instanced(&dragon(), 10).unwrap();
+        let s = instanced(&dragon(), "dragon", 10).unwrap();
         let t = s.instances[9].transform.translation;
         assert!((t.x - 1.25).abs() < 1e-6 && (t.z - 2.5).abs() < 1e-6, "{t}");
-        assert!(instanced(&Scene::default(), 4).is_err());
+        assert!(instanced(&Scene::default(), "dragon", 4).is_err());
     }
 
     #[test]
@@ -548,6 +621,10 @@ mod tests {
 
     #[test]
     fn series_are_the_issues() {
+        for plan in [Plan::full(), Plan::quick()] {
+            assert!(plan.scenes.contains(&plan.instanced));
+            assert!(plan.scenes.contains(&plan.frame_scene));
+        }
         assert_eq!(DRAGON_COPIES, [1, 10, 100, 1000]);
         assert_eq!(TLAS_COUNTS.last(), Some(&1_000_000));
         assert_eq!(RESOLUTIONS[2], (3840, 2160));

@@ -210,14 +210,15 @@ fn retire(device: &wgpu::Device, ctx: &ksrt::ExecuteContext, p: Pending) -> AnyR
     // A non-blocking poll runs the submitted-work-done callbacks of what has finished.
     device.poll(wgpu::PollType::Poll)?;
     let gpu_busy = !p.done.load(Ordering::Acquire);
-    let start = Instant::now();
+    let mut wait_ms = 0.0;
     if gpu_busy {
+        let start = Instant::now();
         device.poll(wgpu::PollType::Wait {
             submission_index: Some(p.index),
             timeout: None,
         })?;
+        wait_ms = start.elapsed().as_secs_f64() * 1e3;
     }
-    let wait_ms = start.elapsed().as_secs_f64() * 1e3;
     for task in p.tasks {
         match ctx.mark_gpu_task_completed(task) {
             Ok(()) | Err(ksrt::Error::InvalidGpuTaskHandle(_)) => {}
@@ -378,6 +379,60 @@ mod tests {
         assert!(ring.must_retire(), "depth 0 means 1");
         assert_eq!(ring.pop_oldest(), Some(7));
         assert!(ring.is_empty());
+    }
+
+    /// GPU (lavapipe: tiny): `ksrt render`'s loop with three frames in flight records every
+    /// frame, waits for nothing before the fourth, and then always for the frame three back.
+    #[test]
+    fn render_loop_keeps_three_frames_in_flight() {
+        let (device, queue) = crate::testing::device();
+        let scene = crate::scene::builtin::cornell_box();
+        let camera = scene.camera_or_default(None);
+        let result = crate::lit::render(
+            device,
+            queue,
+            &scene,
+            &camera,
+            &crate::lit::LitOptions {
+                size: (32, 32),
+                frames: 6,
+                effects: crate::frame::Effects::parse("none,ao").unwrap(),
+                seed: 0,
+                progress: false,
+                gpu_timing: false,
+                frames_in_flight: 3,
+            },
+        )
+        .expect("render");
+        let waited: Vec<Option<u32>> = result.frames.iter().map(|r| r.waited_for).collect();
+        assert_eq!(waited, vec![None, None, None, Some(0), Some(1), Some(2)]);
+        for r in &result.frames {
+            assert!(
+                r.record_ms >= r.sdk_build_ms && r.sdk_build_ms > 0.0,
+                "{r:?}"
+            );
+            assert!(r.frame_ms > 0.0 && r.wait_ms >= 0.0);
+            assert!(r.gpu_busy || r.wait_ms == 0.0);
+        }
+        assert!(result.channel("ao").is_some());
+        let bad = crate::lit::render(
+            device,
+            queue,
+            &scene,
+            &camera,
+            &crate::lit::LitOptions {
+                size: (8, 8),
+                frames: 1,
+                effects: Default::default(),
+                seed: 0,
+                progress: false,
+                gpu_timing: false,
+                frames_in_flight: 4,
+            },
+        );
+        assert!(bad
+            .err()
+            .is_some_and(|e| e.to_string().contains("--frames-in-flight 4")));
     }
 
     #[test]
