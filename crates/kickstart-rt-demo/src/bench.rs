@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use glam::{Affine3A, Quat, Vec3};
 use kickstart_rt as ksrt;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use wgpu::util::DeviceExt;
 
 use crate::bench_profile::{self as prof, PassProfile};
@@ -20,6 +20,8 @@ use crate::AnyResult;
 
 #[path = "bench_cache.rs"]
 mod cache;
+#[path = "bench_extras.rs"]
+pub mod extras;
 
 /// Scenes benchmarked when no `--scene` is given.
 pub const DEFAULT_SCENES: [&str; 2] = ["dragon", "apartment"];
@@ -51,10 +53,12 @@ pub struct BenchOptions {
     pub iterations: u32,
     /// Ray batch image size.
     pub size: (u32, u32),
+    /// The optional passes (`bench_extras.rs`).
+    pub extras: extras::ExtraArgs,
 }
 
 /// Median, minimum and maximum of the timed repetitions, milliseconds.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Stats {
     /// Median.
     pub median_ms: f64,
@@ -234,6 +238,9 @@ pub struct Report {
     pub scenes: Vec<SceneReport>,
     /// Per instance count.
     pub tlas: Vec<TlasReport>,
+    /// The optional passes' results (`cpu_peers`, `scaling`, `frames_in_flight`).
+    #[serde(flatten)]
+    pub extras: extras::ExtrasReport,
 }
 
 /// Runs `f`, keeping its error as text in `errors` (labelled `what`) so that one failed
@@ -1103,7 +1110,10 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         return Err("--iterations must be at least 1".into());
     }
     // Load every scene first: a wrong name fails before minutes of GPU work.
-    let names: Vec<String> = if opts.scenes.is_empty() {
+    opts.extras.check()?;
+    let names: Vec<String> = if opts.extras.skip_scenes {
+        Vec::new()
+    } else if opts.scenes.is_empty() {
         DEFAULT_SCENES.iter().map(|s| s.to_string()).collect()
     } else {
         opts.scenes.clone()
@@ -1149,6 +1159,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         iterations: opts.iterations,
         scenes: Vec::new(),
         tlas: Vec::new(),
+        extras: Default::default(),
     };
     for (name, scene) in names.iter().zip(&scenes) {
         let camera = opts
@@ -1159,8 +1170,13 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         print_scene(&r, opts.size);
         report.scenes.push(r);
     }
-    println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
-    for count in TLAS_INSTANCE_COUNTS {
+    let tlas_counts: &[u32] = if opts.extras.skip_scenes {
+        &[]
+    } else {
+        println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
+        &TLAS_INSTANCE_COUNTS
+    };
+    for &count in tlas_counts {
         let t = bench_tlas(&bench, count);
         let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
         println!(
@@ -1179,6 +1195,13 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         }
         report.tlas.push(t);
     }
+    extras::run(
+        &bench,
+        &opts.scenes_dir,
+        opts.size,
+        &opts.extras,
+        &mut report.extras,
+    )?;
     if let Some(path) = &opts.json {
         let text = serde_json::to_string_pretty(&report)?;
         std::fs::write(path, text)
@@ -1186,7 +1209,8 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         println!("wrote {}", path.display());
     }
     let failed = report.scenes.iter().map(|s| s.errors.len()).sum::<usize>()
-        + report.tlas.iter().map(|t| t.errors.len()).sum::<usize>();
+        + report.tlas.iter().map(|t| t.errors.len()).sum::<usize>()
+        + report.extras.failures();
     if failed > 0 {
         return Err(format!("{failed} measurements failed (listed above)").into());
     }

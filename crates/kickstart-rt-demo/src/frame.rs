@@ -141,12 +141,12 @@ impl Part {
             "TraceSpecularTask" => Part::Specular,
             "TraceDiffuseTask" => Part::Diffuse,
             "TraceAmbientOcclusionTask" => Part::Ao,
-            "TraceShadowTask" => Part::Shadow,
+            "TraceShadowTask" | "TraceMultiShadowTask" => Part::Shadow,
             "DenoiseSpecularAndDiffuseTask" | "DenoiseSpecularTask" | "DenoiseDiffuseTask" => {
                 Part::DenoiseSpecularDiffuse
             }
             "DenoiseDiffuseOcclusionTask" => Part::DenoiseAo,
-            "DenoiseShadowTask" => Part::DenoiseShadow,
+            "DenoiseShadowTask" | "DenoiseMultiShadowTask" => Part::DenoiseShadow,
             _ => return None,
         })
     }
@@ -265,6 +265,16 @@ pub struct SdkFrame {
     pub roughness_override: Option<f32>,
     /// Set while [`Self::record_traces`] builds: the trace tasks only, white noise of this index.
     traces_only: Option<u32>,
+    /// When set, the shadow is traced for several lights ([`Self::set_multi_shadow`]).
+    multi_shadow: Option<MultiShadow>,
+}
+
+/// The multi-light shadow of [`SdkFrame::set_multi_shadow`]: its extra lights and the packed
+/// outputs of `TraceMultiShadowTask`.
+struct MultiShadow {
+    lights: Vec<ksrt::LightInfo>,
+    output0: wgpu::Texture,
+    output1: wgpu::Texture,
 }
 
 /// The SDK's description of a scene light, for its shadow task. Point and spot lights get an
@@ -329,7 +339,31 @@ impl SdkFrame {
             freeze_cache: false,
             roughness_override: None,
             traces_only: None,
+            multi_shadow: None,
         }
+    }
+
+    /// Traces the shadow of the main light and `extra_lights` in one `TraceMultiShadowTask`
+    /// (denoised by `DenoiseMultiShadowTask` into the shadow's denoised output) instead of the
+    /// main light's `TraceShadowTask`; `ksrt bench --scaling` times the frame against the light
+    /// count with it. `None`: back to the single light's task. At most 31 extra lights (the
+    /// task takes 32); more are dropped. The raw `shadow` output is then not written.
+    pub fn set_multi_shadow(
+        &mut self,
+        device: &wgpu::Device,
+        extra_lights: Option<&[ksrt::LightInfo]>,
+    ) {
+        let Some(extra_lights) = extra_lights else {
+            self.multi_shadow = None;
+            return;
+        };
+        let keep = extra_lights.len().min(ksrt::MAX_MULTI_SHADOW_LIGHTS - 1);
+        let packed = SdkOutputs::new(device, self.size);
+        self.multi_shadow = Some(MultiShadow {
+            lights: extra_lights[..keep].to_vec(),
+            output0: packed.shadow,
+            output1: packed.shadow_denoised,
+        });
     }
 
     fn on(&self, part: Part) -> bool {
@@ -555,12 +589,25 @@ impl SdkFrame {
             ));
         }
         if let (true, Some(light)) = (self.on(Part::Shadow), self.shadow_light) {
-            tasks.push(ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
-                common: common.clone(),
-                output: view(&o.shadow),
-                light,
-                enable_first_hit_and_end_search: true,
-            }));
+            match &self.multi_shadow {
+                Some(m) => tasks.push(ksrt::RenderTask::TraceMultiShadow(
+                    ksrt::TraceMultiShadowTask {
+                        common: common.clone(),
+                        output0: view(&m.output0),
+                        output1: view(&m.output1),
+                        lights: std::iter::once(light)
+                            .chain(m.lights.iter().copied())
+                            .collect(),
+                        enable_first_hit_and_end_search: true,
+                    },
+                )),
+                None => tasks.push(ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
+                    common: common.clone(),
+                    output: view(&o.shadow),
+                    light,
+                    enable_first_hit_and_end_search: true,
+                })),
+            }
         }
         self.debug_common = Some(common.clone());
         let mode = if inputs.discard_history {
@@ -633,12 +680,26 @@ impl SdkFrame {
             ));
         }
         if self.on(Part::DenoiseShadow) {
-            let c = denoise_common(self.denoiser(ksrt::SignalType::Shadow)?);
-            tasks.push(ksrt::RenderTask::DenoiseShadow(ksrt::DenoiseShadowTask {
-                common: c,
-                input: view(&self.outputs.shadow),
-                output: view(&self.outputs.shadow_denoised),
-            }));
+            if self.multi_shadow.is_some() {
+                let c = denoise_common(self.denoiser(ksrt::SignalType::MultiShadow)?);
+                if let Some(m) = &self.multi_shadow {
+                    tasks.push(ksrt::RenderTask::DenoiseMultiShadow(
+                        ksrt::DenoiseMultiShadowTask {
+                            common: c,
+                            input0: view(&m.output0),
+                            input1: view(&m.output1),
+                            output: view(&self.outputs.shadow_denoised),
+                        },
+                    ));
+                }
+            } else {
+                let c = denoise_common(self.denoiser(ksrt::SignalType::Shadow)?);
+                tasks.push(ksrt::RenderTask::DenoiseShadow(ksrt::DenoiseShadowTask {
+                    common: c,
+                    input: view(&self.outputs.shadow),
+                    output: view(&self.outputs.shadow_denoised),
+                }));
+            }
         }
         Ok(tasks)
     }
@@ -681,6 +742,8 @@ mod tests {
             "DenoiseDiffuseTask",
             "DenoiseDiffuseOcclusionTask",
             "DenoiseShadowTask",
+            "TraceMultiShadowTask",
+            "DenoiseMultiShadowTask",
         ] {
             assert!(Part::of_task(task).is_some(), "{task}");
         }

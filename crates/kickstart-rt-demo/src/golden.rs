@@ -167,6 +167,7 @@ fn render(scene: &Scene, camera: &Camera, size: (u32, u32), frames: u32) -> LitR
             seed: 7,
             progress: false,
             gpu_timing: false,
+            frames_in_flight: 1,
         },
     )
     .unwrap_or_else(|e| panic!("{}: {e}", scene.name))

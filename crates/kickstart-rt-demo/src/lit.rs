@@ -30,6 +30,9 @@ pub struct LitOptions {
     pub progress: bool,
     /// Measure the SDK's passes on the last frame.
     pub gpu_timing: bool,
+    /// Frames the CPU may record ahead of the GPU (1..=3; 1 waits for each frame before the
+    /// next), see [`crate::frames_in_flight`].
+    pub frames_in_flight: u32,
 }
 
 /// One image of the render: its file stem, texels and how to display them.
@@ -53,6 +56,8 @@ pub struct LitResult {
     /// GPU time of the SDK's passes in each of the last [`TIMED_FRAMES`] frames, when measured
     /// (empty otherwise).
     pub timings: Vec<ksrt::GpuTimings>,
+    /// Every frame's CPU costs: `build_gpu_task`, recording, submit, waits for the GPU.
+    pub frames: Vec<crate::frames_in_flight::FrameRecord>,
 }
 
 impl LitResult {
@@ -75,6 +80,8 @@ pub fn render(
     ropts.effects = opts.effects;
     ropts.seed = opts.seed;
     ropts.gpu_timing = opts.gpu_timing;
+    let depth = crate::frames_in_flight::check_depth(opts.frames_in_flight)?;
+    ropts.frames_in_flight = opts.frames_in_flight;
     let mut renderer = Renderer::new(device, queue, scene, &ropts)?;
     let frames = opts.frames.max(1);
     let bar = if opts.progress {
@@ -89,15 +96,20 @@ pub fn render(
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let mut timings = Vec::new();
-    for f in 0..frames {
-        let timed = opts.gpu_timing && f + TIMED_FRAMES >= frames;
-        if let Some(t) = renderer.render_frame(device, queue, camera, timed)? {
-            timings.push(t);
-        }
-        bar.inc(1);
-    }
+    let looped = crate::frames_in_flight::run(
+        &mut renderer,
+        device,
+        queue,
+        camera,
+        crate::frames_in_flight::LoopOptions {
+            frames,
+            depth,
+            timed_frames: if opts.gpu_timing { TIMED_FRAMES } else { 0 },
+        },
+        || bar.inc(1),
+    )?;
     bar.finish_and_clear();
+    let timings = looped.timings;
 
     let read = |t: &wgpu::Texture| read_texture(device, queue, t);
     let mut channels = vec![
@@ -181,6 +193,7 @@ pub fn render(
         missing,
         refused: renderer.sdk.refused.iter().copied().collect(),
         timings,
+        frames: looped.records,
     })
 }
 

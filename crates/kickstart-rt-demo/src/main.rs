@@ -6,10 +6,12 @@ mod bench_profile;
 mod composite;
 mod debug_view;
 mod frame;
+mod frames_in_flight;
 #[cfg(test)]
 mod golden;
 mod gpu;
 mod lit;
+mod obvhs_peer;
 mod quality;
 mod raster;
 mod readback;
@@ -90,6 +92,11 @@ enum Command {
         /// Also write the SDK pass timings (medians of the last frames) as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Frames the CPU may record ahead of the GPU, 1..=3 (1: wait for each frame before
+        /// recording the next). Each frame's CPU time of `build_gpu_task` and its wait for the
+        /// frame N back are printed and in --json.
+        #[arg(long, default_value_t = 1)]
+        frames_in_flight: u32,
     },
     /// Open a window on a scene: fly with WASD/QE and the mouse (hold the left button), toggle
     /// effects with 1–6, cycle debug views with V; SDK timings in the title bar.
@@ -185,6 +192,9 @@ enum Command {
         /// Only time the denoisers (every task and method, synthetic inputs at --size).
         #[arg(long)]
         denoisers: bool,
+        /// CPU peers, scaling, frames in flight and charts (bench_extras.rs).
+        #[command(flatten)]
+        extras: bench::extras::ExtraArgs,
     },
 }
 
@@ -214,6 +224,7 @@ struct RenderArgs {
     hdr: bool,
     no_reference: bool,
     json: Option<PathBuf>,
+    frames_in_flight: u32,
 }
 
 fn render(args: RenderArgs) -> AnyResult<()> {
@@ -230,10 +241,12 @@ fn render(args: RenderArgs) -> AnyResult<()> {
         hdr,
         no_reference,
         json,
+        frames_in_flight,
     } = args;
     let scene_name = scene_name.as_str();
     let (width, height) = parse_size(&size)?;
     let effects = frame::Effects::parse(&effects)?;
+    frames_in_flight::check_depth(frames_in_flight)?;
     if frames == 0 {
         return Err("--frames 0: render at least one frame".into());
     }
@@ -262,6 +275,7 @@ fn render(args: RenderArgs) -> AnyResult<()> {
             seed,
             progress: true,
             gpu_timing: true,
+            frames_in_flight,
         },
     )?;
     let written = lit::write(&result, &out, hdr)?;
@@ -294,8 +308,16 @@ fn render(args: RenderArgs) -> AnyResult<()> {
     } else {
         print!("{}", lit::timing_table(&result.timings));
     }
+    // The first frames compile pipelines and fill the lighting cache: left out of the summary.
+    let fif = frames_in_flight::summarise(frames_in_flight, &result.frames, (frames / 4) as usize);
+    print!(
+        "CPU per frame, {frames_in_flight} frame(s) in flight (medians of the last {} frames):\n{}",
+        fif.frames,
+        frames_in_flight::table(std::slice::from_ref(&fif))
+    );
     if let Some(path) = &json {
-        let value = lit::timing_json(&scene.name, (width, height), frames, &result.timings);
+        let mut value = lit::timing_json(&scene.name, (width, height), frames, &result.timings);
+        value["frames_in_flight"] = serde_json::json!({"summary": fif, "frames": result.frames});
         std::fs::write(path, serde_json::to_string_pretty(&value)?)
             .map_err(|e| format!("--json {}: {e}", path.display()))?;
         println!("wrote {}", path.display());
@@ -421,7 +443,12 @@ fn bench_command(
     camera: Option<String>,
     iterations: u32,
     size: &str,
+    extras: bench::extras::ExtraArgs,
 ) -> AnyResult<()> {
+    if let (Some(dir), Some(json)) = (&extras.plots, &extras.plots_from) {
+        // Charts of an earlier run: no GPU, no measurement.
+        return bench::extras::plots_from_json(json, dir);
+    }
     bench::run(bench::BenchOptions {
         scenes_dir: scene::scenes_dir(scenes),
         scenes: names,
@@ -429,6 +456,7 @@ fn bench_command(
         camera: camera.as_deref().map(scene::parse_camera).transpose()?,
         iterations,
         size: parse_size(size)?,
+        extras,
     })
 }
 
@@ -450,6 +478,7 @@ fn main() {
             hdr,
             no_reference,
             json,
+            frames_in_flight,
         } => render(RenderArgs {
             size,
             out,
@@ -463,6 +492,7 @@ fn main() {
             hdr,
             no_reference,
             json,
+            frames_in_flight,
         }),
         Command::View {
             scene,
@@ -525,8 +555,9 @@ fn main() {
             camera,
             iterations,
             size,
+            extras,
             ..
-        } => bench_command(scenes, scene, json, camera, iterations, &size),
+        } => bench_command(scenes, scene, json, camera, iterations, &size, extras),
     };
     if let Err(e) = result {
         eprintln!("ksrt: {e}");

@@ -27,6 +27,9 @@ pub struct RendererOptions {
     pub gpu_timing: bool,
     /// Format of the display image (`Rgba8UnormSrgb` for files, the surface's in the viewer).
     pub ldr_format: wgpu::TextureFormat,
+    /// Frames the caller keeps in flight (1..=3): the SDK context is made to allow two GPU
+    /// tasks (the frame's and the debug view's) per frame in flight.
+    pub frames_in_flight: u32,
 }
 
 impl RendererOptions {
@@ -39,6 +42,7 @@ impl RendererOptions {
             lidar_size: 128,
             gpu_timing: false,
             ldr_format: wgpu::TextureFormat::Rgba8UnormSrgb,
+            frames_in_flight: 1,
         }
     }
 }
@@ -63,6 +67,8 @@ pub struct Renderer {
     lidar_on: bool,
     /// What the composite shows.
     pub show: crate::composite::Show,
+    /// CPU time of the SDK's `build_gpu_task` calls in the last [`Self::record_frame`], ms.
+    pub last_sdk_build_ms: f64,
     _uploads: Vec<UploadedMesh>,
 }
 
@@ -93,9 +99,13 @@ impl Renderer {
         scene: &Scene,
         opts: &RendererOptions,
     ) -> AnyResult<Renderer> {
+        let defaults = ksrt::InitSettings::default();
         let settings = ksrt::InitSettings {
             gpu_timing: opts.gpu_timing,
-            ..Default::default()
+            supported_working_sets: defaults
+                .supported_working_sets
+                .max(2 * opts.frames_in_flight),
+            ..defaults
         };
         let ctx = ksrt::ExecuteContext::new(device, queue, settings)?;
         let uploads = gpu::upload_scene(device, scene);
@@ -152,6 +162,7 @@ impl Renderer {
             prev_view: None,
             lidar_on: opts.effects.lidar,
             show: Default::default(),
+            last_sdk_build_ms: 0.0,
             _uploads: uploads,
         })
     }
@@ -200,6 +211,7 @@ impl Renderer {
             None
         };
         let discard_history = self.prev_view.is_none();
+        let sdk_start = std::time::Instant::now();
         let tasks = self.sdk.record(
             encoder,
             &FrameInputs {
@@ -210,6 +222,7 @@ impl Renderer {
                 discard_history,
             },
         )?;
+        self.last_sdk_build_ms = sdk_start.elapsed().as_secs_f64() * 1e3;
         let produced = self.sdk.produced();
         self.composite.record(
             device,

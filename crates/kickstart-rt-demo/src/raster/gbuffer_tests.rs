@@ -120,6 +120,7 @@ fn hdr_channels_are_written_as_linear_exr() {
         missing: vec![],
         refused: vec![],
         timings: vec![],
+        frames: vec![],
     };
     let dir = testing::temp_dir("exr");
     let written = crate::lit::write(&result, &dir, true).expect("write");

@@ -1,0 +1,174 @@
+//! The optional passes of `ksrt bench` (issue 9, apart from the driver peer): CPU BVH peers
+//! (`--cpu-peers`), scaling (`--scaling`), frames in flight (`--frames-in-flight`), and the PNG
+//! charts of their results (`--plots DIR`, also from an earlier run's JSON with
+//! `--plots-from`). Each pass is off unless asked for; `--skip-scenes` leaves out the default
+//! per-scene measurements and TLAS table so that a pass can run alone.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::Bench;
+use crate::scene::{self, Scene};
+use crate::AnyResult;
+
+#[path = "bench_cpu_peers.rs"]
+pub mod cpu_peers;
+#[path = "bench_fif.rs"]
+pub mod fif;
+#[path = "bench_plots.rs"]
+pub mod plots;
+#[path = "bench_scaling.rs"]
+pub mod scaling;
+
+/// The command-line options of the optional passes (flattened into `ksrt bench`).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ExtraArgs {
+    /// Also compare BVH build time and SAH cost with CPU builders (obvhs, and our CPU
+    /// binned-SAH builder) on bunny, Cornell box, apartment and dragon.
+    #[arg(long)]
+    pub cpu_peers: bool,
+    /// Also measure scaling: rays/s and BLAS build time against triangles (with the dragon
+    /// instanced 1–1000×), SDK frame time against resolution and light count, TLAS cost against
+    /// instances (1k–1M). About a minute on an H100.
+    #[arg(long)]
+    pub scaling: bool,
+    /// Also run `ksrt render`'s frame loop with 1, 2 and 3 frames in flight and print the CPU
+    /// time of `build_gpu_task` and the waits for the GPU.
+    #[arg(long)]
+    pub frames_in_flight: bool,
+    /// Frames of each frames-in-flight run (the first quarter is left out as warm-up).
+    #[arg(long, default_value_t = 120)]
+    pub fif_frames: u32,
+    /// Tiny series on the small scenes for the passes above (a smoke test on software Vulkan;
+    /// not the issue's figures).
+    #[arg(long)]
+    pub quick: bool,
+    /// Leave out the default per-scene measurements and the TLAS table (run only the passes
+    /// asked for).
+    #[arg(long)]
+    pub skip_scenes: bool,
+    /// Draw the results of the passes run as PNG charts into this folder.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
+    /// With --plots: draw from this earlier `ksrt bench --json` file instead of measuring
+    /// (no GPU needed).
+    #[arg(long, requires = "plots")]
+    pub plots_from: Option<PathBuf>,
+}
+
+impl ExtraArgs {
+    /// Checks the values (before any GPU work).
+    pub fn check(&self) -> AnyResult<()> {
+        if self.frames_in_flight && self.fif_frames < 8 {
+            return Err(format!(
+                "--fif-frames {}: at least 8 frames (a quarter are warm-up)",
+                self.fif_frames
+            )
+            .into());
+        }
+        Ok(())
+    }
+}
+
+/// What the optional passes measured (flattened into the bench's JSON report; a pass not run
+/// leaves its key out).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct ExtrasReport {
+    /// `--cpu-peers`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_peers: Option<cpu_peers::CpuPeersReport>,
+    /// `--scaling`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scaling: Option<scaling::ScalingReport>,
+    /// `--frames-in-flight`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_in_flight: Option<fif::FifReport>,
+}
+
+impl ExtrasReport {
+    /// Measurements that failed in the passes.
+    pub fn failures(&self) -> usize {
+        self.cpu_peers.as_ref().map_or(0, |r| r.errors.len())
+            + self.scaling.as_ref().map_or(0, |r| r.errors.len())
+            + self.frames_in_flight.as_ref().map_or(0, |r| r.errors.len())
+    }
+}
+
+/// Loads a scene by name, saying how long it took (the big ones take seconds).
+fn load(name: &str, scenes_dir: &Path) -> AnyResult<Scene> {
+    let start = std::time::Instant::now();
+    let s = scene::load(name, scenes_dir)?;
+    println!(
+        "  loaded {name} ({} triangles) in {:.2} s",
+        s.triangle_count(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(s)
+}
+
+/// Runs the passes `args` asks for into `report`, then draws the charts.
+pub(super) fn run(
+    bench: &Bench,
+    scenes_dir: &Path,
+    size: (u32, u32),
+    args: &ExtraArgs,
+    report: &mut ExtrasReport,
+) -> AnyResult<()> {
+    if args.cpu_peers {
+        println!("\nCPU peers: BVH build time and SAH cost, same meshes");
+        let start = std::time::Instant::now();
+        let scenes: &[&str] = if args.quick {
+            &cpu_peers::QUICK_SCENES
+        } else {
+            &cpu_peers::CPU_PEER_SCENES
+        };
+        report.cpu_peers = Some(cpu_peers::run(bench, scenes_dir, scenes));
+        println!("CPU peers done in {:.1} s", start.elapsed().as_secs_f64());
+    }
+    if args.scaling {
+        println!("\nScaling");
+        let start = std::time::Instant::now();
+        let plan = if args.quick {
+            scaling::Plan::quick()
+        } else {
+            scaling::Plan::full()
+        };
+        report.scaling = Some(scaling::run(bench, scenes_dir, size, &plan, args.quick));
+        println!("scaling done in {:.1} s", start.elapsed().as_secs_f64());
+    }
+    if args.frames_in_flight {
+        println!("\nFrames in flight");
+        let scene = if args.quick {
+            "cornell-obj"
+        } else {
+            fif::FIF_SCENE
+        };
+        report.frames_in_flight = Some(fif::run(bench, scenes_dir, size, args.fif_frames, scene));
+    }
+    if let Some(dir) = &args.plots {
+        plots::draw_all(report, dir)?;
+    }
+    Ok(())
+}
+
+/// `ksrt bench --plots DIR --plots-from FILE`: the charts of an earlier run's JSON.
+pub fn plots_from_json(json: &Path, dir: &Path) -> AnyResult<()> {
+    let text = std::fs::read_to_string(json)
+        .map_err(|e| format!("--plots-from {}: cannot read: {e}", json.display()))?;
+    let report: ExtrasReport = serde_json::from_str(&text).map_err(|e| {
+        format!(
+            "--plots-from {}: not a ksrt bench report: {e}",
+            json.display()
+        )
+    })?;
+    if report.cpu_peers.is_none() && report.scaling.is_none() && report.frames_in_flight.is_none() {
+        return Err(format!(
+            "--plots-from {}: holds no --cpu-peers, --scaling or --frames-in-flight results",
+            json.display()
+        )
+        .into());
+    }
+    plots::draw_all(&report, dir)?;
+    Ok(())
+}
