@@ -1,0 +1,165 @@
+//! The peer on this machine's Vulkan: skipped (Unavailable) without ray tracing, traced with it.
+//!
+//! `KSRT_REQUIRE_RT_PEER=1` turns a missing ray-tracing device into a failure, so a machine that
+//! should have one (Mesa 25's lavapipe, the GPU machine) cannot pass by skipping.
+
+use kickstart_rt_peer_vulkan::{
+    BuildPreference, Hit, Instance, Mesh, PeerError, Query, Ray, Timing, VulkanRtPeer,
+};
+
+fn required() -> bool {
+    std::env::var_os("KSRT_REQUIRE_RT_PEER").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// The peer, or `None` (after printing why) where it is unavailable and not required.
+fn peer_or_skip() -> Option<VulkanRtPeer> {
+    match VulkanRtPeer::new(None) {
+        Ok(p) => Some(p),
+        Err(PeerError::Unavailable(why)) if !required() => {
+            eprintln!("skipped (set KSRT_REQUIRE_RT_PEER=1 to fail instead): {why}");
+            None
+        }
+        Err(e) => panic!("vulkan-rt peer: {e}"),
+    }
+}
+
+#[test]
+fn unavailable_names_the_device_and_missing_extension() {
+    match VulkanRtPeer::new(None) {
+        Err(PeerError::Unavailable(why)) => {
+            assert!(!required(), "KSRT_REQUIRE_RT_PEER is set: {why}");
+            // Either no loader at all, or each device with what it lacks.
+            if !why.contains("Vulkan loader") {
+                assert!(why.contains(" lacks "), "{why}");
+                assert!(
+                    why.contains("VK_KHR_")
+                        || why.contains("Vulkan 1.2")
+                        || why.contains("Pipeline"),
+                    "{why}"
+                );
+            }
+            eprintln!("skip path: {why}");
+        }
+        Ok(p) => eprintln!(
+            "{} has ray tracing: no skip path to check here",
+            p.device_name()
+        ),
+        Err(e) => panic!("expected Unavailable or a peer, got: {e}"),
+    }
+}
+
+const TIMING: Timing = Timing {
+    iterations: 1,
+    warm_up: std::time::Duration::ZERO,
+};
+
+fn ray(origin: [f32; 3], dir: [f32; 3], t_min: f32, t_max: f32) -> Ray {
+    Ray {
+        origin,
+        t_min,
+        dir,
+        t_max,
+    }
+}
+
+/// A unit quad (two triangles sharing the diagonal) in z = 0, instanced twice: at z = 0
+/// (index 5) and moved to z = -2 (index 9).
+#[test]
+fn traces_our_hit_rules_on_a_quad() {
+    let Some(mut peer) = peer_or_skip() else {
+        return;
+    };
+    let positions = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ];
+    let indices = [0, 1, 2, 0, 2, 3];
+    peer.upload_meshes(&[
+        Mesh {
+            positions: &positions,
+            indices: &indices,
+        },
+        Mesh {
+            positions: &[],
+            indices: &[],
+        },
+    ])
+    .expect("upload");
+    for pref in [BuildPreference::FastBuild, BuildPreference::FastTrace] {
+        let t = peer.build_blases(pref, TIMING).expect("BLAS build");
+        assert!(t.median() >= 0.0);
+    }
+    let moved = glam::Affine3A::from_translation(glam::Vec3::new(0.0, 0.0, -2.0));
+    peer.build_tlas(
+        &[
+            Instance {
+                mesh: 0,
+                transform: Instance::row_major(glam::Affine3A::IDENTITY),
+                mask: 0xff,
+                index: 5,
+            },
+            Instance {
+                mesh: 0,
+                transform: Instance::row_major(moved),
+                mask: 0xff,
+                index: 9,
+            },
+            // An instance of the empty mesh: left out, nothing to hit.
+            Instance {
+                mesh: 1,
+                transform: Instance::row_major(glam::Affine3A::IDENTITY),
+                mask: 0xff,
+                index: 1,
+            },
+        ],
+        TIMING,
+    )
+    .expect("TLAS build");
+    let down = [0.0, 0.0, -1.0];
+    let rays = [
+        // Lower-right triangle (primitive 0) of the first instance, at t = 1.
+        ray([0.75, 0.25, 1.0], down, 0.0, f32::INFINITY),
+        // Upper-left triangle (primitive 1).
+        ray([0.25, 0.75, 1.0], down, 0.0, f32::INFINITY),
+        // Outside the quad: miss.
+        ray([1.5, 0.5, 1.0], down, 0.0, f32::INFINITY),
+        // From behind (no culling): hits the moved instance's back face at t = 1.
+        ray([0.75, 0.25, -3.0], [0.0, 0.0, 1.0], 0.0, 1.5),
+        // t range excludes the first instance: hits the second at t = 3.
+        ray([0.75, 0.25, 1.0], down, 1.5, f32::INFINITY),
+        // t_max short of the quad: miss.
+        ray([0.75, 0.25, 1.0], down, 0.0, 0.5),
+        // Non-finite direction: a miss, not undefined behaviour.
+        ray([0.5, 0.5, 1.0], [f32::NAN, 0.0, -1.0], 0.0, f32::INFINITY),
+    ];
+    let (time, hits) = peer.trace(&rays, Query::Closest, 4, TIMING).expect("trace");
+    assert_eq!(time.0.len(), 1);
+    assert_eq!(hits.len(), rays.len());
+    let expect = |h: &Hit, t: f32, instance: u32, primitive: u32| {
+        assert!(h.is_hit(), "{h:?}");
+        assert!((h.t - t).abs() < 1e-5, "{h:?}");
+        assert_eq!((h.instance, h.primitive), (instance, primitive), "{h:?}");
+    };
+    expect(&hits[0], 1.0, 5, 0);
+    expect(&hits[1], 1.0, 5, 1);
+    assert!(!hits[2].is_hit(), "{:?}", hits[2]);
+    assert_eq!(hits[2].instance, u32::MAX);
+    expect(&hits[3], 1.0, 9, 0);
+    expect(&hits[4], 3.0, 9, 0);
+    assert!(!hits[5].is_hit());
+    assert!(!hits[6].is_hit());
+    // Barycentrics: weights of the second and third vertex, as ours. Ray 0 hits (0.75, 0.25)
+    // on triangle (0,0)-(1,0)-(1,1): u = 0.5, v = 0.25.
+    assert!(
+        (hits[0].u - 0.5).abs() < 1e-5 && (hits[0].v - 0.25).abs() < 1e-5,
+        "{:?}",
+        hits[0]
+    );
+    let (_, any) = peer
+        .trace(&rays, Query::Any, 64, TIMING)
+        .expect("any-hit trace");
+    let flags: Vec<bool> = any.iter().map(Hit::is_hit).collect();
+    assert_eq!(flags, [true, true, false, true, true, false, false]);
+}
