@@ -253,6 +253,11 @@ pub(in crate::bench) fn run(bench: &Bench, scenes_dir: &Path, scenes: &[&str]) -
             continue;
         };
         for mesh in targets(&scene) {
+            println!(
+                "  building {name} / {} ({} triangles) with each builder…",
+                mesh.name,
+                mesh.triangle_count()
+            );
             let m = compare(bench, name, &mesh, &mut report.errors);
             print_mesh(&m);
             report.meshes.push(m);
@@ -316,6 +321,43 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(targets(&small).len(), 1);
+    }
+
+    /// GPU (lavapipe: the 32-triangle Cornell box): every builder builds, the GPU's SAH is read
+    /// back, and each cost is compared with our CPU builder's.
+    #[test]
+    fn every_builder_builds_the_cornell_box() {
+        let (device, queue) = crate::testing::device();
+        let bench = Bench {
+            device,
+            queue,
+            iterations: 1,
+        };
+        let scene = crate::scene::builtin::cornell_box();
+        let mesh = targets(&scene).remove(0);
+        let mut errors = Vec::new();
+        let m = compare(&bench, "cornell", &mesh, &mut errors);
+        assert!(errors.is_empty(), "{errors:?}");
+        assert_eq!(m.triangles, scene.triangle_count());
+        let names: Vec<&str> = m.builds.iter().map(|b| b.builder.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "kickstart-rt GPU",
+                "kickstart-rt CPU binned SAH",
+                "obvhs fastest_build",
+                "obvhs medium_build",
+                "obvhs very_slow_build"
+            ]
+        );
+        for b in &m.builds {
+            // The root alone costs 1; no sane tree over 32 triangles costs their count twice.
+            assert!(b.sah_cost >= 1.0 && b.sah_cost < 64.0, "{b:?}");
+            let r = b.sah_vs_cpu_binned.expect("ratio");
+            assert!(r > 0.3 && r < 3.0, "{b:?}");
+            assert!(b.time.median_ms >= 0.0);
+        }
+        assert_eq!(m.builds[1].sah_vs_cpu_binned, Some(1.0));
     }
 
     #[test]

@@ -601,6 +601,42 @@ mod tests {
         assert!(instanced(&Scene::default(), "dragon", 4).is_err());
     }
 
+    /// GPU, slow on lavapipe: the TLAS series' largest point fits a device with wgpu's default
+    /// limits (the instance table, 128 bytes an instance, is the tightest: 1 048 576 instances
+    /// fill its 128 MiB binding). One registration and build, untimed.
+    #[test]
+    #[ignore = "minutes on lavapipe in a debug build; run with --ignored"]
+    fn tlas_of_a_million_instances_fits_a_default_device() {
+        let (device, queue) = crate::testing::device();
+        let ctx =
+            ksrt::ExecuteContext::new(device, queue, glue::init_settings(false)).expect("context");
+        let (p, i) = crate::scene::builtin::icosphere(0);
+        let upload = gpu::upload(device, &Mesh::new("s", p, i, Vec3::ONE).unwrap());
+        let geometry = ctx.create_geometry_handle();
+        let mut c = ctx.create_task_container();
+        c.schedule_bvh_task(ksrt::GeometryTask {
+            operation: ksrt::TaskOperation::Register,
+            handle: geometry,
+            input: gpu::geometry_input(&upload, false),
+        });
+        let count = TLAS_COUNTS[TLAS_COUNTS.len() - 1];
+        for (k, h) in ctx
+            .create_instance_handles(count as usize)
+            .into_iter()
+            .enumerate()
+        {
+            let at = Vec3::new((k % 1000) as f32, 0.0, (k / 1000) as f32) * 3.0;
+            c.schedule_bvh_task(ksrt::InstanceTask {
+                operation: ksrt::TaskOperation::Register,
+                handle: h,
+                input: ksrt::InstanceInput::new(geometry, Affine3A::from_translation(at)),
+            });
+        }
+        c.schedule_bvh_task(glue::bvh_build_task(1, Some(Tlas::Rebuild)));
+        let task = gpu::submit(&ctx, device, queue, c, |_| {}).expect("a million instances");
+        gpu::complete(&ctx, device, task).expect("built");
+    }
+
     #[test]
     fn extra_lights_are_points_near_the_camera() {
         let cam = Camera {

@@ -578,6 +578,49 @@ mod tests {
     }
 
     #[test]
+    fn cli_takes_the_bench_passes_and_frames_in_flight() {
+        let cli = Cli::try_parse_from([
+            "ksrt",
+            "bench",
+            "--skip-scenes",
+            "--cpu-peers",
+            "--scaling",
+            "--frames-in-flight",
+            "--plots",
+            "out/plots",
+        ])
+        .expect("bench passes parse");
+        match cli.command {
+            Command::Bench { extras, .. } => {
+                assert!(extras.skip_scenes && extras.cpu_peers && extras.scaling);
+                assert!(extras.frames_in_flight && !extras.quick);
+                assert_eq!(extras.fif_frames, 120);
+                assert_eq!(extras.plots, Some(PathBuf::from("out/plots")));
+            }
+            _ => panic!("not bench"),
+        }
+        // Redrawing needs a folder to draw into.
+        assert!(Cli::try_parse_from(["ksrt", "bench", "--plots-from", "r.json"]).is_err());
+        match Cli::try_parse_from(["ksrt", "render", "--frames-in-flight", "2"]) {
+            Ok(Cli {
+                command:
+                    Command::Render {
+                        frames_in_flight, ..
+                    },
+            }) => assert_eq!(frames_in_flight, 2),
+            _ => panic!("render --frames-in-flight 2 does not parse"),
+        }
+        let default = Cli::try_parse_from(["ksrt", "render"]).expect("render parses");
+        assert!(matches!(
+            default.command,
+            Command::Render {
+                frames_in_flight: 1,
+                ..
+            }
+        ));
+    }
+
+    #[test]
     fn cli_accepts_negative_camera_values() {
         let cli = Cli::try_parse_from([
             "ksrt",
