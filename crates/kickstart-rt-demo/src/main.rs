@@ -184,6 +184,10 @@ enum Command {
         /// Only time the denoisers (every task and method, synthetic inputs at --size).
         #[arg(long)]
         denoisers: bool,
+        /// Also measure a peer on the same meshes and rays and print ours, theirs and the
+        /// ratio (skipped, with the reason, where this machine has no such peer).
+        #[arg(long, value_enum)]
+        peer: Option<bench::PeerKind>,
     },
 }
 
@@ -420,6 +424,7 @@ fn bench_command(
     camera: Option<String>,
     iterations: u32,
     size: &str,
+    peer: Option<bench::PeerKind>,
 ) -> AnyResult<()> {
     bench::run(bench::BenchOptions {
         scenes_dir: scene::scenes_dir(scenes),
@@ -428,6 +433,7 @@ fn bench_command(
         camera: camera.as_deref().map(scene::parse_camera).transpose()?,
         iterations,
         size: parse_size(size)?,
+        peer,
     })
 }
 
@@ -524,8 +530,9 @@ fn main() {
             camera,
             iterations,
             size,
+            peer,
             ..
-        } => bench_command(scenes, scene, json, camera, iterations, &size),
+        } => bench_command(scenes, scene, json, camera, iterations, &size, peer),
     };
     if let Err(e) = result {
         eprintln!("ksrt: {e}");
@@ -556,5 +563,18 @@ mod tests {
             "dragon",
         ]);
         assert!(cli.is_ok());
+    }
+
+    #[test]
+    fn bench_accepts_the_vulkan_rt_peer() {
+        let cli = Cli::try_parse_from(["ksrt", "bench", "--peer", "vulkan-rt"]);
+        assert!(matches!(
+            cli.map(|c| c.command),
+            Ok(Command::Bench {
+                peer: Some(bench::PeerKind::VulkanRt),
+                ..
+            })
+        ));
+        assert!(Cli::try_parse_from(["ksrt", "bench", "--peer", "optix"]).is_err());
     }
 }
