@@ -22,6 +22,10 @@ use crate::AnyResult;
 mod cache;
 #[path = "bench_extras.rs"]
 pub mod extras;
+#[path = "bench_peer.rs"]
+mod peer;
+
+pub use peer::PeerKind;
 
 /// Scenes benchmarked when no `--scene` is given.
 pub const DEFAULT_SCENES: [&str; 2] = ["dragon", "apartment"];
@@ -55,6 +59,8 @@ pub struct BenchOptions {
     pub size: (u32, u32),
     /// The optional passes (`bench_extras.rs`).
     pub extras: extras::ExtraArgs,
+    /// A peer to compare with on the same rays (`--peer`), if any.
+    pub peer: Option<PeerKind>,
 }
 
 /// Median, minimum and maximum of the timed repetitions, milliseconds.
@@ -169,6 +175,8 @@ pub struct SceneReport {
     /// Specular + diffuse + AO + one shadow in one GPU task, full resolution (first trace pass's
     /// start to the last one's end).
     pub trace_combined: Option<Stats>,
+    /// The peer's figures on the same meshes and rays (`--peer`), or why it was skipped.
+    pub peer: Option<peer::PeerReport>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
 }
@@ -525,22 +533,10 @@ fn rays(
     camera: &Camera,
     (width, height): (u32, u32),
     report: &mut SceneReport,
-) -> AnyResult<()> {
+) -> AnyResult<RayBatches> {
     let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
     let slots = handles.instance_of_slot();
-    let dirs: Vec<Vec3> = (0..height)
-        .flat_map(|y| (0..width).map(move |x| (x, y)))
-        .map(|(x, y)| camera.primary_dir(x, y, width, height))
-        .collect();
-    let primary: Vec<GpuRay> = dirs
-        .iter()
-        .map(|d| GpuRay {
-            origin: camera.eye.to_array(),
-            t_min: 0.0,
-            dir: d.to_array(),
-            t_max: f32::INFINITY,
-        })
-        .collect();
+    let (dirs, primary) = primary_rays(camera, (width, height));
     let (primary_time, primary_hits) = bench.trace(&ctx, &primary, Query::Closest)?;
     report.oracle = Some(oracle_check(scene, &primary, &primary_hits));
     let primary_batch = batch("primary", primary.len(), &primary_hits, primary_time);
@@ -558,21 +554,10 @@ fn rays(
         .filter_map(|(h, d)| surface(scene, &slots, h, *d))
         .collect();
     let mut rng = Rng(0x6b73_7274);
-    let secondary = |rng: &mut Rng, t_max: f32| -> Vec<GpuRay> {
-        surfaces
-            .iter()
-            .map(|s| GpuRay {
-                origin: (s.point + s.normal * offset).to_array(),
-                t_min: 0.0,
-                dir: rng.cosine(s.normal).to_array(),
-                t_max,
-            })
-            .collect()
-    };
-    let ao = secondary(&mut rng, 1.0);
+    let ao = secondary_rays(&surfaces, offset, &mut rng, 1.0);
     let (ao_time, ao_hits) = bench.trace(&ctx, &ao, Query::Any)?;
     report.rays.push(batch("ao", ao.len(), &ao_hits, ao_time));
-    let diffuse = secondary(&mut rng, f32::INFINITY);
+    let diffuse = secondary_rays(&surfaces, offset, &mut rng, f32::INFINITY);
     let (diffuse_time, diffuse_hits) = bench.trace(&ctx, &diffuse, Query::Closest)?;
     let diffuse_ms = diffuse_time.median_ms;
     report
@@ -580,7 +565,58 @@ fn rays(
         .push(batch("diffuse", diffuse.len(), &diffuse_hits, diffuse_time));
     report.peer_mrays_per_s =
         Some((pixels + primary_hit_count) / ((primary_ms + diffuse_ms) * 1e3));
-    Ok(())
+    Ok(RayBatches {
+        slots: handles.instances.iter().map(|h| h.index()).collect(),
+        width,
+        batches: vec![
+            ("primary", Query::Closest, primary, primary_hits),
+            ("ao", Query::Any, ao, ao_hits),
+            ("diffuse", Query::Closest, diffuse, diffuse_hits),
+        ],
+    })
+}
+
+/// The rays of [`rays`] and our hits, kept so a peer traces exactly the same rays.
+struct RayBatches {
+    /// Our instance slot index of each scene instance (what hits report).
+    slots: Vec<u32>,
+    /// Width of the primary rays' image (their row length).
+    width: u32,
+    /// Kind, query, rays and our hits of each batch, in the order measured.
+    batches: Vec<(&'static str, Query, Vec<GpuRay>, Vec<GpuHit>)>,
+}
+
+/// One primary ray per pixel through `camera`, row by row from the top: their directions and the
+/// rays (from the eye, t in [0, ∞)).
+fn primary_rays(camera: &Camera, (width, height): (u32, u32)) -> (Vec<Vec3>, Vec<GpuRay>) {
+    let dirs: Vec<Vec3> = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| camera.primary_dir(x, y, width, height))
+        .collect();
+    let rays = dirs
+        .iter()
+        .map(|d| GpuRay {
+            origin: camera.eye.to_array(),
+            t_min: 0.0,
+            dir: d.to_array(),
+            t_max: f32::INFINITY,
+        })
+        .collect();
+    (dirs, rays)
+}
+
+/// One cosine-distributed ray about each surface's normal, from the surface point moved
+/// `offset` along the normal (so it does not hit its own triangle), t in [0, `t_max`].
+fn secondary_rays(surfaces: &[Surface], offset: f32, rng: &mut Rng, t_max: f32) -> Vec<GpuRay> {
+    surfaces
+        .iter()
+        .map(|s| GpuRay {
+            origin: (s.point + s.normal * offset).to_array(),
+            t_min: 0.0,
+            dir: rng.cosine(s.normal).to_array(),
+            t_max,
+        })
+        .collect()
 }
 
 /// Compares about 20 000 primary hits with the CPU reference BVH over the world's triangles.
@@ -617,6 +653,42 @@ fn oracle_check(scene: &Scene, rays: &[GpuRay], hits: &[GpuHit]) -> OracleCheck 
     check
 }
 
+impl SceneReport {
+    /// The report of `scene` before anything is measured.
+    fn new(name: &str, scene: &Scene, camera: &Camera) -> SceneReport {
+        SceneReport {
+            scene: name.to_string(),
+            meshes: scene.meshes.len(),
+            instances: scene.instances.len(),
+            geometry_triangles: scene.meshes.iter().map(|m| m.triangle_count()).sum(),
+            world_triangles: scene.triangle_count(),
+            camera: [
+                camera.eye.x,
+                camera.eye.y,
+                camera.eye.z,
+                camera.at.x,
+                camera.at.y,
+                camera.at.z,
+                camera.fov_y_deg,
+            ],
+            blas_build: None,
+            blas_build_profile: Vec::new(),
+            blas_build_mtri_per_s: None,
+            blas_refit: None,
+            blas_refit_profile: Vec::new(),
+            sah: None,
+            rays: Vec::new(),
+            peer_mrays_per_s: None,
+            oracle: None,
+            cache: None,
+            trace_tasks: Vec::new(),
+            trace_combined: None,
+            peer: None,
+            errors: Vec::new(),
+        }
+    }
+}
+
 /// Benchmarks one scene.
 fn bench_scene(
     bench: &Bench,
@@ -624,36 +696,9 @@ fn bench_scene(
     scene: &Scene,
     camera: Camera,
     size: (u32, u32),
+    peer: Option<&mut peer::PeerState>,
 ) -> SceneReport {
-    let mut r = SceneReport {
-        scene: name.to_string(),
-        meshes: scene.meshes.len(),
-        instances: scene.instances.len(),
-        geometry_triangles: scene.meshes.iter().map(|m| m.triangle_count()).sum(),
-        world_triangles: scene.triangle_count(),
-        camera: [
-            camera.eye.x,
-            camera.eye.y,
-            camera.eye.z,
-            camera.at.x,
-            camera.at.y,
-            camera.at.z,
-            camera.fov_y_deg,
-        ],
-        blas_build: None,
-        blas_build_profile: Vec::new(),
-        blas_build_mtri_per_s: None,
-        blas_refit: None,
-        blas_refit_profile: Vec::new(),
-        sah: None,
-        rays: Vec::new(),
-        peer_mrays_per_s: None,
-        oracle: None,
-        cache: None,
-        trace_tasks: Vec::new(),
-        trace_combined: None,
-        errors: Vec::new(),
-    };
+    let mut r = SceneReport::new(name, scene, &camera);
     let uploads = gpu::upload_scene(bench.device, scene);
     let mut errors = Vec::new();
     if let Some((stats, ctx, h)) = attempt(&mut errors, "BLAS build", || {
@@ -693,9 +738,19 @@ fn bench_scene(
     if r.blas_refit.is_some() {
         r.blas_refit_profile = bench.last_profile();
     }
-    attempt(&mut errors, "rays", || {
+    let batches = attempt(&mut errors, "rays", || {
         rays(bench, scene, &uploads, &camera, size, &mut r)
     });
+    if let Some(p) = peer {
+        r.peer = Some(peer::compare(
+            bench,
+            p,
+            scene,
+            &uploads,
+            batches.as_ref(),
+            &r,
+        ));
+    }
     r.cache = attempt(&mut errors, "lighting cache", || {
         cache::cache_bench(bench, scene, &uploads, &camera, size)
     });
@@ -940,19 +995,7 @@ fn trace_tasks(
 ) -> AnyResult<()> {
     let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
     let slots = handles.instance_of_slot();
-    let dirs: Vec<Vec3> = (0..height)
-        .flat_map(|y| (0..width).map(move |x| (x, y)))
-        .map(|(x, y)| camera.primary_dir(x, y, width, height))
-        .collect();
-    let primary: Vec<GpuRay> = dirs
-        .iter()
-        .map(|d| GpuRay {
-            origin: camera.eye.to_array(),
-            t_min: 0.0,
-            dir: d.to_array(),
-            t_max: f32::INFINITY,
-        })
-        .collect();
+    let (dirs, primary) = primary_rays(camera, (width, height));
     let (_, hits) = bench.trace(&ctx, &primary, Query::Closest)?;
     let mut positions = vec![[f32::NAN; 4]; hits.len()];
     let mut normals = vec![[0.0f32; 4]; hits.len()];
@@ -1147,6 +1190,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         iterations: opts.iterations,
         last_passes: Default::default(),
     };
+    let mut peer = opts.peer.map(|kind| peer::open(kind, &info));
     let mut report = Report {
         sdk_version: ksrt::VERSION.to_string(),
         adapter: info.name.clone(),
@@ -1166,8 +1210,11 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             .camera
             .or_else(|| issue_camera(name))
             .unwrap_or_else(|| scene.camera_or_default(None));
-        let r = bench_scene(&bench, name, scene, camera, opts.size);
+        let r = bench_scene(&bench, name, scene, camera, opts.size, peer.as_mut());
         print_scene(&r, opts.size);
+        if let Some(p) = &r.peer {
+            peer::print(p);
+        }
         report.scenes.push(r);
     }
     let tlas_counts: &[u32] = if opts.extras.skip_scenes {

@@ -332,6 +332,7 @@ mod tests {
             device,
             queue,
             iterations: 1,
+            last_passes: Default::default(),
         };
         let scene = crate::scene::builtin::cornell_box();
         let mesh = targets(&scene).remove(0);

@@ -195,6 +195,10 @@ enum Command {
         /// CPU peers, scaling, frames in flight and charts (bench_extras.rs).
         #[command(flatten)]
         extras: bench::extras::ExtraArgs,
+        /// Also measure a peer on the same meshes and rays and print ours, theirs and the
+        /// ratio (skipped, with the reason, where this machine has no such peer).
+        #[arg(long, value_enum)]
+        peer: Option<bench::PeerKind>,
     },
 }
 
@@ -443,7 +447,7 @@ fn bench_command(
     camera: Option<String>,
     iterations: u32,
     size: &str,
-    extras: bench::extras::ExtraArgs,
+    (extras, peer): (bench::extras::ExtraArgs, Option<bench::PeerKind>),
 ) -> AnyResult<()> {
     if let (Some(dir), Some(json)) = (&extras.plots, &extras.plots_from) {
         // Charts of an earlier run: no GPU, no measurement.
@@ -457,6 +461,7 @@ fn bench_command(
         iterations,
         size: parse_size(size)?,
         extras,
+        peer,
     })
 }
 
@@ -556,8 +561,17 @@ fn main() {
             iterations,
             size,
             extras,
+            peer,
             ..
-        } => bench_command(scenes, scene, json, camera, iterations, &size, extras),
+        } => bench_command(
+            scenes,
+            scene,
+            json,
+            camera,
+            iterations,
+            &size,
+            (extras, peer),
+        ),
     };
     if let Err(e) = result {
         eprintln!("ksrt: {e}");
@@ -631,5 +645,18 @@ mod tests {
             "dragon",
         ]);
         assert!(cli.is_ok());
+    }
+
+    #[test]
+    fn bench_accepts_the_vulkan_rt_peer() {
+        let cli = Cli::try_parse_from(["ksrt", "bench", "--peer", "vulkan-rt"]);
+        assert!(matches!(
+            cli.map(|c| c.command),
+            Ok(Command::Bench {
+                peer: Some(bench::PeerKind::VulkanRt),
+                ..
+            })
+        ));
+        assert!(Cli::try_parse_from(["ksrt", "bench", "--peer", "optix"]).is_err());
     }
 }
