@@ -1447,6 +1447,11 @@ impl ExecuteContext {
                 transform: input.transform,
                 initial: input.initial_tile_color,
             });
+            // One task allocates at most this many (the rest wait for the next tasks): with a
+            // million instances waiting, collecting them all every task would dominate it.
+            if jobs.len() == crate::cache::alloc::MAX_ALLOCS_PER_TASK {
+                break;
+            }
         }
         jobs
     }

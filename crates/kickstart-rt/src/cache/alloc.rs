@@ -2,7 +2,7 @@
 //! triangle records, CPU-allocated since their sizes are known) and the surfel pool (allocated on
 //! the GPU, since the surfel count depends on the geometry the CPU never sees).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -24,7 +24,7 @@ pub(crate) const RECORD_WORDS: u32 = 8;
 pub(crate) const SURFEL_BYTES: u64 = 16;
 /// Free blocks handed to the GPU per task, and allocations per task (the rest wait a task).
 const MAX_FREE_BLOCKS: usize = 64;
-const MAX_ALLOCS_PER_TASK: usize = 256;
+pub(crate) const MAX_ALLOCS_PER_TASK: usize = 256;
 /// Word offsets of the allocation state buffer (as `cache_alloc.wgsl`).
 const ST_FREE: u64 = 4;
 const ST_LOG: u64 = 132;
@@ -108,8 +108,9 @@ pub(crate) struct DirectLightingCache {
     state: wgpu::Buffer,
     scratch: wgpu::Buffer,
     instances: HashMap<u32, InstanceCache>,
-    /// Instance slots waiting for an allocation (geometry not built, or re-allocation).
-    waiting: Vec<u32>,
+    /// Instance slots waiting for an allocation (geometry not built, or re-allocation). A set:
+    /// registering a million instances in one task must not search a list per instance.
+    waiting: BTreeSet<u32>,
     free: BTreeMap<u32, u32>,
     pending_free: Vec<(u64, u32, u32)>,
     readbacks: Vec<AllocReadback>,
@@ -163,7 +164,7 @@ impl DirectLightingCache {
             state,
             scratch: storage(device, "kickstart-rt cache allocation scratch", 4),
             instances: HashMap::new(),
-            waiting: Vec::new(),
+            waiting: BTreeSet::new(),
             free: BTreeMap::new(),
             pending_free: Vec::new(),
             readbacks: Vec::new(),
@@ -222,13 +223,11 @@ impl DirectLightingCache {
     /// A (re-)registered instance: its old cache is released, a new one waits for allocation.
     pub fn register(&mut self, slot: u32, last_used: u64) {
         self.release(slot, last_used);
-        if !self.waiting.contains(&slot) {
-            self.waiting.push(slot);
-        }
+        self.waiting.insert(slot);
     }
 
-    /// Whether `slot` waits for an allocation.
-    pub fn waiting(&self) -> &[u32] {
+    /// The slots waiting for an allocation.
+    pub fn waiting(&self) -> &BTreeSet<u32> {
         &self.waiting
     }
 
@@ -236,7 +235,7 @@ impl DirectLightingCache {
     /// is cleared by the next [`Self::record_allocations`] call that allocates the slot, or by
     /// `clear_headers`).
     pub fn release(&mut self, slot: u32, last_used: u64) {
-        self.waiting.retain(|s| *s != slot);
+        self.waiting.remove(&slot);
         let Some(c) = self.instances.remove(&slot) else {
             return;
         };
@@ -601,7 +600,7 @@ impl DirectLightingCache {
                     surfels: Surfels::Pending { serial, log: i },
                 },
             );
-            self.waiting.retain(|s| *s != j.slot);
+            self.waiting.remove(&j.slot);
         }
         let bytes = (ST_LOG + 4 * jobs.len() as u64) * 4;
         let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {

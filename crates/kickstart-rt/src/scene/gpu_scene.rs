@@ -126,12 +126,20 @@ pub(crate) struct Uploads {
 }
 
 impl Uploads {
-    /// Queues `bytes` (a multiple of 4) for `dst` at `offset` (a multiple of 4).
+    /// Queues `bytes` (a multiple of 4) for `dst` at `offset` (a multiple of 4). A write that
+    /// continues the previous one in `dst` extends its copy: wgpu tracks and barriers every copy,
+    /// and a million instance records written in slot order would otherwise be a million copies.
     pub fn push(&mut self, dst: &wgpu::Buffer, offset: u64, bytes: &[u8]) {
         let src = self.data.len() as u64;
+        let len = bytes.len() as u64;
         self.data.extend_from_slice(bytes);
-        self.copies
-            .push((dst.clone(), offset, src, bytes.len() as u64));
+        if let Some(last) = self.copies.last_mut() {
+            if last.0 == *dst && continues((last.1, last.2, last.3), offset, src) {
+                last.3 += len;
+                return;
+            }
+        }
+        self.copies.push((dst.clone(), offset, src, len));
     }
 
     /// Records the copies; the staging buffer returned belongs to the task's working set.
@@ -154,6 +162,12 @@ impl Uploads {
         }
         Some(buffer)
     }
+}
+
+/// Whether a write of staging bytes at `src` to `offset` directly follows the copy
+/// `(offset, src, len)` in both buffers, so one copy can carry both.
+fn continues((last_offset, last_src, last_len): (u64, u64, u64), offset: u64, src: u64) -> bool {
+    last_offset + last_len == offset && last_src + last_len == src
 }
 
 /// Lazily created pipelines: a context that never traces never compiles the trace shaders.
@@ -811,4 +825,21 @@ pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Resu
         .map_err(|e| Error::ReadBack(e.to_string()))?
         .to_vec();
     Ok(data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::continues;
+
+    #[test]
+    fn only_writes_adjacent_in_both_buffers_share_a_copy() {
+        // Slot records of 128 bytes written in order: each continues the last.
+        assert!(continues((0, 0, 128), 128, 128));
+        assert!(continues((256, 512, 128), 384, 640));
+        // A gap in the destination, or bytes staged in between, starts a new copy.
+        assert!(!continues((0, 0, 128), 256, 128));
+        assert!(!continues((0, 0, 128), 128, 256));
+        // Backwards (a lower slot after a higher one) too.
+        assert!(!continues((128, 0, 128), 0, 128));
+    }
 }
