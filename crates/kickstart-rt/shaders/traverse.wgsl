@@ -47,8 +47,7 @@ const RT_FLT_MAX: f32 = 3.40282347e38;
 const RT_FAR_WIDEN: f32 = 1.0000004;
 
 // Traversal stack: one private array per invocation (node reference and entry distance), 64
-// entries for both levels. Only the farther child of a node goes on it: the nearer one is the
-// next node at once (a push and pop fewer per node).
+// entries for both levels.
 //
 // Measured on the H100 (BENCHMARKS.md, 2026-11-23): moving the shallow part of the stack into
 // workgroup memory (per-lane slices of 16–24 entries) made incoherent rays 1.5–2.3× *slower*
@@ -58,8 +57,23 @@ const RT_FAR_WIDEN: f32 = 1.0000004;
 //
 // Passes that include this module dispatch RT_WORKGROUP_SIZE invocations per workgroup.
 const RT_WORKGROUP_SIZE: u32 = 64u;
-// (node reference, bits of the entry distance): one 8-byte store and load per entry.
-var<private> rt_stack: array<vec2<u32>, RT_STACK_SIZE>;
+var<private> rt_stack_ref: array<u32, RT_STACK_SIZE>;
+var<private> rt_stack_t: array<f32, RT_STACK_SIZE>;
+
+// Stack entry i (< RT_STACK_SIZE): node reference and entry distance.
+fn rt_stack_store(i: u32, node: u32, t: f32) {
+    rt_stack_ref[i] = node;
+    rt_stack_t[i] = t;
+}
+
+struct RtStackEntry {
+    node: u32,
+    t: f32,
+}
+
+fn rt_stack_load(i: u32) -> RtStackEntry {
+    return RtStackEntry(rt_stack_ref[i], rt_stack_t[i]);
+}
 
 fn rt_is_finite(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
@@ -140,11 +154,16 @@ struct RtBoxHit {
 
 // Slab test against [bmin, bmax] within [t_min, t_max]; empty boxes (min > max) are missed.
 fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32) -> RtBoxHit {
-    // Straight-line code (no early return): lanes of a subgroup that disagree on an early exit
-    // would serialise (measured +5 % rays/s on the H100 with four boxes per node).
-    let empty = any(bmin > bmax);
+    var r: RtBoxHit;
+    r.near = t_min;
+    r.hit = false;
+    if any(bmin > bmax) {
+        return r;
+    }
     let inside = (sp.origin >= bmin) & (sp.origin <= bmax);
-    let flat_miss = any(sp.flat_axis & !inside);
+    if any(sp.flat_axis & !inside) {
+        return r;
+    }
     let t0 = (bmin - sp.origin) * sp.inv_dir;
     let t1 = (bmax - sp.origin) * sp.inv_dir;
     // A flat axis with the origin inside its slab does not constrain the interval (the CPU's
@@ -153,9 +172,8 @@ fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32)
     let hi = select(max(t0, t1), vec3<f32>(RT_FLT_MAX), sp.flat_axis);
     let near = max(t_min, max(lo.x, max(lo.y, lo.z)));
     let far = min(t_max, min(hi.x, min(hi.y, hi.z)));
-    var r: RtBoxHit;
     r.near = near;
-    r.hit = !empty && !flat_miss && near <= far * RT_FAR_WIDEN;
+    r.hit = near <= far * RT_FAR_WIDEN;
     return r;
 }
 
@@ -237,11 +255,10 @@ fn rt_miss() -> RtHit {
     return RtHit(-1.0, 0.0, 0.0, RT_NO_INDEX, RT_NO_INDEX, 0u);
 }
 
-// Traverses TLAS and BLASes with one stack. The nearer child that is hit becomes the current
-// node at once; only the farther one is pushed. Entries at stack index >= `blas_sp` belong to the
-// BLAS of the instance being traversed; popping one below it means that BLAS is done. Each entry
-// keeps the entry distance of its box, so subtrees behind a closer hit are skipped. `any_hit`
-// returns at the first hit found.
+// Traverses TLAS and BLASes with one stack. Entries at stack index >= `blas_sp` belong to the
+// BLAS of the instance being traversed; popping an entry below it means that BLAS is done. Each
+// entry keeps the entry distance of its box, so subtrees behind a closer hit are skipped.
+// `any_hit` returns at the first hit found.
 fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
     var best = rt_miss();
     if !rt_is_finite3(ray.origin) || !rt_is_finite3(ray.dir) || all(ray.dir == vec3<f32>(0.0)) {
@@ -260,53 +277,38 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         return best;
     }
     let world = rt_space(ray.origin, ray.dir);
-    // The space of the level being traversed: `world` in the TLAS, the instance's in a BLAS.
-    var space = world;
-    var sp = 0u;
+    var local = world;
+    rt_stack_store(0u, 0u, t_min);
+    var sp = 1u;
     var blas_sp = RT_STACK_SIZE + 1u;
-    var in_blas = false;
     var node_base = 0u;
     var tri_base = 0u;
     var cur_inst = 0u;
-    // The node to visit next without a pop: the TLAS root first.
-    var cur = 0u;
-    var cur_t = t_min;
-    var have_cur = true;
     var visits = 0u;
-    loop {
-        if !have_cur {
-            if sp == 0u {
-                break;
-            }
-            sp -= 1u;
-            let popped = rt_stack[sp];
-            if in_blas && sp < blas_sp {
-                in_blas = false;
-                blas_sp = RT_STACK_SIZE + 1u;
-                space = world;
-            }
-            cur = popped.x;
-            cur_t = bitcast<f32>(popped.y);
-            // Pushed before a closer hit was found: the box test would now fail.
-            if cur_t > t_max * RT_FAR_WIDEN {
-                continue;
-            }
-        }
-        have_cur = false;
+    while sp > 0u && visits < RT_MAX_VISITS {
         visits += 1u;
-        if visits > RT_MAX_VISITS {
-            break;
+        sp -= 1u;
+        let popped = rt_stack_load(sp);
+        let entry = popped.node;
+        let entry_t = popped.t;
+        let in_blas = sp >= blas_sp;
+        if !in_blas {
+            blas_sp = RT_STACK_SIZE + 1u;
         }
-        if (cur & RT_LEAF_BIT) != 0u {
-            let first = cur & RT_FIRST_MASK;
-            let count = ((cur >> 28u) & 7u) + 1u;
+        // Pushed before a closer hit was found: the box test would now fail.
+        if entry_t > t_max * RT_FAR_WIDEN {
+            continue;
+        }
+        if (entry & RT_LEAF_BIT) != 0u {
+            let first = entry & RT_FIRST_MASK;
+            let count = ((entry >> 28u) & 7u) + 1u;
             if in_blas {
                 for (var i = 0u; i < count; i += 1u) {
                     let slot = (tri_base + first + i) * 3u;
                     let v0 = rt_triangles[slot];
                     let v1 = rt_triangles[slot + 1u];
                     let v2 = rt_triangles[slot + 2u];
-                    let h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                    let h = rt_triangle(local, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
                     if !h.hit {
                         continue;
                     }
@@ -327,8 +329,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 // A TLAS leaf of several instances: enter the first now and re-push the rest
                 // (below the BLAS entries, so they come after this BLAS is done).
                 if count > 1u && sp < RT_STACK_SIZE {
-                    rt_stack[sp] = vec2<u32>(
-                        RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), bitcast<u32>(cur_t));
+                    rt_stack_store(sp, RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), entry_t);
                     sp += 1u;
                 }
                 let inst = rt_instances[first];
@@ -336,22 +337,21 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                     continue;
                 }
                 let geo = rt_geometries[inst.geometry];
-                if (geo.flags & 1u) == 0u {
+                if (geo.flags & 1u) == 0u || sp >= RT_STACK_SIZE {
                     continue;
                 }
                 // No renormalisation: t means the same in object and world space.
                 let m = inst.world_to_object;
-                space = rt_space(
+                local = rt_space(
                     rt_transform(m, ray.origin, 1.0),
                     rt_transform(m, ray.dir, 0.0),
                 );
                 node_base = geo.node_base;
                 tri_base = geo.tri_base;
                 cur_inst = first;
-                in_blas = true;
                 blas_sp = sp;
-                cur = 0u;
-                have_cur = true;
+                rt_stack_store(sp, 0u, entry_t);
+                sp += 1u;
             }
             continue;
         }
@@ -359,14 +359,16 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         var n1: vec4<f32>;
         var n2: vec4<f32>;
         var n3: vec4<f32>;
+        var space = world;
         if in_blas {
-            let base = (node_base + cur) * 4u;
+            let base = (node_base + entry) * 4u;
             n0 = rt_blas_nodes[base];
             n1 = rt_blas_nodes[base + 1u];
             n2 = rt_blas_nodes[base + 2u];
             n3 = rt_blas_nodes[base + 3u];
+            space = local;
         } else {
-            let base = cur * 4u;
+            let base = entry * 4u;
             n0 = rt_tlas_nodes[base];
             n1 = rt_tlas_nodes[base + 1u];
             n2 = rt_tlas_nodes[base + 2u];
@@ -376,23 +378,30 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         let hr = rt_box(n2.xyz, n3.xyz, space, t_min, t_max);
         let lref = bitcast<u32>(n0.w);
         let rref = bitcast<u32>(n1.w);
+        // Push the farther child first so the nearer one is visited next. When the stack is
+        // full the farther child is dropped (it cannot happen for trees of depth < 32 per level).
         if hl.hit && hr.hit {
-            let right_first = hr.near < hl.near;
-            cur = select(lref, rref, right_first);
-            cur_t = select(hl.near, hr.near, right_first);
-            // When the stack is full the farther child is dropped (it cannot happen for trees
-            // of depth < 32 per level).
-            if sp < RT_STACK_SIZE {
-                rt_stack[sp] = vec2<u32>(
-                    select(rref, lref, right_first),
-                    bitcast<u32>(select(hr.near, hl.near, right_first)));
+            var near_ref = lref;
+            var near_t = hl.near;
+            var far_ref = rref;
+            var far_t = hr.near;
+            if hr.near < hl.near {
+                near_ref = rref;
+                near_t = hr.near;
+                far_ref = lref;
+                far_t = hl.near;
+            }
+            if sp + 1u < RT_STACK_SIZE {
+                rt_stack_store(sp, far_ref, far_t);
                 sp += 1u;
             }
-            have_cur = true;
-        } else if hl.hit || hr.hit {
-            cur = select(rref, lref, hl.hit);
-            cur_t = select(hr.near, hl.near, hl.hit);
-            have_cur = true;
+            if sp < RT_STACK_SIZE {
+                rt_stack_store(sp, near_ref, near_t);
+                sp += 1u;
+            }
+        } else if (hl.hit || hr.hit) && sp < RT_STACK_SIZE {
+            rt_stack_store(sp, select(rref, lref, hl.hit), select(hr.near, hl.near, hl.hit));
+            sp += 1u;
         }
     }
     return best;
