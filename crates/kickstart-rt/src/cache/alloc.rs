@@ -239,7 +239,9 @@ impl DirectLightingCache {
         let Some(c) = self.instances.remove(&slot) else {
             return;
         };
-        self.meta.free_after(c.records, last_used);
+        if c.records.len > 0 {
+            self.meta.free_after(c.records, last_used);
+        }
         match c.surfels {
             Surfels::Known { start, len, .. } => {
                 if len > 0 {
@@ -493,18 +495,24 @@ impl DirectLightingCache {
             return Ok(());
         }
         // Triangle records (CPU-allocated) and scratch big enough for the largest job.
+        let mut fitted = Vec::with_capacity(jobs.len());
         let mut records = Vec::with_capacity(jobs.len());
         for j in jobs {
             let words = j.tri_count.max(1) * RECORD_WORDS;
-            let r = self
+            match self
                 .meta
                 .alloc(&self.device, rec.encoder, words, self.max_binding)
-                .ok_or_else(|| Error::OutOfDeviceMemory {
-                    what: "lighting cache triangle records".into(),
-                    bytes: words as u64 * 4,
-                    limit: self.max_binding,
-                })?;
-            records.push(r);
+            {
+                Some(r) => {
+                    fitted.push(j.clone());
+                    records.push(r);
+                }
+                None => self.no_room_for_records(j.slot, words),
+            }
+        }
+        let jobs = &fitted[..];
+        if jobs.is_empty() {
+            return Ok(());
         }
         let max_tris = jobs.iter().map(|j| j.tri_count).max().unwrap_or(1).max(1);
         let hash_size = (6 * max_tris).next_power_of_two();
@@ -621,6 +629,32 @@ impl DirectLightingCache {
         Ok(())
     }
 
+    /// An instance whose triangle records do not fit the cache's meta binding gets no cache
+    /// ([`super::CacheLevel::None`]) instead of failing its task, as an instance the surfel pool
+    /// has no room for is degraded: its rays and injections simply find no cache. Logged.
+    fn no_room_for_records(&mut self, slot: u32, words: u32) {
+        log::warn!(
+            "lighting cache of instance slot {slot}: its triangle records ({} bytes) do not fit \
+             the cache's records binding (max_storage_buffer_binding_size {} bytes, shared by \
+             every instance's records); the instance gets no cache",
+            words as u64 * 4,
+            self.max_binding
+        );
+        self.waiting.remove(&slot);
+        self.instances.insert(
+            slot,
+            InstanceCache {
+                records: Range { start: 0, len: 0 },
+                surfels: Surfels::Known {
+                    start: 0,
+                    len: 0,
+                    level: 2,
+                },
+            },
+        );
+        self.cleared.push(slot);
+    }
+
     /// The allocation of instance `slot` as read back: `(surfels, level)` with level 0 full,
     /// 1 coarse, 2 none; `None` before its read-back arrived.
     pub fn allocation(&self, slot: u32) -> Option<super::CacheAllocation> {
@@ -678,4 +712,61 @@ fn free_insert(free: &mut BTreeMap<u32, u32>, start: u32, len: u32) {
         l += nl;
     }
     free.insert(s, l);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::{CacheLevel, CacheParams};
+    use crate::gpu::testing::{buffer, gpu, run};
+
+    fn job(slot: u32, tri_count: u32) -> AllocJob {
+        AllocJob {
+            slot,
+            tri_base: 0,
+            tri_count,
+            params: CacheParams {
+                mesh_colors: false,
+                tile_unit_length: 1.0,
+                tile_resolution_limit: 4,
+                direct_tile_mapping_threshold: 0.5,
+                force_direct_tile_mapping: false,
+            },
+            transform: glam::Affine3A::IDENTITY,
+            initial: glam::Vec4::ZERO,
+        }
+    }
+
+    #[test]
+    fn an_instance_whose_records_do_not_fit_gets_no_cache_and_the_task_goes_on() {
+        let g = gpu();
+        let mut cache = DirectLightingCache::new(&g.device, 1024);
+        // A binding of 64 KiB: one triangle's records fit, 10 000 triangles' (320 KB) never do.
+        cache.max_binding = 64 * 1024;
+        let triangles = buffer(4 * 48);
+        cache.register(0, 0);
+        cache.register(1, 0);
+        let mut result = Ok(());
+        run(|rec| {
+            result = cache.prepare_task(rec.encoder, 2, 1).and_then(|()| {
+                cache.record_allocations(rec, &triangles, &[job(0, 1), job(1, 10_000)], 1)
+            });
+        });
+        assert!(result.is_ok(), "the task must not fail: {result:?}");
+        assert!(
+            cache.waiting().is_empty(),
+            "neither instance waits any more"
+        );
+        let none = cache.allocation(1).map(|a| (a.surfels, a.level));
+        assert_eq!(none, Some((0, CacheLevel::None)));
+        // The instance that fits was allocated on the GPU (its read-back is still pending).
+        assert!(matches!(
+            cache.instances.get(&0).map(|c| &c.surfels),
+            Some(Surfels::Pending { .. })
+        ));
+        // Releasing the cache-less instance returns nothing to the records pool.
+        let used = cache.meta.used_bytes();
+        cache.release(1, 1);
+        assert_eq!(cache.meta.used_bytes(), used);
+    }
 }
