@@ -301,7 +301,35 @@ struct Bench<'a> {
     last_passes: std::cell::RefCell<Vec<ksrt::PassTiming>>,
 }
 
-impl Bench<'_> {
+impl<'a> Bench<'a> {
+    /// A bench on `device`, timing `iterations` repetitions of each measurement.
+    fn new(device: &'a wgpu::Device, queue: &'a wgpu::Queue, iterations: u32) -> Self {
+        Bench {
+            device,
+            queue,
+            iterations,
+            last_passes: Default::default(),
+        }
+    }
+
+    /// TLAS rebuild over `scene`'s instances, every transform updated (to the same values: the
+    /// rebuild does the same work whatever they are), span `tlas build`.
+    fn tlas_rebuild(&self, scene: &Scene, uploads: &[UploadedMesh]) -> AnyResult<Stats> {
+        let (ctx, h) = self.registered(scene, uploads, false, true)?;
+        self.repeat(|_| {
+            let mut c = ctx.create_task_container();
+            for (inst, &handle) in scene.instances.iter().zip(&h.instances) {
+                c.schedule_bvh_task(ksrt::InstanceTask {
+                    operation: ksrt::TaskOperation::Update,
+                    handle,
+                    input: ksrt::InstanceInput::new(h.geometries[inst.mesh], inst.transform),
+                });
+            }
+            c.schedule_bvh_task(glue::bvh_build_task(1, Some(Tlas::Rebuild)));
+            self.timed(&ctx, c, &["tlas build"], |_| {})
+        })
+    }
+
     fn context(&self) -> AnyResult<ksrt::ExecuteContext> {
         let ctx = ksrt::ExecuteContext::new(self.device, self.queue, glue::init_settings(true))?;
         glue::prepare_pipelines(&ctx)?;
@@ -1192,12 +1220,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         info.driver_info,
         opts.iterations
     );
-    let bench = Bench {
-        device: &device,
-        queue: &queue,
-        iterations: opts.iterations,
-        last_passes: Default::default(),
-    };
+    let bench = Bench::new(&device, &queue, opts.iterations);
     let mut peer = opts.peer.map(|kind| peer::open(kind, &info));
     let mut report = Report {
         sdk_version: ksrt::VERSION.to_string(),

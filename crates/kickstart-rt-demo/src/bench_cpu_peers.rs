@@ -328,12 +328,7 @@ mod tests {
     #[test]
     fn every_builder_builds_the_cornell_box() {
         let (device, queue) = crate::testing::device();
-        let bench = Bench {
-            device,
-            queue,
-            iterations: 1,
-            last_passes: Default::default(),
-        };
+        let bench = Bench::new(device, queue, 1);
         let scene = crate::scene::builtin::cornell_box();
         let mesh = targets(&scene).remove(0);
         let mut errors = Vec::new();

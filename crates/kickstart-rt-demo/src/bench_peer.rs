@@ -8,15 +8,13 @@
 
 use std::time::Duration;
 
-use kickstart_rt as ksrt;
 use kickstart_rt_peer_vulkan as vkrt;
 use serde::Serialize;
 
 use super::{attempt, Bench, GpuHit, RayBatches, SceneReport, Stats};
 use crate::gpu::UploadedMesh;
 use crate::scene::Scene;
-use crate::sdk_glue::{self as glue, Query, Tlas};
-use crate::AnyResult;
+use crate::sdk_glue::Query;
 
 /// The peers `ksrt bench --peer` knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -198,27 +196,6 @@ fn peer_hit(h: &GpuHit) -> vkrt::Hit {
     }
 }
 
-/// Our TLAS rebuild over the scene's instances (the same transforms again each time: the
-/// rebuild does the same work whatever they are), span `tlas build`.
-fn our_tlas_build(bench: &Bench, scene: &Scene, uploads: &[UploadedMesh]) -> AnyResult<Stats> {
-    let (ctx, h) = bench.registered(scene, uploads, false, true)?;
-    bench.repeat(|_| {
-        let mut c = ctx.create_task_container();
-        for (inst, &handle) in scene.instances.iter().zip(&h.instances) {
-            c.schedule_bvh_task(ksrt::InstanceTask {
-                operation: ksrt::TaskOperation::Update,
-                handle,
-                input: ksrt::InstanceInput::new(h.geometries[inst.mesh], inst.transform),
-            });
-        }
-        c.schedule_bvh_task(glue::bvh_build_task(
-            uploads.len() as u32,
-            Some(Tlas::Rebuild),
-        ));
-        bench.timed(&ctx, c, &["tlas build"], |_| {})
-    })
-}
-
 /// Measures the peer on `scene` with the rays of `batches` (our hits in them) and compares
 /// with our figures in `ours`. Never fails: what failed is listed in the report's `errors`.
 pub fn compare(
@@ -290,7 +267,7 @@ pub fn compare(
         .collect();
     if report.blas_build_fast_trace.is_some() {
         let ours_tlas = attempt(&mut errors, "our TLAS build", || {
-            our_tlas_build(bench, scene, uploads)
+            bench.tlas_rebuild(scene, uploads)
         })
         .map(|s| s.median_ms);
         report.tlas_build = attempt(&mut errors, "peer TLAS build", || {
@@ -495,12 +472,7 @@ mod tests {
     #[test]
     fn skipped_peer_reports_why_and_measures_nothing() {
         let (device, queue) = crate::testing::device();
-        let bench = Bench {
-            device,
-            queue,
-            iterations: 1,
-            last_passes: Default::default(),
-        };
+        let bench = Bench::new(device, queue, 1);
         let scene = scene::builtin::cornell_box();
         let camera = scene.camera_or_default(None);
         let r = SceneReport::new("cornell", &scene, &camera);
@@ -526,12 +498,7 @@ mod tests {
             Err(e) => panic!("vulkan-rt peer required (KSRT_REQUIRE_RT_PEER): {e}"),
         };
         let (device, queue) = crate::testing::device();
-        let bench = Bench {
-            device,
-            queue,
-            iterations: 1,
-            last_passes: Default::default(),
-        };
+        let bench = Bench::new(device, queue, 1);
         let scene = scene::builtin::cornell_box();
         let camera = scene.camera_or_default(None);
         let uploads = crate::gpu::upload_scene(device, &scene);

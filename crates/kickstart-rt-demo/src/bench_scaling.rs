@@ -18,11 +18,14 @@ use glam::{Affine3A, Vec3};
 use kickstart_rt as ksrt;
 use serde::{Deserialize, Serialize};
 
-use crate::bench::{attempt, batch, bench_tlas, issue_camera, surface, Bench, Rng, Stats};
+use crate::bench::{
+    attempt, batch, bench_tlas, issue_camera, primary_rays, secondary_rays, surface, Bench, Rng,
+    Stats,
+};
 use crate::gpu::{self, UploadedMesh};
 use crate::renderer::{Renderer, RendererOptions};
 use crate::scene::{Camera, Instance, Scene};
-use crate::sdk_glue::{self as glue, GpuRay, Query, Tlas};
+use crate::sdk_glue::{self as glue, GpuRay, Query};
 use crate::AnyResult;
 
 /// Scenes of the triangle series.
@@ -236,19 +239,7 @@ fn trace_kinds(
 ) -> AnyResult<Vec<RayPoint>> {
     let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
     let slots = handles.instance_of_slot();
-    let dirs: Vec<Vec3> = (0..height)
-        .flat_map(|y| (0..width).map(move |x| (x, y)))
-        .map(|(x, y)| camera.primary_dir(x, y, width, height))
-        .collect();
-    let primary: Vec<GpuRay> = dirs
-        .iter()
-        .map(|d| GpuRay {
-            origin: camera.eye.to_array(),
-            t_min: 0.0,
-            dir: d.to_array(),
-            t_max: f32::INFINITY,
-        })
-        .collect();
+    let (dirs, primary) = primary_rays(camera, (width, height));
     let point = |kind: &'static str, rays: &[GpuRay], time: Stats, hits: &[glue::GpuHit]| {
         let b = batch(kind, rays.len(), hits, time);
         RayPoint {
@@ -270,41 +261,13 @@ fn trace_kinds(
         .filter_map(|(h, d)| surface(scene, &slots, h, *d))
         .collect();
     let mut rng = Rng(0x6b73_7274);
-    let mut secondary = |t_max: f32| -> Vec<GpuRay> {
-        surfaces
-            .iter()
-            .map(|s| GpuRay {
-                origin: (s.point + s.normal * offset).to_array(),
-                t_min: 0.0,
-                dir: rng.cosine(s.normal).to_array(),
-                t_max,
-            })
-            .collect()
-    };
-    let ao = secondary(1.0);
+    let ao = secondary_rays(&surfaces, offset, &mut rng, 1.0);
     let (t, hits) = bench.trace(&ctx, &ao, Query::Any)?;
     out.push(point("ao", &ao, t, &hits));
-    let diffuse = secondary(f32::INFINITY);
+    let diffuse = secondary_rays(&surfaces, offset, &mut rng, f32::INFINITY);
     let (t, hits) = bench.trace(&ctx, &diffuse, Query::Closest)?;
     out.push(point("diffuse", &diffuse, t, &hits));
     Ok(out)
-}
-
-/// TLAS rebuild over the scene's instances after every transform was updated (unchanged).
-fn tlas_rebuild(bench: &Bench, scene: &Scene, uploads: &[UploadedMesh]) -> AnyResult<Stats> {
-    let (ctx, h) = bench.registered(scene, uploads, false, true)?;
-    bench.repeat(|_| {
-        let mut c = ctx.create_task_container();
-        for (inst, &handle) in scene.instances.iter().zip(&h.instances) {
-            c.schedule_bvh_task(ksrt::InstanceTask {
-                operation: ksrt::TaskOperation::Update,
-                handle,
-                input: ksrt::InstanceInput::new(h.geometries[inst.mesh], inst.transform),
-            });
-        }
-        c.schedule_bvh_task(glue::bvh_build_task(1, Some(Tlas::Rebuild)));
-        bench.timed(&ctx, c, &["tlas build"], |_| {})
-    })
 }
 
 /// The triangle series point of `scene` (copies 0: a loaded scene, with its BLAS build).
@@ -331,7 +294,7 @@ fn triangle_point(
         });
     } else {
         p.tlas_build = attempt(errors, &format!("{label}: TLAS build"), || {
-            tlas_rebuild(bench, scene, &uploads)
+            bench.tlas_rebuild(scene, &uploads)
         });
     }
     p.rays = attempt(errors, &format!("{label}: rays"), || {
@@ -548,6 +511,7 @@ pub(in crate::bench) fn run(
 mod tests {
     use super::*;
     use crate::scene::Mesh;
+    use crate::sdk_glue::Tlas;
 
     fn dragon() -> Scene {
         let mesh = Mesh::new(
