@@ -483,20 +483,14 @@ mod tests {
     }
 
     /// The peer against our tracer on the Cornell box, every ray kind of the bench: at most
-    /// 0.01 % disagreement. Without a ray-tracing Vulkan device it returns early, unless
-    /// `KSRT_REQUIRE_RT_PEER` is set (then it fails): a skip must never pass for agreement.
+    /// 0.01 % disagreement. It needs a ray-tracing Vulkan device, which CI's software Vulkan
+    /// lacks, so it is ignored (never counted as a pass there) and run with `--ignored` where one
+    /// exists; run so, a missing device fails it.
     #[test]
+    #[ignore = "needs a Vulkan device with ray-tracing pipelines: run with --ignored there"]
     fn peer_agrees_with_our_tracer_on_the_cornell_box() {
-        let peer = match vkrt::VulkanRtPeer::new(None) {
-            Ok(p) => p,
-            Err(vkrt::PeerError::Unavailable(why))
-                if std::env::var_os("KSRT_REQUIRE_RT_PEER").is_none() =>
-            {
-                eprintln!("no ray-tracing Vulkan device, agreement not checked: {why}");
-                return;
-            }
-            Err(e) => panic!("vulkan-rt peer required (KSRT_REQUIRE_RT_PEER): {e}"),
-        };
+        let peer = vkrt::VulkanRtPeer::new(None)
+            .unwrap_or_else(|e| panic!("this test needs a ray-tracing Vulkan device: {e}"));
         let (device, queue) = crate::testing::device();
         let bench = Bench::new(device, queue, 1);
         let scene = scene::builtin::cornell_box();
