@@ -348,12 +348,7 @@ impl<'a> Bench<'a> {
         let timings = ctx.wait_for_gpu_timings(task);
         gpu::complete(ctx, self.device, task)?;
         let timings = timings?;
-        let ms = timings.span_ms(span).ok_or_else(|| {
-            format!(
-                "no GPU pass labelled {span:?} in this task (passes: {:?})",
-                timings.passes.iter().map(|p| p.label).collect::<Vec<_>>()
-            )
-        })?;
+        let ms = glue::span_ms(&timings, span)?;
         *self.last_passes.borrow_mut() = timings.passes;
         Ok(ms)
     }

@@ -15,6 +15,7 @@ use std::time::Instant;
 use kickstart_rt as ksrt;
 use serde::{Deserialize, Serialize};
 
+use crate::lit::median;
 use crate::renderer::Renderer;
 use crate::scene::Camera;
 use crate::AnyResult;
@@ -124,15 +125,6 @@ pub struct FifSummary {
     pub frame_ms: f64,
     /// 1000 / the mean frame interval.
     pub fps: f64,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    match v.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => v[n / 2],
-        n => (v[n / 2 - 1] + v[n / 2]) / 2.0,
-    }
 }
 
 /// Summarises `records` after dropping the first `warmup` frames (first frames compile

@@ -220,7 +220,9 @@ pub fn write(result: &LitResult, out: &Path, hdr: bool) -> AnyResult<Vec<std::pa
     Ok(written)
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+/// Median of `v` (0 when empty): the per-frame summaries of `ksrt render` and its
+/// frames-in-flight loop.
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     match v.len() {
         0 => 0.0,

@@ -80,7 +80,12 @@ pub fn wait_span_ms(
     task: ksrt::GpuTaskHandle,
     prefixes: &[&str],
 ) -> AnyResult<f64> {
-    let timings = ctx.wait_for_gpu_timings(task)?;
+    span_ms(&ctx.wait_for_gpu_timings(task)?, prefixes)
+}
+
+/// The span of `timings` over the passes whose labels start with any of `prefixes`, in
+/// milliseconds; an error listing the task's passes when none matches.
+pub fn span_ms(timings: &ksrt::GpuTimings, prefixes: &[&str]) -> AnyResult<f64> {
     timings.span_ms(prefixes).ok_or_else(|| {
         format!(
             "no GPU pass labelled {prefixes:?} in this task (passes: {:?})",
