@@ -172,3 +172,57 @@ pub fn plots_from_json(json: &Path, dir: &Path) -> AnyResult<()> {
     plots::draw_all(&report, dir)?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn too_few_frames_in_flight_frames_are_refused_by_name() {
+        let args = ExtraArgs {
+            frames_in_flight: true,
+            fif_frames: 7,
+            ..Default::default()
+        };
+        let err = args.check().expect_err("7 frames refused").to_string();
+        assert!(err.contains("--fif-frames 7"), "{err}");
+        // The count only matters when the pass runs.
+        let off = ExtraArgs {
+            fif_frames: 0,
+            ..Default::default()
+        };
+        assert!(off.check().is_ok());
+    }
+
+    #[test]
+    fn plots_from_refuses_a_missing_file_another_json_and_a_report_without_extras() {
+        let dir = crate::testing::temp_dir("plots-from-bad-input");
+        let missing = dir.join("missing.json");
+        let err = plots_from_json(&missing, &dir)
+            .expect_err("missing")
+            .to_string();
+        assert!(
+            err.contains("--plots-from") && err.contains("cannot read"),
+            "{err}"
+        );
+        let other = dir.join("other.json");
+        std::fs::write(&other, "[1, 2, 3]").expect("write");
+        let err = plots_from_json(&other, &dir)
+            .expect_err("not a report")
+            .to_string();
+        assert!(err.contains("not a ksrt bench report"), "{err}");
+        let empty = dir.join("empty.json");
+        std::fs::write(&empty, "{}").expect("write");
+        let err = plots_from_json(&empty, &dir)
+            .expect_err("no extras")
+            .to_string();
+        assert!(err.contains("holds no --cpu-peers"), "{err}");
+        assert!(
+            std::fs::read_dir(&dir)
+                .expect("dir")
+                .filter_map(Result::ok)
+                .all(|e| e.path().extension().is_none_or(|x| x != "png")),
+            "no chart is drawn from bad input"
+        );
+    }
+}
