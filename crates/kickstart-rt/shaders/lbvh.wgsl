@@ -14,6 +14,8 @@
 //   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only)
 //   [8, 8 + 6 (n-1))             inner node boxes during the climb (min.xyz, max.xyz bit patterns)
 //   [8 + 6 (n-1), 8 + 7 (n-1))   arrival counters of the inner nodes (cleared before the climb)
+//   [8 + 7 (n-1), 8 + 10 (n-1))  per inner node during the climb: SAH cost (f32 bits), primitive
+//                                count | COLLAPSED_BIT, first sorted position (leaf collapsing)
 //
 // Topology layout (u32 words from topo_base), n >= 2:
 //   [0, 2 (n-1))           children of inner node i at 2i, 2i+1: inner index, or 0x80000000 | k
@@ -31,7 +33,9 @@ struct Params {
     // bit 0: leaf refs are primitive indices (order[k]) instead of sorted positions k;
     // bit 1: write the root box to bounds_out.
     flags: u32,
-    pad: u32,
+    // Largest leaf the climb may make by collapsing a subtree (1: every leaf holds one
+    // primitive). Only with sorted-position refs: a subtree's primitives are then one range.
+    max_leaf: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -58,6 +62,13 @@ const EMPTY_KEY: u32 = 0x40000000u;
 const BIG: f32 = 3.40282347e38;
 const EMPTY_OUT: f32 = 1e30;
 const BOXES_AT: u32 = 8u;
+// SAH constants of the collapse decision: the CPU builder's (src/cpu/bvh.rs), so the GPU tree's
+// SAH cost is minimised in the same terms the benchmark compares it in.
+const SAH_TRAVERSAL: f32 = 1.0;
+const SAH_INTERSECTION: f32 = 1.0;
+// In the count word of a subtree: the subtree is cheaper as one leaf (its parent refers to it as
+// a leaf of `count` primitives from `first`).
+const COLLAPSED_BIT: u32 = 0x80000000u;
 
 fn linear_id(lid: u32, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid;
@@ -374,12 +385,81 @@ fn load_box(node: u32) -> Box {
                   bitcast<f32>(atomicLoad(&work[at + 5u]))));
 }
 
+// Summary of child ref c whose box is `b`: a leaf's is computed, an inner node's was published
+// by its climber (with its box, under the same release/acquire protocol).
+fn child_subtree(c: u32, b: Box) -> Subtree {
+    if (c & LEAF_BIT) != 0u {
+        return leaf_subtree(c & 0x7fffffffu, b);
+    }
+    return load_subtree(c);
+}
+
 // Box of child ref c (topology encoding): leaves from the input, inner nodes from `work`.
 fn child_box(c: u32) -> Box {
     if (c & LEAF_BIT) != 0u {
         return leaf_box(c & 0x7fffffffu);
     }
     return load_box(c);
+}
+
+// SAH summary of a subtree: its cost (area-weighted, not normalised), primitive count and first
+// sorted position, and whether it is cheaper as a single leaf.
+struct Subtree {
+    cost: f32,
+    count: u32,
+    first: u32,
+    collapsed: bool,
+}
+
+// Surface area, 0 for an empty box, capped at BIG so sums of costs stay comparable (a non-finite
+// value may be assumed away by the compiler).
+fn area(b: Box) -> f32 {
+    let d = max(b.hi - b.lo, vec3<f32>(0.0));
+    return min(2.0 * (d.x * d.y + d.y * d.z + d.z * d.x), BIG);
+}
+
+fn leaf_subtree(k: u32, b: Box) -> Subtree {
+    return Subtree(area(b) * SAH_INTERSECTION, 1u, k, false);
+}
+
+// The optimal cost of an inner node over children `l` and `r` (box `b`): split, or one leaf when
+// collapsing is on, the leaf fits and it is no more expensive.
+fn join_subtrees(b: Box, l: Subtree, r: Subtree) -> Subtree {
+    let a = area(b);
+    let count = l.count + r.count;
+    let split = min(a * SAH_TRAVERSAL + l.cost + r.cost, BIG);
+    let as_leaf = min(a * f32(count) * SAH_INTERSECTION, BIG);
+    let collapse = (params.flags & FLAG_PRIMITIVE_REFS) == 0u && count <= params.max_leaf
+        && as_leaf <= split;
+    return Subtree(select(split, as_leaf, collapse), count, min(l.first, r.first), collapse);
+}
+
+fn subtree_at(node: u32) -> u32 {
+    let n = params.count;
+    return BOXES_AT + 7u * (n - 1u) + 3u * node;
+}
+
+fn store_subtree(node: u32, s: Subtree) {
+    let at = subtree_at(node);
+    atomicStore(&work[at], bitcast<u32>(s.cost));
+    atomicStore(&work[at + 1u], s.count | select(0u, COLLAPSED_BIT, s.collapsed));
+    atomicStore(&work[at + 2u], s.first);
+}
+
+fn load_subtree(node: u32) -> Subtree {
+    let at = subtree_at(node);
+    let count = atomicLoad(&work[at + 1u]);
+    return Subtree(bitcast<f32>(atomicLoad(&work[at])), count & ~COLLAPSED_BIT,
+                   atomicLoad(&work[at + 2u]), (count & COLLAPSED_BIT) != 0u);
+}
+
+// The ref a node stores for child `c` (topology encoding) with summary `s`: a collapsed inner
+// child becomes a leaf of its whole range (count - 1 in bits 28..30).
+fn child_ref(c: u32, s: Subtree) -> u32 {
+    if (c & LEAF_BIT) == 0u && s.collapsed {
+        return LEAF_BIT | ((s.count - 1u) << 28u) | s.first;
+    }
+    return out_ref(c);
 }
 
 @compute @workgroup_size(256)
@@ -414,6 +494,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
     if climbing {
         bx = leaf_box(k);
     }
+    var sub = leaf_subtree(k, bx);
     loop {
         // Uniform trip count: continue while anyone in the workgroup is still climbing.
         if lid == 0u {
@@ -439,6 +520,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
                 // Inner boxes are published for the sibling's climber (leaves are re-read
                 // from the input instead).
                 store_box(node, bx);
+                store_subtree(node, sub);
                 parent = topology[inner_parents + node];
             }
         }
@@ -456,13 +538,18 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             let rc = topology[params.topo_base + 2u * parent + 1u];
             var lb = bx;
             var rb = bx;
+            var ls = sub;
+            var rs = sub;
             if lc == node {
                 rb = child_box(rc);
+                rs = child_subtree(rc, rb);
             } else {
                 lb = child_box(lc);
+                ls = child_subtree(lc, lb);
             }
-            write_node(parent, lb, out_ref(lc), rb, out_ref(rc));
+            write_node(parent, lb, child_ref(lc, ls), rb, child_ref(rc, rs));
             bx = union_box(lb, rb);
+            sub = join_subtrees(bx, ls, rs);
             node = parent;
             if parent == 0u {
                 write_bounds(bx);

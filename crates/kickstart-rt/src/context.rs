@@ -121,6 +121,8 @@ pub enum DenoisingMethod {
 struct GeometryData {
     name: String,
     allow_update: bool,
+    /// Leaf collapsing of its BLAS builds, from `build_hint` ([`BuildHint::max_leaf`]).
+    max_leaf: u32,
     triangles: u32,
     gpu: GeometryGpu,
     dropped: Option<DroppedTriangles>,
@@ -959,6 +961,7 @@ impl ExecuteContext {
             let data = slot.data.get_or_insert_with(|| GeometryData {
                 name: task.input.name.clone(),
                 allow_update: task.input.allow_update,
+                max_leaf: task.input.build_hint.max_leaf(task.input.allow_update),
                 triangles,
                 gpu: GeometryGpu::default(),
                 dropped: None,
@@ -1012,6 +1015,7 @@ impl ExecuteContext {
                             h.index,
                             &mut d.gpu,
                             d.allow_update,
+                            d.max_leaf,
                             &d.name,
                         )?;
                         headers.push(

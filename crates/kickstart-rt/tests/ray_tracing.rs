@@ -1058,3 +1058,71 @@ fn blas_read_back_and_geometry_queries_check_their_handles() {
         Err(Error::InvalidHandle { .. })
     ));
 }
+
+/// `build_hint`: fast-trace collapses subtrees into leaves of up to
+/// `BuildHint::FAST_TRACE_MAX_LEAF` triangles by SAH (a lower SAH cost); fast-build, and `Auto`
+/// with `allow_update`, keep one triangle per leaf; `Auto` on static geometry is fast-trace.
+#[test]
+fn build_hints_choose_the_leaf_size() {
+    let ctx = context(4);
+    let sphere = Mesh::icosphere(3);
+    let cases = [
+        (BuildHint::PreferFastTrace, false, true),
+        (BuildHint::PreferFastTrace, true, true),
+        (BuildHint::Auto, false, true),
+        (BuildHint::PreferFastBuild, false, false),
+        (BuildHint::Auto, true, false),
+    ];
+    let handles = ctx.create_geometry_handles(cases.len());
+    let mut c = ctx.create_task_container();
+    for (&(hint, allow_update, _), &h) in cases.iter().zip(&handles) {
+        let mut input = mesh_input("sphere", &sphere, allow_update);
+        input.build_hint = hint;
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: h,
+            input,
+        });
+    }
+    build_submit_complete(&ctx, c);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: cases.len() as u32,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    let one_per_leaf = ctx.read_back_blas(handles[3]).unwrap().sah_cost;
+    for (&(hint, allow_update, collapsed), &h) in cases.iter().zip(&handles) {
+        let b = ctx.read_back_blas(h).unwrap();
+        // Leaf sizes reachable from the root (collapsed subtrees' nodes stay in the buffer).
+        let mut leaves = Vec::new();
+        let mut stack = vec![0u32];
+        while let Some(i) = stack.pop() {
+            for c in b.nodes[i as usize].iter().filter(|c| !c.is_empty()) {
+                if c.is_leaf() {
+                    leaves.push(c.leaf_range().1);
+                } else {
+                    stack.push(c.reference);
+                }
+            }
+        }
+        let largest = leaves.iter().copied().max().unwrap_or(0);
+        let what = format!("{hint:?}, allow_update {allow_update}");
+        if collapsed {
+            assert!(
+                largest > 1 && largest <= BuildHint::FAST_TRACE_MAX_LEAF,
+                "{what}: largest leaf {largest}"
+            );
+            assert!(
+                b.sah_cost < one_per_leaf,
+                "{what}: SAH {} vs {one_per_leaf} with one triangle per leaf",
+                b.sah_cost
+            );
+        } else {
+            assert_eq!(largest, 1, "{what}");
+        }
+        // Reachable leaves hold every triangle exactly once.
+        let triangles: u32 = leaves.iter().sum();
+        assert_eq!(triangles as usize, sphere.indices.len() / 3, "{what}");
+    }
+}

@@ -37,6 +37,8 @@ pub(crate) enum PendingBvh {
 pub(crate) struct BlasRanges {
     pub tris: Range,
     pub nodes: Range,
+    /// Leaf collapsing of the build (refits make their decisions with the same limit).
+    pub max_leaf: u32,
     /// Sort order (`n` words; `orders` pool) and refit topology (`topologies` pool), kept for
     /// `allow_update` geometry only. Separate pools: the builder binds them in one dispatch.
     pub refit: Option<(Range, Range)>,
@@ -426,6 +428,7 @@ impl GpuScene {
         slot: u32,
         g: &mut GeometryGpu,
         keep_for_refit: bool,
+        max_leaf: u32,
         name: &str,
     ) -> Result<[u32; 4]> {
         let n = g.triangles;
@@ -503,6 +506,7 @@ impl GpuScene {
                 order_base,
                 topology: refit.map(|(_, t)| (self.topologies.buffer(), t.start)),
                 leaf_refs: LeafRefs::SortedPosition,
+                max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
             },
         );
@@ -516,7 +520,12 @@ impl GpuScene {
             self.triangles.buffer(),
             tris.start,
         );
-        g.blas = Some(BlasRanges { tris, nodes, refit });
+        g.blas = Some(BlasRanges {
+            tris,
+            nodes,
+            max_leaf,
+            refit,
+        });
         Ok([nodes.start, tris.start, n, 1])
     }
 
@@ -527,6 +536,7 @@ impl GpuScene {
             Some(BlasRanges {
                 tris,
                 nodes,
+                max_leaf,
                 refit: Some((order, topology)),
             }),
         ) = (g.staged, g.blas)
@@ -557,6 +567,7 @@ impl GpuScene {
                 order_base: order.start,
                 topology: (self.topologies.buffer(), topology.start),
                 leaf_refs: LeafRefs::SortedPosition,
+                max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
             },
         );
@@ -632,6 +643,7 @@ impl GpuScene {
                     order_base: 0,
                     topology: (&self.tlas.topology, 0),
                     leaf_refs: LeafRefs::PrimitiveIndex,
+                    max_leaf: 1,
                     bounds_out: None,
                 },
             );
@@ -649,6 +661,7 @@ impl GpuScene {
                     order_base: 0,
                     topology: Some((&self.tlas.topology, 0)),
                     leaf_refs: LeafRefs::PrimitiveIndex,
+                    max_leaf: 1,
                     bounds_out: None,
                 },
             );

@@ -8,7 +8,9 @@
 //! 4. [`RadixSort::record`] (31 key bits, stable), values = primitive indices;
 //! 5. `lbvh hierarchy`: `order`, children and parents (Karras, with the index tie-break);
 //! 6. `lbvh climb`: bottom-up boxes without waiting on anyone (see the shader), writes the nodes
-//!    and `bounds_out`.
+//!    and `bounds_out`. With `max_leaf` > 1 it also computes each subtree's SAH cost and turns
+//!    every subtree of at most `max_leaf` primitives that is cheaper as one leaf into a leaf ref
+//!    (the fast-trace build; its inner nodes stay in the buffer, unreferenced).
 //!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology.
 
@@ -30,6 +32,8 @@ const FLAG_BOUNDS_OUT: u32 = 2;
 const BOXES_AT: u64 = 8;
 /// Largest primitive count: a leaf ref has 28 bits for its first primitive.
 const MAX_COUNT: u32 = 1 << 28;
+/// Largest leaf: a leaf ref has 3 bits for its count − 1.
+pub(crate) const MAX_LEAF: u32 = 8;
 
 /// What a leaf's `first` field refers to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,6 +65,9 @@ pub(crate) struct LbvhBuild<'a> {
     pub topology: Option<(&'a wgpu::Buffer, u32)>,
     /// What leaf refs point at.
     pub leaf_refs: LeafRefs,
+    /// Largest leaf made by collapsing subtrees by SAH (1..=[`MAX_LEAF`]; 1 = one primitive per
+    /// leaf). Only honoured with [`LeafRefs::SortedPosition`].
+    pub max_leaf: u32,
     /// Output: the root box as two `vec4` (min, max; `w` = 0) at this vec4 index.
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
@@ -86,6 +93,9 @@ pub(crate) struct LbvhRefit<'a> {
     pub topology: (&'a wgpu::Buffer, u32),
     /// What leaf refs point at (as built).
     pub leaf_refs: LeafRefs,
+    /// Leaf collapsing, as [`LbvhBuild::max_leaf`] (the decisions are made again for the new
+    /// boxes; a subtree's primitives stay one range, so any decision is valid).
+    pub max_leaf: u32,
     /// Output: the root box as two `vec4` at this vec4 index.
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
@@ -101,7 +111,7 @@ struct Params {
     topo_base: u32,
     bounds_base: u32,
     flags: u32,
-    pad: u32,
+    max_leaf: u32,
 }
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
@@ -196,9 +206,19 @@ fn groups(n: u32) -> u32 {
     n.div_ceil(WORKGROUP).max(1)
 }
 
-/// Words of the work buffer for `n` primitives: header, 6 per inner box, 1 per arrival counter.
+/// Words of the work buffer for `n` primitives: header, then per inner node 6 for its box, 1
+/// arrival counter and 3 for its SAH summary (cost, count, first).
 fn work_words(n: u32) -> u64 {
-    BOXES_AT + 7 * u64::from(n.saturating_sub(1))
+    BOXES_AT + 10 * u64::from(n.saturating_sub(1))
+}
+
+/// The `max_leaf` a dispatch uses: clamped to 1..=MAX_LEAF, and 1 for primitive-index refs
+/// (a TLAS leaf's instances are not one range).
+fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
+    match leaf_refs {
+        LeafRefs::SortedPosition => max_leaf.clamp(1, MAX_LEAF),
+        LeafRefs::PrimitiveIndex => 1,
+    }
 }
 
 impl Lbvh {
@@ -291,7 +311,7 @@ impl Lbvh {
                 topo_base,
                 bounds_base,
                 flags: Self::flags(b.leaf_refs, b.bounds_out.is_some()),
-                pad: 0,
+                max_leaf: effective_max_leaf(b.max_leaf, b.leaf_refs),
             },
         );
         let bind = Bindings {
@@ -338,7 +358,7 @@ impl Lbvh {
                 topo_base: r.topology.1,
                 bounds_base,
                 flags: Self::flags(r.leaf_refs, r.bounds_out.is_some()),
-                pad: 0,
+                max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
             },
         );
         // Keys and values are not used by the climb; the dummy fills their slots.
@@ -462,6 +482,7 @@ mod tests {
         n: u32,
         bases: Bases,
         leaf_refs: LeafRefs,
+        max_leaf: u32,
         nodes: wgpu::Buffer,
         order: wgpu::Buffer,
         topology: wgpu::Buffer,
@@ -507,8 +528,19 @@ mod tests {
         words(&read_back(b, 0, b.size()))
     }
 
-    /// Builds over `aabbs` on the GPU, checks everything and returns the tree and its SAH cost.
+    /// Builds over `aabbs` on the GPU (one primitive per leaf), checks everything and returns
+    /// the tree and its SAH cost.
     fn build_and_check(lbvh: &mut Lbvh, aabbs: &[Aabb], leaf_refs: LeafRefs) -> (GpuTree, f64) {
+        build_and_check_leaves(lbvh, aabbs, leaf_refs, 1)
+    }
+
+    /// [`build_and_check`] with leaves collapsed up to `max_leaf` primitives.
+    fn build_and_check_leaves(
+        lbvh: &mut Lbvh,
+        aabbs: &[Aabb],
+        leaf_refs: LeafRefs,
+        max_leaf: u32,
+    ) -> (GpuTree, f64) {
         let bases = BASES;
         let n = aabbs.len() as u32;
         let node_count = u64::from(Lbvh::node_count(n));
@@ -518,6 +550,7 @@ mod tests {
             n,
             bases,
             leaf_refs,
+            max_leaf,
             nodes: sentinel_buffer((u64::from(bases.node) + node_count + 1) * 16),
             order: sentinel_buffer(u64::from(bases.order + n) + 1),
             topology: sentinel_buffer(u64::from(bases.topo) + topo_words + 1),
@@ -538,6 +571,7 @@ mod tests {
                     order_base: bases.order,
                     topology: Some((&tree.topology, bases.topo)),
                     leaf_refs,
+                    max_leaf,
                     bounds_out: Some((&tree.bounds, bases.bounds)),
                 },
             )
@@ -576,6 +610,7 @@ mod tests {
             &tree.order_words,
             tree.leaf_refs,
             empties_last,
+            effective_max_leaf(tree.max_leaf, tree.leaf_refs),
         );
         let bw = &bounds[b.bounds as usize * 4..][..8];
         assert_eq!(words_to_box(bw), stored(root), "bounds_out is the union");
@@ -591,12 +626,14 @@ mod tests {
         boxes: &'a [Option<Aabb>],
         order: &'a [u32],
         leaf_refs: LeafRefs,
+        /// Largest leaf allowed.
+        max_leaf: u32,
         /// Primitives found in a leaf.
         seen: Vec<bool>,
         /// Inner nodes reached.
         visited: Vec<bool>,
-        /// Every child's stored box and whether it is a leaf (for the SAH).
-        children: Vec<(Aabb, bool)>,
+        /// Every child's stored box and its primitive count (0: inner), for the SAH.
+        children: Vec<(Aabb, u32)>,
     }
 
     impl Walk<'_> {
@@ -608,17 +645,29 @@ mod tests {
             for right in [false, true] {
                 let (r, stored_box) = (self.child)(node, right);
                 let leaf = r & 0x8000_0000 != 0;
+                let count = if leaf { ((r >> 28) & 7) + 1 } else { 0 };
                 let subtree = if leaf {
-                    assert_eq!(r & 0x7000_0000, 0, "leaf count 1");
+                    assert!(
+                        count <= self.max_leaf,
+                        "leaf {r:#x}: more than {}",
+                        self.max_leaf
+                    );
                     let first = (r & 0x0fff_ffff) as usize;
-                    assert!(first < self.boxes.len(), "leaf ref {r:#x} out of range");
-                    let prim = match self.leaf_refs {
-                        LeafRefs::SortedPosition => self.order[first] as usize,
-                        LeafRefs::PrimitiveIndex => first,
-                    };
-                    assert!(!self.seen[prim], "primitive {prim} in two leaves");
-                    self.seen[prim] = true;
-                    self.boxes[prim]
+                    assert!(
+                        first + count as usize <= self.boxes.len(),
+                        "leaf ref {r:#x} out of range"
+                    );
+                    let mut b = None;
+                    for k in first..first + count as usize {
+                        let prim = match self.leaf_refs {
+                            LeafRefs::SortedPosition => self.order[k] as usize,
+                            LeafRefs::PrimitiveIndex => k,
+                        };
+                        assert!(!self.seen[prim], "primitive {prim} in two leaves");
+                        self.seen[prim] = true;
+                        b = union(b, self.boxes[prim]);
+                    }
+                    b
                 } else {
                     assert!(
                         (r as usize) < self.visited.len(),
@@ -631,7 +680,7 @@ mod tests {
                     stored(subtree),
                     "node {node} child {right}: exact union"
                 );
-                self.children.push((stored_box, leaf));
+                self.children.push((stored_box, count));
                 total = union(total, subtree);
             }
             total
@@ -646,6 +695,7 @@ mod tests {
         order: &[u32],
         leaf_refs: LeafRefs,
         empties_last: bool,
+        max_leaf: u32,
     ) -> (Option<Aabb>, f64) {
         let n = aabbs.len();
         let boxes: Vec<Option<Aabb>> = aabbs.iter().map(|b| (!is_empty(b)).then_some(*b)).collect();
@@ -694,30 +744,32 @@ mod tests {
             boxes: &boxes,
             order,
             leaf_refs,
+            max_leaf,
             seen: vec![false; n],
             visited: vec![false; n - 1],
             children: Vec::new(),
         };
         let root = walk.visit(0);
+        // Collapsed subtrees' inner nodes stay in the buffer, unreferenced.
         assert!(
-            walk.visited.iter().all(|&v| v),
+            max_leaf > 1 || walk.visited.iter().all(|&v| v),
             "every inner node reachable"
         );
         assert!(walk.seen.iter().all(|&s| s), "every primitive in a leaf");
-        // As CpuBvh::sah_cost: the root, then every child (inner: traversal cost; leaf of one
-        // primitive: one intersection), areas relative to the root's.
+        // As CpuBvh::sah_cost: the root, then every child (inner: traversal cost; leaf: one
+        // intersection per primitive), areas relative to the root's.
         let ra = area(&stored(root)).max(f64::from(f32::MIN_POSITIVE));
         let sah = f64::from(SAH_TRAVERSAL_COST)
             + walk
                 .children
                 .iter()
-                .map(|(b, leaf)| {
-                    let cost = if *leaf {
-                        SAH_INTERSECTION_COST
+                .map(|&(b, count)| {
+                    let cost = if count > 0 {
+                        f64::from(SAH_INTERSECTION_COST) * f64::from(count)
                     } else {
-                        SAH_TRAVERSAL_COST
+                        f64::from(SAH_TRAVERSAL_COST)
                     };
-                    area(b) / ra * f64::from(cost)
+                    area(&b) / ra * cost
                 })
                 .sum::<f64>();
         (root, sah)
@@ -810,13 +862,14 @@ mod tests {
                         order_base: 0,
                         topology: None,
                         leaf_refs: LeafRefs::SortedPosition,
+                        max_leaf: 1,
                         bounds_out: None,
                     },
                 );
             }
         });
         // Scratch covers the larger build (work words, keys, values, topology).
-        assert!(lbvh.scratch_bytes() >= 4 * (7 * 5000 + 2 * 5000 + 4 * 5000));
+        assert!(lbvh.scratch_bytes() >= 4 * (10 * 5000 + 2 * 5000 + 4 * 5000));
         for (i, aabbs) in [&small, &large].into_iter().enumerate() {
             check_tree(
                 aabbs,
@@ -824,6 +877,7 @@ mod tests {
                 &read_words(&order[i]),
                 LeafRefs::SortedPosition,
                 true,
+                1,
             );
         }
     }
@@ -876,6 +930,7 @@ mod tests {
                         order_base: tree.bases.order,
                         topology: (&tree.topology, tree.bases.topo),
                         leaf_refs: refs,
+                        max_leaf: 1,
                         bounds_out: Some((&tree.bounds, tree.bases.bounds)),
                     },
                 )
@@ -921,5 +976,153 @@ mod tests {
                 "LBVH SAH {gpu_sah} vs CPU {cpu_sah}"
             );
         }
+    }
+
+    /// The optimal SAH cost (relative to the root's area, as `check_tree`) of collapsing
+    /// subtrees of the read-back topology into leaves of at most `max_leaf` primitives: the
+    /// CPU oracle of the climb's decisions, in f64.
+    fn optimal_collapsed_sah(tree: &GpuTree, aabbs: &[Aabb], max_leaf: u32) -> f64 {
+        let topo = read_words(&tree.topology);
+        let topo = &topo[tree.bases.topo as usize..];
+        let n = tree.n as usize;
+        let boxes: Vec<Option<Aabb>> = aabbs.iter().map(|b| (!is_empty(b)).then_some(*b)).collect();
+        // (box, count, optimal cost) of the subtree of topology ref `c` (depth is small for
+        // these inputs: recursion is fine in a test).
+        fn solve(
+            c: u32,
+            topo: &[u32],
+            tree: &GpuTree,
+            boxes: &[Option<Aabb>],
+            max_leaf: u32,
+        ) -> (Option<Aabb>, u32, f64) {
+            if c & 0x8000_0000 != 0 {
+                let b = boxes[tree.order_words[(c & 0x7fff_ffff) as usize] as usize];
+                let a = b.as_ref().map_or(0.0, area);
+                return (b, 1, a * f64::from(SAH_INTERSECTION_COST));
+            }
+            let i = c as usize;
+            let l = solve(topo[2 * i], topo, tree, boxes, max_leaf);
+            let r = solve(topo[2 * i + 1], topo, tree, boxes, max_leaf);
+            let b = union(l.0, r.0);
+            let a = b.as_ref().map_or(0.0, area);
+            let count = l.1 + r.1;
+            let split = a * f64::from(SAH_TRAVERSAL_COST) + l.2 + r.2;
+            let leaf = a * f64::from(count) * f64::from(SAH_INTERSECTION_COST);
+            let cost = if count <= max_leaf && leaf <= split {
+                leaf
+            } else {
+                split
+            };
+            (b, count, cost)
+        }
+        assert!(n >= 2);
+        let l = solve(topo[0], topo, tree, &boxes, max_leaf);
+        let r = solve(topo[1], topo, tree, &boxes, max_leaf);
+        let root = union(l.0, r.0);
+        let ra = area(&stored(root)).max(f64::from(f32::MIN_POSITIVE));
+        f64::from(SAH_TRAVERSAL_COST) + (l.2 + r.2) / ra
+    }
+
+    /// Clustered random triangles' boxes (the shape of a mesh: many small, overlapping boxes).
+    fn clustered_boxes(n: usize, seed: u64) -> Vec<Aabb> {
+        let mut rng = Rng(seed);
+        (0..n)
+            .map(|_| {
+                let c = rng.vec(0.0, 30.0);
+                let d = rng.vec(0.05, 1.0);
+                (
+                    [0, 1, 2].map(|i| c[i] - d[i]),
+                    [0, 1, 2].map(|i| c[i] + d[i]),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lbvh_collapsed_leaves_are_the_sah_optimum_of_the_topology() {
+        let mut lbvh = Lbvh::new(&gpu().device);
+        for (aabbs, name) in [
+            (clustered_boxes(6000, 3), "clustered"),
+            (hard_soup(5003, 8), "hard soup"),
+        ] {
+            let (_, single) = build_and_check(&mut lbvh, &aabbs, LeafRefs::SortedPosition);
+            for max_leaf in [2, 4, 8] {
+                // check_tree: every primitive in exactly one leaf of ≤ max_leaf, exact boxes.
+                let (tree, sah) =
+                    build_and_check_leaves(&mut lbvh, &aabbs, LeafRefs::SortedPosition, max_leaf);
+                let optimum = optimal_collapsed_sah(&tree, &aabbs, max_leaf);
+                eprintln!("{name} max_leaf {max_leaf}: SAH {sah:.3} (one per leaf {single:.3})");
+                assert!(
+                    (sah - optimum).abs() <= 1e-4 * optimum,
+                    "{name} max_leaf {max_leaf}: SAH {sah} but the optimum is {optimum}"
+                );
+                assert!(sah < single, "{name}: collapsing must lower the SAH cost");
+            }
+        }
+    }
+
+    #[test]
+    fn lbvh_collapse_is_off_for_primitive_index_refs() {
+        // A TLAS leaf's instances are not one range: max_leaf is ignored there.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let aabbs = clustered_boxes(3000, 4);
+        let (tree, _) = build_and_check_leaves(&mut lbvh, &aabbs, LeafRefs::PrimitiveIndex, 8);
+        let counts_one = tree
+            .node_words
+            .chunks(16)
+            .flat_map(|w| [w[3], w[7]])
+            .filter(|r| r & 0x8000_0000 != 0)
+            .all(|r| r & 0x7000_0000 == 0);
+        assert!(counts_one, "every TLAS leaf holds one instance");
+    }
+
+    #[test]
+    fn lbvh_refit_with_collapse_makes_the_optimum_for_the_new_boxes() {
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let before = clustered_boxes(4000, 5);
+        let (tree, _) = build_and_check_leaves(&mut lbvh, &before, LeafRefs::SortedPosition, 4);
+        // Scatter a third of the boxes far away: decisions made for the old boxes no longer
+        // hold.
+        let mut rng = Rng(6);
+        let after: Vec<Aabb> = before
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                if i % 3 == 0 {
+                    let d = rng.vec(-200.0, 200.0);
+                    (
+                        [0, 1, 2].map(|a| b.0[a] + d[a]),
+                        [0, 1, 2].map(|a| b.1[a] + d[a]),
+                    )
+                } else {
+                    *b
+                }
+            })
+            .collect();
+        let input = aabb_buffer(&after, tree.bases.aabb);
+        run(|rec| {
+            lbvh.refit(
+                rec,
+                &LbvhRefit {
+                    aabbs: &input,
+                    aabb_base: tree.bases.aabb,
+                    count: tree.n,
+                    nodes: &tree.nodes,
+                    node_base: tree.bases.node,
+                    order: &tree.order,
+                    order_base: tree.bases.order,
+                    topology: (&tree.topology, tree.bases.topo),
+                    leaf_refs: LeafRefs::SortedPosition,
+                    max_leaf: 4,
+                    bounds_out: Some((&tree.bounds, tree.bases.bounds)),
+                },
+            )
+        });
+        let (tree, sah) = check_read_back(tree, &after, false);
+        let optimum = optimal_collapsed_sah(&tree, &after, 4);
+        assert!(
+            (sah - optimum).abs() <= 1e-4 * optimum,
+            "refit SAH {sah}, optimum for the new boxes {optimum}"
+        );
     }
 }

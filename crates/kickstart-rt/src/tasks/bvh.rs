@@ -114,6 +114,10 @@ pub enum SurfelType {
 }
 
 /// Which BVH quality/speed trade-off to build.
+///
+/// Both builds are the same GPU LBVH; fast-trace also lets the bottom-up pass turn every subtree
+/// of up to [`BuildHint::FAST_TRACE_MAX_LEAF`] triangles that is cheaper by the surface area
+/// heuristic into one leaf (fewer, fuller leaves: fewer node visits per ray).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum BuildHint {
     /// Fast-build when `allow_update` is set, fast-trace otherwise.
@@ -123,6 +127,21 @@ pub enum BuildHint {
     PreferFastTrace,
     /// Shortest build.
     PreferFastBuild,
+}
+
+impl BuildHint {
+    /// Largest leaf of a fast-trace BLAS, in triangles.
+    pub const FAST_TRACE_MAX_LEAF: u32 = 4;
+
+    /// Largest leaf the build may make, in triangles, for a geometry with `allow_update`.
+    pub fn max_leaf(self, allow_update: bool) -> u32 {
+        match self {
+            BuildHint::PreferFastTrace => Self::FAST_TRACE_MAX_LEAF,
+            BuildHint::PreferFastBuild => 1,
+            BuildHint::Auto if allow_update => 1,
+            BuildHint::Auto => Self::FAST_TRACE_MAX_LEAF,
+        }
+    }
 }
 
 /// Everything the SDK needs to build one BLAS and its lighting cache layout.
