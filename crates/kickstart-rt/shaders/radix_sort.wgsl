@@ -1,42 +1,42 @@
-// Stable LSD radix sort of (u32 key, u32 value) pairs: one 4-bit digit per pass.
+// Stable LSD radix sort of (u32 key, u32 value) pairs: one 8-bit digit per pass.
 //
-// Each pass is classic multi-pass (no inter-workgroup communication within a dispatch, so no
-// reliance on forward progress and no subgroup operations):
+// The cost that matters is the number of dispatches (each one a full barrier between kernels),
+// not the work: hence 8-bit digits (a 31-bit key takes 4 passes, not 8) and three dispatches per
+// pass at every size. None of them communicates between workgroups (no reliance on forward
+// progress) and none uses subgroup operations:
 //   1. `histogram`: every block of BLOCK elements counts its digits into
-//      hist[digit * nblocks + block] (digit-major, block-minor).
-//   2. `reduce` / `scan_add`: exclusive prefix sum over that array (multi-level: chunk sums of one
-//      level form the next level, up to one chunk that one workgroup scans). Afterwards
-//      hist[digit * nblocks + block] is where the block's first element of that digit goes.
-//   3. `scatter`: every block ranks its elements stably by digit in workgroup memory, reorders
-//      them there (so global writes are runs of consecutive addresses) and writes them out.
+//      hist[digit * nblocks + block] (digit-major, block-minor: row d is digit d over all blocks).
+//   2. `scan_rows`: workgroup d turns row d into its exclusive prefix sum in place and writes the
+//      row total to hist[RADIX * nblocks + d]. One workgroup per row, looping over the row, rather
+//      than a multi-level scan over the whole array: a row has only count / BLOCK entries, so one
+//      dispatch suffices at any size where a multi-level scan needs two or three more.
+//   3. `scatter`: every block scans the RADIX row totals itself (one workgroup scan, cheaper than
+//      another dispatch), ranks its elements stably by digit in workgroup memory and writes them
+//      out as runs of consecutive addresses.
 // `copy_back` moves the result back into the caller's buffers after an odd number of passes.
 //
 // Workgroup linear index = wid.y * nwg.x + wid.x (the host splits big 1-D counts into 2-D).
+// Workgroup memory per entry point (WebGPU's default limit is 16384 bytes): histogram 8192,
+// scan_rows 1024, scatter 10240, copy_back 0.
 
 const WG: u32 = 256u;
 // Elements per thread: a thread owns EPT consecutive elements of its block, so ranking
 // "thread-major, then element" is the block's index order, which is what stability needs.
 const EPT: u32 = 4u;
 const BLOCK: u32 = 1024u; // WG * EPT
-const RADIX: u32 = 16u;
-// Elements of the prefix-sum chunk of one workgroup in `reduce` / `scan_add`.
+// Digit values of one pass. Equal to WG: thread t handles digit t wherever there is one per digit.
+const RADIX: u32 = 256u;
+// Entries of a row that `scan_rows` scans per loop iteration.
 const SCAN_CHUNK: u32 = 1024u; // WG * 4
 
 struct Params {
     // Elements to sort (histogram, scatter, copy).
     count: u32,
-    // Digit of this pass: (key >> shift) & ((1 << bits) - 1), bits in 1..=4.
+    // Digit of this pass: (key >> shift) & ((1 << bits) - 1), bits in 1..=8.
     shift: u32,
     bits: u32,
-    // Blocks of BLOCK elements (the histogram's block dimension).
+    // Blocks of BLOCK elements (the histogram's row length).
     nblocks: u32,
-    // Scan level: its first entry in `hist`, its entry count, and where the next level
-    // (the chunk sums / their exclusive prefixes) starts.
-    level_base: u32,
-    level_len: u32,
-    next_base: u32,
-    // scan_add: 1 = add the chunk's prefix from the next level, 0 = top level (no next level).
-    has_next: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -44,7 +44,7 @@ struct Params {
 @group(0) @binding(2) var<storage, read> vals_in: array<u32>;
 @group(0) @binding(3) var<storage, read_write> keys_out: array<u32>;
 @group(0) @binding(4) var<storage, read_write> vals_out: array<u32>;
-// Per-block digit counts followed by the upper scan levels.
+// RADIX rows of nblocks per-block digit counts, then the RADIX row totals.
 @group(0) @binding(5) var<storage, read_write> hist: array<u32>;
 
 fn digit_of(key: u32) -> u32 {
@@ -54,8 +54,11 @@ fn digit_of(key: u32) -> u32 {
 // ---------------------------------------------------------------------------------------------
 // Histogram
 
-// 16 copies of the 16 counters (replica = thread index % 16): fewer threads contend per atomic.
-var<workgroup> wg_bins: array<atomic<u32>, 256>;
+// REPLICAS copies of the RADIX counters (replica-major; replica = thread index % REPLICAS):
+// fewer threads contend per atomic when a block's keys share digits (sorted or clustered keys,
+// e.g. the high digits of Morton codes).
+const REPLICAS: u32 = 8u;
+var<workgroup> wg_bins: array<atomic<u32>, 2048>; // REPLICAS * RADIX
 
 @compute @workgroup_size(256)
 fn histogram(
@@ -67,29 +70,30 @@ fn histogram(
     if block >= params.nblocks {
         return;
     }
-    atomicStore(&wg_bins[t], 0u);
+    for (var r = 0u; r < REPLICAS; r++) {
+        atomicStore(&wg_bins[r * RADIX + t], 0u);
+    }
     workgroupBarrier();
     let base = block * BLOCK;
-    let replica = t & 15u;
+    let replica = (t % REPLICAS) * RADIX;
     // Strided loads (coalesced): the order does not matter for counting.
     for (var j = 0u; j < EPT; j++) {
         let i = base + j * WG + t;
         if i < params.count {
-            atomicAdd(&wg_bins[digit_of(keys_in[i]) * 16u + replica], 1u);
+            atomicAdd(&wg_bins[replica + digit_of(keys_in[i])], 1u);
         }
     }
     workgroupBarrier();
-    if t < RADIX {
-        var sum = 0u;
-        for (var c = 0u; c < 16u; c++) {
-            sum += atomicLoad(&wg_bins[t * 16u + c]);
-        }
-        hist[t * params.nblocks + block] = sum;
+    // Every digit's count is written, zeros included: no clearing pass needed.
+    var sum = 0u;
+    for (var r = 0u; r < REPLICAS; r++) {
+        sum += atomicLoad(&wg_bins[r * RADIX + t]);
     }
+    hist[t * params.nblocks + block] = sum;
 }
 
 // ---------------------------------------------------------------------------------------------
-// Prefix sum over hist (multi-level)
+// Prefix sum over each histogram row
 
 var<workgroup> wg_scan: array<u32, 256>;
 
@@ -106,131 +110,89 @@ fn workgroup_inclusive_scan(t: u32) {
     }
 }
 
-// Chunk c of the level gets its sum written to the next level's entry c.
+// Row d (digit d in every block) becomes its exclusive prefix sum; its total goes after the rows.
 @compute @workgroup_size(256)
-fn reduce(
+fn scan_rows(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) t: u32,
 ) {
-    let chunk = wid.y * nwg.x + wid.x;
-    let start = chunk * SCAN_CHUNK;
-    if start >= params.level_len {
+    let row = wid.y * nwg.x + wid.x;
+    if row >= RADIX {
         return;
     }
-    var sum = 0u;
-    for (var j = 0u; j < 4u; j++) {
-        let i = start + j * WG + t;
-        if i < params.level_len {
-            sum += hist[params.level_base + i];
+    let start = row * params.nblocks;
+    var carry = 0u;
+    for (var chunk = 0u; chunk < params.nblocks; chunk += SCAN_CHUNK) {
+        // Thread t owns 4 consecutive entries, so its serial sum plus the workgroup scan is the
+        // prefix in index order.
+        var v: array<u32, 4>;
+        var sum = 0u;
+        for (var j = 0u; j < 4u; j++) {
+            let b = chunk + t * 4u + j;
+            v[j] = 0u;
+            if b < params.nblocks {
+                v[j] = hist[start + b];
+            }
+            sum += v[j];
         }
-    }
-    wg_scan[t] = sum;
-    workgroupBarrier();
-    for (var stride = WG / 2u; stride > 0u; stride >>= 1u) {
-        if t < stride {
-            wg_scan[t] += wg_scan[t + stride];
+        wg_scan[t] = sum;
+        workgroupBarrier();
+        workgroup_inclusive_scan(t);
+        var running = carry + wg_scan[t] - sum;
+        for (var j = 0u; j < 4u; j++) {
+            let b = chunk + t * 4u + j;
+            if b < params.nblocks {
+                hist[start + b] = running;
+            }
+            running += v[j];
         }
+        carry += wg_scan[WG - 1u];
+        // The next iteration overwrites wg_scan, which slower threads may still be reading.
         workgroupBarrier();
     }
     if t == 0u {
-        hist[params.next_base + chunk] = wg_scan[0];
-    }
-}
-
-// Exclusive prefix sum of chunk c of the level, in place, plus the next level's entry c (the
-// exclusive prefix of the chunk sums, already computed) when there is a next level.
-@compute @workgroup_size(256)
-fn scan_add(
-    @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) t: u32,
-) {
-    let chunk = wid.y * nwg.x + wid.x;
-    let start = chunk * SCAN_CHUNK;
-    if start >= params.level_len {
-        return;
-    }
-    // Thread t owns 4 consecutive entries, so its serial sum plus the workgroup scan is the
-    // prefix in index order.
-    var v: array<u32, 4>;
-    var sum = 0u;
-    for (var j = 0u; j < 4u; j++) {
-        let i = start + t * 4u + j;
-        v[j] = 0u;
-        if i < params.level_len {
-            v[j] = hist[params.level_base + i];
-        }
-        sum += v[j];
-    }
-    wg_scan[t] = sum;
-    workgroupBarrier();
-    workgroup_inclusive_scan(t);
-    var running = wg_scan[t] - sum;
-    if params.has_next != 0u {
-        running += hist[params.next_base + chunk];
-    }
-    for (var j = 0u; j < 4u; j++) {
-        let i = start + t * 4u + j;
-        if i < params.level_len {
-            hist[params.level_base + i] = running;
-        }
-        running += v[j];
+        hist[RADIX * params.nblocks + row] = carry;
     }
 }
 
 // ---------------------------------------------------------------------------------------------
 // Scatter
 
-// Packed per-thread digit counters (two 16-bit lanes per word; a block holds at most 1024
-// elements, so a lane never overflows): digit d of thread t lives at word (d % 8) * 256 + t,
-// lane d / 8. Scanning the words in index order therefore visits, per lane, digit-major then
-// thread-minor, which is exactly the stable rank order within the block. After ranking, the
-// same memory holds the block's reordered keys, then its reordered values.
+// An 8-bit digit has too many values for per-thread counters in 16 KiB (256 digits × 256
+// threads), so the block is ranked by two stable 4-bit splits, low nibble then high nibble: after
+// both it is sorted stably by the whole digit (LSD within the block).
+//
+// During a split: packed per-thread nibble counters (two 16-bit lanes per word; a block holds at
+// most 1024 elements, so a lane never overflows): nibble n of thread t lives at word
+// (n % 8) * 256 + t, lane n / 8. Scanning the words in index order therefore visits, per lane,
+// nibble-major then thread-minor, which is exactly the stable rank order within the block.
+// After a split, the same memory holds the block's keys [0, BLOCK) and values [BLOCK, 2 BLOCK)
+// in the split's order.
 var<workgroup> wg_counters: array<u32, 2048>;
 // Per digit: global destination of the block's first element of that digit minus its position
-// in the block's reordered elements.
-var<workgroup> wg_dest: array<u32, 16>;
+// in the block's sorted order.
+var<workgroup> wg_dest: array<u32, 256>;
 
-@compute @workgroup_size(256)
-fn scatter(
-    @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) t: u32,
-) {
-    let block = wid.y * nwg.x + wid.x;
-    if block >= params.nblocks {
-        return;
-    }
-    let base = block * BLOCK;
-    let valid = min(BLOCK, params.count - base);
+// This thread's EPT elements in the current order of the block.
+var<private> pk: array<u32, 4>;
+var<private> pv: array<u32, 4>;
 
+// Stable split of the block (pk/pv of every thread, in block order) by the nibble
+// (digit >> nib_shift) & 15; leaves the reordered keys and values in wg_counters.
+fn split_by_nibble(t: u32, nib_shift: u32) {
+    // Only thread t touches column t until the barrier: no atomics needed.
     for (var r = 0u; r < 8u; r++) {
         wg_counters[r * WG + t] = 0u;
     }
-
-    // Load this thread's consecutive elements. Elements past the end get the last digit: being
-    // last in the block's order too, they rank after every valid element and are never written.
-    var k: array<u32, 4>;
-    var v: array<u32, 4>;
-    var d: array<u32, 4>;
+    // Count per thread; the count before the increment is the rank among this thread's own
+    // elements of that nibble.
+    var n: array<u32, 4>;
     var rank: array<u32, 4>;
     for (var j = 0u; j < EPT; j++) {
-        let i = t * EPT + j;
-        k[j] = 0u;
-        v[j] = 0u;
-        d[j] = RADIX - 1u;
-        if i < valid {
-            k[j] = keys_in[base + i];
-            v[j] = vals_in[base + i];
-            d[j] = digit_of(k[j]);
-        }
-    }
-    // Count per thread; the count before the increment is the rank among this thread's own
-    // elements of that digit. Only thread t touches column t: no barrier or atomics needed.
-    for (var j = 0u; j < EPT; j++) {
-        let w = (d[j] & 7u) * WG + t;
-        let lane = (d[j] >> 3u) * 16u;
+        n[j] = (digit_of(pk[j]) >> nib_shift) & 15u;
+        let w = (n[j] & 7u) * WG + t;
+        let lane = (n[j] >> 3u) * 16u;
         let c = wg_counters[w];
         rank[j] = (c >> lane) & 0xffffu;
         wg_counters[w] = c + (1u << lane);
@@ -253,47 +215,91 @@ fn scatter(
         wg_counters[t * 8u + q] = running;
         running += words[q];
     }
-    // Low lane total = elements with digits 0..7: the high lane (digits 8..15) starts after them.
+    // Low lane total = elements with nibbles 0..7: the high lane (8..15) starts after them.
     let low_total = wg_scan[WG - 1u] & 0xffffu;
     workgroupBarrier();
 
     for (var j = 0u; j < EPT; j++) {
-        let w = (d[j] & 7u) * WG + t;
-        let hi = d[j] >> 3u;
+        let w = (n[j] & 7u) * WG + t;
+        let hi = n[j] >> 3u;
         rank[j] += ((wg_counters[w] >> (hi * 16u)) & 0xffffu) + hi * low_total;
     }
-    if t < RADIX {
-        // Thread 0's counter of digit t is the block position of the digit's first element.
-        let hi = t >> 3u;
-        let first = ((wg_counters[(t & 7u) * WG] >> (hi * 16u)) & 0xffffu) + hi * low_total;
-        // Wrapping u32 arithmetic: destination = this + position, and position >= first.
-        wg_dest[t] = hist[t * params.nblocks + block] - first;
-    }
+    // Every rank is read before the counters are overwritten by the reordered elements.
     workgroupBarrier();
-
-    // Reorder keys in workgroup memory, then write runs of consecutive positions per digit.
     for (var j = 0u; j < EPT; j++) {
-        wg_counters[rank[j]] = k[j];
+        wg_counters[rank[j]] = pk[j];
+        wg_counters[BLOCK + rank[j]] = pv[j];
     }
     workgroupBarrier();
-    var dest: array<u32, 4>;
+}
+
+@compute @workgroup_size(256)
+fn scatter(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) t: u32,
+) {
+    let block = wid.y * nwg.x + wid.x;
+    if block >= params.nblocks {
+        return;
+    }
+    let base = block * BLOCK;
+    let valid = min(BLOCK, params.count - base);
+
+    // Where digit t's elements of this block start globally: all elements of smaller digits
+    // (exclusive prefix of the row totals) plus digit t's elements in earlier blocks (its row
+    // prefix). No barrier after it: thread t reads only its own wg_scan entry here, and the
+    // first split rewrites wg_scan only after a barrier.
+    let total = hist[RADIX * params.nblocks + t];
+    wg_scan[t] = total;
+    workgroupBarrier();
+    workgroup_inclusive_scan(t);
+    wg_dest[t] = wg_scan[t] - total + hist[t * params.nblocks + block];
+
+    // Load this thread's consecutive elements. Elements past the end get key 0xffffffff, the
+    // largest digit of any pass: being last in the block's order too, they rank after every
+    // valid element in both splits and are never written.
+    for (var j = 0u; j < EPT; j++) {
+        let i = t * EPT + j;
+        pk[j] = 0xffffffffu;
+        pv[j] = 0u;
+        if i < valid {
+            pk[j] = keys_in[base + i];
+            pv[j] = vals_in[base + i];
+        }
+    }
+    split_by_nibble(t, 0u);
+    // A digit of at most 4 bits (only in a last pass) is already sorted by its low nibble.
+    if params.bits > 4u {
+        for (var j = 0u; j < EPT; j++) {
+            pk[j] = wg_counters[t * EPT + j];
+            pv[j] = wg_counters[BLOCK + t * EPT + j];
+        }
+        workgroupBarrier();
+        split_by_nibble(t, 4u);
+    }
+
+    // The block is sorted by digit. Strided positions, so neighbouring threads write neighbouring
+    // addresses within a digit's run. The first element of each digit's run turns wg_dest[digit]
+    // into destination minus position (wrapping u32 arithmetic: every position of the run is at
+    // least the first). One thread per digit writes it, as the run has one first element.
+    var key: array<u32, 4>;
+    var dig: array<u32, 4>;
     for (var j = 0u; j < EPT; j++) {
         let i = j * WG + t;
-        if i < valid {
-            let key = wg_counters[i];
-            dest[j] = wg_dest[digit_of(key)] + i;
-            keys_out[dest[j]] = key;
+        key[j] = wg_counters[i];
+        dig[j] = digit_of(key[j]);
+        if i < valid && (i == 0u || digit_of(wg_counters[i - 1u]) != dig[j]) {
+            wg_dest[dig[j]] -= i;
         }
     }
     workgroupBarrier();
     for (var j = 0u; j < EPT; j++) {
-        wg_counters[rank[j]] = v[j];
-    }
-    workgroupBarrier();
-    for (var j = 0u; j < EPT; j++) {
         let i = j * WG + t;
         if i < valid {
-            vals_out[dest[j]] = wg_counters[i];
+            let dest = wg_dest[dig[j]] + i;
+            keys_out[dest] = key[j];
+            vals_out[dest] = wg_counters[BLOCK + i];
         }
     }
 }

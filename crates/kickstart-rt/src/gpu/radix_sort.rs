@@ -2,9 +2,15 @@
 //!
 //! Portable by construction: WebGPU default limits, no subgroup operations, no inter-workgroup
 //! communication inside a dispatch (so no reliance on forward progress between workgroups).
-//! One 4-bit digit per pass; each pass is histogram → multi-level prefix sum → stable scatter.
-//! 4-bit digits keep the per-thread rank counters of a block in 8 KiB of workgroup memory (two
-//! 16-bit lanes per word), so ranking costs O(1) per element instead of a loop over the radix.
+//!
+//! On a large GPU the sorts the SDK does (a BLAS's primitives) cost their dispatch count more
+//! than their work, so the design minimises dispatches: 8-bit digits (a 31-bit key takes 4
+//! passes, not 8) and 3 dispatches per pass at any size: histogram → prefix sum of each digit's
+//! row (one workgroup per digit, so no multi-level scan) → stable scatter, which scans the 256
+//! digit totals itself. 31-bit keys: 12 dispatches (40 with the former 4-bit digits and
+//! multi-level scan). The scatter ranks a block by two 4-bit splits in workgroup memory:
+//! per-thread counters for all 256 digit values would not fit in 16 KiB, those of 16 nibble
+//! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
 //! Counts up to [`SMALL_SORT_MAX`] take a one-workgroup bitonic network over (key, position)
 //! instead: the same stable result in one dispatch, since small sorts (small BLASes, TLASes) are
 //! bound by dispatch count.
@@ -19,14 +25,12 @@ const SMALL_SOURCE: &str = include_str!("../../shaders/radix_sort_small.wgsl");
 /// Largest count sorted by the one-workgroup path (its workgroup arrays' length).
 pub(crate) const SMALL_SORT_MAX: u32 = 1024;
 
-/// Bits of one digit (one pass each). Must match `RADIX` in the shader.
-const DIGIT_BITS: u32 = 4;
-/// Digit values per pass.
+/// Bits of one digit (one pass each). `RADIX` must match the shader's.
+const DIGIT_BITS: u32 = 8;
+/// Digit values per pass: the histogram's rows and `scan_rows`' workgroups.
 const RADIX: u32 = 1 << DIGIT_BITS;
 /// Elements per workgroup in `histogram` / `scatter` (256 threads × 4). Must match `BLOCK`.
 const BLOCK: u32 = 1024;
-/// Entries per workgroup in `reduce` / `scan_add`. Must match `SCAN_CHUNK`.
-const SCAN_CHUNK: u32 = 1024;
 /// Threads per workgroup of `copy_back`.
 const COPY_WG: u32 = 256;
 
@@ -38,50 +42,24 @@ struct Params {
     shift: u32,
     bits: u32,
     nblocks: u32,
-    level_base: u32,
-    level_len: u32,
-    next_base: u32,
-    has_next: u32,
 }
 
-/// One level of the prefix sum over the histogram array: where it lies in the `hist` buffer
-/// and how many entries it has.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Level {
-    base: u32,
-    len: u32,
-}
-
-/// Levels of the multi-level prefix sum over `first_len` entries: level 0 is the histogram
-/// itself; each next level holds the chunk sums of the previous one; the last fits one chunk.
-fn scan_levels(first_len: u32) -> Vec<Level> {
-    let mut levels = vec![Level {
-        base: 0,
-        len: first_len,
-    }];
-    while let Some(&last) = levels.last() {
-        if last.len <= SCAN_CHUNK {
-            break;
-        }
-        levels.push(Level {
-            base: last.base + last.len,
-            len: last.len.div_ceil(SCAN_CHUNK),
-        });
-    }
-    levels
+/// Entries of the `hist` buffer for `nblocks` blocks: RADIX rows of per-block counts, then the
+/// RADIX row totals.
+fn hist_len(nblocks: u32) -> u32 {
+    (nblocks + 1) * RADIX
 }
 
 /// Stable GPU LSD radix sort of (u32 key, u32 value) pairs.
 pub(crate) struct RadixSort {
     histogram: wgpu::ComputePipeline,
-    reduce: wgpu::ComputePipeline,
-    scan_add: wgpu::ComputePipeline,
+    scan_rows: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
     copy_back: wgpu::ComputePipeline,
     /// The one-workgroup path for counts up to [`SMALL_SORT_MAX`].
     small: wgpu::ComputePipeline,
     /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
-    /// its scan levels; created on first use, grown when a sort needs more.
+    /// its row totals; created on first use, grown when a sort needs more.
     keys_tmp: Option<wgpu::Buffer>,
     vals_tmp: Option<wgpu::Buffer>,
     hist: Option<wgpu::Buffer>,
@@ -93,8 +71,7 @@ impl RadixSort {
         let pipeline = |entry| compute_pipeline(device, "radix sort", SOURCE, entry);
         RadixSort {
             histogram: pipeline("histogram"),
-            reduce: pipeline("reduce"),
-            scan_add: pipeline("scan_add"),
+            scan_rows: pipeline("scan_rows"),
             scatter: pipeline("scatter"),
             copy_back: pipeline("copy_back"),
             small: compute_pipeline(device, "radix sort (small)", SMALL_SOURCE, "sort_small"),
@@ -110,9 +87,10 @@ impl RadixSort {
     ///
     /// Only the low `key_bits` bits of each key are sorted on: keys must be `< 2^key_bits`
     /// (bits above are carried along but do not affect the order). `key_bits` is clamped to
-    /// 1..=32 except that 0 sorts nothing; fewer bits mean fewer passes (`ceil(key_bits / 4)`,
-    /// plus one copy pass when that is odd). `count` ≤ 1 records nothing. `count` is limited by
-    /// the device's `max_storage_buffer_binding_size / 4` (32M with default limits).
+    /// 1..=32 except that 0 sorts nothing; fewer bits mean fewer passes (`ceil(key_bits / 8)`
+    /// of 3 dispatches each, plus one copy dispatch when that is odd). `count` ≤ 1 records
+    /// nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
+    /// with default limits).
     ///
     /// Everything is recorded into `rec.encoder` (no submit); the scratch buffers stay in use
     /// until that work has run, so record sorts with one `RadixSort` sequentially.
@@ -128,7 +106,7 @@ impl RadixSort {
             return;
         }
         if count <= SMALL_SORT_MAX {
-            // Same result (stable, ascending) in one dispatch instead of ~5 per digit pass.
+            // Same result (stable, ascending) in one dispatch instead of 3 per digit pass.
             let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
             let bg = rec.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("radix sort (small)"),
@@ -153,9 +131,7 @@ impl RadixSort {
         }
         let key_bits = key_bits.min(32);
         let nblocks = count.div_ceil(BLOCK);
-        let levels = scan_levels(nblocks * RADIX);
-        let hist_len = levels.last().map_or(0, |l| l.base + l.len);
-        self.reserve(rec.device, count, hist_len);
+        self.reserve(rec.device, count, hist_len(nblocks));
         let (Some(keys_tmp), Some(vals_tmp), Some(hist)) =
             (&self.keys_tmp, &self.vals_tmp, &self.hist)
         else {
@@ -167,10 +143,6 @@ impl RadixSort {
             shift: 0,
             bits: 0,
             nblocks,
-            level_base: 0,
-            level_len: 0,
-            next_base: 0,
-            has_next: 0,
         };
         // A copy of the device reference, so the closure does not borrow `rec` (dispatch needs it
         // mutably).
@@ -192,28 +164,6 @@ impl RadixSort {
                 entries: &entries,
             })
         };
-
-        // The scan's bind groups do not depend on the digit: build them once for all passes.
-        // Upsweep: level i's chunk sums into level i + 1. Downsweep: the top level alone, then
-        // each lower level plus its chunk prefixes from the level above.
-        let mut reduce_groups = Vec::new();
-        let mut scan_groups = Vec::new();
-        for (i, level) in levels.iter().enumerate() {
-            let next = levels.get(i + 1);
-            let p = Params {
-                level_base: level.base,
-                level_len: level.len,
-                next_base: next.map_or(0, |n| n.base),
-                has_next: u32::from(next.is_some()),
-                ..params
-            };
-            let uniform = rec.uniform("radix sort scan params", &p);
-            let groups = level.len.div_ceil(SCAN_CHUNK);
-            if next.is_some() {
-                reduce_groups.push((bind(&self.reduce, &uniform, &[(5, hist)]), groups));
-            }
-            scan_groups.push((bind(&self.scan_add, &uniform, &[(5, hist)]), groups));
-        }
 
         let passes = key_bits.div_ceil(DIGIT_BITS);
         for pass in 0..passes {
@@ -237,12 +187,8 @@ impl RadixSort {
                 &[&hist_group],
                 nblocks,
             );
-            for (group, workgroups) in &reduce_groups {
-                rec.dispatch("radix sort reduce", &self.reduce, &[group], *workgroups);
-            }
-            for (group, workgroups) in scan_groups.iter().rev() {
-                rec.dispatch("radix sort scan", &self.scan_add, &[group], *workgroups);
-            }
+            let scan_group = bind(&self.scan_rows, &uniform, &[(5, hist)]);
+            rec.dispatch("radix sort scan", &self.scan_rows, &[&scan_group], RADIX);
             let scatter_group = bind(
                 &self.scatter,
                 &uniform,
@@ -329,7 +275,8 @@ mod tests {
     }
 
     /// Sorts `keys` (values = a scrambled original index) on the GPU with `sorter` and asserts
-    /// both arrays equal a CPU stable sort by key.
+    /// both arrays equal a CPU stable sort by the key's low `key_bits` bits (the whole keys,
+    /// higher bits included, are what must come back).
     fn check_with(sorter: &mut RadixSort, keys: &[u32], key_bits: u32) {
         let n = keys.len();
         let values: Vec<u32> = (0..n as u32)
@@ -348,7 +295,8 @@ mod tests {
         let got_vals = to_u32s(&testing::read_back(&vb, 0, (n as u64 + 1) * 4));
 
         let mut expected: Vec<(u32, u32)> = keys.iter().copied().zip(values).collect();
-        expected.sort_by_key(|&(k, _)| k); // stable
+        let mask = u32::MAX.checked_shr(32 - key_bits.min(32)).unwrap_or(0);
+        expected.sort_by_key(|&(k, _)| k & mask); // stable
         let (exp_keys, exp_vals): (Vec<u32>, Vec<u32>) = expected.into_iter().unzip();
         assert_eq!(
             got_keys[..n],
@@ -423,32 +371,86 @@ mod tests {
 
     #[test]
     fn radix_sort_fewer_key_bits() {
-        // 6 bits: 2 passes; 5 and 13 bits: odd pass counts (copy back); 1 bit: one pass.
+        // 6, 5 and 1 bits: one pass (copy back), a single nibble split; 13 bits: two passes, the
+        // last of 5 bits; 30 bits: four.
         for (bits, n) in [(6, 10_000), (5, 3000), (13, 7000), (1, 2500), (30, 70_000)] {
             check(&random_keys(n, bits, u64::from(bits) * 7 + 3), bits);
         }
     }
 
     #[test]
-    fn radix_sort_multi_level_scan() {
-        // 16 × 70 blocks = 1120 histogram entries: more than one scan chunk, so two levels.
-        assert_eq!(scan_levels(16 * 70).len(), 2);
-        check(&random_keys(70 * 1024 - 5, 30, 4242), 30);
+    fn radix_sort_key_bits_not_a_multiple_of_8() {
+        // 31 (the LBVH's): 4 passes, the last of 7 bits. 12: 8 + 4, the last pass a single
+        // nibble split. 20: 3 passes (copy back), the last of 4 bits. 7: one pass (copy back).
+        // 9: a last pass of 1 bit. Sizes not multiples of the block: a partial last block.
+        for (bits, n) in [
+            (31, 50_001),
+            (12, 9_000),
+            (20, 6_001),
+            (7, 4_100),
+            (9, 3_333),
+        ] {
+            check(&random_keys(n, bits, u64::from(bits) * 11 + 1), bits);
+        }
+        // Every key the largest of its key_bits, in a partial last block: the block's padding
+        // has the largest digit too and must still rank after them.
+        check(&vec![(1 << 31) - 1; 2_500], 31);
+        check(&vec![u32::MAX; 3_000], 32);
+        check(&vec![0xfff; 1_500], 12);
     }
 
     #[test]
-    fn radix_sort_scan_levels_shrink_to_one_chunk() {
-        assert_eq!(scan_levels(5), vec![Level { base: 0, len: 5 }]);
-        let levels = scan_levels(16 * 16384 * 64);
-        assert_eq!(levels.len(), 3);
-        assert_eq!(
-            levels[1],
-            Level {
-                base: 16 * 16384 * 64,
-                len: 16384
-            }
-        );
-        assert_eq!(levels[2].len, 16);
+    fn radix_sort_bits_above_key_bits_are_carried_not_sorted() {
+        // Random high bits over 12-bit sort keys: the order is by the low 12 bits alone (stable),
+        // the keys come back whole.
+        let mut rng = Rng(77);
+        let keys: Vec<u32> = random_keys(20_000, 12, 78)
+            .into_iter()
+            .map(|k| k | (rng.next() << 12))
+            .collect();
+        check(&keys, 12);
+        // Same with 8 bits (one pass, copy back) and 16 bits (two full passes).
+        let keys: Vec<u32> = (0..5_000u32).map(|i| rng.next() ^ (i % 3)).collect();
+        check(&keys, 8);
+        check(&keys, 16);
+        // 0 bits sort nothing (input order is the stable order of equal keys); more than 32 are
+        // 32.
+        check(&keys, 0);
+        check(&keys, 40);
+    }
+
+    #[test]
+    fn radix_sort_stable_with_many_duplicate_digits() {
+        // Every key shares its low digit with many others (and nibbles within a digit repeat), so
+        // the within-block ranking of both nibble splits and the global offsets decide the order
+        // of long runs of equal digits; values reveal any reordering of equal keys.
+        let mut rng = Rng(4_321);
+        let digits = [0x00u32, 0x0f, 0xf0, 0xff, 0x11, 0x80, 0x08];
+        let keys: Vec<u32> = (0..40_000)
+            .map(|_| {
+                let lo = digits[rng.next() as usize % digits.len()];
+                let hi = digits[rng.next() as usize % digits.len()];
+                (hi << 8) | lo
+            })
+            .collect();
+        check(&keys, 16);
+        check(&keys, 31);
+        // Two keys only, alternating in runs of irregular length across block boundaries.
+        let keys: Vec<u32> = (0..12_345u32)
+            .map(|i| if (i / 97) % 2 == 0 { 0x0102 } else { 0x0201 })
+            .collect();
+        check(&keys, 16);
+    }
+
+    #[test]
+    fn radix_sort_histogram_rows_longer_than_one_scan_chunk() {
+        // `scan_rows` scans a row (one digit over all blocks) 1024 blocks per loop iteration:
+        // 1024 blocks is exactly one chunk, 1025 the smallest that needs two (the carry between
+        // them).
+        let mut sorter = RadixSort::new(&testing::gpu().device);
+        for (n, seed) in [(1024 * 1024, 4_242), (1024 * 1024 + 1, 4_243)] {
+            check_with(&mut sorter, &random_keys(n, 31, seed), 31);
+        }
     }
 
     /// Rough GPU timing of 1M 30-bit keys (run on real GPUs:
@@ -486,7 +488,7 @@ mod tests {
             "radix sort of {n} pairs (30-bit keys): GPU {per_sort:?} per sort (submit to idle), \
              recording {recorded:?} per sort"
         );
-        // The brief's upper size: 16M pairs (multi-level scan, 2-D dispatch split).
+        // The brief's upper size: 16M pairs (histogram rows of 16384 blocks: 16 chunks each).
         check_with(&mut sorter, &random_keys(16 << 20, 30, 6), 30);
     }
 }
