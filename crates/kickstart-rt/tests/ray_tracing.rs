@@ -1092,8 +1092,35 @@ fn build_hints_choose_the_leaf_size() {
     });
     build_submit_complete(&ctx, c);
     let one_per_leaf = ctx.read_back_blas(handles[3]).unwrap().sah_cost;
+    // Rays from around the sphere (radius 1) towards and past it, for the read-back traversal.
+    let mut rng = Rng(31);
+    let rays: Vec<kickstart_rt::cpu::Ray> = random_rays(&mut rng, 2000, 1.5)
+        .iter()
+        .map(|r| kickstart_rt::cpu::Ray {
+            origin: Vec3::from(r.origin),
+            dir: Vec3::from(r.dir),
+            t_min: r.t_min,
+            t_max: r.t_max,
+        })
+        .collect();
+    let tris = sphere.triangles();
+    let oracle = kickstart_rt::cpu::CpuBvh::build(&tris);
+    let mut node_visits = Vec::new();
     for (&(hint, allow_update, collapsed), &h) in cases.iter().zip(&handles) {
         let b = ctx.read_back_blas(h).unwrap();
+        // The read-back tree traced on the CPU finds the oracle's hits; count its work.
+        let mut work = kickstart_rt::cpu::TraversalCounts::default();
+        for r in &rays {
+            let (hit, counts) = b.trace(r, false);
+            work += counts;
+            let want = oracle.closest_hit(&tris, r);
+            assert_eq!(
+                hit.map(|h| (h.t, h.primitive)),
+                want.map(|h| (h.t, h.primitive)),
+                "{hint:?}: {r:?}"
+            );
+        }
+        node_visits.push((collapsed, work.nodes));
         // Leaf sizes reachable from the root (collapsed subtrees' nodes stay in the buffer).
         let mut leaves = Vec::new();
         let mut stack = vec![0u32];
@@ -1125,4 +1152,11 @@ fn build_hints_choose_the_leaf_size() {
         let triangles: u32 = leaves.iter().sum();
         assert_eq!(triangles as usize, sphere.indices.len() / 3, "{what}");
     }
+    // Fuller leaves: fewer inner nodes fetched for the same rays.
+    let most_collapsed = node_visits.iter().filter(|v| v.0).map(|v| v.1).max();
+    let fewest_single = node_visits.iter().filter(|v| !v.0).map(|v| v.1).min();
+    assert!(
+        most_collapsed < fewest_single,
+        "node visits (collapsed, count): {node_visits:?}"
+    );
 }

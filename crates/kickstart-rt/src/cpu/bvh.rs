@@ -213,19 +213,7 @@ impl CpuBvh {
     /// Slab test, conservative: the far distance is widened slightly (by 2γ, after Ize 2013) so
     /// rays grazing a box's face are never culled by rounding.
     fn ray_box(n: &CpuBvhNode, o: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
-        let t0 = (n.min - o) * inv;
-        let t1 = (n.max - o) * inv;
-        // A ray lying in a slab's boundary plane gives 0 × ∞ = NaN: that axis must not constrain
-        // the interval (NaN counts as −∞ for the near bound and +∞ for the far bound).
-        let lo = |a: f32| if a.is_nan() { f32::NEG_INFINITY } else { a };
-        let hi = |a: f32| if a.is_nan() { f32::INFINITY } else { a };
-        let mut near = t_min;
-        let mut far = t_max;
-        for k in 0..3 {
-            near = near.max(lo(t0[k]).min(lo(t1[k])));
-            far = far.min(hi(t0[k]).max(hi(t1[k])));
-        }
-        (near <= far * 1.000_000_4).then_some(near)
+        slab(n.min, n.max, o, inv, t_min, t_max)
     }
 
     fn traverse(&self, triangles: &[[Vec3; 3]], ray: &Ray, any: bool) -> Option<Hit> {
@@ -301,6 +289,31 @@ impl CpuBvh {
     pub fn any_hit(&self, triangles: &[[Vec3; 3]], ray: &Ray) -> bool {
         self.traverse(triangles, ray, true).is_some()
     }
+}
+
+/// Slab test of the box `[min, max]` against the ray `o + t / inv`, within `[t_min, t_max]`;
+/// the entry distance when hit. A ray lying in a slab's boundary plane gives 0 × ∞ = NaN: that
+/// axis must not constrain the interval (NaN counts as −∞ for the near bound and +∞ for the far
+/// bound).
+pub(crate) fn slab(
+    min: Vec3,
+    max: Vec3,
+    o: Vec3,
+    inv: Vec3,
+    t_min: f32,
+    t_max: f32,
+) -> Option<f32> {
+    let t0 = (min - o) * inv;
+    let t1 = (max - o) * inv;
+    let lo = |a: f32| if a.is_nan() { f32::NEG_INFINITY } else { a };
+    let hi = |a: f32| if a.is_nan() { f32::INFINITY } else { a };
+    let mut near = t_min;
+    let mut far = t_max;
+    for k in 0..3 {
+        near = near.max(lo(t0[k]).min(lo(t1[k])));
+        far = far.min(hi(t0[k]).max(hi(t1[k])));
+    }
+    (near <= far * 1.000_000_4).then_some(near)
 }
 
 #[cfg(test)]

@@ -7,5 +7,5 @@ mod readback;
 mod triangle;
 
 pub use bvh::{CpuBvh, CpuBvhNode, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
-pub use readback::{BlasReadback, Bvh2Child};
+pub use readback::{BlasReadback, Bvh2Child, TraversalCounts};
 pub use triangle::{intersect_triangle, Hit, Ray, TriangleHit};

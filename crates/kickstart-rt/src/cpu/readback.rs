@@ -1,8 +1,27 @@
 //! A GPU BVH read back to the CPU (nodes in the BVH2 format of `docs/ray-tracing-core.md`), and
 //! its SAH cost with the same constants as [`super::CpuBvh::sah_cost`], so the two compare.
 
+use super::bvh::slab;
+use super::triangle::{intersect_sheared, Hit, Ray, Shear};
 use super::{SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
 use glam::Vec3;
+
+/// The work one traversal of a read-back BVH did: a measure of tree quality that does not
+/// depend on the GPU (the GPU traversal visits the same nodes in the same order).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TraversalCounts {
+    /// Inner nodes fetched (each tests its two child boxes).
+    pub nodes: u64,
+    /// Ray/triangle tests.
+    pub triangles: u64,
+}
+
+impl std::ops::AddAssign for TraversalCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.nodes += o.nodes;
+        self.triangles += o.triangles;
+    }
+}
 
 /// One child of a GPU BVH2 node.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -127,5 +146,77 @@ impl BlasReadback {
             }
         }
         cost
+    }
+
+    /// Closest hit (or, with `any`, the first hit found) of `ray` in this BLAS, traversed as the
+    /// GPU traverses it (nearer child first, entries behind a closer hit skipped), and the work
+    /// it took. `Hit::primitive` is the geometry's primitive index.
+    pub fn trace(&self, ray: &Ray, any: bool) -> (Option<Hit>, TraversalCounts) {
+        let mut counts = TraversalCounts::default();
+        if self.nodes.is_empty() {
+            return (None, counts);
+        }
+        let sh = Shear::new(ray.dir);
+        let inv = ray.dir.recip();
+        let mut best: Option<Hit> = None;
+        let mut t_max = ray.t_max;
+        // (child ref, entry distance); the root is entered as an inner ref at t_min.
+        let mut stack = vec![(0u32, ray.t_min)];
+        while let Some((r, entry_t)) = stack.pop() {
+            if entry_t > t_max * 1.000_000_4 {
+                continue;
+            }
+            if r & 0x8000_0000 != 0 {
+                let first = (r & 0x0fff_ffff) as usize;
+                let count = (((r >> 28) & 7) + 1) as usize;
+                for slot in first..(first + count).min(self.triangles.len()) {
+                    counts.triangles += 1;
+                    let [a, b, c] = self.triangles[slot];
+                    let clipped = Ray { t_max, ..*ray };
+                    let Some(h) = intersect_sheared(&clipped, &sh, a, b, c) else {
+                        continue;
+                    };
+                    let p = self.primitive_indices[slot];
+                    let better =
+                        best.is_none_or(|cur| h.t < cur.t || (h.t == cur.t && p < cur.primitive));
+                    if better {
+                        best = Some(Hit {
+                            t: h.t,
+                            primitive: p,
+                            u: h.u,
+                            v: h.v,
+                        });
+                        t_max = h.t;
+                        if any {
+                            return (best, counts);
+                        }
+                    }
+                }
+                continue;
+            }
+            let Some(node) = self.nodes.get(r as usize) else {
+                continue;
+            };
+            counts.nodes += 1;
+            // A malformed tree (a cycle) must not hang a tool.
+            if counts.nodes > 4 * self.nodes.len() as u64 + 4 {
+                break;
+            }
+            let t = |c: &Bvh2Child| {
+                (!c.is_empty())
+                    .then(|| slab(c.min, c.max, ray.origin, inv, ray.t_min, t_max))
+                    .flatten()
+            };
+            let (tl, tr) = (t(&node[0]), t(&node[1]));
+            let (l, r) = (node[0].reference, node[1].reference);
+            match (tl, tr) {
+                (Some(a), Some(b)) if b < a => stack.extend([(l, a), (r, b)]),
+                (Some(a), Some(b)) => stack.extend([(r, b), (l, a)]),
+                (Some(a), None) => stack.push((l, a)),
+                (None, Some(b)) => stack.push((r, b)),
+                (None, None) => {}
+            }
+        }
+        (best, counts)
     }
 }
