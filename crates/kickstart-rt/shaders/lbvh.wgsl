@@ -388,7 +388,8 @@ fn load_box(node: u32) -> Box {
 // Summary of child ref c whose box is `b`: a leaf's is computed, an inner node's was published
 // by its climber (with its box, under the same release/acquire protocol).
 fn child_subtree(c: u32, b: Box) -> Subtree {
-    if (c & LEAF_BIT) != 0u {
+    // Without collapsing no summary was published (and none is needed: nothing collapses).
+    if (c & LEAF_BIT) != 0u || !collapsing() {
         return leaf_subtree(c & 0x7fffffffu, b);
     }
     return load_subtree(c);
@@ -429,9 +430,15 @@ fn join_subtrees(b: Box, l: Subtree, r: Subtree) -> Subtree {
     let count = l.count + r.count;
     let split = min(a * SAH_TRAVERSAL + l.cost + r.cost, BIG);
     let as_leaf = min(a * f32(count) * SAH_INTERSECTION, BIG);
-    let collapse = (params.flags & FLAG_PRIMITIVE_REFS) == 0u && count <= params.max_leaf
-        && as_leaf <= split;
+    let collapse = collapsing() && count <= params.max_leaf && as_leaf <= split;
     return Subtree(select(split, as_leaf, collapse), count, min(l.first, r.first), collapse);
+}
+
+// Whether this dispatch may collapse subtrees (uniform). Builds and refits that may not skip the
+// summaries' stores and loads, which would otherwise add 3 words per inner node to the climb's
+// device traffic for nothing.
+fn collapsing() -> bool {
+    return (params.flags & FLAG_PRIMITIVE_REFS) == 0u && params.max_leaf > 1u;
 }
 
 fn subtree_at(node: u32) -> u32 {
@@ -520,7 +527,9 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
                 // Inner boxes are published for the sibling's climber (leaves are re-read
                 // from the input instead).
                 store_box(node, bx);
-                store_subtree(node, sub);
+                if collapsing() {
+                    store_subtree(node, sub);
+                }
                 parent = topology[inner_parents + node];
             }
         }

@@ -1,6 +1,6 @@
 //! Binned-SAH BVH build and stack-based traversal on the CPU.
 
-use super::triangle::{intersect_sheared, Hit, Ray, Shear};
+use super::triangle::{offer_triangle, Hit, Ray, Shear};
 use glam::Vec3;
 
 /// SAH cost of visiting an inner node.
@@ -236,24 +236,11 @@ impl CpuBvh {
                 for &p in
                     &self.primitive_indices[node.first as usize..(node.first + node.count) as usize]
                 {
-                    let [a, b, c] = triangles[p as usize];
                     let r = Ray { t_max, ..*ray };
-                    if let Some(h) = intersect_sheared(&r, &sh, a, b, c) {
-                        let better = match best {
-                            None => true,
-                            Some(cur) => h.t < cur.t || (h.t == cur.t && p < cur.primitive),
-                        };
-                        if better {
-                            best = Some(Hit {
-                                t: h.t,
-                                primitive: p,
-                                u: h.u,
-                                v: h.v,
-                            });
-                            t_max = h.t;
-                            if any {
-                                return best;
-                            }
+                    if offer_triangle(&mut best, &r, &sh, triangles[p as usize], p) {
+                        t_max = best.map_or(t_max, |h| h.t);
+                        if any {
+                            return best;
                         }
                     }
                 }

@@ -2,7 +2,7 @@
 //! its SAH cost with the same constants as [`super::CpuBvh::sah_cost`], so the two compare.
 
 use super::bvh::slab;
-use super::triangle::{intersect_sheared, Hit, Ray, Shear};
+use super::triangle::{offer_triangle, Hit, Ray, Shear};
 use super::{SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
 use glam::Vec3;
 
@@ -171,22 +171,10 @@ impl BlasReadback {
                 let count = (((r >> 28) & 7) + 1) as usize;
                 for slot in first..(first + count).min(self.triangles.len()) {
                     counts.triangles += 1;
-                    let [a, b, c] = self.triangles[slot];
                     let clipped = Ray { t_max, ..*ray };
-                    let Some(h) = intersect_sheared(&clipped, &sh, a, b, c) else {
-                        continue;
-                    };
                     let p = self.primitive_indices[slot];
-                    let better =
-                        best.is_none_or(|cur| h.t < cur.t || (h.t == cur.t && p < cur.primitive));
-                    if better {
-                        best = Some(Hit {
-                            t: h.t,
-                            primitive: p,
-                            u: h.u,
-                            v: h.v,
-                        });
-                        t_max = h.t;
+                    if offer_triangle(&mut best, &clipped, &sh, self.triangles[slot], p) {
+                        t_max = best.map_or(t_max, |h| h.t);
                         if any {
                             return (best, counts);
                         }

@@ -81,18 +81,38 @@ impl Shear {
     }
 }
 
+/// Tests triangle `tri`, primitive `primitive`, against `ray` (already clipped to the closest hit
+/// so far); when it is hit closer than `best`, or at the same `t` with a lower primitive index
+/// (the tie rule), it becomes `best`. Returns whether it did. Both CPU traversals use it, so they
+/// keep the same rule.
+pub(crate) fn offer_triangle(
+    best: &mut Option<Hit>,
+    ray: &Ray,
+    sh: &Shear,
+    [a, b, c]: [Vec3; 3],
+    primitive: u32,
+) -> bool {
+    let Some(h) = intersect_sheared(ray, sh, a, b, c) else {
+        return false;
+    };
+    let better = best.is_none_or(|cur| h.t < cur.t || (h.t == cur.t && primitive < cur.primitive));
+    if better {
+        *best = Some(Hit {
+            t: h.t,
+            primitive,
+            u: h.u,
+            v: h.v,
+        });
+    }
+    better
+}
+
 /// Intersects `ray` with triangle `(a, b, c)`; both windings hit.
 pub fn intersect_triangle(ray: &Ray, a: Vec3, b: Vec3, c: Vec3) -> Option<TriangleHit> {
     intersect_sheared(ray, &Shear::new(ray.dir), a, b, c)
 }
 
-pub(crate) fn intersect_sheared(
-    ray: &Ray,
-    sh: &Shear,
-    a: Vec3,
-    b: Vec3,
-    c: Vec3,
-) -> Option<TriangleHit> {
+fn intersect_sheared(ray: &Ray, sh: &Shear, a: Vec3, b: Vec3, c: Vec3) -> Option<TriangleHit> {
     let [kx, ky, kz] = sh.k;
     let (a, b, c) = (a - ray.origin, b - ray.origin, c - ray.origin);
     let ax = a[kx] - sh.s.x * a[kz];

@@ -586,6 +586,37 @@ mod tests {
         check_read_back(tree, aabbs, true)
     }
 
+    /// `b` moved by `d`.
+    fn shifted(b: &Aabb, d: [f32; 3]) -> Aabb {
+        (
+            [0, 1, 2].map(|a| b.0[a] + d[a]),
+            [0, 1, 2].map(|a| b.1[a] + d[a]),
+        )
+    }
+
+    /// Refits `tree` (as built) to the primitive boxes `after`, collapsing up to `max_leaf`.
+    fn refit_to(lbvh: &mut Lbvh, tree: &GpuTree, after: &[Aabb], max_leaf: u32) {
+        let input = aabb_buffer(after, tree.bases.aabb);
+        run(|rec| {
+            lbvh.refit(
+                rec,
+                &LbvhRefit {
+                    aabbs: &input,
+                    aabb_base: tree.bases.aabb,
+                    count: tree.n,
+                    nodes: &tree.nodes,
+                    node_base: tree.bases.node,
+                    order: &tree.order,
+                    order_base: tree.bases.order,
+                    topology: (&tree.topology, tree.bases.topo),
+                    leaf_refs: tree.leaf_refs,
+                    max_leaf,
+                    bounds_out: Some((&tree.bounds, tree.bases.bounds)),
+                },
+            )
+        });
+    }
+
     /// Reads back nodes, order and bounds of `tree` and checks them against `aabbs`.
     fn check_read_back(mut tree: GpuTree, aabbs: &[Aabb], empties_last: bool) -> (GpuTree, f64) {
         let n = tree.n;
@@ -907,34 +938,10 @@ mod tests {
                     0 => EMPTY,
                     1 => random_box(&mut rng),
                     _ if is_empty(b) => *b,
-                    _ => {
-                        let d = rng.vec(-3.0, 3.0);
-                        (
-                            [0, 1, 2].map(|a| b.0[a] + d[a]),
-                            [0, 1, 2].map(|a| b.1[a] + d[a]),
-                        )
-                    }
+                    _ => shifted(b, rng.vec(-3.0, 3.0)),
                 })
                 .collect();
-            let input = aabb_buffer(&after, tree.bases.aabb);
-            run(|rec| {
-                lbvh.refit(
-                    rec,
-                    &LbvhRefit {
-                        aabbs: &input,
-                        aabb_base: tree.bases.aabb,
-                        count: tree.n,
-                        nodes: &tree.nodes,
-                        node_base: tree.bases.node,
-                        order: &tree.order,
-                        order_base: tree.bases.order,
-                        topology: (&tree.topology, tree.bases.topo),
-                        leaf_refs: refs,
-                        max_leaf: 1,
-                        bounds_out: Some((&tree.bounds, tree.bases.bounds)),
-                    },
-                )
-            });
+            refit_to(&mut lbvh, &tree, &after, 1);
             // Exact boxes of the new primitives over the same tree (the order was made for
             // the old boxes, so empties need not be last any more).
             let order_before = tree.order_words.clone();
@@ -1089,35 +1096,13 @@ mod tests {
             .enumerate()
             .map(|(i, b)| {
                 if i % 3 == 0 {
-                    let d = rng.vec(-200.0, 200.0);
-                    (
-                        [0, 1, 2].map(|a| b.0[a] + d[a]),
-                        [0, 1, 2].map(|a| b.1[a] + d[a]),
-                    )
+                    shifted(b, rng.vec(-200.0, 200.0))
                 } else {
                     *b
                 }
             })
             .collect();
-        let input = aabb_buffer(&after, tree.bases.aabb);
-        run(|rec| {
-            lbvh.refit(
-                rec,
-                &LbvhRefit {
-                    aabbs: &input,
-                    aabb_base: tree.bases.aabb,
-                    count: tree.n,
-                    nodes: &tree.nodes,
-                    node_base: tree.bases.node,
-                    order: &tree.order,
-                    order_base: tree.bases.order,
-                    topology: (&tree.topology, tree.bases.topo),
-                    leaf_refs: LeafRefs::SortedPosition,
-                    max_leaf: 4,
-                    bounds_out: Some((&tree.bounds, tree.bases.bounds)),
-                },
-            )
-        });
+        refit_to(&mut lbvh, &tree, &after, 4);
         let (tree, sah) = check_read_back(tree, &after, false);
         let optimum = optimal_collapsed_sah(&tree, &after, 4);
         assert!(
