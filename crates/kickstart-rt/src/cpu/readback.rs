@@ -208,3 +208,121 @@ impl BlasReadback {
         (best, counts)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A raw node: two children (min, max, ref).
+    fn node(l: ([f32; 3], [f32; 3], u32), r: ([f32; 3], [f32; 3], u32)) -> [f32; 16] {
+        let mut n = [0.0; 16];
+        n[0..3].copy_from_slice(&l.0);
+        n[3] = f32::from_bits(l.2);
+        n[4..7].copy_from_slice(&l.1);
+        n[7] = f32::from_bits(r.2);
+        n[8..11].copy_from_slice(&r.0);
+        n[12..15].copy_from_slice(&r.1);
+        n
+    }
+
+    /// Triangle slot with vertices in the plane z = `z` and primitive index `prim`.
+    fn tri(z: f32, prim: u32) -> [f32; 12] {
+        [
+            -1.0,
+            -1.0,
+            z,
+            f32::from_bits(prim),
+            1.0,
+            -1.0,
+            z,
+            0.0,
+            0.0,
+            1.0,
+            z,
+            0.0,
+        ]
+    }
+
+    const LEAF: u32 = 0x8000_0000;
+
+    fn down(t_max: f32) -> Ray {
+        Ray {
+            origin: Vec3::new(0.0, 0.0, 5.0),
+            dir: Vec3::new(0.0, 0.0, -1.0),
+            t_min: 0.0,
+            t_max,
+        }
+    }
+
+    #[test]
+    fn trace_finds_the_closest_of_a_two_triangle_leaf_and_counts_the_work() {
+        // Root: left = leaf of 2 triangles (slots 0, 1; count − 1 = 1), right empty.
+        let b = BlasReadback::new(
+            vec![node(
+                ([-1.0, -1.0, 0.0], [1.0, 1.0, 2.0], LEAF | (1 << 28)),
+                ([1e30; 3], [-1e30; 3], LEAF),
+            )],
+            vec![tri(0.0, 7), tri(2.0, 3)],
+        );
+        let (hit, counts) = b.trace(&down(f32::INFINITY), false);
+        let hit = hit.expect("hits the upper triangle");
+        assert_eq!((hit.t, hit.primitive), (3.0, 3));
+        assert_eq!(
+            counts,
+            TraversalCounts {
+                nodes: 1,
+                triangles: 2
+            }
+        );
+        // A range starting past the upper triangle (t = 3) finds the lower one (t = 5); one
+        // ending before it finds neither.
+        let past = Ray {
+            t_min: 4.0,
+            ..down(f32::INFINITY)
+        };
+        let (hit, _) = b.trace(&past, false);
+        assert_eq!(hit.map(|h| (h.t, h.primitive)), Some((5.0, 7)));
+        let (hit, _) = b.trace(&down(2.5), false);
+        assert_eq!(hit, None);
+    }
+
+    #[test]
+    fn trace_survives_bad_rays_and_a_malformed_tree() {
+        // Node 0's left child is node 0 itself (a cycle), the right an out-of-range node.
+        let b = BlasReadback::new(
+            vec![node(
+                ([-1.0, -1.0, 0.0], [1.0, 1.0, 2.0], 0),
+                ([-1.0, -1.0, 0.0], [1.0, 1.0, 2.0], 99),
+            )],
+            vec![tri(0.0, 0)],
+        );
+        let (hit, counts) = b.trace(&down(f32::INFINITY), false);
+        assert_eq!(hit, None);
+        // The guard stops after 4 × nodes + 4 visits.
+        assert!(counts.nodes <= 9, "a cycle must stop: {counts:?}");
+        let leaf = BlasReadback::new(
+            vec![node(
+                ([-1.0, -1.0, 0.0], [1.0, 1.0, 0.0], LEAF),
+                ([1e30; 3], [-1e30; 3], LEAF),
+            )],
+            vec![tri(0.0, 0)],
+        );
+        for ray in [
+            Ray {
+                dir: Vec3::ZERO,
+                ..down(f32::INFINITY)
+            },
+            Ray {
+                origin: Vec3::NAN,
+                ..down(f32::INFINITY)
+            },
+            Ray {
+                t_min: f32::NAN,
+                ..down(f32::INFINITY)
+            },
+        ] {
+            assert_eq!(leaf.trace(&ray, true).0, None, "{ray:?}");
+        }
+        assert_eq!(BlasReadback::default().trace(&down(1.0), false).0, None);
+    }
+}
