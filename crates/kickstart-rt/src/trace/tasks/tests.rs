@@ -556,7 +556,13 @@ fn multi_shadow_packs_each_lights_visibility() {
             let i = (y * N + x) as usize;
             let got = img1[i].map(|v| v as u32);
             assert_eq!(got, want, "bits at {x},{y}");
-            assert_eq!(img0[i][0], visible as f32 / 20.0);
+            // A GPU division may be off by an ulp (WGSL allows 2.5); one light is 0.05.
+            let fraction = visible as f32 / 20.0;
+            assert!(
+                (img0[i][0] - fraction).abs() <= 1e-6,
+                "visible fraction at {x},{y}: {} for {visible} of 20",
+                img0[i][0]
+            );
             assert_eq!(img0[i][3], 20.0);
             if visible > 0 && visible < 20 {
                 partial += 1;
