@@ -20,8 +20,10 @@
 // Topology layout (u32 words from topo_base), n >= 2:
 //   [0, 2 (n-1))           children of inner node i at 2i, 2i+1: inner index, or 0x80000000 | k
 //                          for the leaf at sorted position k
-//   [2 (n-1), 3 (n-1))     parent of inner node i (0xFFFFFFFF for the root)
-//   [3 (n-1), 4n - 3)      parent of leaf k
+//   [2 (n-1), 3 (n-1))     parent ref of inner node i (0xFFFFFFFF for the root)
+//   [3 (n-1), 4n - 3)      parent ref of leaf k
+//   A parent ref is the parent's inner index | PARENT_LOCAL_BIT (0x40000000) when all of the
+//   parent's leaves lie in one block of 256 sorted positions [256 b, 256 b + 256).
 
 struct Params {
     count: u32,
@@ -55,6 +57,10 @@ const FLAG_PRIMITIVE_REFS: u32 = 1u;
 const FLAG_BOUNDS_OUT: u32 = 2u;
 const LEAF_BIT: u32 = 0x80000000u;
 const NO_PARENT: u32 = 0xFFFFFFFFu;
+// In a parent ref: the parent's leaves all lie in one block of WG sorted positions (one climb
+// workgroup's). Indices stay below 2^28, so the bit is free.
+const PARENT_LOCAL_BIT: u32 = 0x40000000u;
+const PARENT_INDEX_MASK: u32 = 0x0fffffffu;
 // Key of empty primitives: above every 30-bit Morton code, below 2^31 (the sort uses 31 bits).
 const EMPTY_KEY: u32 = 0x40000000u;
 // Empty box while climbing: the largest finite floats, so a union with it is exact for every
@@ -292,17 +298,20 @@ fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     let g = u32(gamma);
     var left = g;
     var right = g + 1u;
+    // The children's parent ref says whether this node's leaves all lie in one climb
+    // workgroup's block: the climb then joins it in workgroup memory (see lbvh_climb).
+    let parent_ref = k | select(0u, PARENT_LOCAL_BIT, first / WG == last / WG);
     if first == g {
         left = LEAF_BIT | g;
-        topology[leaf_parents + g] = k;
+        topology[leaf_parents + g] = parent_ref;
     } else {
-        topology[inner_parents + g] = k;
+        topology[inner_parents + g] = parent_ref;
     }
     if last == g + 1u {
         right = LEAF_BIT | (g + 1u);
-        topology[leaf_parents + g + 1u] = k;
+        topology[leaf_parents + g + 1u] = parent_ref;
     } else {
-        topology[inner_parents + g + 1u] = k;
+        topology[inner_parents + g + 1u] = parent_ref;
     }
     topology[params.topo_base + 2u * k] = left;
     topology[params.topo_base + 2u * k + 1u] = right;
@@ -469,6 +478,57 @@ fn child_ref(c: u32, s: Subtree) -> u32 {
     return out_ref(c);
 }
 
+// Parent ref (index | PARENT_LOCAL_BIT) of a node in topology encoding.
+fn parent_ref(node: u32, leaf_parents: u32, inner_parents: u32) -> u32 {
+    if (node & LEAF_BIT) != 0u {
+        return topology[leaf_parents + (node & 0x7fffffffu)];
+    }
+    return topology[inner_parents + node];
+}
+
+// Phase 1 of the climb: per block-local inner node (slot = index - block start, < WG, since a
+// Karras node's index is one end of its leaf range), its box (6 words) and SAH summary
+// (3 words), and its arrival counter.
+var<workgroup> wg_boxes: array<f32, 1536>;
+var<workgroup> wg_subtrees: array<u32, 768>;
+var<workgroup> wg_arrival: array<atomic<u32>, 256>;
+
+fn wg_store(slot: u32, b: Box, s: Subtree) {
+    let at = 6u * slot;
+    wg_boxes[at] = b.lo.x;
+    wg_boxes[at + 1u] = b.lo.y;
+    wg_boxes[at + 2u] = b.lo.z;
+    wg_boxes[at + 3u] = b.hi.x;
+    wg_boxes[at + 4u] = b.hi.y;
+    wg_boxes[at + 5u] = b.hi.z;
+    if collapsing() {
+        wg_subtrees[3u * slot] = bitcast<u32>(s.cost);
+        wg_subtrees[3u * slot + 1u] = s.count | select(0u, COLLAPSED_BIT, s.collapsed);
+        wg_subtrees[3u * slot + 2u] = s.first;
+    }
+}
+
+// Box of child ref c of a block-local node: a leaf's from the input, an inner node's from
+// workgroup memory.
+fn wg_child_box(c: u32, block: u32) -> Box {
+    if (c & LEAF_BIT) != 0u {
+        return leaf_box(c & 0x7fffffffu);
+    }
+    let at = 6u * (c - block);
+    return Box(vec3<f32>(wg_boxes[at], wg_boxes[at + 1u], wg_boxes[at + 2u]),
+               vec3<f32>(wg_boxes[at + 3u], wg_boxes[at + 4u], wg_boxes[at + 5u]));
+}
+
+fn wg_child_subtree(c: u32, b: Box, block: u32) -> Subtree {
+    if (c & LEAF_BIT) != 0u || !collapsing() {
+        return leaf_subtree(c & 0x7fffffffu, b);
+    }
+    let at = 3u * (c - block);
+    let count = wg_subtrees[at + 1u];
+    return Subtree(bitcast<f32>(wg_subtrees[at]), count & ~COLLAPSED_BIT, wg_subtrees[at + 2u],
+                   (count & COLLAPSED_BIT) != 0u);
+}
+
 @compute @workgroup_size(256)
 fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
               @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -502,6 +562,76 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
         bx = leaf_box(k);
     }
     var sub = leaf_subtree(k, bx);
+    // Parent ref of `node` (meaningful while climbing: the root is never the current node then).
+    var pref = NO_PARENT;
+    if climbing {
+        pref = parent_ref(node, leaf_parents, inner_parents);
+    }
+
+    // Phase 1, in workgroup memory: the nodes whose leaves all lie in this workgroup's block
+    // (PARENT_LOCAL_BIT) have both children's climbers here, so their arrivals and boxes need
+    // only workgroup barriers, not the device-scope fences of phase 2. Most inner nodes are
+    // such nodes; a node straddling a block boundary is the exception (a node of s leaves
+    // straddles one with probability about s / WG).
+    let block = k - lid;
+    atomicStore(&wg_arrival[lid], 0u);
+    loop {
+        if lid == 0u {
+            atomicStore(&wg_active, 0u);
+        }
+        // Also orders the arrival counters' clearing before their first use.
+        workgroupBarrier();
+        let local = climbing && pref != NO_PARENT && (pref & PARENT_LOCAL_BIT) != 0u;
+        if local {
+            atomicAdd(&wg_active, 1u);
+        }
+        workgroupBarrier();
+        if lid == 0u {
+            wg_go = atomicLoad(&wg_active);
+        }
+        if workgroupUniformLoad(&wg_go) == 0u {
+            break;
+        }
+        let parent = pref & PARENT_INDEX_MASK;
+        if local {
+            if (node & LEAF_BIT) == 0u {
+                wg_store(node - block, bx, sub);
+            }
+            // First to arrive: the sibling's climber (in this workgroup) takes over.
+            climbing = atomicAdd(&wg_arrival[parent - block], 1u) != 0u;
+        }
+        // The first arriver's stores above happen-before the second's loads below, whichever
+        // round the second arrives in.
+        workgroupBarrier();
+        if local && climbing {
+            let lc = topology[params.topo_base + 2u * parent];
+            let rc = topology[params.topo_base + 2u * parent + 1u];
+            var lb = bx;
+            var rb = bx;
+            var ls = sub;
+            var rs = sub;
+            if lc == node {
+                rb = wg_child_box(rc, block);
+                rs = wg_child_subtree(rc, rb, block);
+            } else {
+                lb = wg_child_box(lc, block);
+                ls = wg_child_subtree(lc, lb, block);
+            }
+            write_node(parent, lb, child_ref(lc, ls), rb, child_ref(rc, rs));
+            bx = union_box(lb, rb);
+            sub = join_subtrees(bx, ls, rs);
+            node = parent;
+            if parent == 0u {
+                write_bounds(bx);
+                climbing = false;
+            } else {
+                pref = parent_ref(node, leaf_parents, inner_parents);
+            }
+        }
+    }
+
+    // Phase 2, across workgroups: every climber left has a parent that straddles blocks (and so
+    // has every ancestor of it).
     loop {
         // Uniform trip count: continue while anyone in the workgroup is still climbing.
         if lid == 0u {
@@ -519,18 +649,13 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             break;
         }
 
-        var parent = 0u;
-        if climbing {
-            if (node & LEAF_BIT) != 0u {
-                parent = topology[leaf_parents + (node & 0x7fffffffu)];
-            } else {
-                // Inner boxes are published for the sibling's climber (leaves are re-read
-                // from the input instead).
-                store_box(node, bx);
-                if collapsing() {
-                    store_subtree(node, sub);
-                }
-                parent = topology[inner_parents + node];
+        let parent = pref & PARENT_INDEX_MASK;
+        if climbing && (node & LEAF_BIT) == 0u {
+            // Inner boxes are published for the sibling's climber (leaves are re-read from the
+            // input instead).
+            store_box(node, bx);
+            if collapsing() {
+                store_subtree(node, sub);
             }
         }
         // Release: the box above before the arrival below.
@@ -563,6 +688,8 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             if parent == 0u {
                 write_bounds(bx);
                 climbing = false;
+            } else {
+                pref = parent_ref(node, leaf_parents, inner_parents);
             }
         }
     }

@@ -6,9 +6,11 @@
 //! 2. `lbvh bounds`: bounds of the valid centroids (workgroup reduce, then device atomics);
 //! 3. `lbvh morton`: 30-bit Morton keys; empty primitives get `1 << 30` so they sort last;
 //! 4. [`RadixSort::record`] (31 key bits, stable), values = primitive indices;
-//! 5. `lbvh hierarchy`: `order`, children and parents (Karras, with the index tie-break);
+//! 5. `lbvh hierarchy`: `order`, children and parents (Karras, with the index tie-break); a
+//!    parent ref says whether the parent's leaves all lie in one climb workgroup's block;
 //! 6. `lbvh climb`: bottom-up boxes without waiting on anyone (see the shader), writes the nodes
-//!    and `bounds_out`. With `max_leaf` > 1 it also computes each subtree's SAH cost and turns
+//!    and `bounds_out`. Nodes within one workgroup's block are joined in workgroup memory; only
+//!    the few that straddle blocks pay device-scope fences. With `max_leaf` > 1 it also computes each subtree's SAH cost and turns
 //!    every subtree of at most `max_leaf` primitives that is cheaper as one leaf into a leaf ref
 //!    (the fast-trace build; its inner nodes stay in the buffer, unreferenced).
 //!
@@ -583,7 +585,59 @@ mod tests {
             if n >= 2 { topo_words as usize } else { 0 },
             "topology",
         );
+        if n >= 2 {
+            check_parent_refs(&topo[bases.topo as usize..], n);
+        }
         check_read_back(tree, aabbs, true)
+    }
+
+    /// Every parent ref in the topology names the node that lists the child, with the
+    /// block-local bit exactly when the parent's leaves lie in one block of `WORKGROUP` sorted
+    /// positions (the climb's workgroup-memory phase relies on it; a wrong bit deadlocks a node's
+    /// two climbers or only slows the climb).
+    fn check_parent_refs(topo: &[u32], n: u32) {
+        const LEAF: u32 = 0x8000_0000;
+        const LOCAL: u32 = 0x4000_0000;
+        let inner = (n - 1) as usize;
+        // Leaf range of every inner node, children before parents (iterative post-order).
+        let mut range = vec![(u32::MAX, 0u32); inner];
+        let mut stack = vec![(0usize, false)];
+        while let Some((i, children_done)) = stack.pop() {
+            let kids = [topo[2 * i], topo[2 * i + 1]];
+            if children_done {
+                let r = kids.map(|c| {
+                    if c & LEAF != 0 {
+                        (c & !LEAF, c & !LEAF)
+                    } else {
+                        range[c as usize]
+                    }
+                });
+                range[i] = (r[0].0.min(r[1].0), r[0].1.max(r[1].1));
+                continue;
+            }
+            stack.push((i, true));
+            stack.extend(
+                kids.iter()
+                    .filter(|&&c| c & LEAF == 0)
+                    .map(|&c| (c as usize, false)),
+            );
+        }
+        assert_eq!(topo[2 * inner], u32::MAX, "root's parent ref");
+        for (i, &(first, last)) in range.iter().enumerate() {
+            let local = first / WORKGROUP == last / WORKGROUP;
+            let expected = i as u32 | if local { LOCAL } else { 0 };
+            for c in [topo[2 * i], topo[2 * i + 1]] {
+                let at = if c & LEAF != 0 {
+                    3 * inner + (c & !LEAF) as usize
+                } else {
+                    2 * inner + c as usize
+                };
+                assert_eq!(
+                    topo[at], expected,
+                    "parent ref of child {c:#x} of node {i} {first}..={last}"
+                );
+            }
+        }
     }
 
     /// `b` moved by `d`.
