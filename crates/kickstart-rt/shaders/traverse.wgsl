@@ -57,13 +57,13 @@ const RT_FAR_WIDEN: f32 = 1.0000004;
 //
 // Passes that include this module dispatch RT_WORKGROUP_SIZE invocations per workgroup.
 const RT_WORKGROUP_SIZE: u32 = 64u;
-var<private> rt_stack_ref: array<u32, RT_STACK_SIZE>;
-var<private> rt_stack_t: array<f32, RT_STACK_SIZE>;
+// One 8-byte entry (node reference, entry distance bits): one local-memory store or load per
+// push or pop instead of two.
+var<private> rt_stack: array<vec2<u32>, RT_STACK_SIZE>;
 
 // Stack entry i (< RT_STACK_SIZE): node reference and entry distance.
 fn rt_stack_store(i: u32, node: u32, t: f32) {
-    rt_stack_ref[i] = node;
-    rt_stack_t[i] = t;
+    rt_stack[i] = vec2<u32>(node, bitcast<u32>(t));
 }
 
 struct RtStackEntry {
@@ -72,7 +72,8 @@ struct RtStackEntry {
 }
 
 fn rt_stack_load(i: u32) -> RtStackEntry {
-    return RtStackEntry(rt_stack_ref[i], rt_stack_t[i]);
+    let e = rt_stack[i];
+    return RtStackEntry(e.x, bitcast<f32>(e.y));
 }
 
 fn rt_is_finite(x: f32) -> bool {
@@ -110,6 +111,8 @@ struct RtSpace {
     // Axes where the direction is 0 (or so small that its reciprocal overflows): the CPU gets
     // ±∞ × 0 = NaN or ±∞ there, i.e. the axis only decides whether the origin is inside the slab.
     flat_axis: vec3<bool>,
+    // Any flat axis: the box test takes its general path (rare: axis-aligned rays).
+    any_flat: bool,
     // Watertight test: axis permutation (kx, ky, kz) and shear (Sx, Sy, Sz).
     k: vec3<u32>,
     s: vec3<f32>,
@@ -121,7 +124,10 @@ fn rt_space(origin: vec3<f32>, dir: vec3<f32>) -> RtSpace {
     let zero = dir == vec3<f32>(0.0);
     let inv = vec3<f32>(1.0) / select(dir, vec3<f32>(1.0), zero);
     let overflow = vec3<bool>(!rt_is_finite(inv.x), !rt_is_finite(inv.y), !rt_is_finite(inv.z));
-    sp.flat_axis = zero | overflow;
+    // A reciprocal flushed to 0 (a huge direction component) is flat too: the fast box test
+    // needs a non-zero reciprocal to tell an empty box from a point.
+    sp.flat_axis = zero | overflow | (inv == vec3<f32>(0.0));
+    sp.any_flat = any(sp.flat_axis);
     sp.inv_dir = select(inv, vec3<f32>(0.0), sp.flat_axis);
     // Same axis choice as the CPU (strict comparisons, ties to the later axis).
     let a = abs(dir);
@@ -154,6 +160,19 @@ struct RtBoxHit {
 
 // Slab test against [bmin, bmax] within [t_min, t_max]; empty boxes (min > max) are missed.
 fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32) -> RtBoxHit {
+    if !sp.any_flat {
+        // No flat axis (nearly every ray): the entry plane of each axis is chosen by the
+        // direction's sign, so tn = min(t0, t1) and tf = max(t0, t1) of the general path below,
+        // bit for bit (rounding is monotonic), without its flat-axis and empty-box logic. Empty
+        // boxes are stored as (+1e30, -1e30) on every axis (docs/ray-tracing-core.md), so one
+        // comparison on x rejects them.
+        let neg = sp.inv_dir < vec3<f32>(0.0);
+        let tn = (select(bmin, bmax, neg) - sp.origin) * sp.inv_dir;
+        let tf = (select(bmax, bmin, neg) - sp.origin) * sp.inv_dir;
+        let near = max(t_min, max(tn.x, max(tn.y, tn.z)));
+        let far = min(t_max, min(tf.x, min(tf.y, tf.z)));
+        return RtBoxHit(near, near <= far * RT_FAR_WIDEN && bmin.x <= bmax.x);
+    }
     var r: RtBoxHit;
     r.near = t_min;
     r.hit = false;
