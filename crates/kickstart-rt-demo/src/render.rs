@@ -51,7 +51,7 @@ pub fn render(
     let path = opts.out.join("cpu-reference.png");
     image.save(&path)?;
     println!(
-        "wrote {} ({}x{}, traced on the CPU reference BVH in {:.2} s; lit GPU images need the lighting cache and trace tasks, not implemented yet)",
+        "wrote {} ({}x{}, traced on the CPU reference BVH in {:.2} s: direct sunlight without the SDK, to compare the lit images with)",
         path.display(),
         opts.width,
         opts.height,
