@@ -619,10 +619,24 @@ fn rays(
 ) -> AnyResult<RayBatches> {
     let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
     let slots = handles.instance_of_slot();
+    // Work per ray needs the one BLAS every ray meets (scenes of one instance).
+    let one_blas = match scene.instances.as_slice() {
+        [only] => Some((
+            ctx.read_back_blas(handles.geometries[only.mesh])?,
+            only.transform.inverse(),
+        )),
+        _ => None,
+    };
+    let work = |rays: &[GpuRay], any: bool| {
+        one_blas
+            .as_ref()
+            .map(|(blas, world_to_object)| work_per_ray(blas, *world_to_object, rays, any))
+    };
     let (dirs, primary) = primary_rays(camera, (width, height));
     let (primary_time, primary_hits) = bench.trace(&ctx, &primary, Query::Closest)?;
     report.oracle = Some(oracle_check(scene, &primary, &primary_hits));
-    let primary_batch = batch("primary", primary.len(), &primary_hits, primary_time);
+    let mut primary_batch = batch("primary", primary.len(), &primary_hits, primary_time);
+    primary_batch.work = work(&primary, false);
     let pixels = primary.len() as f64;
     let primary_hit_count = (primary_batch.rays - primary_batch.misses) as f64;
     let primary_ms = primary_batch.time.median_ms;
@@ -639,27 +653,17 @@ fn rays(
     let mut rng = Rng(0x6b73_7274);
     let ao = secondary_rays(&surfaces, offset, &mut rng, 1.0);
     let (ao_time, ao_hits) = bench.trace(&ctx, &ao, Query::Any)?;
-    report.rays.push(batch("ao", ao.len(), &ao_hits, ao_time));
+    let mut ao_batch = batch("ao", ao.len(), &ao_hits, ao_time);
+    ao_batch.work = work(&ao, true);
+    report.rays.push(ao_batch);
     let diffuse = secondary_rays(&surfaces, offset, &mut rng, f32::INFINITY);
     let (diffuse_time, diffuse_hits) = bench.trace(&ctx, &diffuse, Query::Closest)?;
     let diffuse_ms = diffuse_time.median_ms;
-    report
-        .rays
-        .push(batch("diffuse", diffuse.len(), &diffuse_hits, diffuse_time));
+    let mut diffuse_batch = batch("diffuse", diffuse.len(), &diffuse_hits, diffuse_time);
+    diffuse_batch.work = work(&diffuse, false);
+    report.rays.push(diffuse_batch);
     report.peer_mrays_per_s =
         Some((pixels + primary_hit_count) / ((primary_ms + diffuse_ms) * 1e3));
-    if let [only] = scene.instances.as_slice() {
-        let blas = ctx.read_back_blas(handles.geometries[only.mesh])?;
-        let world_to_object = only.transform.inverse();
-        let n = report.rays.len();
-        for (b, (rays, any)) in
-            report.rays[n - 3..]
-                .iter_mut()
-                .zip([(&primary, false), (&ao, true), (&diffuse, false)])
-        {
-            b.work = Some(work_per_ray(&blas, world_to_object, rays, any));
-        }
-    }
     Ok(RayBatches {
         slots: handles.instances.iter().map(|h| h.index()).collect(),
         width,

@@ -300,18 +300,18 @@ fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     var right = g + 1u;
     // The children's parent ref says whether this node's leaves all lie in one climb
     // workgroup's block: the climb then joins it in workgroup memory (see lbvh_climb).
-    let parent_ref = k | select(0u, PARENT_LOCAL_BIT, first / WG == last / WG);
+    let ref_k = k | select(0u, PARENT_LOCAL_BIT, first / WG == last / WG);
     if first == g {
         left = LEAF_BIT | g;
-        topology[leaf_parents + g] = parent_ref;
+        topology[leaf_parents + g] = ref_k;
     } else {
-        topology[inner_parents + g] = parent_ref;
+        topology[inner_parents + g] = ref_k;
     }
     if last == g + 1u {
         right = LEAF_BIT | (g + 1u);
-        topology[leaf_parents + g + 1u] = parent_ref;
+        topology[leaf_parents + g + 1u] = ref_k;
     } else {
-        topology[inner_parents + g + 1u] = parent_ref;
+        topology[inner_parents + g + 1u] = ref_k;
     }
     topology[params.topo_base + 2u * k] = left;
     topology[params.topo_base + 2u * k + 1u] = right;
@@ -478,12 +478,55 @@ fn child_ref(c: u32, s: Subtree) -> u32 {
     return out_ref(c);
 }
 
-// Parent ref (index | PARENT_LOCAL_BIT) of a node in topology encoding.
-fn parent_ref(node: u32, leaf_parents: u32, inner_parents: u32) -> u32 {
+// Parent ref (index | PARENT_LOCAL_BIT) of a node in topology encoding (n >= 2).
+fn parent_ref(node: u32) -> u32 {
+    let n = params.count;
     if (node & LEAF_BIT) != 0u {
-        return topology[leaf_parents + (node & 0x7fffffffu)];
+        return topology[params.topo_base + 3u * (n - 1u) + (node & 0x7fffffffu)];
     }
-    return topology[inner_parents + node];
+    return topology[params.topo_base + 2u * (n - 1u) + node];
+}
+
+// One invocation's climb: its current node (topology encoding: leaf bit + sorted position, or
+// inner index), that subtree's box and SAH summary, and the node's parent ref (meaningful while
+// climbing: the root is never the current node then).
+struct Climber {
+    node: u32,
+    bx: Box,
+    sub: Subtree,
+    pref: u32,
+    climbing: bool,
+}
+
+// The sibling of the climber's node under a parent whose children are `lc`, `rc`.
+fn sibling(c: Climber, lc: u32, rc: u32) -> u32 {
+    return select(lc, rc, lc == c.node);
+}
+
+// The second arriver at `parent` (children `lc`, `rc`) joins its subtree with the sibling's
+// (box `sb`, summary `ss`), writes the parent's node and moves up to it, or stops at the root.
+// Both phases of the climb end a step this way; they differ in where the sibling comes from.
+fn climb_up(c: ptr<function, Climber>, parent: u32, lc: u32, rc: u32, sb: Box, ss: Subtree) {
+    var lb = sb;
+    var ls = ss;
+    var rb = (*c).bx;
+    var rs = (*c).sub;
+    if lc == (*c).node {
+        lb = (*c).bx;
+        ls = (*c).sub;
+        rb = sb;
+        rs = ss;
+    }
+    write_node(parent, lb, child_ref(lc, ls), rb, child_ref(rc, rs));
+    (*c).bx = union_box(lb, rb);
+    (*c).sub = join_subtrees((*c).bx, ls, rs);
+    (*c).node = parent;
+    if parent == 0u {
+        write_bounds((*c).bx);
+        (*c).climbing = false;
+    } else {
+        (*c).pref = parent_ref(parent);
+    }
 }
 
 // Phase 1 of the climb: per block-local inner node (slot = index - block start, < WG, since a
@@ -550,23 +593,18 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
         }
         return;
     }
-    let inner_parents = params.topo_base + 2u * (n - 1u);
-    let leaf_parents = params.topo_base + 3u * (n - 1u);
     let arrival_at = BOXES_AT + 6u * (n - 1u);
 
-    var climbing = k < n;
-    // Current node in topology encoding (leaf bit + sorted position, or inner index).
-    var node = LEAF_BIT | k;
-    var bx = empty_box();
-    if climbing {
-        bx = leaf_box(k);
+    var c: Climber;
+    c.climbing = k < n;
+    c.node = LEAF_BIT | k;
+    c.bx = empty_box();
+    c.pref = NO_PARENT;
+    if c.climbing {
+        c.bx = leaf_box(k);
+        c.pref = parent_ref(c.node);
     }
-    var sub = leaf_subtree(k, bx);
-    // Parent ref of `node` (meaningful while climbing: the root is never the current node then).
-    var pref = NO_PARENT;
-    if climbing {
-        pref = parent_ref(node, leaf_parents, inner_parents);
-    }
+    c.sub = leaf_subtree(k, c.bx);
 
     // Phase 1, in workgroup memory: the nodes whose leaves all lie in this workgroup's block
     // (PARENT_LOCAL_BIT) have both children's climbers here, so their arrivals and boxes need
@@ -581,7 +619,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
         }
         // Also orders the arrival counters' clearing before their first use.
         workgroupBarrier();
-        let local = climbing && pref != NO_PARENT && (pref & PARENT_LOCAL_BIT) != 0u;
+        let local = c.climbing && (c.pref & PARENT_LOCAL_BIT) != 0u;
         if local {
             atomicAdd(&wg_active, 1u);
         }
@@ -592,41 +630,23 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
         if workgroupUniformLoad(&wg_go) == 0u {
             break;
         }
-        let parent = pref & PARENT_INDEX_MASK;
+        let parent = c.pref & PARENT_INDEX_MASK;
         if local {
-            if (node & LEAF_BIT) == 0u {
-                wg_store(node - block, bx, sub);
+            if (c.node & LEAF_BIT) == 0u {
+                wg_store(c.node - block, c.bx, c.sub);
             }
             // First to arrive: the sibling's climber (in this workgroup) takes over.
-            climbing = atomicAdd(&wg_arrival[parent - block], 1u) != 0u;
+            c.climbing = atomicAdd(&wg_arrival[parent - block], 1u) != 0u;
         }
         // The first arriver's stores above happen-before the second's loads below, whichever
         // round the second arrives in.
         workgroupBarrier();
-        if local && climbing {
+        if local && c.climbing {
             let lc = topology[params.topo_base + 2u * parent];
             let rc = topology[params.topo_base + 2u * parent + 1u];
-            var lb = bx;
-            var rb = bx;
-            var ls = sub;
-            var rs = sub;
-            if lc == node {
-                rb = wg_child_box(rc, block);
-                rs = wg_child_subtree(rc, rb, block);
-            } else {
-                lb = wg_child_box(lc, block);
-                ls = wg_child_subtree(lc, lb, block);
-            }
-            write_node(parent, lb, child_ref(lc, ls), rb, child_ref(rc, rs));
-            bx = union_box(lb, rb);
-            sub = join_subtrees(bx, ls, rs);
-            node = parent;
-            if parent == 0u {
-                write_bounds(bx);
-                climbing = false;
-            } else {
-                pref = parent_ref(node, leaf_parents, inner_parents);
-            }
+            let sib = sibling(c, lc, rc);
+            let sb = wg_child_box(sib, block);
+            climb_up(&c, parent, lc, rc, sb, wg_child_subtree(sib, sb, block));
         }
     }
 
@@ -638,7 +658,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             atomicStore(&wg_active, 0u);
         }
         workgroupBarrier();
-        if climbing {
+        if c.climbing {
             atomicAdd(&wg_active, 1u);
         }
         workgroupBarrier();
@@ -649,48 +669,30 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             break;
         }
 
-        let parent = pref & PARENT_INDEX_MASK;
-        if climbing && (node & LEAF_BIT) == 0u {
+        let parent = c.pref & PARENT_INDEX_MASK;
+        if c.climbing && (c.node & LEAF_BIT) == 0u {
             // Inner boxes are published for the sibling's climber (leaves are re-read from the
             // input instead).
-            store_box(node, bx);
+            store_box(c.node, c.bx);
             if collapsing() {
-                store_subtree(node, sub);
+                store_subtree(c.node, c.sub);
             }
         }
         // Release: the box above before the arrival below.
         storageBarrier();
-        if climbing {
+        if c.climbing {
             let before = atomicAdd(&work[arrival_at + parent], 1u);
             // First to arrive: the sibling's box may not exist yet; its climber takes over.
-            climbing = before != 0u;
+            c.climbing = before != 0u;
         }
         // Acquire: the sibling's box (stored before its arrival) is visible below.
         storageBarrier();
-        if climbing {
+        if c.climbing {
             let lc = topology[params.topo_base + 2u * parent];
             let rc = topology[params.topo_base + 2u * parent + 1u];
-            var lb = bx;
-            var rb = bx;
-            var ls = sub;
-            var rs = sub;
-            if lc == node {
-                rb = child_box(rc);
-                rs = child_subtree(rc, rb);
-            } else {
-                lb = child_box(lc);
-                ls = child_subtree(lc, lb);
-            }
-            write_node(parent, lb, child_ref(lc, ls), rb, child_ref(rc, rs));
-            bx = union_box(lb, rb);
-            sub = join_subtrees(bx, ls, rs);
-            node = parent;
-            if parent == 0u {
-                write_bounds(bx);
-                climbing = false;
-            } else {
-                pref = parent_ref(node, leaf_parents, inner_parents);
-            }
+            let sib = sibling(c, lc, rc);
+            let sb = child_box(sib);
+            climb_up(&c, parent, lc, rc, sb, child_subtree(sib, sb));
         }
     }
 }

@@ -12,10 +12,20 @@ pub(crate) fn compute_pipeline(
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
+    pipeline_with_auto_layout(device, label, &module, entry_point)
+}
+
+/// The compute pipeline of `module`'s `entry_point` with an automatic layout.
+fn pipeline_with_auto_layout(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry_point: &str,
+) -> wgpu::ComputePipeline {
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(label),
         layout: None,
-        module: &module,
+        module,
         entry_point: Some(entry_point),
         compilation_options: Default::default(),
         cache: None,
@@ -48,14 +58,7 @@ pub(crate) unsafe fn compute_pipeline_unchecked(
             wgpu::ShaderRuntimeChecks::unchecked(),
         )
     };
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: None,
-        module: &module,
-        entry_point: Some(entry_point),
-        compilation_options: Default::default(),
-        cache: None,
-    })
+    pipeline_with_auto_layout(device, label, &module, entry_point)
 }
 
 /// A compute pipeline from WGSL `source` with explicit bind group layouts (`layouts[i]` is group

@@ -10,9 +10,10 @@
 //!    parent ref says whether the parent's leaves all lie in one climb workgroup's block;
 //! 6. `lbvh climb`: bottom-up boxes without waiting on anyone (see the shader), writes the nodes
 //!    and `bounds_out`. Nodes within one workgroup's block are joined in workgroup memory; only
-//!    the few that straddle blocks pay device-scope fences. With `max_leaf` > 1 it also computes each subtree's SAH cost and turns
-//!    every subtree of at most `max_leaf` primitives that is cheaper as one leaf into a leaf ref
-//!    (the fast-trace build; its inner nodes stay in the buffer, unreferenced).
+//!    the few that straddle blocks pay device-scope fences. With `max_leaf` > 1 it also
+//!    computes each subtree's SAH cost and turns every subtree of at most `max_leaf` primitives
+//!    that is cheaper as one leaf into a leaf ref (the fast-trace build; its inner nodes stay in
+//!    the buffer, unreferenced).
 //!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology.
 
