@@ -322,15 +322,23 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
             let first = entry & RT_FIRST_MASK;
             let count = ((entry >> 28u) & 7u) + 1u;
             if in_blas {
-                for (var i = 0u; i < count; i += 1u) {
-                    let slot = (tri_base + first + i) * 3u;
-                    let v0 = rt_triangles[slot];
-                    let v1 = rt_triangles[slot + 1u];
-                    let v2 = rt_triangles[slot + 2u];
-                    let h = rt_triangle(local, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
-                    if !h.hit {
-                        continue;
-                    }
+                // One triangle per iteration; the rest of the leaf goes back on top of the stack
+                // and is popped next. When the invocations of a subgroup diverge between leaves
+                // and inner nodes, each iteration then costs one node step plus one triangle
+                // test, not a node step plus the longest leaf's triangles (measured on the H100,
+                // BENCHMARKS.md 2026-11-23 session 18: +5 % dragon, +3 % apartment). The rest is
+                // pushed with t_min, so it is never culled: every triangle of a leaf is tested,
+                // as before.
+                if count > 1u && sp < RT_STACK_SIZE {
+                    rt_stack_store(sp, RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), t_min);
+                    sp += 1u;
+                }
+                let slot = (tri_base + first) * 3u;
+                let v0 = rt_triangles[slot];
+                let v1 = rt_triangles[slot + 1u];
+                let v2 = rt_triangles[slot + 2u];
+                let h = rt_triangle(local, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                if h.hit {
                     let prim = bitcast<u32>(v0.w);
                     // Tie rule: equal t → lowest instance, then lowest primitive index.
                     let better = best.hit == 0u || h.t < best.t

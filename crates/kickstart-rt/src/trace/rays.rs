@@ -108,7 +108,7 @@ impl RayTracer {
         // - every scene index comes from data the SDK built (node refs and leaf ranges from its
         //   BVH builders, instance and geometry tables from validated handles), never from
         //   the user's buffers;
-        // - the only other loop runs over a leaf's count (at most 8).
+        // - the traversal has no other loop (a leaf's triangles are one per iteration).
         let pipeline = unsafe {
             compute_pipeline_unchecked(device, "kickstart-rt trace rays", &source, "main")
         };
