@@ -338,6 +338,23 @@ fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
 var<workgroup> wg_active: atomic<u32>;
 var<workgroup> wg_go: u32;
 
+// Whether `flag` is set in any invocation of the workgroup: the same answer in all of them, so
+// the climb's loops keep a uniform trip count. Every invocation must call it (it has barriers).
+fn wg_any(flag: bool, lid: u32) -> bool {
+    if lid == 0u {
+        atomicStore(&wg_active, 0u);
+    }
+    workgroupBarrier();
+    if flag {
+        atomicAdd(&wg_active, 1u);
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        wg_go = atomicLoad(&wg_active);
+    }
+    return workgroupUniformLoad(&wg_go) != 0u;
+}
+
 // The child ref as written into a node: inner index as is; leaf k -> k or order[k].
 fn out_ref(c: u32) -> u32 {
     if (c & LEAF_BIT) == 0u || (params.flags & FLAG_PRIMITIVE_REFS) == 0u {
@@ -614,20 +631,9 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
     let block = k - lid;
     atomicStore(&wg_arrival[lid], 0u);
     loop {
-        if lid == 0u {
-            atomicStore(&wg_active, 0u);
-        }
-        // Also orders the arrival counters' clearing before their first use.
-        workgroupBarrier();
         let local = c.climbing && (c.pref & PARENT_LOCAL_BIT) != 0u;
-        if local {
-            atomicAdd(&wg_active, 1u);
-        }
-        workgroupBarrier();
-        if lid == 0u {
-            wg_go = atomicLoad(&wg_active);
-        }
-        if workgroupUniformLoad(&wg_go) == 0u {
+        // Its first barrier also orders the arrival counters' clearing before their first use.
+        if !wg_any(local, lid) {
             break;
         }
         let parent = c.pref & PARENT_INDEX_MASK;
@@ -654,18 +660,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
     // has every ancestor of it).
     loop {
         // Uniform trip count: continue while anyone in the workgroup is still climbing.
-        if lid == 0u {
-            atomicStore(&wg_active, 0u);
-        }
-        workgroupBarrier();
-        if c.climbing {
-            atomicAdd(&wg_active, 1u);
-        }
-        workgroupBarrier();
-        if lid == 0u {
-            wg_go = atomicLoad(&wg_active);
-        }
-        if workgroupUniformLoad(&wg_go) == 0u {
+        if !wg_any(c.climbing, lid) {
             break;
         }
 

@@ -321,18 +321,22 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         if (entry & RT_LEAF_BIT) != 0u {
             let first = entry & RT_FIRST_MASK;
             let count = ((entry >> 28u) & 7u) + 1u;
+            // One item per iteration; the rest of the leaf goes back on top of the stack.
+            // - BLAS leaf: one triangle now, the rest popped next. When the invocations of a
+            //   subgroup diverge between leaves and inner nodes, each iteration then costs one
+            //   node step plus one triangle test, not a node step plus the longest leaf's
+            //   triangles (measured on the H100, BENCHMARKS.md 2026-11-23 session 18: +5 %
+            //   dragon, +3 % apartment). The rest is pushed with t_min, so it is never culled:
+            //   every triangle of a leaf is tested, as before.
+            // - TLAS leaf of several instances: the first is entered now; the rest lies below
+            //   that BLAS's entries, so it comes after this BLAS is done, culled by the leaf's
+            //   entry distance like any other entry.
+            if count > 1u && sp < RT_STACK_SIZE {
+                let rest = RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u);
+                rt_stack_store(sp, rest, select(entry_t, t_min, in_blas));
+                sp += 1u;
+            }
             if in_blas {
-                // One triangle per iteration; the rest of the leaf goes back on top of the stack
-                // and is popped next. When the invocations of a subgroup diverge between leaves
-                // and inner nodes, each iteration then costs one node step plus one triangle
-                // test, not a node step plus the longest leaf's triangles (measured on the H100,
-                // BENCHMARKS.md 2026-11-23 session 18: +5 % dragon, +3 % apartment). The rest is
-                // pushed with t_min, so it is never culled: every triangle of a leaf is tested,
-                // as before.
-                if count > 1u && sp < RT_STACK_SIZE {
-                    rt_stack_store(sp, RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), t_min);
-                    sp += 1u;
-                }
                 let slot = (tri_base + first) * 3u;
                 let v0 = rt_triangles[slot];
                 let v1 = rt_triangles[slot + 1u];
@@ -353,12 +357,6 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                     }
                 }
             } else {
-                // A TLAS leaf of several instances: enter the first now and re-push the rest
-                // (below the BLAS entries, so they come after this BLAS is done).
-                if count > 1u && sp < RT_STACK_SIZE {
-                    rt_stack_store(sp, RT_LEAF_BIT | ((count - 2u) << 28u) | (first + 1u), entry_t);
-                    sp += 1u;
-                }
                 let inst = rt_instances[first];
                 if (inst.mask & mask) == 0u || (inst.flags & 1u) == 0u {
                     continue;
