@@ -4,8 +4,9 @@
 //
 // Entry points (all 256 invocations, 1-D workgroups split into 2-D by the Recorder):
 //   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6]
-//   lbvh_morton    per primitive: 30-bit Morton key (empty: 1 << 30, sorts last), value = index
-//   (radix sort of (keys, values), 31 key bits, by the caller)
+//   lbvh_morton    per primitive: Morton key of key_bits bits, min(key_bits / 3, 10) per axis
+//                  (empty: all ones, sorts last), value = index
+//   (radix sort of (keys, values), key_bits bits, by the caller)
 //   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
 //   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
 //                  refit share it)
@@ -38,6 +39,12 @@ struct Params {
     // Largest leaf the climb may make by collapsing a subtree (1: every leaf holds one
     // primitive). Only with sorted-position refs: a subtree's primitives are then one range.
     max_leaf: u32,
+    // Bits of the sort keys (3..=31; builds only): 31 for a BLAS, 24 for a TLAS, whose sort then
+    // needs one digit pass fewer (src/scene/lbvh.rs says why).
+    key_bits: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -61,8 +68,6 @@ const NO_PARENT: u32 = 0xFFFFFFFFu;
 // workgroup's). Indices stay below 2^28, so the bit is free.
 const PARENT_LOCAL_BIT: u32 = 0x40000000u;
 const PARENT_INDEX_MASK: u32 = 0x0fffffffu;
-// Key of empty primitives: above every 30-bit Morton code, below 2^31 (the sort uses 31 bits).
-const EMPTY_KEY: u32 = 0x40000000u;
 // Empty box while climbing: the largest finite floats, so a union with it is exact for every
 // finite coordinate. Written out as the documented (+1e30, -1e30).
 const BIG: f32 = 3.40282347e38;
@@ -189,16 +194,16 @@ fn spread3(v: u32) -> u32 {
     return x;
 }
 
-// Cell 0..1023 of c in [lo, hi]; a zero or non-finite extent, or a non-finite c, gives cell 0
+// Cell 0..cells-1 of c in [lo, hi]; a zero or non-finite extent, or a non-finite c, gives cell 0
 // (such primitives still get a leaf; only their place in the order is arbitrary).
-fn cell(c: f32, lo: f32, hi: f32) -> u32 {
+fn cell(c: f32, lo: f32, hi: f32, cells: f32) -> u32 {
     let extent = hi - lo;
-    let t = (c - lo) / extent * 1024.0;
+    let t = (c - lo) / extent * cells;
     // Finite first: only then is the comparison meaningful (NaN may be assumed away).
     if !is_finite(extent) || !(extent > 0.0) || !is_finite(t) {
         return 0u;
     }
-    return u32(clamp(t, 0.0, 1023.0));
+    return u32(clamp(t, 0.0, cells - 1.0));
 }
 
 @compute @workgroup_size(256)
@@ -209,15 +214,23 @@ fn lbvh_morton(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
         return;
     }
     let b = prim_box(i);
-    var key = EMPTY_KEY;
+    // Empty primitives: all ones, the largest key, so they sort last.
+    let empty_key = (1u << params.key_bits) - 1u;
+    var key = empty_key;
     if !is_empty(b) {
         let lo = vec3<f32>(dec(~atomicLoad(&work[0])), dec(~atomicLoad(&work[1])),
                            dec(~atomicLoad(&work[2])));
         let hi = vec3<f32>(dec(atomicLoad(&work[3])), dec(atomicLoad(&work[4])),
                            dec(atomicLoad(&work[5])));
         let c = centroid(b);
-        key = (spread3(cell(c.x, lo.x, hi.x)) << 2u) | (spread3(cell(c.y, lo.y, hi.y)) << 1u)
-            | spread3(cell(c.z, lo.z, hi.z));
+        // Exact power of two (at most 1024): the same cells as a literal would give.
+        let cells = f32(1u << min(params.key_bits / 3u, 10u));
+        let morton = (spread3(cell(c.x, lo.x, hi.x, cells)) << 2u)
+            | (spread3(cell(c.y, lo.y, hi.y, cells)) << 1u) | spread3(cell(c.z, lo.z, hi.z, cells));
+        // Below the empty key: only when the Morton bits fill the key (24 bits: 8 per axis) can
+        // they equal it, and then the far corner cell joins its neighbour, the next lower code.
+        // With a spare bit (31 = 3 x 10 + 1) no code is lowered.
+        key = min(morton, empty_key - 1u);
     }
     keys[i] = key;
     values[i] = i;

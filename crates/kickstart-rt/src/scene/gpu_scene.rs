@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
-use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs};
+use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS};
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::Prims;
 use crate::staging::{StagingBuffer, StagingPool};
@@ -508,6 +508,7 @@ impl GpuScene {
                 leaf_refs: LeafRefs::SortedPosition,
                 max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                key_bits: BLAS_KEY_BITS,
             },
         );
         prims.gather_triangles(
@@ -663,6 +664,7 @@ impl GpuScene {
                     leaf_refs: LeafRefs::PrimitiveIndex,
                     max_leaf: 1,
                     bounds_out: None,
+                    key_bits: TLAS_KEY_BITS,
                 },
             );
             self.tlas.refits_since_rebuild = 0;
