@@ -3,7 +3,8 @@
 // src/scene/lbvh.rs, which documents the pass order.
 //
 // Entry points (all 256 invocations, 1-D workgroups split into 2-D by the Recorder):
-//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6]
+//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6] (not run
+//                  when the caller's pass merged them: the TLAS's instance boxes)
 //   lbvh_morton    per primitive: Morton key of key_bits bits, min(key_bits / 3, 10) per axis
 //                  (empty: all ones, sorts last), value = index
 //   (radix sort of (keys, values), key_bits bits, by the caller)
@@ -12,7 +13,8 @@
 //                  refit share it)
 //
 // `work` layout (u32 words, all accessed atomically):
-//   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only)
+//   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only;
+//                                centroid_bounds.wgsl)
 //   [8, 8 + 6 (n-1))             inner node boxes during the climb (min.xyz, max.xyz bit patterns)
 //   [8 + 6 (n-1), 8 + 7 (n-1))   arrival counters of the inner nodes (cleared before the climb)
 //   [8 + 7 (n-1), 8 + 10 (n-1))  per inner node during the climb: SAH cost (f32 bits), primitive
@@ -42,7 +44,9 @@ struct Params {
     // Bits of the sort keys (3..=31; builds only): 31 for a BLAS, 24 for a TLAS, whose sort then
     // needs one digit pass fewer (src/scene/lbvh.rs says why).
     key_bits: u32,
-    pad0: u32,
+    // First of the 6 centroid-bounds words lbvh_morton reads from binding 2: 0 (work's header),
+    // or where the caller's pass merged them in the buffer bound there instead.
+    centroid_base: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -85,25 +89,6 @@ fn linear_id(lid: u32, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid;
 }
 
-// NaN by bit pattern (the compiler may assume floats are never NaN).
-fn is_nan(x: f32) -> bool {
-    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
-}
-
-fn is_finite(x: f32) -> bool {
-    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
-}
-
-// A float as a u32 that sorts like the float (negative: all bits flipped; positive: sign set).
-fn enc(x: f32) -> u32 {
-    let b = bitcast<u32>(x);
-    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
-}
-
-fn dec(u: u32) -> f32 {
-    return bitcast<f32>(select(~u, u & 0x7fffffffu, (u & 0x80000000u) != 0u));
-}
-
 struct Box {
     lo: vec3<f32>,
     hi: vec3<f32>,
@@ -123,9 +108,7 @@ fn prim_box(prim: u32) -> Box {
     let i = 2u * (params.aabb_base + prim);
     let lo = aabbs[i].xyz;
     let hi = aabbs[i + 1u].xyz;
-    let nan = is_nan(lo.x) || is_nan(lo.y) || is_nan(lo.z) || is_nan(hi.x) || is_nan(hi.y)
-        || is_nan(hi.z);
-    if nan || lo.x > hi.x {
+    if stored_box_is_empty(lo, hi) {
         return empty_box();
     }
     return Box(lo, hi);
@@ -135,46 +118,29 @@ fn union_box(a: Box, b: Box) -> Box {
     return Box(min(a.lo, b.lo), max(a.hi, b.hi));
 }
 
-// Centroid without overflow for huge boxes; valid when every lane is finite.
 fn centroid(b: Box) -> vec3<f32> {
-    return b.lo * 0.5 + b.hi * 0.5;
-}
-
-fn centroid_valid(b: Box) -> bool {
-    let c = centroid(b);
-    return !is_empty(b) && is_finite(c.x) && is_finite(c.y) && is_finite(c.z);
+    return box_centroid(b.lo, b.hi);
 }
 
 // ---------------------------------------------------------------------------------------------
-// Scene bounds of the valid centroids: workgroup reduce in shared atomics, then one device
-// atomicMax per word. Min is reduced as max of ~enc so a zero-cleared buffer is the identity.
-
-var<workgroup> wg_bounds: array<atomic<u32>, 6>;
+// Scene bounds of the valid centroids (centroid_bounds.wgsl): workgroup reduce in shared atomics,
+// then one device atomicMax per word into work[0..6]. Skipped when the caller's primitive pass
+// merged them already (the TLAS's instance boxes): lbvh_morton then reads the caller's words.
 
 @compute @workgroup_size(256)
 fn lbvh_bounds(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = linear_id(lid, wid, nwg);
-    if lid < 6u {
-        atomicStore(&wg_bounds[lid], 0u);
-    }
+    wg_bounds_clear(lid);
     workgroupBarrier();
     // No early return: the barriers below must be reached by the whole workgroup.
     if i < params.count {
-        let b = prim_box(i);
-        if centroid_valid(b) {
-            let c = centroid(b);
-            atomicMax(&wg_bounds[0], ~enc(c.x));
-            atomicMax(&wg_bounds[1], ~enc(c.y));
-            atomicMax(&wg_bounds[2], ~enc(c.z));
-            atomicMax(&wg_bounds[3], enc(c.x));
-            atomicMax(&wg_bounds[4], enc(c.y));
-            atomicMax(&wg_bounds[5], enc(c.z));
-        }
+        let at = 2u * (params.aabb_base + i);
+        wg_bounds_add(aabbs[at].xyz, aabbs[at + 1u].xyz);
     }
     workgroupBarrier();
     if lid < 6u {
-        let v = atomicLoad(&wg_bounds[lid]);
+        let v = wg_bounds_word(lid);
         if v != 0u {
             atomicMax(&work[lid], v);
         }
@@ -218,10 +184,12 @@ fn lbvh_morton(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
     let empty_key = (1u << params.key_bits) - 1u;
     var key = empty_key;
     if !is_empty(b) {
-        let lo = vec3<f32>(dec(~atomicLoad(&work[0])), dec(~atomicLoad(&work[1])),
-                           dec(~atomicLoad(&work[2])));
-        let hi = vec3<f32>(dec(atomicLoad(&work[3])), dec(atomicLoad(&work[4])),
-                           dec(atomicLoad(&work[5])));
+        // work[0..6], or the caller's words bound in its place (see lbvh_bounds).
+        let cb = params.centroid_base;
+        let lo = vec3<f32>(dec(~atomicLoad(&work[cb])), dec(~atomicLoad(&work[cb + 1u])),
+                           dec(~atomicLoad(&work[cb + 2u])));
+        let hi = vec3<f32>(dec(atomicLoad(&work[cb + 3u])), dec(atomicLoad(&work[cb + 4u])),
+                           dec(atomicLoad(&work[cb + 5u])));
         let c = centroid(b);
         // Exact power of two (at most 1024): the same cells as a literal would give.
         let cells = f32(1u << min(params.key_bits / 3u, 10u));

@@ -2,8 +2,10 @@
 //! layouts: `docs/ray-tracing-core.md` (AABB input, BVH2 node format).
 //!
 //! Build, all recorded into the caller's encoder:
-//! 1. clear the centroid-bounds words and the arrival counters (`clear_buffer`);
-//! 2. `lbvh bounds`: bounds of the valid centroids (workgroup reduce, then device atomics);
+//! 1. clear the arrival counters, and the centroid-bounds words when step 2 runs (`clear_buffer`);
+//! 2. `lbvh bounds`: bounds of the valid centroids (workgroup reduce, then device atomics), unless
+//!    the caller's primitive pass merged them already ([`LbvhBuild::centroid_bounds`]: the
+//!    TLAS's instance boxes, one dependent dispatch fewer);
 //! 3. `lbvh morton`: Morton keys of [`LbvhBuild::key_bits`] bits (`min(key_bits / 3, 10)`
 //!    bits per axis); empty primitives get the all-ones key so they sort last;
 //! 4. [`RadixSort::record`] (`key_bits`, stable), values = primitive indices: 31 bits and 4
@@ -98,6 +100,12 @@ pub(crate) struct LbvhBuild<'a> {
     /// all-ones key; when the Morton bits fill the key (a multiple of 3), the one Morton code
     /// equal to it (the far corner cell) is lowered into its neighbour's.
     pub key_bits: u32,
+    /// Centroid bounds the caller's pass merged while writing `aabbs` (buffer, first u32 word):
+    /// 6 words in the encoding of `shaders/centroid_bounds.wgsl`, which that pass must include
+    /// (same primitives counted, same words), so the build skips its `lbvh bounds` pass. `None`:
+    /// the build computes them. The words must be ready (zeroed, then merged) before the build's
+    /// passes run; the buffer needs STORAGE usage.
+    pub centroid_bounds: Option<(&'a wgpu::Buffer, u32)>,
 }
 
 /// Inputs and outputs of one refit: the same topology as a previous build, new boxes. Leaf `k`
@@ -142,8 +150,10 @@ struct Params {
     max_leaf: u32,
     /// Sort key bits (build only; refits leave it 0).
     key_bits: u32,
+    /// First centroid-bounds word in the buffer `lbvh_morton` binds at 2.
+    centroid_base: u32,
     /// Pads the uniform to a multiple of 16 bytes.
-    pad: [u32; 3],
+    pad: [u32; 2],
 }
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
@@ -256,7 +266,10 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
-        let src = include_str!("../../shaders/lbvh.wgsl");
+        let src = concat!(
+            include_str!("../../shaders/centroid_bounds.wgsl"),
+            include_str!("../../shaders/lbvh.wgsl")
+        );
         Lbvh {
             bounds: compute_pipeline(device, "lbvh bounds", src, "lbvh_bounds"),
             morton: compute_pipeline(device, "lbvh morton", src, "lbvh_morton"),
@@ -348,7 +361,8 @@ impl Lbvh {
                 flags: Self::flags(b.leaf_refs, b.bounds_out.is_some()),
                 max_leaf: effective_max_leaf(b.max_leaf, b.leaf_refs),
                 key_bits,
-                pad: [0; 3],
+                centroid_base: b.centroid_bounds.map_or(0, |(_, base)| base),
+                pad: [0; 2],
             },
         );
         let mut bind = Bindings {
@@ -359,12 +373,24 @@ impl Lbvh {
         // Where the sorted pairs end up (the sort's scratch after an odd number of passes).
         let sorted;
         if n >= 2 {
-            // Centroid-bounds header (zero is the identity of the encoded atomicMax).
-            rec.encoder.clear_buffer(&work, 0, Some(BOXES_AT * 4));
             Self::clear_arrivals(rec, &work, n);
-            let bg = bind.group(device, &self.bounds, BOUNDS_BINDINGS);
-            rec.dispatch("lbvh bounds", &self.bounds, &[&bg], groups(n));
-            let bg = bind.group(device, &self.morton, MORTON_BINDINGS);
+            let morton_bind = match b.centroid_bounds {
+                // The caller's words take the work buffer's place in the morton pass.
+                Some((given, _)) => Bindings {
+                    all: [
+                        &params, b.aabbs, given, &keys, &values, b.order, &topology, b.nodes,
+                        bounds_out,
+                    ],
+                },
+                None => {
+                    // Centroid-bounds header (zero is the identity of the encoded atomicMax).
+                    rec.encoder.clear_buffer(&work, 0, Some(BOXES_AT * 4));
+                    let bg = bind.group(device, &self.bounds, BOUNDS_BINDINGS);
+                    rec.dispatch("lbvh bounds", &self.bounds, &[&bg], groups(n));
+                    Bindings { all: bind.all }
+                }
+            };
+            let bg = morton_bind.group(device, &self.morton, MORTON_BINDINGS);
             rec.dispatch("lbvh morton", &self.morton, &[&bg], groups(n));
             sorted = self.sort.record(rec, &keys, &values, n, key_bits);
             bind.all[3] = &sorted.0;
@@ -401,7 +427,8 @@ impl Lbvh {
                 flags: Self::flags(r.leaf_refs, r.bounds_out.is_some()),
                 max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
                 key_bits: 0,
-                pad: [0; 3],
+                centroid_base: 0,
+                pad: [0; 2],
             },
         );
         // Keys and values are not used by the climb; the dummy fills their slots.
@@ -422,6 +449,34 @@ impl Lbvh {
         let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
         rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
     }
+}
+
+/// The centroid-bounds words (`shaders/centroid_bounds.wgsl`) of stored boxes `(min, max)`, as
+/// the GPU merges them: the CPU oracle of both passes that merge them.
+#[cfg(test)]
+pub(crate) fn cpu_centroid_bounds(boxes: impl Iterator<Item = ([f32; 3], [f32; 3])>) -> [u32; 6] {
+    // A float as a u32 that sorts like it (the shader's `enc`).
+    let enc = |x: f32| {
+        let b = x.to_bits();
+        if b & 0x8000_0000 != 0 {
+            !b
+        } else {
+            b | 0x8000_0000
+        }
+    };
+    let mut words = [0u32; 6];
+    for (lo, hi) in boxes {
+        let empty = lo.iter().chain(&hi).any(|v| v.is_nan()) || lo[0] > hi[0];
+        let c: [f32; 3] = std::array::from_fn(|a| lo[a] * 0.5 + hi[a] * 0.5);
+        if empty || c.iter().any(|v| !v.is_finite()) {
+            continue;
+        }
+        for a in 0..3 {
+            words[a] = words[a].max(!enc(c[a]));
+            words[3 + a] = words[3 + a].max(enc(c[a]));
+        }
+    }
+    words
 }
 
 #[cfg(test)]
@@ -628,6 +683,7 @@ mod tests {
                     max_leaf,
                     bounds_out: Some((&tree.bounds, bases.bounds)),
                     key_bits,
+                    centroid_bounds: None,
                 },
             )
         });
@@ -1008,6 +1064,7 @@ mod tests {
                         max_leaf: 1,
                         bounds_out: None,
                         key_bits: sets[i].1,
+                        centroid_bounds: None,
                     },
                 );
             }
@@ -1144,6 +1201,54 @@ mod tests {
     }
 
     #[test]
+    fn lbvh_given_centroid_bounds_build_the_same_tree() {
+        // The TLAS's instance pass merges the centroid bounds and the build skips its bounds
+        // pass: given the same words (here from the CPU oracle, at a non-zero base, in a buffer
+        // of their own), the build must make the same order and nodes, bit for bit.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        for (aabbs, refs) in [
+            (hard_soup(5003, 21), LeafRefs::PrimitiveIndex),
+            (clustered_boxes(900, 22), LeafRefs::SortedPosition),
+        ] {
+            let n = aabbs.len() as u32;
+            let (own, _) = build_and_check_with(&mut lbvh, &aabbs, refs, 1, TLAS_KEY_BITS);
+            let mut words = vec![SENTINEL; 3];
+            words.extend(cpu_centroid_bounds(aabbs.iter().copied()));
+            let given = buffer_with(bytemuck::cast_slice(&words));
+            let input = aabb_buffer(&aabbs, 0);
+            let nodes = sentinel_buffer(u64::from(Lbvh::node_count(n)) * 16);
+            let order = sentinel_buffer(u64::from(n));
+            let mut dispatches = 0;
+            run(|rec| {
+                lbvh.build(
+                    rec,
+                    &LbvhBuild {
+                        aabbs: &input,
+                        aabb_base: 0,
+                        count: n,
+                        nodes: &nodes,
+                        node_base: 0,
+                        order: &order,
+                        order_base: 0,
+                        topology: None,
+                        leaf_refs: refs,
+                        max_leaf: 1,
+                        bounds_out: None,
+                        key_bits: TLAS_KEY_BITS,
+                        centroid_bounds: Some((&given, 3)),
+                    },
+                );
+                dispatches = rec.dispatches;
+            });
+            assert_eq!(read_words(&order), own.order_words, "order, {n} primitives");
+            assert_eq!(read_words(&nodes), own.node_words, "nodes, {n} primitives");
+            assert_eq!(read_words(&given), words, "the given words are only read");
+            // Morton, sort (9 dispatches, or 1 up to 1024 primitives), hierarchy, climb.
+            assert_eq!(dispatches, if n > 1024 { 12 } else { 4 });
+        }
+    }
+
+    #[test]
     fn lbvh_build_dispatch_counts() {
         // A BLAS build of more than 1024 primitives: bounds, morton, 4 × 3 sort passes,
         // hierarchy, climb. A TLAS build: 3 sort passes and no copy back. Up to 1024: one sort
@@ -1175,6 +1280,7 @@ mod tests {
                         max_leaf: 1,
                         bounds_out: None,
                         key_bits: bits,
+                        centroid_bounds: None,
                     },
                 );
                 dispatches = rec.dispatches;
