@@ -3,15 +3,18 @@
 // src/scene/lbvh.rs, which documents the pass order.
 //
 // Entry points (all 256 invocations, 1-D workgroups split into 2-D by the Recorder):
-//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6]
-//   lbvh_morton    per primitive: 30-bit Morton key (empty: 1 << 30, sorts last), value = index
-//   (radix sort of (keys, values), 31 key bits, by the caller)
+//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6] (not run
+//                  when the caller's pass merged them: the TLAS's instance boxes)
+//   lbvh_morton    per primitive: Morton key of key_bits bits, min(key_bits / 3, 10) per axis
+//                  (empty: all ones, sorts last), value = index
+//   (radix sort of (keys, values), key_bits bits, by the caller)
 //   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
 //   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
 //                  refit share it)
 //
 // `work` layout (u32 words, all accessed atomically):
-//   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only)
+//   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only;
+//                                centroid_bounds.wgsl)
 //   [8, 8 + 6 (n-1))             inner node boxes during the climb (min.xyz, max.xyz bit patterns)
 //   [8 + 6 (n-1), 8 + 7 (n-1))   arrival counters of the inner nodes (cleared before the climb)
 //   [8 + 7 (n-1), 8 + 10 (n-1))  per inner node during the climb: SAH cost (f32 bits), primitive
@@ -38,6 +41,14 @@ struct Params {
     // Largest leaf the climb may make by collapsing a subtree (1: every leaf holds one
     // primitive). Only with sorted-position refs: a subtree's primitives are then one range.
     max_leaf: u32,
+    // Bits of the sort keys (3..=31; builds only): 31 for a BLAS, 24 for a TLAS, whose sort then
+    // needs one digit pass fewer (src/scene/lbvh.rs says why).
+    key_bits: u32,
+    // First of the 6 centroid-bounds words lbvh_morton reads from binding 2: 0 (work's header),
+    // or where the caller's pass merged them in the buffer bound there instead.
+    centroid_base: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -61,8 +72,6 @@ const NO_PARENT: u32 = 0xFFFFFFFFu;
 // workgroup's). Indices stay below 2^28, so the bit is free.
 const PARENT_LOCAL_BIT: u32 = 0x40000000u;
 const PARENT_INDEX_MASK: u32 = 0x0fffffffu;
-// Key of empty primitives: above every 30-bit Morton code, below 2^31 (the sort uses 31 bits).
-const EMPTY_KEY: u32 = 0x40000000u;
 // Empty box while climbing: the largest finite floats, so a union with it is exact for every
 // finite coordinate. Written out as the documented (+1e30, -1e30).
 const BIG: f32 = 3.40282347e38;
@@ -78,25 +87,6 @@ const COLLAPSED_BIT: u32 = 0x80000000u;
 
 fn linear_id(lid: u32, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid;
-}
-
-// NaN by bit pattern (the compiler may assume floats are never NaN).
-fn is_nan(x: f32) -> bool {
-    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
-}
-
-fn is_finite(x: f32) -> bool {
-    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
-}
-
-// A float as a u32 that sorts like the float (negative: all bits flipped; positive: sign set).
-fn enc(x: f32) -> u32 {
-    let b = bitcast<u32>(x);
-    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
-}
-
-fn dec(u: u32) -> f32 {
-    return bitcast<f32>(select(~u, u & 0x7fffffffu, (u & 0x80000000u) != 0u));
 }
 
 struct Box {
@@ -118,9 +108,7 @@ fn prim_box(prim: u32) -> Box {
     let i = 2u * (params.aabb_base + prim);
     let lo = aabbs[i].xyz;
     let hi = aabbs[i + 1u].xyz;
-    let nan = is_nan(lo.x) || is_nan(lo.y) || is_nan(lo.z) || is_nan(hi.x) || is_nan(hi.y)
-        || is_nan(hi.z);
-    if nan || lo.x > hi.x {
+    if stored_box_is_empty(lo, hi) {
         return empty_box();
     }
     return Box(lo, hi);
@@ -130,46 +118,29 @@ fn union_box(a: Box, b: Box) -> Box {
     return Box(min(a.lo, b.lo), max(a.hi, b.hi));
 }
 
-// Centroid without overflow for huge boxes; valid when every lane is finite.
 fn centroid(b: Box) -> vec3<f32> {
-    return b.lo * 0.5 + b.hi * 0.5;
-}
-
-fn centroid_valid(b: Box) -> bool {
-    let c = centroid(b);
-    return !is_empty(b) && is_finite(c.x) && is_finite(c.y) && is_finite(c.z);
+    return box_centroid(b.lo, b.hi);
 }
 
 // ---------------------------------------------------------------------------------------------
-// Scene bounds of the valid centroids: workgroup reduce in shared atomics, then one device
-// atomicMax per word. Min is reduced as max of ~enc so a zero-cleared buffer is the identity.
-
-var<workgroup> wg_bounds: array<atomic<u32>, 6>;
+// Scene bounds of the valid centroids (centroid_bounds.wgsl): workgroup reduce in shared atomics,
+// then one device atomicMax per word into work[0..6]. Skipped when the caller's primitive pass
+// merged them already (the TLAS's instance boxes): lbvh_morton then reads the caller's words.
 
 @compute @workgroup_size(256)
 fn lbvh_bounds(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = linear_id(lid, wid, nwg);
-    if lid < 6u {
-        atomicStore(&wg_bounds[lid], 0u);
-    }
+    wg_bounds_clear(lid);
     workgroupBarrier();
     // No early return: the barriers below must be reached by the whole workgroup.
     if i < params.count {
-        let b = prim_box(i);
-        if centroid_valid(b) {
-            let c = centroid(b);
-            atomicMax(&wg_bounds[0], ~enc(c.x));
-            atomicMax(&wg_bounds[1], ~enc(c.y));
-            atomicMax(&wg_bounds[2], ~enc(c.z));
-            atomicMax(&wg_bounds[3], enc(c.x));
-            atomicMax(&wg_bounds[4], enc(c.y));
-            atomicMax(&wg_bounds[5], enc(c.z));
-        }
+        let at = 2u * (params.aabb_base + i);
+        wg_bounds_add(aabbs[at].xyz, aabbs[at + 1u].xyz);
     }
     workgroupBarrier();
     if lid < 6u {
-        let v = atomicLoad(&wg_bounds[lid]);
+        let v = wg_bounds_word(lid);
         if v != 0u {
             atomicMax(&work[lid], v);
         }
@@ -189,16 +160,16 @@ fn spread3(v: u32) -> u32 {
     return x;
 }
 
-// Cell 0..1023 of c in [lo, hi]; a zero or non-finite extent, or a non-finite c, gives cell 0
+// Cell 0..cells-1 of c in [lo, hi]; a zero or non-finite extent, or a non-finite c, gives cell 0
 // (such primitives still get a leaf; only their place in the order is arbitrary).
-fn cell(c: f32, lo: f32, hi: f32) -> u32 {
+fn cell(c: f32, lo: f32, hi: f32, cells: f32) -> u32 {
     let extent = hi - lo;
-    let t = (c - lo) / extent * 1024.0;
+    let t = (c - lo) / extent * cells;
     // Finite first: only then is the comparison meaningful (NaN may be assumed away).
     if !is_finite(extent) || !(extent > 0.0) || !is_finite(t) {
         return 0u;
     }
-    return u32(clamp(t, 0.0, 1023.0));
+    return u32(clamp(t, 0.0, cells - 1.0));
 }
 
 @compute @workgroup_size(256)
@@ -209,15 +180,25 @@ fn lbvh_morton(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
         return;
     }
     let b = prim_box(i);
-    var key = EMPTY_KEY;
+    // Empty primitives: all ones, the largest key, so they sort last.
+    let empty_key = (1u << params.key_bits) - 1u;
+    var key = empty_key;
     if !is_empty(b) {
-        let lo = vec3<f32>(dec(~atomicLoad(&work[0])), dec(~atomicLoad(&work[1])),
-                           dec(~atomicLoad(&work[2])));
-        let hi = vec3<f32>(dec(atomicLoad(&work[3])), dec(atomicLoad(&work[4])),
-                           dec(atomicLoad(&work[5])));
+        // work[0..6], or the caller's words bound in its place (see lbvh_bounds).
+        let cb = params.centroid_base;
+        let lo = vec3<f32>(dec(~atomicLoad(&work[cb])), dec(~atomicLoad(&work[cb + 1u])),
+                           dec(~atomicLoad(&work[cb + 2u])));
+        let hi = vec3<f32>(dec(atomicLoad(&work[cb + 3u])), dec(atomicLoad(&work[cb + 4u])),
+                           dec(atomicLoad(&work[cb + 5u])));
         let c = centroid(b);
-        key = (spread3(cell(c.x, lo.x, hi.x)) << 2u) | (spread3(cell(c.y, lo.y, hi.y)) << 1u)
-            | spread3(cell(c.z, lo.z, hi.z));
+        // Exact power of two (at most 1024): the same cells as a literal would give.
+        let cells = f32(1u << min(params.key_bits / 3u, 10u));
+        let morton = (spread3(cell(c.x, lo.x, hi.x, cells)) << 2u)
+            | (spread3(cell(c.y, lo.y, hi.y, cells)) << 1u) | spread3(cell(c.z, lo.z, hi.z, cells));
+        // Below the empty key: only when the Morton bits fill the key (24 bits: 8 per axis) can
+        // they equal it, and then the far corner cell joins its neighbour, the next lower code.
+        // With a spare bit (31 = 3 x 10 + 1) no code is lowered.
+        key = min(morton, empty_key - 1u);
     }
     keys[i] = key;
     values[i] = i;

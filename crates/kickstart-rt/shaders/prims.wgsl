@@ -4,8 +4,8 @@
 
 struct Params {
     a: u32,     // triangle_aabbs: tri_base; gather: src_base; instance_aabbs: count
-    b: u32,     // triangle_aabbs: count;    gather: order_base
-    c: u32,     // triangle_aabbs: aabb_base; gather: count
+    b: u32,     // triangle_aabbs: count;    gather: order_base; instance_aabbs: flags
+    c: u32,     // triangle_aabbs: aabb_base; gather: count; instance_aabbs: first bounds word
     d: u32,     // gather: dst_base
 }
 
@@ -82,21 +82,26 @@ fn gather_triangles(
 }
 
 // ---- instance_aabbs -------------------------------------------------------------------------
+// Also merges the boxes' centroid bounds (centroid_bounds.wgsl) when asked (params.b bit 0, the
+// TLAS build): the LBVH then skips its own bounds pass over the boxes, a dependent dispatch
+// fewer. Params: a = count, b = flags, c = first centroid-bounds word.
 
 @group(0) @binding(1) var<storage, read> instances: array<InstanceGpu>;
 @group(0) @binding(2) var<storage, read> geometries: array<GeometryGpu>;
 @group(0) @binding(3) var<storage, read_write> instance_boxes: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> instance_centroid_bounds: array<atomic<u32>>;
 
-@compute @workgroup_size(64)
-fn instance_aabbs(
-    @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
-    let i = linear_id(wid, nwg, lid);
-    if i >= params.a {
-        return;
-    }
+// 256 rather than WG: a quarter of the device atomics on the six bounds words.
+const INSTANCE_WG: u32 = 256u;
+const MERGE_CENTROID_BOUNDS: u32 = 1u;
+
+struct StoredBox {
+    lo: vec4<f32>,
+    hi: vec4<f32>,
+}
+
+// World box of instance slot i as the TLAS stores it (the documented empty box when hidden).
+fn instance_box(i: u32) -> StoredBox {
     let inst = instances[i];
     var visible = (inst.flags & 1u) != 0u && inst.geometry < arrayLength(&geometries);
     var g: GeometryGpu;
@@ -106,9 +111,7 @@ fn instance_aabbs(
         visible = (g.flags & 1u) != 0u && g.tri_count > 0u && all(g.bounds_min.xyz <= g.bounds_max.xyz);
     }
     if !visible {
-        instance_boxes[2u * i] = EMPTY_MIN;
-        instance_boxes[2u * i + 1u] = EMPTY_MAX;
-        return;
+        return StoredBox(EMPTY_MIN, EMPTY_MAX);
     }
     let m = inst.object_to_world;
     var lo = vec3<f32>(3.0e38);
@@ -134,6 +137,31 @@ fn instance_aabbs(
         dot(abs(m[2].xyz), extent) + abs(m[2].w),
     );
     let pad = mag * 4.76837158203125e-7; // 2^-21
-    instance_boxes[2u * i] = vec4<f32>(lo - pad, 0.0);
-    instance_boxes[2u * i + 1u] = vec4<f32>(hi + pad, 0.0);
+    return StoredBox(vec4<f32>(lo - pad, 0.0), vec4<f32>(hi + pad, 0.0));
+}
+
+@compute @workgroup_size(256)
+fn instance_aabbs(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let i = (wid.y * nwg.x + wid.x) * INSTANCE_WG + lid;
+    wg_bounds_clear(lid);
+    workgroupBarrier();
+    // No early return: the barriers must be reached by the whole workgroup.
+    if i < params.a {
+        let b = instance_box(i);
+        instance_boxes[2u * i] = b.lo;
+        instance_boxes[2u * i + 1u] = b.hi;
+        // From the stored values, as the LBVH's own bounds pass would read them back.
+        wg_bounds_add(b.lo.xyz, b.hi.xyz);
+    }
+    workgroupBarrier();
+    if (params.b & MERGE_CENTROID_BOUNDS) != 0u && lid < 6u {
+        let v = wg_bounds_word(lid);
+        if v != 0u {
+            atomicMax(&instance_centroid_bounds[params.c + lid], v);
+        }
+    }
 }

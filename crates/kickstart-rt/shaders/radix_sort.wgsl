@@ -13,11 +13,12 @@
 //   3. `scatter`: every block scans the RADIX row totals itself (one workgroup scan, cheaper than
 //      another dispatch), ranks its elements stably by digit in workgroup memory and writes them
 //      out as runs of consecutive addresses.
-// `copy_back` moves the result back into the caller's buffers after an odd number of passes.
+// Passes alternate between the caller's buffers and the scratch; after an odd number the result
+// stays in the scratch and the host hands that to the caller (no copy dispatch).
 //
 // Workgroup linear index = wid.y * nwg.x + wid.x (the host splits big 1-D counts into 2-D).
 // Workgroup memory per entry point (WebGPU's default limit is 16384 bytes): histogram 8192,
-// scan_rows 1024, scatter 10240, copy_back 0.
+// scan_rows 1024, scatter 10240.
 
 const WG: u32 = 256u;
 // Elements per thread: a thread owns EPT consecutive elements of its block, so ranking
@@ -30,7 +31,7 @@ const RADIX: u32 = 256u;
 const SCAN_CHUNK: u32 = 1024u; // WG * 4
 
 struct Params {
-    // Elements to sort (histogram, scatter, copy).
+    // Elements to sort (histogram, scatter).
     count: u32,
     // Digit of this pass: (key >> shift) & ((1 << bits) - 1), bits in 1..=8.
     shift: u32,
@@ -301,21 +302,5 @@ fn scatter(
             keys_out[dest] = key[j];
             vals_out[dest] = wg_counters[BLOCK + i];
         }
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Copy (storage to storage, so the caller's buffers need no COPY_DST usage)
-
-@compute @workgroup_size(256)
-fn copy_back(
-    @builtin(workgroup_id) wid: vec3<u32>,
-    @builtin(num_workgroups) nwg: vec3<u32>,
-    @builtin(local_invocation_index) t: u32,
-) {
-    let i = (wid.y * nwg.x + wid.x) * WG + t;
-    if i < params.count {
-        keys_out[i] = keys_in[i];
-        vals_out[i] = vals_in[i];
     }
 }

@@ -921,6 +921,7 @@ impl ExecuteContext {
                 encoder,
                 timestamps: timestamps.as_mut(),
                 scope: "ingest",
+                dispatches: 0,
             };
             for (i, ((_, _, staged, _), comps)) in ingestions.iter().zip(&plans).enumerate() {
                 s.scene
@@ -988,6 +989,7 @@ impl ExecuteContext {
                 encoder,
                 timestamps: timestamps.as_mut(),
                 scope: "blas build",
+                dispatches: 0,
             };
             let mut done = 0;
             while done < build.max_blas_build_count {
@@ -1073,6 +1075,7 @@ impl ExecuteContext {
                 encoder,
                 timestamps: timestamps.as_mut(),
                 scope: "tlas build",
+                dispatches: 0,
             };
             s.scene.update_tlas(&mut rec, slots, refit)?;
             s.tlas_rebuild = false;
@@ -1111,6 +1114,7 @@ impl ExecuteContext {
                 encoder,
                 timestamps: timestamps.as_mut(),
                 scope: "cache allocation",
+                dispatches: 0,
             };
             s.cache
                 .record_allocations(&mut rec, s.scene.triangles.buffer(), &jobs, serial)?;
@@ -1123,6 +1127,7 @@ impl ExecuteContext {
                 encoder,
                 timestamps: timestamps.as_mut(),
                 scope: "",
+                dispatches: 0,
             };
             match task {
                 RenderTask::TraceRays(t) => {

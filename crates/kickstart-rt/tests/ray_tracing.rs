@@ -147,6 +147,118 @@ proptest! {
     }
 }
 
+/// A TLAS over thousands of instances (above the one-workgroup sort, so the radix sort of the
+/// TLAS's coarse 24-bit keys runs): a dense cluster whose instances share key cells, coincident
+/// instances (equal keys and equal hits: the lowest instance wins), instances spread wide, a few
+/// far away stretching the bounds, and empty slots (not participating, destroyed). Hits equal
+/// the CPU oracle's after the build and after a TLAS refit that moves some of them.
+#[test]
+fn thousands_of_clustered_and_coincident_instances_equal_the_cpu_oracle() {
+    let mut rng = Rng(2024);
+    let ctx = context(4);
+    let mut oracle = Oracle::default();
+    let mut c = ctx.create_task_container();
+    let meshes = [Mesh::icosphere(1), Mesh::soup(&mut rng, 60, 1.0)];
+    let geometries: Vec<GeometryHandle> = meshes
+        .iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let h = ctx.create_geometry_handle();
+            schedule_mesh(&mut c, h, &format!("small mesh {k}"), m);
+            oracle.geometry(h, m);
+            h
+        })
+        .collect();
+    let n = 2000usize;
+    let handles = ctx.create_instance_handles(n);
+    let mut inputs: Vec<InstanceInput> = Vec::with_capacity(n);
+    let small = |rng: &mut Rng, at: Vec3| {
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(rng.range(0.02, 0.1)),
+            Quat::from_axis_angle(rng.unit(), rng.range(0.0, std::f32::consts::TAU)),
+            at,
+        )
+    };
+    for k in 0..n {
+        let geometry = geometries[k % 2];
+        let mut input = match k % 10 {
+            // Coincident with the instance before it: same geometry, same transform, so equal
+            // keys and hits at equal t (the lower instance index must win).
+            0 if k > 0 => InstanceInput::new(inputs[k - 1].geometry, inputs[k - 1].transform),
+            // The dense cluster: 0.5 across in a scene thousands across.
+            1..=4 => {
+                let at = rng.v(-0.25, 0.25);
+                InstanceInput::new(geometry, small(&mut rng, at))
+            }
+            9 if k % 100 == 9 => InstanceInput::new(geometry, random_transform(&mut rng, 4000.0)),
+            _ => InstanceInput::new(geometry, random_transform(&mut rng, 40.0)),
+        };
+        if k % 13 == 7 {
+            input.participating_in_tlas = false;
+        }
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: handles[k],
+            input: input.clone(),
+        });
+        oracle.instance(handles[k], &input);
+        inputs.push(input);
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    // Destroyed instances leave empty slots in the rebuilt TLAS (the slot count stays).
+    for k in (5..n).step_by(97) {
+        ctx.destroy_instance_handle(handles[k]).unwrap();
+        oracle.remove_instance(handles[k]);
+    }
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask {
+        tlas_update: TlasUpdate::Rebuild,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+
+    // Rays into the cluster from nearby, and rays across the spread instances.
+    let rays_now = |rng: &mut Rng| -> Vec<GpuRay> {
+        let mut rays: Vec<GpuRay> = (0..200)
+            .map(|_| {
+                let o = rng.v(-1.0, 1.0);
+                ray(o, rng.v(-0.25, 0.25) - o, 0.0, f32::INFINITY)
+            })
+            .collect();
+        rays.extend(random_rays(rng, 200, 45.0));
+        rays
+    };
+    let rays = rays_now(&mut rng);
+    let hits = closest(&ctx, &rays);
+    let a = compare(&oracle, &rays, &hits, VISIBLE);
+    assert_agrees(&a, "clustered instances, rebuilt TLAS");
+    assert!(a.hits > 200, "the rays must hit things: {}", a.hits);
+
+    // Move every third live instance (a refit keeps the tree of the old keys).
+    let mut c = ctx.create_task_container();
+    for k in (0..n).step_by(3).filter(|k| (k + 92) % 97 != 0) {
+        let mut input = inputs[k].clone();
+        input.transform = Affine3A::from_translation(Vec3::new(0.1, -0.05, 0.2)) * input.transform;
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Update,
+            handle: handles[k],
+            input: input.clone(),
+        });
+        oracle.instance(handles[k], &input);
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        tlas_update: TlasUpdate::Refit,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    let hits = closest(&ctx, &rays);
+    assert_agrees(
+        &compare(&oracle, &rays, &hits, VISIBLE),
+        "clustered instances, refitted TLAS",
+    );
+}
+
 /// Rays from inside closed meshes, and rays through their shared edges and vertices (from inside
 /// and outside), never miss; rays lying in face planes and axis-aligned rays agree with the CPU.
 #[test]

@@ -13,7 +13,8 @@
 //! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
 //! Counts up to [`SMALL_SORT_MAX`] take a one-workgroup bitonic network over (key, position)
 //! instead: the same stable result in one dispatch, since small sorts (small BLASes, TLASes) are
-//! bound by dispatch count.
+//! bound by dispatch count. An odd number of digit passes ends in the scratch buffers, which
+//! [`RadixSort::record`] returns to the caller instead of copying them back (a dispatch saved).
 
 use super::shader::compute_pipeline;
 use super::Recorder;
@@ -31,8 +32,6 @@ const DIGIT_BITS: u32 = 8;
 const RADIX: u32 = 1 << DIGIT_BITS;
 /// Elements per workgroup in `histogram` / `scatter` (256 threads × 4). Must match `BLOCK`.
 const BLOCK: u32 = 1024;
-/// Threads per workgroup of `copy_back`.
-const COPY_WG: u32 = 256;
 
 /// Per-dispatch parameters; layout of `Params` in the shader.
 #[repr(C)]
@@ -55,7 +54,6 @@ pub(crate) struct RadixSort {
     histogram: wgpu::ComputePipeline,
     scan_rows: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
-    copy_back: wgpu::ComputePipeline,
     /// The one-workgroup path for counts up to [`SMALL_SORT_MAX`].
     small: wgpu::ComputePipeline,
     /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
@@ -73,7 +71,6 @@ impl RadixSort {
             histogram: pipeline("histogram"),
             scan_rows: pipeline("scan_rows"),
             scatter: pipeline("scatter"),
-            copy_back: pipeline("copy_back"),
             small: compute_pipeline(device, "radix sort (small)", SMALL_SOURCE, "sort_small"),
             keys_tmp: None,
             vals_tmp: None,
@@ -81,19 +78,27 @@ impl RadixSort {
         }
     }
 
-    /// Sorts `count` pairs in place: `keys[0..count]` and `values[0..count]` (whole buffers
-    /// bound at offset 0; STORAGE usage is all they need) ascending by key, stable (equal keys
-    /// keep their input order, so their values do too).
+    /// Sorts the `count` pairs `keys[0..count]`, `values[0..count]` (whole buffers bound at
+    /// offset 0; STORAGE usage is all they need) ascending by key, stable (equal keys keep their
+    /// input order, so their values do too), into the returned buffers (see below).
     ///
     /// Only the low `key_bits` bits of each key are sorted on: keys must be `< 2^key_bits`
     /// (bits above are carried along but do not affect the order). `key_bits` is clamped to
     /// 1..=32 except that 0 sorts nothing; fewer bits mean fewer passes (`ceil(key_bits / 8)`
-    /// of 3 dispatches each, plus one copy dispatch when that is odd). `count` ≤ 1 records
-    /// nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
+    /// of 3 dispatches each). `count` ≤ 1 records nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
     /// with default limits).
     ///
     /// Everything is recorded into `rec.encoder` (no submit); the scratch buffers stay in use
     /// until that work has run, so record sorts with one `RadixSort` sequentially.
+    ///
+    /// Returns the buffers holding the sorted pairs. Each digit pass moves the pairs between the
+    /// caller's buffers and this sorter's scratch, so after an odd number of passes they are in
+    /// the scratch: no copy back is recorded (it would cost a dispatch), the caller binds the
+    /// returned buffers instead. The scratch stays as sorted until the next sort recorded with
+    /// this `RadixSort` runs, so read it before recording another sort (the returned handles
+    /// keep the buffers alive even if a later sort replaces the scratch). After an even number
+    /// of passes, the one-workgroup path, or a sort of nothing, they are `keys` and `values`.
+    #[must_use = "the sorted pairs may be in the returned scratch buffers, not in `keys`"]
     pub fn record(
         &mut self,
         rec: &mut Recorder<'_>,
@@ -101,9 +106,10 @@ impl RadixSort {
         values: &wgpu::Buffer,
         count: u32,
         key_bits: u32,
-    ) {
+    ) -> (wgpu::Buffer, wgpu::Buffer) {
+        let in_place = (keys.clone(), values.clone());
         if count <= 1 || key_bits == 0 {
-            return;
+            return in_place;
         }
         if count <= SMALL_SORT_MAX {
             // Same result (stable, ascending) in one dispatch instead of 3 per digit pass.
@@ -127,7 +133,7 @@ impl RadixSort {
                 ],
             });
             rec.dispatch("radix sort (small)", &self.small, &[&bg], 1);
-            return;
+            return in_place;
         }
         let key_bits = key_bits.min(32);
         let nblocks = count.div_ceil(BLOCK);
@@ -135,7 +141,7 @@ impl RadixSort {
         let (Some(keys_tmp), Some(vals_tmp), Some(hist)) =
             (&self.keys_tmp, &self.vals_tmp, &self.hist)
         else {
-            return; // reserve always creates them
+            return in_place; // reserve always creates them
         };
 
         let params = Params {
@@ -202,21 +208,9 @@ impl RadixSort {
             );
         }
         if passes % 2 == 1 {
-            // A storage-to-storage copy rather than copy_buffer_to_buffer: the caller's buffers
-            // need no COPY_DST usage.
-            let uniform = rec.uniform("radix sort copy params", &params);
-            let group = bind(
-                &self.copy_back,
-                &uniform,
-                &[(1, keys_tmp), (2, vals_tmp), (3, keys), (4, values)],
-            );
-            let workgroups = count.div_ceil(COPY_WG);
-            rec.dispatch(
-                "radix sort copy back",
-                &self.copy_back,
-                &[&group],
-                workgroups,
-            );
+            (keys_tmp.clone(), vals_tmp.clone())
+        } else {
+            in_place
         }
     }
 
@@ -235,7 +229,8 @@ impl RadixSort {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: u64::from(entries.max(1)) * 4,
-                usage: wgpu::BufferUsages::STORAGE,
+                // COPY_SRC: a result left in the scratch can be read back (tests, tools).
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             })
         };
@@ -290,9 +285,22 @@ mod tests {
         };
         let kb = testing::buffer_with(bytemuck::cast_slice(&pad(keys)));
         let vb = testing::buffer_with(bytemuck::cast_slice(&pad(&values)));
-        testing::run(|rec| sorter.record(rec, &kb, &vb, n as u32, key_bits));
-        let got_keys = to_u32s(&testing::read_back(&kb, 0, (n as u64 + 1) * 4));
-        let got_vals = to_u32s(&testing::read_back(&vb, 0, (n as u64 + 1) * 4));
+        let mut sorted = None;
+        testing::run(|rec| sorted = Some(sorter.record(rec, &kb, &vb, n as u32, key_bits)));
+        let (sk, sv) = sorted.expect("recorded");
+        // An odd number of digit passes leaves the pairs in the scratch (no copy back); an even
+        // number, the one-workgroup path and no sort at all leave them in the caller's buffers.
+        let passes = key_bits.min(32).div_ceil(DIGIT_BITS);
+        let in_scratch = n as u32 > SMALL_SORT_MAX && passes % 2 == 1;
+        assert_eq!(
+            (sk != kb, sv != vb),
+            (in_scratch, in_scratch),
+            "where the pairs are, n = {n}, key_bits = {key_bits}"
+        );
+        // At least one word: a read-back of nothing is not a copy wgpu accepts.
+        let words = (n as u64).max(1) * 4;
+        let got_keys = to_u32s(&testing::read_back(&sk, 0, words));
+        let got_vals = to_u32s(&testing::read_back(&sv, 0, words));
 
         let mut expected: Vec<(u32, u32)> = keys.iter().copied().zip(values).collect();
         let mask = u32::MAX.checked_shr(32 - key_bits.min(32)).unwrap_or(0);
@@ -308,8 +316,11 @@ mod tests {
             exp_vals[..],
             "values, n = {n}, key_bits = {key_bits}"
         );
-        assert_eq!(got_keys[n], 0xdead_beef, "wrote past count");
-        assert_eq!(got_vals[n], 0xdead_beef, "wrote past count");
+        // The caller's buffers past `count` are never written (in the scratch they are
+        // unspecified).
+        let tail = |b: &wgpu::Buffer| to_u32s(&testing::read_back(b, n as u64 * 4, 4));
+        assert_eq!(tail(&kb), [0xdead_beef], "wrote past count");
+        assert_eq!(tail(&vb), [0xdead_beef], "wrote past count");
     }
 
     fn check(keys: &[u32], key_bits: u32) {
@@ -371,7 +382,7 @@ mod tests {
 
     #[test]
     fn radix_sort_fewer_key_bits() {
-        // 6, 5 and 1 bits: one pass (copy back), a single nibble split; 13 bits: two passes, the
+        // 6, 5 and 1 bits: one pass (ends in the scratch), a single nibble split; 13 bits: two passes, the
         // last of 5 bits; 30 bits: four.
         for (bits, n) in [(6, 10_000), (5, 3000), (13, 7000), (1, 2500), (30, 70_000)] {
             check(&random_keys(n, bits, u64::from(bits) * 7 + 3), bits);
@@ -381,7 +392,7 @@ mod tests {
     #[test]
     fn radix_sort_key_bits_not_a_multiple_of_8() {
         // 31 (the LBVH's): 4 passes, the last of 7 bits. 12: 8 + 4, the last pass a single
-        // nibble split. 20: 3 passes (copy back), the last of 4 bits. 7: one pass (copy back).
+        // nibble split. 20: 3 passes (ending in the scratch), the last of 4 bits. 7: one pass.
         // 9: a last pass of 1 bit. Sizes not multiples of the block: a partial last block.
         for (bits, n) in [
             (31, 50_001),
@@ -400,6 +411,28 @@ mod tests {
     }
 
     #[test]
+    fn radix_sort_tlas_key_bits_end_in_the_scratch() {
+        // The LBVH's TLAS keys: 24 bits (8 Morton bits per axis; empty primitives all ones),
+        // 3 passes whose result stays in the scratch; 22 bits, a last pass of 6 bits. One sorter
+        // for all sizes, so a later sort overwrites (or grows) the scratch an earlier one
+        // returned.
+        let mut sorter = RadixSort::new(&testing::gpu().device);
+        for (i, (n, bits)) in [(1025usize, 24), (4096, 24), (10_007, 22), (100_003, 24)]
+            .into_iter()
+            .enumerate()
+        {
+            let mut keys = random_keys(n, bits, 50 + i as u64);
+            // Every 9th the "empty" key, which must sort after every other key.
+            for k in keys.iter_mut().step_by(9) {
+                *k = (1 << bits) - 1;
+            }
+            check_with(&mut sorter, &keys, bits);
+        }
+        check_with(&mut sorter, &vec![(1 << 24) - 1; 3_001], 24);
+        check_with(&mut sorter, &vec![0; 2_048], 24);
+    }
+
+    #[test]
     fn radix_sort_bits_above_key_bits_are_carried_not_sorted() {
         // Random high bits over 12-bit sort keys: the order is by the low 12 bits alone (stable),
         // the keys come back whole.
@@ -409,7 +442,7 @@ mod tests {
             .map(|k| k | (rng.next() << 12))
             .collect();
         check(&keys, 12);
-        // Same with 8 bits (one pass, copy back) and 16 bits (two full passes).
+        // Same with 8 bits (one pass, ending in the scratch) and 16 bits (two full passes).
         let keys: Vec<u32> = (0..5_000u32).map(|i| rng.next() ^ (i % 3)).collect();
         check(&keys, 8);
         check(&keys, 16);
@@ -473,7 +506,8 @@ mod tests {
         {
             let mut rec = crate::gpu::Recorder::new(&g.device, &mut enc);
             for _ in 0..reps {
-                sorter.record(&mut rec, &kb, &vb, n as u32, 30);
+                // 4 passes: the pairs end in `kb`/`vb` again.
+                let _ = sorter.record(&mut rec, &kb, &vb, n as u32, 30);
             }
         }
         let commands = enc.finish();

@@ -82,6 +82,9 @@ pub(crate) struct Recorder<'a> {
     pub timestamps: Option<&'a mut Timestamps>,
     /// Attributes the following passes' timings ("ingest", "blas build", …).
     pub scope: &'static str,
+    /// Compute passes recorded so far. The builds are designed around their count of dependent
+    /// dispatches (each costs a gap on a large GPU), so tests assert it.
+    pub dispatches: u32,
 }
 
 impl<'a> Recorder<'a> {
@@ -93,6 +96,7 @@ impl<'a> Recorder<'a> {
             encoder,
             timestamps: None,
             scope: "",
+            dispatches: 0,
         }
     }
 
@@ -108,6 +112,7 @@ impl<'a> Recorder<'a> {
         if workgroups == 0 {
             return;
         }
+        self.dispatches += 1;
         let scope = self.scope;
         let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
         let mut pass = self
@@ -135,6 +140,7 @@ impl<'a> Recorder<'a> {
         if x == 0 || y == 0 {
             return;
         }
+        self.dispatches += 1;
         let scope = self.scope;
         let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
         let mut pass = self

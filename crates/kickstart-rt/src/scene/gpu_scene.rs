@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
-use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs};
+use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS};
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::Prims;
 use crate::staging::{StagingBuffer, StagingPool};
@@ -213,6 +213,9 @@ struct Tlas {
     order: wgpu::Buffer,
     topology: wgpu::Buffer,
     aabbs: wgpu::Buffer,
+    /// Centroid bounds of the instance boxes (6 u32 words), merged by the instance-box pass
+    /// of a build for the LBVH, which then skips its own bounds pass.
+    centroid_bounds: wgpu::Buffer,
     /// Instance slots the buffers hold.
     capacity: u32,
     /// Instance slots of the last build (0 before the first).
@@ -271,6 +274,7 @@ impl GpuScene {
                 order: storage(device, "kickstart-rt TLAS order", 4),
                 topology: storage(device, "kickstart-rt TLAS topology", 4),
                 aabbs: storage(device, "kickstart-rt TLAS instance boxes", AABB_BYTES),
+                centroid_bounds: storage(device, "kickstart-rt TLAS centroid bounds", 6 * 4),
                 capacity: 0,
                 slots: 0,
                 built: false,
@@ -306,6 +310,7 @@ impl GpuScene {
             + self.tlas.order.size()
             + self.tlas.topology.size()
             + self.tlas.aabbs.size()
+            + self.tlas.centroid_bounds.size()
     }
 
     /// Releases pool ranges no in-flight task can read.
@@ -508,6 +513,8 @@ impl GpuScene {
                 leaf_refs: LeafRefs::SortedPosition,
                 max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                key_bits: BLAS_KEY_BITS,
+                centroid_bounds: None,
             },
         );
         prims.gather_triangles(
@@ -623,12 +630,15 @@ impl GpuScene {
         }
         let (prims, lbvh) = self.passes.build(&self.device);
         rec.scope = if refit { "tlas refit" } else { "tlas build" };
+        // A refit keeps the tree and needs no centroid bounds.
+        let centroid_bounds = (!refit).then_some((&self.tlas.centroid_bounds, 0));
         prims.instance_aabbs(
             rec,
             &self.instance_table.buffer,
             &self.geometry_table.buffer,
             slots,
             &self.tlas.aabbs,
+            centroid_bounds,
         );
         if refit {
             lbvh.refit(
@@ -663,6 +673,8 @@ impl GpuScene {
                     leaf_refs: LeafRefs::PrimitiveIndex,
                     max_leaf: 1,
                     bounds_out: None,
+                    key_bits: TLAS_KEY_BITS,
+                    centroid_bounds,
                 },
             );
             self.tlas.refits_since_rebuild = 0;

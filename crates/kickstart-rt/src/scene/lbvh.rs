@@ -2,12 +2,18 @@
 //! layouts: `docs/ray-tracing-core.md` (AABB input, BVH2 node format).
 //!
 //! Build, all recorded into the caller's encoder:
-//! 1. clear the centroid-bounds words and the arrival counters (`clear_buffer`);
-//! 2. `lbvh bounds`: bounds of the valid centroids (workgroup reduce, then device atomics);
-//! 3. `lbvh morton`: 30-bit Morton keys; empty primitives get `1 << 30` so they sort last;
-//! 4. [`RadixSort::record`] (31 key bits, stable), values = primitive indices;
-//! 5. `lbvh hierarchy`: `order`, children and parents (Karras, with the index tie-break); a
-//!    parent ref says whether the parent's leaves all lie in one climb workgroup's block;
+//! 1. clear the arrival counters, and the centroid-bounds words when step 2 runs (`clear_buffer`);
+//! 2. `lbvh bounds`: bounds of the valid centroids (workgroup reduce, then device atomics), unless
+//!    the caller's primitive pass merged them already ([`LbvhBuild::centroid_bounds`]: the
+//!    TLAS's instance boxes, one dependent dispatch fewer);
+//! 3. `lbvh morton`: Morton keys of [`LbvhBuild::key_bits`] bits (`min(key_bits / 3, 10)`
+//!    bits per axis); empty primitives get the all-ones key so they sort last;
+//! 4. [`RadixSort::record`] (`key_bits`, stable), values = primitive indices: 31 bits and 4
+//!    digit passes for a BLAS ([`BLAS_KEY_BITS`]), 24 bits and 3 passes for a TLAS
+//!    ([`TLAS_KEY_BITS`]), whose sorted pairs stay in the sort's scratch (no copy back);
+//! 5. `lbvh hierarchy`: `order`, children and parents (Karras, with the index tie-break, so
+//!    equal keys are fine); a parent ref says whether the parent's leaves all lie in one climb
+//!    workgroup's block;
 //! 6. `lbvh climb`: bottom-up boxes without waiting on anyone (see the shader), writes the nodes
 //!    and `bounds_out`. Nodes within one workgroup's block are joined in workgroup memory; only
 //!    the few that straddle blocks pay device-scope fences. With `max_leaf` > 1 it also
@@ -25,8 +31,23 @@ use crate::gpu::radix_sort::RadixSort;
 
 /// Invocations per workgroup of every LBVH pass (the shader's `WG`).
 const WORKGROUP: u32 = 256;
-/// Sort key width: 30 Morton bits plus the "empty" bit 30.
-const KEY_BITS: u32 = 31;
+/// Sort key bits of a BLAS build: 10 Morton bits per axis and a spare bit above them, so the
+/// all-ones "empty" key is above every Morton code (4 digit passes of the sort). A BLAS has up
+/// to millions of triangles, which need the fine grid to be ordered well.
+pub(crate) const BLAS_KEY_BITS: u32 = 31;
+/// Sort key bits of a TLAS build: 8 Morton bits per axis, 3 digit passes instead of 4, and an
+/// odd pass count leaves the result in the sort's scratch, so a TLAS build records 9 sort
+/// dispatches instead of 12 (each a dependent pass: on the H100 about 10 µs of gap plus its own
+/// time). A TLAS has far fewer primitives than a large BLAS (2^24 cells, 168 per instance at
+/// 100k instances), and instances sharing a cell are still split, by index (the hierarchy's
+/// tie-break), so the tree stays valid and only its order within a cell is arbitrary. The cost
+/// is where instances crowd into few cells: a dense cluster in a scene stretched by a far
+/// instance gets a worse tree than with 10 bits per axis (3.6 times the SAH cost below the root
+/// in the `lbvh_tlas_keys_*` test, 10 times with 7 bits per axis and the "empty" bit).
+pub(crate) const TLAS_KEY_BITS: u32 = 24;
+/// Sort key bits accepted: 1 Morton bit per axis at least, and the "empty" key `2^bits - 1`
+/// must fit a u32 shift.
+const KEY_BITS_RANGE: std::ops::RangeInclusive<u32> = 3..=31;
 /// Params flag: leaf refs are primitive indices.
 const FLAG_PRIMITIVE_REFS: u32 = 1;
 /// Params flag: write the root box to `bounds_out`.
@@ -73,6 +94,18 @@ pub(crate) struct LbvhBuild<'a> {
     pub max_leaf: u32,
     /// Output: the root box as two `vec4` (min, max; `w` = 0) at this vec4 index.
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
+    /// Bits of the sort keys (clamped to 3..=31): `min(key_bits / 3, 10)` Morton bits per axis,
+    /// and the sort takes one pass per 8 bits, so fewer bits cost fewer dispatches and give a
+    /// coarser spatial order ([`BLAS_KEY_BITS`], [`TLAS_KEY_BITS`]). Empty primitives get the
+    /// all-ones key; when the Morton bits fill the key (a multiple of 3), the one Morton code
+    /// equal to it (the far corner cell) is lowered into its neighbour's.
+    pub key_bits: u32,
+    /// Centroid bounds the caller's pass merged while writing `aabbs` (buffer, first u32 word):
+    /// 6 words in the encoding of `shaders/centroid_bounds.wgsl`, which that pass must include
+    /// (same primitives counted, same words), so the build skips its `lbvh bounds` pass. `None`:
+    /// the build computes them. The words must be ready (zeroed, then merged) before the build's
+    /// passes run; the buffer needs STORAGE usage.
+    pub centroid_bounds: Option<(&'a wgpu::Buffer, u32)>,
 }
 
 /// Inputs and outputs of one refit: the same topology as a previous build, new boxes. Leaf `k`
@@ -115,6 +148,12 @@ struct Params {
     bounds_base: u32,
     flags: u32,
     max_leaf: u32,
+    /// Sort key bits (build only; refits leave it 0).
+    key_bits: u32,
+    /// First centroid-bounds word in the buffer `lbvh_morton` binds at 2.
+    centroid_base: u32,
+    /// Pads the uniform to a multiple of 16 bytes.
+    pad: [u32; 2],
 }
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
@@ -227,7 +266,10 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
-        let src = include_str!("../../shaders/lbvh.wgsl");
+        let src = concat!(
+            include_str!("../../shaders/centroid_bounds.wgsl"),
+            include_str!("../../shaders/lbvh.wgsl")
+        );
         Lbvh {
             bounds: compute_pipeline(device, "lbvh bounds", src, "lbvh_bounds"),
             morton: compute_pipeline(device, "lbvh morton", src, "lbvh_morton"),
@@ -304,6 +346,9 @@ impl Lbvh {
             }
         };
         let (bounds_out, bounds_base) = b.bounds_out.unwrap_or((&dummy, 0));
+        let key_bits = b
+            .key_bits
+            .clamp(*KEY_BITS_RANGE.start(), *KEY_BITS_RANGE.end());
         let params = rec.uniform(
             "lbvh params",
             &Params {
@@ -315,22 +360,41 @@ impl Lbvh {
                 bounds_base,
                 flags: Self::flags(b.leaf_refs, b.bounds_out.is_some()),
                 max_leaf: effective_max_leaf(b.max_leaf, b.leaf_refs),
+                key_bits,
+                centroid_base: b.centroid_bounds.map_or(0, |(_, base)| base),
+                pad: [0; 2],
             },
         );
-        let bind = Bindings {
+        let mut bind = Bindings {
             all: [
                 &params, b.aabbs, &work, &keys, &values, b.order, &topology, b.nodes, bounds_out,
             ],
         };
+        // Where the sorted pairs end up (the sort's scratch after an odd number of passes).
+        let sorted;
         if n >= 2 {
-            // Centroid-bounds header (zero is the identity of the encoded atomicMax).
-            rec.encoder.clear_buffer(&work, 0, Some(BOXES_AT * 4));
             Self::clear_arrivals(rec, &work, n);
-            let bg = bind.group(device, &self.bounds, BOUNDS_BINDINGS);
-            rec.dispatch("lbvh bounds", &self.bounds, &[&bg], groups(n));
-            let bg = bind.group(device, &self.morton, MORTON_BINDINGS);
+            let morton_bind = match b.centroid_bounds {
+                // The caller's words take the work buffer's place in the morton pass.
+                Some((given, _)) => Bindings {
+                    all: [
+                        &params, b.aabbs, given, &keys, &values, b.order, &topology, b.nodes,
+                        bounds_out,
+                    ],
+                },
+                None => {
+                    // Centroid-bounds header (zero is the identity of the encoded atomicMax).
+                    rec.encoder.clear_buffer(&work, 0, Some(BOXES_AT * 4));
+                    let bg = bind.group(device, &self.bounds, BOUNDS_BINDINGS);
+                    rec.dispatch("lbvh bounds", &self.bounds, &[&bg], groups(n));
+                    Bindings { all: bind.all }
+                }
+            };
+            let bg = morton_bind.group(device, &self.morton, MORTON_BINDINGS);
             rec.dispatch("lbvh morton", &self.morton, &[&bg], groups(n));
-            self.sort.record(rec, &keys, &values, n, KEY_BITS);
+            sorted = self.sort.record(rec, &keys, &values, n, key_bits);
+            bind.all[3] = &sorted.0;
+            bind.all[4] = &sorted.1;
         }
         if n >= 1 {
             let bg = bind.group(device, &self.hierarchy, HIERARCHY_BINDINGS);
@@ -362,6 +426,9 @@ impl Lbvh {
                 bounds_base,
                 flags: Self::flags(r.leaf_refs, r.bounds_out.is_some()),
                 max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
+                key_bits: 0,
+                centroid_base: 0,
+                pad: [0; 2],
             },
         );
         // Keys and values are not used by the climb; the dummy fills their slots.
@@ -382,6 +449,34 @@ impl Lbvh {
         let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
         rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
     }
+}
+
+/// The centroid-bounds words (`shaders/centroid_bounds.wgsl`) of stored boxes `(min, max)`, as
+/// the GPU merges them: the CPU oracle of both passes that merge them.
+#[cfg(test)]
+pub(crate) fn cpu_centroid_bounds(boxes: impl Iterator<Item = ([f32; 3], [f32; 3])>) -> [u32; 6] {
+    // A float as a u32 that sorts like it (the shader's `enc`).
+    let enc = |x: f32| {
+        let b = x.to_bits();
+        if b & 0x8000_0000 != 0 {
+            !b
+        } else {
+            b | 0x8000_0000
+        }
+    };
+    let mut words = [0u32; 6];
+    for (lo, hi) in boxes {
+        let empty = lo.iter().chain(&hi).any(|v| v.is_nan()) || lo[0] > hi[0];
+        let c: [f32; 3] = std::array::from_fn(|a| lo[a] * 0.5 + hi[a] * 0.5);
+        if empty || c.iter().any(|v| !v.is_finite()) {
+            continue;
+        }
+        for a in 0..3 {
+            words[a] = words[a].max(!enc(c[a]));
+            words[3 + a] = words[3 + a].max(enc(c[a]));
+        }
+    }
+    words
 }
 
 #[cfg(test)]
@@ -544,6 +639,17 @@ mod tests {
         leaf_refs: LeafRefs,
         max_leaf: u32,
     ) -> (GpuTree, f64) {
+        build_and_check_with(lbvh, aabbs, leaf_refs, max_leaf, BLAS_KEY_BITS)
+    }
+
+    /// [`build_and_check_leaves`] with sort keys of `key_bits` bits.
+    fn build_and_check_with(
+        lbvh: &mut Lbvh,
+        aabbs: &[Aabb],
+        leaf_refs: LeafRefs,
+        max_leaf: u32,
+        key_bits: u32,
+    ) -> (GpuTree, f64) {
         let bases = BASES;
         let n = aabbs.len() as u32;
         let node_count = u64::from(Lbvh::node_count(n));
@@ -576,6 +682,8 @@ mod tests {
                     leaf_refs,
                     max_leaf,
                     bounds_out: Some((&tree.bounds, bases.bounds)),
+                    key_bits,
+                    centroid_bounds: None,
                 },
             )
         });
@@ -925,17 +1033,22 @@ mod tests {
     }
 
     #[test]
-    fn lbvh_two_builds_in_one_encoder_grow_scratch() {
-        // The second build needs more scratch than the first: both must be correct.
+    fn lbvh_three_builds_in_one_encoder_grow_scratch() {
+        // Each build needs more scratch than the one before, and the TLAS-key builds (3 sort
+        // passes) leave their sorted pairs in the sort's scratch, which the next build's sort
+        // overwrites or replaces: every build must still be correct.
         let mut lbvh = Lbvh::new(&gpu().device);
-        let small = hard_soup(300, 1);
-        let large = hard_soup(5000, 2);
-        let n = [small.len() as u32, large.len() as u32];
-        let inputs = [aabb_buffer(&small, 0), aabb_buffer(&large, 0)];
+        let sets = [
+            (hard_soup(300, 1), BLAS_KEY_BITS),
+            (hard_soup(5000, 2), TLAS_KEY_BITS),
+            (hard_soup(9000, 3), TLAS_KEY_BITS),
+        ];
+        let n = sets.each_ref().map(|(a, _)| a.len() as u32);
+        let inputs = sets.each_ref().map(|(a, _)| aabb_buffer(a, 0));
         let nodes = n.map(|n| sentinel_buffer(u64::from(Lbvh::node_count(n)) * 16));
         let order = n.map(|n| sentinel_buffer(u64::from(n)));
         run(|rec| {
-            for i in 0..2 {
+            for i in 0..sets.len() {
                 lbvh.build(
                     rec,
                     &LbvhBuild {
@@ -950,13 +1063,15 @@ mod tests {
                         leaf_refs: LeafRefs::SortedPosition,
                         max_leaf: 1,
                         bounds_out: None,
+                        key_bits: sets[i].1,
+                        centroid_bounds: None,
                     },
                 );
             }
         });
-        // Scratch covers the larger build (work words, keys, values, topology).
-        assert!(lbvh.scratch_bytes() >= 4 * (10 * 5000 + 2 * 5000 + 4 * 5000));
-        for (i, aabbs) in [&small, &large].into_iter().enumerate() {
+        // Scratch covers the largest build (work words, keys, values, topology).
+        assert!(lbvh.scratch_bytes() >= 4 * (10 * 9000 + 2 * 9000 + 4 * 9000));
+        for (i, (aabbs, _)) in sets.iter().enumerate() {
             check_tree(
                 aabbs,
                 &read_words(&nodes[i]),
@@ -965,6 +1080,212 @@ mod tests {
                 true,
                 1,
             );
+        }
+    }
+
+    /// The sort key `lbvh_morton` makes for cells `c` with `key_bits`: the Morton code of
+    /// `min(key_bits / 3, 10)` bits per axis (x in the highest bit of each triple), below the
+    /// all-ones key of empty primitives.
+    fn morton_key(c: [u32; 3], key_bits: u32) -> u32 {
+        let mut key = 0;
+        for b in 0..(key_bits / 3).min(10) {
+            for (axis, shift) in [(0, 2), (1, 1), (2, 0)] {
+                key |= ((c[axis] >> b) & 1) << (3 * b + shift);
+            }
+        }
+        key.min(empty_key(key_bits) - 1)
+    }
+
+    fn empty_key(key_bits: u32) -> u32 {
+        (1 << key_bits) - 1
+    }
+
+    /// Boxes whose centroids sit at cell centres of the grid of `key_bits` keys over
+    /// `[0, cells]` per axis (two anchors at the corners fix the centroid bounds), so every cell
+    /// is exact in f32 and the GPU's keys can be predicted: random cells, many primitives
+    /// sharing a cell (equal keys), empty ones, and the far corner cell (whose code is lowered
+    /// when the Morton bits fill the key). Returns the boxes and each one's expected key.
+    fn grid_boxes(n: usize, key_bits: u32, seed: u64) -> (Vec<Aabb>, Vec<u32>) {
+        let mut rng = Rng(seed);
+        let g = 1u32 << (key_bits / 3).min(10);
+        let half = 0.25f32;
+        let at = |c: [f32; 3]| -> Aabb { (c.map(|v| v - half), c.map(|v| v + half)) };
+        let mut boxes = vec![at([0.0; 3]), at([g as f32; 3])];
+        let mut keys = vec![0, morton_key([g - 1; 3], key_bits)];
+        let shared: Vec<[u32; 3]> = (0..5)
+            .map(|_| [0; 3].map(|_| rng.next_u32() % g))
+            .chain([[g - 1, g - 1, g - 2], [g - 1; 3]]) // the corner and its Morton neighbour
+            .collect();
+        while boxes.len() < n {
+            let cell = match rng.next_u32() % 8 {
+                0 => {
+                    boxes.push(if boxes.len() % 2 == 0 {
+                        EMPTY
+                    } else {
+                        ([f32::NAN, 0.0, 0.0], [1.0; 3])
+                    });
+                    keys.push(empty_key(key_bits));
+                    continue;
+                }
+                1..=2 => shared[rng.next_u32() as usize % shared.len()],
+                _ => [0; 3].map(|_| rng.next_u32() % g),
+            };
+            boxes.push(at(cell.map(|c| c as f32 + 0.5)));
+            keys.push(morton_key(cell, key_bits));
+        }
+        (boxes, keys)
+    }
+
+    #[test]
+    fn lbvh_order_is_the_stable_sort_of_the_morton_keys_of_every_key_width() {
+        // TLAS keys (24 bits, 8 per axis: 3 sort passes ending in the sort's scratch, the
+        // corner cell lowered), BLAS keys (31 bits, 10 per axis and a spare bit: 4 passes),
+        // 4 bits (one pass), and the one-workgroup sort below 1025 primitives: the order must be
+        // exactly the stable sort of the predicted keys (equal keys in primitive order, empties
+        // last).
+        let mut lbvh = Lbvh::new(&gpu().device);
+        for (n, bits, refs) in [
+            (6000, TLAS_KEY_BITS, LeafRefs::PrimitiveIndex),
+            (4100, BLAS_KEY_BITS, LeafRefs::SortedPosition),
+            (3000, 4, LeafRefs::PrimitiveIndex),
+            (900, TLAS_KEY_BITS, LeafRefs::PrimitiveIndex),
+        ] {
+            let (boxes, keys) = grid_boxes(n, bits, u64::from(bits) * 31 + n as u64);
+            let (tree, _) = build_and_check_with(&mut lbvh, &boxes, refs, 1, bits);
+            let mut expected: Vec<u32> = (0..n as u32).collect();
+            expected.sort_by_key(|&i| keys[i as usize]); // stable
+            assert_eq!(tree.order_words, expected, "n {n}, {bits} key bits");
+        }
+    }
+
+    #[test]
+    fn lbvh_tlas_keys_keep_the_tree_exact_and_its_sah_close() {
+        // Coarser keys only change the order within a cell: the tree is still exact (checked by
+        // check_tree) over clustered boxes, coincident ones and empties, and not much worse.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let mut coincident = clustered_boxes(2000, 9);
+        coincident.extend(vec![([1.0, 2.0, 3.0], [1.5, 2.5, 3.5]); 1500]);
+        coincident.extend(vec![EMPTY; 300]);
+        // A dense cluster in a scene stretched by one far box: many boxes share a coarse cell.
+        let mut stretched = clustered_boxes(6000, 10);
+        stretched.push(([3000.0; 3], [3001.0; 3]));
+        for (aabbs, name) in [
+            (clustered_boxes(8000, 7), "clustered"),
+            (hard_soup(6007, 11), "hard soup"),
+            (coincident, "coincident"),
+            (stretched, "stretched"),
+        ] {
+            let (_, fine) = build_and_check_with(
+                &mut lbvh,
+                &aabbs,
+                LeafRefs::PrimitiveIndex,
+                1,
+                BLAS_KEY_BITS,
+            );
+            let (_, coarse) = build_and_check_with(
+                &mut lbvh,
+                &aabbs,
+                LeafRefs::PrimitiveIndex,
+                1,
+                TLAS_KEY_BITS,
+            );
+            eprintln!("{name}: SAH with 10 bits per axis {fine:.4}, with 8 {coarse:.4}");
+            assert!(coarse <= 1.05 * fine, "{name}: SAH {coarse} vs {fine}");
+            if name == "stretched" {
+                // The price of coarse keys, documented at TLAS_KEY_BITS: below the root (cost
+                // 1), the cluster's subtree costs 3.6 times as much on this input (10 times with
+                // 7 bits per axis).
+                assert!(coarse - 1.0 <= 4.0 * (fine - 1.0), "SAH {coarse} vs {fine}");
+            }
+        }
+    }
+
+    #[test]
+    fn lbvh_given_centroid_bounds_build_the_same_tree() {
+        // The TLAS's instance pass merges the centroid bounds and the build skips its bounds
+        // pass: given the same words (here from the CPU oracle, at a non-zero base, in a buffer
+        // of their own), the build must make the same order and nodes, bit for bit.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        for (aabbs, refs) in [
+            (hard_soup(5003, 21), LeafRefs::PrimitiveIndex),
+            (clustered_boxes(900, 22), LeafRefs::SortedPosition),
+        ] {
+            let n = aabbs.len() as u32;
+            let (own, _) = build_and_check_with(&mut lbvh, &aabbs, refs, 1, TLAS_KEY_BITS);
+            let mut words = vec![SENTINEL; 3];
+            words.extend(cpu_centroid_bounds(aabbs.iter().copied()));
+            let given = buffer_with(bytemuck::cast_slice(&words));
+            let input = aabb_buffer(&aabbs, 0);
+            let nodes = sentinel_buffer(u64::from(Lbvh::node_count(n)) * 16);
+            let order = sentinel_buffer(u64::from(n));
+            let mut dispatches = 0;
+            run(|rec| {
+                lbvh.build(
+                    rec,
+                    &LbvhBuild {
+                        aabbs: &input,
+                        aabb_base: 0,
+                        count: n,
+                        nodes: &nodes,
+                        node_base: 0,
+                        order: &order,
+                        order_base: 0,
+                        topology: None,
+                        leaf_refs: refs,
+                        max_leaf: 1,
+                        bounds_out: None,
+                        key_bits: TLAS_KEY_BITS,
+                        centroid_bounds: Some((&given, 3)),
+                    },
+                );
+                dispatches = rec.dispatches;
+            });
+            assert_eq!(read_words(&order), own.order_words, "order, {n} primitives");
+            assert_eq!(read_words(&nodes), own.node_words, "nodes, {n} primitives");
+            assert_eq!(read_words(&given), words, "the given words are only read");
+            // Morton, sort (9 dispatches, or 1 up to 1024 primitives), hierarchy, climb.
+            assert_eq!(dispatches, if n > 1024 { 12 } else { 4 });
+        }
+    }
+
+    #[test]
+    fn lbvh_build_dispatch_counts() {
+        // A BLAS build of more than 1024 primitives: bounds, morton, 4 × 3 sort passes,
+        // hierarchy, climb. A TLAS build: 3 sort passes and no copy back. Up to 1024: one sort
+        // dispatch.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        for (n, bits, expected) in [
+            (5000, BLAS_KEY_BITS, 16),
+            (5000, TLAS_KEY_BITS, 13),
+            (1000, TLAS_KEY_BITS, 5),
+        ] {
+            let aabbs = hard_soup(n, 12);
+            let input = aabb_buffer(&aabbs, 0);
+            let nodes = sentinel_buffer(u64::from(Lbvh::node_count(n as u32)) * 16);
+            let order = sentinel_buffer(n as u64);
+            let mut dispatches = 0;
+            run(|rec| {
+                lbvh.build(
+                    rec,
+                    &LbvhBuild {
+                        aabbs: &input,
+                        aabb_base: 0,
+                        count: n as u32,
+                        nodes: &nodes,
+                        node_base: 0,
+                        order: &order,
+                        order_base: 0,
+                        topology: None,
+                        leaf_refs: LeafRefs::PrimitiveIndex,
+                        max_leaf: 1,
+                        bounds_out: None,
+                        key_bits: bits,
+                        centroid_bounds: None,
+                    },
+                );
+                dispatches = rec.dispatches;
+            });
+            assert_eq!(dispatches, expected, "{n} primitives, {bits} key bits");
         }
     }
 

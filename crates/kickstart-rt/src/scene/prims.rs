@@ -5,8 +5,13 @@
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
 
-/// Threads per workgroup of every `prims.wgsl` entry point (one primitive each).
+/// Threads per workgroup of the triangle entry points of `prims.wgsl` (one primitive each).
 const WORKGROUP: u32 = 64;
+/// Threads per workgroup of `instance_aabbs` (the shader's `INSTANCE_WG`): wider, so fewer
+/// workgroups merge the centroid bounds with device atomics.
+const INSTANCE_WORKGROUP: u32 = 256;
+/// `instance_aabbs` flag: merge the boxes' centroid bounds.
+const MERGE_CENTROID_BOUNDS: u32 = 1;
 
 /// The three pipelines (one module, one entry point each).
 pub(crate) struct Prims {
@@ -16,6 +21,8 @@ pub(crate) struct Prims {
     gather_triangles: wgpu::ComputePipeline,
     /// `instance_aabbs` entry point.
     instance_aabbs: wgpu::ComputePipeline,
+    /// Bound in place of missing centroid-bounds words (never written: the flag is off).
+    no_bounds: wgpu::Buffer,
 }
 
 impl Prims {
@@ -23,6 +30,7 @@ impl Prims {
     pub fn new(device: &wgpu::Device) -> Self {
         let source = concat!(
             include_str!("../../shaders/scene_types.wgsl"),
+            include_str!("../../shaders/centroid_bounds.wgsl"),
             include_str!("../../shaders/prims.wgsl")
         );
         let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", source, entry);
@@ -30,6 +38,12 @@ impl Prims {
             triangle_aabbs: make("triangle_aabbs"),
             gather_triangles: make("gather_triangles"),
             instance_aabbs: make("instance_aabbs"),
+            no_bounds: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("kickstart-rt no centroid bounds"),
+                size: 32,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
         }
     }
 
@@ -114,6 +128,11 @@ impl Prims {
     /// (flags bit 0) whose geometry is built (flags bit 0) with `tri_count > 0` and a non-empty
     /// root box gets the box of its 8 transformed corners, padded outward by a few ulp so it
     /// contains the exactly transformed box; every other slot gets the empty box.
+    ///
+    /// With `centroid_bounds` (buffer with STORAGE and COPY_DST usage, first u32 word), the same
+    /// dispatch zeroes those 6 words and merges the boxes' centroid bounds into them, as the
+    /// LBVH's bounds pass would (for [`crate::scene::lbvh::LbvhBuild::centroid_bounds`]: the TLAS
+    /// build then needs one dependent dispatch fewer).
     pub fn instance_aabbs(
         &self,
         rec: &mut Recorder<'_>,
@@ -121,11 +140,24 @@ impl Prims {
         geometries: &wgpu::Buffer,
         count: u32,
         aabbs: &wgpu::Buffer,
+        centroid_bounds: Option<(&wgpu::Buffer, u32)>,
     ) {
         if count == 0 {
             return;
         }
-        let params = rec.uniform("kickstart-rt instance aabbs params", &[count, 0u32, 0, 0]);
+        let (bounds, bounds_base, flags) = match centroid_bounds {
+            Some((b, base)) => {
+                // Zero is the identity of the encoded atomicMax.
+                rec.encoder
+                    .clear_buffer(b, u64::from(base) * 4, Some(6 * 4));
+                (b, base, MERGE_CENTROID_BOUNDS)
+            }
+            None => (&self.no_bounds, 0, 0),
+        };
+        let params = rec.uniform(
+            "kickstart-rt instance aabbs params",
+            &[count, flags, bounds_base, 0],
+        );
         let bind = rec.bind_buffers(
             "kickstart-rt instance aabbs",
             &self.instance_aabbs,
@@ -135,13 +167,14 @@ impl Prims {
                 instances.as_entire_binding(),
                 geometries.as_entire_binding(),
                 aabbs.as_entire_binding(),
+                bounds.as_entire_binding(),
             ],
         );
         rec.dispatch(
             "tlas build: instance aabbs",
             &self.instance_aabbs,
             &[&bind],
-            count.div_ceil(WORKGROUP),
+            count.div_ceil(INSTANCE_WORKGROUP),
         );
     }
 }
@@ -332,7 +365,7 @@ mod tests {
         let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
         let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * (n + 2)]));
         let prims = Prims::new(&gpu().device);
-        run(|rec| prims.instance_aabbs(rec, &inst_buf, &geo_buf, n as u32, &aabbs));
+        run(|rec| prims.instance_aabbs(rec, &inst_buf, &geo_buf, n as u32, &aabbs, None));
         let got: Vec<f32> = words(&aabbs, 8 * (n + 2))
             .into_iter()
             .map(f32::from_bits)
@@ -381,5 +414,77 @@ mod tests {
             got[8 * n..].iter().all(|&w| w.to_bits() == SENTINEL),
             "past count written"
         );
+    }
+
+    #[test]
+    fn instance_aabbs_merge_the_centroid_bounds_of_their_boxes() {
+        // Several workgroups of instances, some hidden (empty boxes, not counted): the words
+        // equal the CPU oracle's over the boxes the pass wrote, stale words are zeroed first and
+        // the words around them are untouched. All hidden: all zero (nothing counted).
+        let mut rng = Rng(14);
+        let mut geos: Vec<u32> = vec![0, 0, 12, 1];
+        geos.extend([-1.0f32, -2.0, -3.0, 0.0, 4.0, 5.0, 6.0, 0.0].map(f32::to_bits));
+        let instance = |t: Affine3A, flags: u32| -> Vec<u32> {
+            let m = t.matrix3;
+            let mut w = Vec::new();
+            for r in 0..3 {
+                w.extend(
+                    [m.x_axis[r], m.y_axis[r], m.z_axis[r], t.translation[r]].map(f32::to_bits),
+                );
+            }
+            w.extend([0u32; 12]);
+            w.extend([0, 0xff, flags, 0, 0, 0, 0, 0]);
+            w
+        };
+        let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
+        let prims = Prims::new(&gpu().device);
+        for (n, hidden_every) in [(700usize, 7usize), (300, 1)] {
+            let inst: Vec<u32> = (0..n)
+                .flat_map(|k| {
+                    let t = Affine3A::from_scale_rotation_translation(
+                        Vec3::splat(rng.range(0.1, 3.0)),
+                        Quat::from_rotation_y(rng.range(-3.0, 3.0)),
+                        Vec3::new(
+                            rng.range(-500.0, 500.0),
+                            rng.range(-5.0, 50.0),
+                            rng.range(-1e4, 1e4),
+                        ),
+                    );
+                    instance(t, u32::from(k % hidden_every != 0))
+                })
+                .collect();
+            let inst_buf = buffer_with(bytemuck::cast_slice(&inst));
+            let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * n]));
+            let bounds = buffer_with(bytemuck::cast_slice(&[SENTINEL; 10]));
+            run(|rec| {
+                prims.instance_aabbs(
+                    rec,
+                    &inst_buf,
+                    &geo_buf,
+                    n as u32,
+                    &aabbs,
+                    Some((&bounds, 2)),
+                )
+            });
+            let boxes: Vec<f32> = words(&aabbs, 8 * n)
+                .into_iter()
+                .map(f32::from_bits)
+                .collect();
+            let expected = crate::scene::lbvh::cpu_centroid_bounds(
+                boxes
+                    .chunks(8)
+                    .map(|b| ([b[0], b[1], b[2]], [b[4], b[5], b[6]])),
+            );
+            let got = words(&bounds, 10);
+            assert_eq!(got[2..8], expected, "{n} instances");
+            assert_eq!(
+                [got[0], got[1], got[8], got[9]],
+                [SENTINEL; 4],
+                "{n} instances"
+            );
+            if hidden_every == 1 {
+                assert_eq!(expected, [0; 6], "nothing counted");
+            }
+        }
     }
 }
