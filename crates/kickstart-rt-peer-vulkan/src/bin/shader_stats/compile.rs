@@ -504,13 +504,18 @@ pub fn write_spirv(
 mod tests {
     use super::*;
 
+    /// lbvh.wgsl as the SDK compiles it: after centroid_bounds.wgsl, whose helpers it uses.
     fn lbvh() -> Source {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../kickstart-rt/shaders/lbvh.wgsl"
-        );
-        let text = std::fs::read_to_string(path).expect("lbvh.wgsl is in the workspace");
-        Source::concat(&[(path.to_string(), text)])
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../kickstart-rt/shaders/");
+        let parts: Vec<(String, String)> = ["centroid_bounds.wgsl", "lbvh.wgsl"]
+            .iter()
+            .map(|name| {
+                let path = format!("{dir}{name}");
+                let text = std::fs::read_to_string(&path).expect("the shader is in the workspace");
+                (path, text)
+            })
+            .collect();
+        Source::concat(&parts)
     }
 
     /// `(group, WGSL binding, Vulkan binding, kind)` of entry point `ep`, and its workgroup
