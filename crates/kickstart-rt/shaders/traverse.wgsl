@@ -299,7 +299,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
     // BLAS. The world space is not kept aside while a BLAS is traversed but recomputed (same
     // function, same bits) when the BLAS is left: less live state per iteration, +0.5 % dragon and
     // +1.6 % apartment peer workload on the H100 (BENCHMARKS.md, session 19).
-    var local = rt_space(ray.origin, ray.dir);
+    var space = rt_space(ray.origin, ray.dir);
     rt_stack_store(0u, 0u, t_min);
     var sp = 1u;
     var blas_sp = RT_STACK_SIZE + 1u;
@@ -317,7 +317,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         if !in_blas && blas_sp <= RT_STACK_SIZE {
             // Back in the TLAS.
             blas_sp = RT_STACK_SIZE + 1u;
-            local = rt_space(ray.origin, ray.dir);
+            space = rt_space(ray.origin, ray.dir);
         }
         // Pushed before a closer hit was found: the box test would now fail.
         if entry_t > t_max * RT_FAR_WIDEN {
@@ -346,7 +346,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 let v0 = rt_triangles[slot];
                 let v1 = rt_triangles[slot + 1u];
                 let v2 = rt_triangles[slot + 2u];
-                let h = rt_triangle(local, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                let h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
                 if h.hit {
                     let prim = bitcast<u32>(v0.w);
                     // Tie rule: equal t → lowest instance, then lowest primitive index.
@@ -372,7 +372,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 }
                 // No renormalisation: t means the same in object and world space.
                 let m = inst.world_to_object;
-                local = rt_space(
+                space = rt_space(
                     rt_transform(m, ray.origin, 1.0),
                     rt_transform(m, ray.dir, 0.0),
                 );
@@ -389,7 +389,6 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
         var n1: vec4<f32>;
         var n2: vec4<f32>;
         var n3: vec4<f32>;
-        let space = local;
         if in_blas {
             let base = (node_base + entry) * 4u;
             n0 = rt_blas_nodes[base];

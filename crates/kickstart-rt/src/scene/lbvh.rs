@@ -1200,6 +1200,45 @@ mod tests {
         }
     }
 
+    /// Builds `aabbs` (one primitive per leaf) into fresh node and order buffers, with no
+    /// topology or bounds output, as a TLAS build does; returns those buffers and the number of
+    /// dispatches recorded.
+    fn build_minimal(
+        lbvh: &mut Lbvh,
+        aabbs: &[Aabb],
+        leaf_refs: LeafRefs,
+        key_bits: u32,
+        centroid_bounds: Option<(&wgpu::Buffer, u32)>,
+    ) -> (wgpu::Buffer, wgpu::Buffer, u32) {
+        let n = aabbs.len() as u32;
+        let input = aabb_buffer(aabbs, 0);
+        let nodes = sentinel_buffer(u64::from(Lbvh::node_count(n)) * 16);
+        let order = sentinel_buffer(u64::from(n));
+        let mut dispatches = 0;
+        run(|rec| {
+            lbvh.build(
+                rec,
+                &LbvhBuild {
+                    aabbs: &input,
+                    aabb_base: 0,
+                    count: n,
+                    nodes: &nodes,
+                    node_base: 0,
+                    order: &order,
+                    order_base: 0,
+                    topology: None,
+                    leaf_refs,
+                    max_leaf: 1,
+                    bounds_out: None,
+                    key_bits,
+                    centroid_bounds,
+                },
+            );
+            dispatches = rec.dispatches;
+        });
+        (nodes, order, dispatches)
+    }
+
     #[test]
     fn lbvh_given_centroid_bounds_build_the_same_tree() {
         // The TLAS's instance pass merges the centroid bounds and the build skips its bounds
@@ -1215,31 +1254,8 @@ mod tests {
             let mut words = vec![SENTINEL; 3];
             words.extend(cpu_centroid_bounds(aabbs.iter().copied()));
             let given = buffer_with(bytemuck::cast_slice(&words));
-            let input = aabb_buffer(&aabbs, 0);
-            let nodes = sentinel_buffer(u64::from(Lbvh::node_count(n)) * 16);
-            let order = sentinel_buffer(u64::from(n));
-            let mut dispatches = 0;
-            run(|rec| {
-                lbvh.build(
-                    rec,
-                    &LbvhBuild {
-                        aabbs: &input,
-                        aabb_base: 0,
-                        count: n,
-                        nodes: &nodes,
-                        node_base: 0,
-                        order: &order,
-                        order_base: 0,
-                        topology: None,
-                        leaf_refs: refs,
-                        max_leaf: 1,
-                        bounds_out: None,
-                        key_bits: TLAS_KEY_BITS,
-                        centroid_bounds: Some((&given, 3)),
-                    },
-                );
-                dispatches = rec.dispatches;
-            });
+            let (nodes, order, dispatches) =
+                build_minimal(&mut lbvh, &aabbs, refs, TLAS_KEY_BITS, Some((&given, 3)));
             assert_eq!(read_words(&order), own.order_words, "order, {n} primitives");
             assert_eq!(read_words(&nodes), own.node_words, "nodes, {n} primitives");
             assert_eq!(read_words(&given), words, "the given words are only read");
@@ -1260,31 +1276,8 @@ mod tests {
             (1000, TLAS_KEY_BITS, 5),
         ] {
             let aabbs = hard_soup(n, 12);
-            let input = aabb_buffer(&aabbs, 0);
-            let nodes = sentinel_buffer(u64::from(Lbvh::node_count(n as u32)) * 16);
-            let order = sentinel_buffer(n as u64);
-            let mut dispatches = 0;
-            run(|rec| {
-                lbvh.build(
-                    rec,
-                    &LbvhBuild {
-                        aabbs: &input,
-                        aabb_base: 0,
-                        count: n as u32,
-                        nodes: &nodes,
-                        node_base: 0,
-                        order: &order,
-                        order_base: 0,
-                        topology: None,
-                        leaf_refs: LeafRefs::PrimitiveIndex,
-                        max_leaf: 1,
-                        bounds_out: None,
-                        key_bits: bits,
-                        centroid_bounds: None,
-                    },
-                );
-                dispatches = rec.dispatches;
-            });
+            let (_, _, dispatches) =
+                build_minimal(&mut lbvh, &aabbs, LeafRefs::PrimitiveIndex, bits, None);
             assert_eq!(dispatches, expected, "{n} primitives, {bits} key bits");
         }
     }
