@@ -24,6 +24,8 @@ mod cache;
 pub mod extras;
 #[path = "bench_peer.rs"]
 mod peer;
+#[path = "bench_tree_work.rs"]
+mod tree_work;
 
 pub use peer::PeerKind;
 
@@ -220,6 +222,9 @@ pub struct SceneReport {
     pub trace_combined: Option<Stats>,
     /// The peer's figures on the same meshes and rays (`--peer`), or why it was skipped.
     pub peer: Option<peer::PeerReport>,
+    /// `--tree-work`: other builders' trees on the same rays.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub tree_work: Vec<tree_work::TreeWork>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
 }
@@ -783,6 +788,7 @@ impl SceneReport {
             trace_tasks: Vec::new(),
             trace_combined: None,
             peer: None,
+            tree_work: Vec::new(),
             errors: Vec::new(),
         }
     }
@@ -796,6 +802,7 @@ fn bench_scene(
     camera: Camera,
     size: (u32, u32),
     peer: Option<&mut peer::PeerState>,
+    measure_tree_work: bool,
 ) -> SceneReport {
     let mut r = SceneReport::new(name, scene, &camera);
     let uploads = gpu::upload_scene(bench.device, scene);
@@ -840,6 +847,24 @@ fn bench_scene(
     let batches = attempt(&mut errors, "rays", || {
         rays(bench, scene, &uploads, &camera, size, &mut r)
     });
+    if let (true, Some(b)) = (measure_tree_work, &batches) {
+        let rays: Vec<(&'static str, bool, &[GpuRay])> = b
+            .batches
+            .iter()
+            .map(|(kind, query, rays, _)| (*kind, matches!(query, Query::Any), rays.as_slice()))
+            .collect();
+        if let Some(trees) = attempt(&mut errors, "tree work", || {
+            tree_work::measure(scene, &rays)
+        }) {
+            let gpu: Vec<(String, Option<WorkPerRay>)> = r
+                .rays
+                .iter()
+                .map(|b| (b.kind.to_string(), b.work))
+                .collect();
+            tree_work::print(&gpu, &trees);
+            r.tree_work = trees;
+        }
+    }
     if let Some(p) = peer {
         r.peer = Some(peer::compare(
             bench,
@@ -1272,7 +1297,12 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     let mut scenes = Vec::new();
     for name in &names {
         let start = std::time::Instant::now();
-        scenes.push(scene::load(name, &opts.scenes_dir)?);
+        let loaded = scene::load(name, &opts.scenes_dir)?;
+        scenes.push(if opts.extras.flatten {
+            loaded.flattened()?
+        } else {
+            loaded
+        });
         println!("loaded {name} in {:.2} s", start.elapsed().as_secs_f64());
     }
     let adapter = gpu::adapter()?;
@@ -1313,7 +1343,15 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             .camera
             .or_else(|| issue_camera(name))
             .unwrap_or_else(|| scene.camera_or_default(None));
-        let r = bench_scene(&bench, name, scene, camera, opts.size, peer.as_mut());
+        let r = bench_scene(
+            &bench,
+            name,
+            scene,
+            camera,
+            opts.size,
+            peer.as_mut(),
+            opts.extras.tree_work,
+        );
         print_scene(&r, opts.size);
         if let Some(p) = &r.peer {
             peer::print(p);

@@ -44,6 +44,15 @@ pub struct ExtraArgs {
     /// not the figures).
     #[arg(long)]
     pub quick: bool,
+    /// Also trace each one-instance scene's sampled rays (on the CPU, as the GPU traverses)
+    /// through trees of our CPU binned-SAH builder and obvhs's PLOC presets laid out as our
+    /// BVH2: the traversal work a better builder would save. Seconds of CPU per scene.
+    #[arg(long)]
+    pub tree_work: bool,
+    /// Bake every scene into one mesh in world space under one instance before measuring (as a
+    /// renderer with a single BVH over its whole scene would trace it).
+    #[arg(long)]
+    pub flatten: bool,
     /// Leave out the default per-scene measurements and the TLAS table (run only the passes
     /// asked for).
     #[arg(long)]

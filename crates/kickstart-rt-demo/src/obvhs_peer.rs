@@ -66,14 +66,17 @@ pub fn to_obvhs(triangles: &[[Vec3; 3]]) -> Vec<Triangle> {
 /// boxes, optional pre-splits, PLOC, reinsertion, leaf collapse). Errors on an empty input,
 /// which obvhs does not accept.
 pub fn build(triangles: &[Triangle], preset: Preset) -> Result<Bvh2, String> {
+    build_with(triangles, preset.params())
+}
+
+/// [`build`] with any parameters.
+pub fn build_with(triangles: &[Triangle], params: BvhBuildParams) -> Result<Bvh2, String> {
     if triangles.is_empty() {
         return Err("obvhs: no finite triangle to build a BVH over".into());
     }
     let mut core = std::time::Duration::ZERO;
     Ok(obvhs::bvh2::builder::build_bvh2_from_tris(
-        triangles,
-        preset.params(),
-        &mut core,
+        triangles, params, &mut core,
     ))
 }
 

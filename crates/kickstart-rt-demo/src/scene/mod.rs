@@ -356,6 +356,43 @@ impl Scene {
         (tris, owner)
     }
 
+    /// The whole scene as one mesh in world space under one identity instance (instanced
+    /// meshes repeated): what a renderer that bakes its scene into a single BVH traces, for
+    /// `ksrt bench --flatten`. Materials and textures are dropped; lights and camera are kept.
+    pub fn flattened(&self) -> Result<Scene, String> {
+        let mut positions = Vec::new();
+        let mut indices = Vec::with_capacity(self.triangle_count() * 3);
+        for inst in &self.instances {
+            let m = &self.meshes[inst.mesh];
+            let base = u32::try_from(positions.len())
+                .map_err(|_| format!("{}: too many vertices to flatten", self.name))?;
+            positions.extend(
+                m.positions
+                    .iter()
+                    .map(|p| inst.transform.transform_point3(Vec3::from(*p)).to_array()),
+            );
+            indices.extend(m.indices.iter().map(|i| base + i));
+        }
+        let color = self.meshes.first().map_or(Vec3::splat(0.8), |m| m.color);
+        let mesh = Mesh::new(
+            format!("{} (flattened)", self.name),
+            positions,
+            indices,
+            color,
+        )?;
+        Ok(Scene {
+            name: self.name.clone(),
+            meshes: vec![mesh],
+            instances: vec![Instance {
+                mesh: 0,
+                transform: Affine3A::IDENTITY,
+            }],
+            camera: self.camera,
+            textures: Vec::new(),
+            lights: self.lights.clone(),
+        })
+    }
+
     /// World-space bounds `(min, max)` of the finite vertices of every instance; a unit box at the
     /// origin when there are none (so cameras and offsets derived from it stay finite).
     pub fn bounds(&self) -> (Vec3, Vec3) {

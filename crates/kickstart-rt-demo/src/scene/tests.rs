@@ -294,3 +294,44 @@ fn gltf_instances_hierarchy_modes_and_camera() {
     assert!(close(cam.at, Vec3::new(0.0, 0.0, 9.0)), "looks down -Z");
     assert!((cam.fov_y_deg - 0.8f32.to_degrees()).abs() < 1e-3);
 }
+
+#[test]
+fn a_flattened_scene_has_the_same_world_triangles_under_one_instance() {
+    let tri = Mesh::new(
+        "tri",
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        vec![0, 1, 2],
+        Vec3::ONE,
+    )
+    .unwrap();
+    let scene = Scene {
+        name: "two".into(),
+        meshes: vec![tri],
+        instances: vec![
+            Instance {
+                mesh: 0,
+                transform: Affine3A::from_translation(Vec3::new(5.0, 0.0, 0.0)),
+            },
+            Instance {
+                mesh: 0,
+                transform: Affine3A::from_scale(Vec3::splat(2.0)),
+            },
+        ],
+        ..Default::default()
+    };
+    let flat = scene.flattened().unwrap();
+    assert_eq!(flat.meshes.len(), 1);
+    assert_eq!(flat.instances.len(), 1);
+    assert_eq!(flat.instances[0].transform, Affine3A::IDENTITY);
+    // Indices of the second instance point at its own (second) copy of the vertices.
+    assert_eq!(flat.meshes[0].indices, vec![0, 1, 2, 3, 4, 5]);
+    assert_eq!(flat.world_triangles().0, scene.world_triangles().0);
+    assert_eq!(
+        flat.world_triangles().0[1],
+        [
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 2.0, 0.0)
+        ]
+    );
+}

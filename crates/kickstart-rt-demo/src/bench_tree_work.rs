@@ -1,0 +1,449 @@
+//! The traversal work other builders' trees would cost on the bench's own rays
+//! (`ksrt bench --tree-work`): the scene's one geometry is built again on the CPU (our binned-SAH
+//! builder, obvhs's PLOC presets), each tree is laid out as a GPU BVH2 and traced on the CPU
+//! exactly as the GPU traverses ours. Nodes per ray against our GPU tree's says what a better
+//! builder would buy the traversal before anyone writes it on the GPU.
+
+use glam::{Affine3A, Vec3};
+use serde::Serialize;
+
+use super::{work_per_ray, GpuRay, WorkPerRay};
+use crate::obvhs_peer::{self, Preset};
+use crate::scene::Scene;
+use crate::AnyResult;
+use kickstart_rt as ksrt;
+
+/// Most triangles our BVH2 leaf reference can hold (3 bits of count).
+const LEAF_LIMIT: u32 = 8;
+
+/// One node of a binary tree to lay out: an inner node (`count == 0`, children at `first` and
+/// `first + 1`) or a leaf of `count` entries of the primitive list from `first`.
+#[derive(Debug, Clone, Copy)]
+pub struct BinaryNode {
+    /// Box minimum.
+    pub min: Vec3,
+    /// Box maximum.
+    pub max: Vec3,
+    /// First child, or first primitive slot.
+    pub first: u32,
+    /// Primitives of a leaf; 0 for an inner node.
+    pub count: u32,
+}
+
+/// Raw GPU BVH2 nodes (16 floats) and triangles in leaf order (12 floats), as a BLAS reads back.
+pub type RawTree = (Vec<[f32; 16]>, Vec<[f32; 12]>);
+
+#[cfg(test)]
+/// Lays out a binary tree (root at node 0) as the GPU's BVH2 and decodes it as a read-back BLAS,
+/// so that [`ksrt::cpu::BlasReadback::trace`] counts its work as it counts ours. Leaves list
+/// triangles through `primitives` (indices into `triangles`).
+pub fn as_gpu_bvh2(
+    nodes: &[BinaryNode],
+    primitives: &[u32],
+    triangles: &[[Vec3; 3]],
+) -> Result<ksrt::cpu::BlasReadback, String> {
+    let (raw_nodes, raw_tris) = gpu_bvh2_raw(nodes, primitives, triangles)?;
+    Ok(ksrt::cpu::BlasReadback::new(raw_nodes, raw_tris))
+}
+
+/// [`as_gpu_bvh2`]'s raw layout (empty for an empty tree).
+pub fn gpu_bvh2_raw(
+    nodes: &[BinaryNode],
+    primitives: &[u32],
+    triangles: &[[Vec3; 3]],
+) -> Result<RawTree, String> {
+    let Some(root) = nodes.first() else {
+        return Ok((Vec::new(), Vec::new()));
+    };
+    let mut raw_nodes: Vec<[f32; 16]> = Vec::new();
+    let mut raw_tris: Vec<[f32; 12]> = Vec::new();
+    // (source inner node, its slot in raw_nodes).
+    let mut pending: Vec<(u32, usize)> = Vec::new();
+    let mut reference = |node: &BinaryNode,
+                         index: u32,
+                         raw_nodes: &mut Vec<[f32; 16]>,
+                         pending: &mut Vec<(u32, usize)>|
+     -> Result<u32, String> {
+        if node.count == 0 {
+            let slot = raw_nodes.len();
+            raw_nodes.push([0.0; 16]);
+            pending.push((index, slot));
+            return Ok(slot as u32);
+        }
+        if node.count > LEAF_LIMIT {
+            return Err(format!(
+                "node {index}: a leaf of {} triangles (the GPU layout holds {LEAF_LIMIT})",
+                node.count
+            ));
+        }
+        let first = raw_tris.len() as u32;
+        for k in node.first..node.first + node.count {
+            let prim = *primitives
+                .get(k as usize)
+                .ok_or_else(|| format!("node {index}: primitive slot {k} out of range"))?;
+            let t = triangles
+                .get(prim as usize)
+                .ok_or_else(|| format!("primitive {prim} out of range"))?;
+            raw_tris.push([
+                t[0].x,
+                t[0].y,
+                t[0].z,
+                f32::from_bits(prim),
+                t[1].x,
+                t[1].y,
+                t[1].z,
+                0.0,
+                t[2].x,
+                t[2].y,
+                t[2].z,
+                0.0,
+            ]);
+        }
+        Ok(0x8000_0000 | ((node.count - 1) << 28) | first)
+    };
+    let empty = BinaryNode {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+        first: 0,
+        count: 0,
+    };
+    let write_child = |raw: &mut [f32; 16], k: usize, node: &BinaryNode, r: u32| {
+        let o = 8 * k;
+        raw[o..o + 3].copy_from_slice(&node.min.to_array());
+        raw[o + 4..o + 7].copy_from_slice(&node.max.to_array());
+        raw[3 + 4 * k] = f32::from_bits(r);
+    };
+    if root.count != 0 {
+        // A tree of one leaf: a root whose second child is empty.
+        raw_nodes.push([0.0; 16]);
+        let r = reference(root, 0, &mut raw_nodes, &mut pending)?;
+        write_child(&mut raw_nodes[0], 0, root, r);
+        write_child(&mut raw_nodes[0], 1, &empty, 0);
+    } else {
+        reference(root, 0, &mut raw_nodes, &mut pending)?;
+    }
+    while let Some((index, slot)) = pending.pop() {
+        if raw_nodes.len() > 2 * nodes.len() + 1 {
+            return Err("the tree has a cycle".into());
+        }
+        let node = nodes[index as usize];
+        for k in 0..2 {
+            let c = node.first + k as u32;
+            let child = nodes
+                .get(c as usize)
+                .ok_or_else(|| format!("node {index}: child {c} out of range"))?;
+            let r = reference(child, c, &mut raw_nodes, &mut pending)?;
+            let mut raw = raw_nodes[slot];
+            write_child(&mut raw, k, child, r);
+            raw_nodes[slot] = raw;
+        }
+    }
+    Ok((raw_nodes, raw_tris))
+}
+
+/// The work of one tree on every batch of rays.
+#[derive(Debug, Clone, Serialize)]
+pub struct TreeWork {
+    /// The builder.
+    pub tree: String,
+    /// CPU time of its build, seconds (16 threads for obvhs, one for ours).
+    pub build_s: f64,
+    /// SAH cost with our constants (`BlasReadback::sah_cost`).
+    pub sah_cost: f64,
+    /// `(batch kind, work per ray)` for each batch.
+    pub batches: Vec<(String, WorkPerRay)>,
+}
+
+/// Builds the scene's one geometry with each CPU builder and counts the work of `batches`' rays
+/// in each tree. Scenes of more than one instance are refused (use `--flatten`).
+pub fn measure(
+    scene: &Scene,
+    batches: &[(&'static str, bool, &[GpuRay])],
+) -> AnyResult<Vec<TreeWork>> {
+    let [only] = scene.instances.as_slice() else {
+        return Err(format!(
+            "--tree-work: {} has {} instances; it needs one (add --flatten)",
+            scene.name,
+            scene.instances.len()
+        )
+        .into());
+    };
+    let triangles: Vec<[Vec3; 3]> = scene.meshes[only.mesh]
+        .triangles(Affine3A::IDENTITY)
+        .collect();
+    let world_to_object = only.transform.inverse();
+    let mut out = Vec::new();
+    for kind in TreeKind::ALL {
+        let (build_s, (raw_nodes, raw_tris)) = build_tree(kind, &triangles)?;
+        let blas = ksrt::cpu::BlasReadback::new(raw_nodes, raw_tris);
+        let batches = batches
+            .iter()
+            .map(|(kind, any, rays)| {
+                (
+                    kind.to_string(),
+                    work_per_ray(&blas, world_to_object, rays, *any),
+                )
+            })
+            .collect();
+        out.push(TreeWork {
+            tree: kind.name(),
+            build_s,
+            sah_cost: f64::from(blas.sah_cost),
+            batches,
+        });
+    }
+    Ok(out)
+}
+
+/// A CPU builder whose tree [`measure`] lays out as ours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TreeKind {
+    /// `ksrt::cpu::CpuBvh`: 16-bin SAH on every axis, leaves of ≤ 4.
+    Binned,
+    /// obvhs's BVH2 with a preset's parameters, leaves of ≤ 4 (as our builders make them).
+    Obvhs(Preset),
+}
+
+impl TreeKind {
+    /// Every kind, in the order reported.
+    pub const ALL: [TreeKind; 4] = [
+        TreeKind::Binned,
+        TreeKind::Obvhs(Preset::Fastest),
+        TreeKind::Obvhs(Preset::Medium),
+        TreeKind::Obvhs(Preset::VerySlow),
+    ];
+
+    /// The name in reports.
+    pub fn name(self) -> String {
+        match self {
+            TreeKind::Binned => "our CPU binned SAH".into(),
+            TreeKind::Obvhs(p) => format!("{} (≤ 4 a leaf)", p.name()),
+        }
+    }
+}
+
+/// Builds `kind`'s tree over `triangles` in our raw layout, with its CPU build time in seconds.
+pub fn build_tree(kind: TreeKind, triangles: &[[Vec3; 3]]) -> Result<(f64, RawTree), String> {
+    let start = std::time::Instant::now();
+    match kind {
+        TreeKind::Binned => {
+            let cpu = ksrt::cpu::CpuBvh::build(triangles);
+            let build_s = start.elapsed().as_secs_f64();
+            let nodes: Vec<BinaryNode> = cpu
+                .nodes
+                .iter()
+                .map(|n| BinaryNode {
+                    min: n.min,
+                    max: n.max,
+                    first: n.first,
+                    count: n.count,
+                })
+                .collect();
+            Ok((
+                build_s,
+                gpu_bvh2_raw(&nodes, &cpu.primitive_indices, triangles)?,
+            ))
+        }
+        TreeKind::Obvhs(preset) => {
+            // obvhs's input leaves out non-finite triangles: its indices map back through this.
+            let finite: Vec<u32> = (0..triangles.len() as u32)
+                .filter(|&i| triangles[i as usize].iter().all(|v| v.is_finite()))
+                .collect();
+            let input = obvhs_peer::to_obvhs(triangles);
+            let mut params = preset.params();
+            params.max_prims_per_leaf = 4;
+            let start = std::time::Instant::now();
+            let bvh = obvhs_peer::build_with(&input, params)?;
+            let build_s = start.elapsed().as_secs_f64();
+            let nodes: Vec<BinaryNode> = bvh
+                .nodes
+                .iter()
+                .map(|n| {
+                    let b = n.aabb();
+                    let (min, max): ([f32; 3], [f32; 3]) = (b.min.into(), b.max.into());
+                    BinaryNode {
+                        min: Vec3::from(min),
+                        max: Vec3::from(max),
+                        first: n.first_index,
+                        count: n.prim_count,
+                    }
+                })
+                .collect();
+            let primitives: Vec<u32> = bvh
+                .primitive_indices
+                .iter()
+                .map(|&p| finite.get(p as usize).copied().unwrap_or(u32::MAX))
+                .collect();
+            Ok((build_s, gpu_bvh2_raw(&nodes, &primitives, triangles)?))
+        }
+    }
+}
+
+/// Prints the trees' work beside our GPU tree's (`gpu`: kind and work of each batch).
+pub fn print(gpu: &[(String, Option<WorkPerRay>)], trees: &[TreeWork]) {
+    println!("  tree work (the same sampled rays, traced on the CPU as the GPU traverses):");
+    println!(
+        "    {:<34} {:>8} {:>10}  nodes + triangle tests per ray by batch",
+        "tree", "SAH", "build"
+    );
+    let row = |name: &str, sah: String, build: String, work: Vec<String>| {
+        println!("    {name:<34} {sah:>8} {build:>10}  {}", work.join("   "));
+    };
+    row(
+        "our GPU tree",
+        "—".into(),
+        "—".into(),
+        gpu.iter()
+            .map(|(kind, w)| match w {
+                Some(w) => format!("{kind} {:.1} + {:.1}", w.nodes, w.triangles),
+                None => format!("{kind} —"),
+            })
+            .collect(),
+    );
+    for t in trees {
+        row(
+            &t.tree,
+            format!("{:.2}", t.sah_cost),
+            format!("{:.3} s", t.build_s),
+            t.batches
+                .iter()
+                .map(|(kind, w)| format!("{kind} {:.1} + {:.1}", w.nodes, w.triangles))
+                .collect(),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tri(x: f32) -> [Vec3; 3] {
+        [
+            Vec3::new(x, 0.0, 0.0),
+            Vec3::new(x + 0.5, 0.0, 0.0),
+            Vec3::new(x, 0.5, 0.0),
+        ]
+    }
+
+    #[test]
+    fn a_cpu_tree_laid_out_as_the_gpu_bvh2_finds_the_cpu_hits() {
+        let triangles: Vec<[Vec3; 3]> = (0..40).map(|i| tri(i as f32)).collect();
+        let cpu = ksrt::cpu::CpuBvh::build(&triangles);
+        let nodes: Vec<BinaryNode> = cpu
+            .nodes
+            .iter()
+            .map(|n| BinaryNode {
+                min: n.min,
+                max: n.max,
+                first: n.first,
+                count: n.count,
+            })
+            .collect();
+        let blas = as_gpu_bvh2(&nodes, &cpu.primitive_indices, &triangles).unwrap();
+        assert_eq!(blas.triangles.len(), 40);
+        for i in 0..40 {
+            let ray = ksrt::cpu::Ray {
+                origin: Vec3::new(i as f32 + 0.1, 0.1, 1.0),
+                dir: Vec3::NEG_Z,
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            };
+            let (hit, counts) = blas.trace(&ray, false);
+            let hit = hit.unwrap();
+            assert_eq!(hit.primitive, i);
+            assert!((hit.t - 1.0).abs() < 1e-6);
+            // A balanced tree of 40 triangles in leaves of ≤ 4: a handful of nodes, not all 10+.
+            assert!(counts.nodes >= 3 && counts.nodes < 12, "{counts:?}");
+        }
+        // Same SAH as the CPU tree it came from.
+        assert!((blas.sah_cost - cpu.sah_cost()).abs() < 1e-4 * cpu.sah_cost());
+    }
+
+    #[test]
+    fn a_one_leaf_tree_and_bad_trees() {
+        let triangles = vec![tri(0.0)];
+        let leaf = BinaryNode {
+            min: Vec3::ZERO,
+            max: Vec3::new(0.5, 0.5, 0.0),
+            first: 0,
+            count: 1,
+        };
+        let blas = as_gpu_bvh2(&[leaf], &[0], &triangles).unwrap();
+        let ray = ksrt::cpu::Ray {
+            origin: Vec3::new(0.1, 0.1, 1.0),
+            dir: Vec3::NEG_Z,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        };
+        assert_eq!(blas.trace(&ray, false).0.unwrap().primitive, 0);
+        let big = BinaryNode { count: 9, ..leaf };
+        assert!(as_gpu_bvh2(&[big], &[0; 9], &triangles)
+            .unwrap_err()
+            .contains("9 triangles"));
+        let dangling = BinaryNode {
+            count: 0,
+            first: 5,
+            ..leaf
+        };
+        assert!(as_gpu_bvh2(&[dangling], &[0], &triangles)
+            .unwrap_err()
+            .contains("out of range"));
+    }
+
+    fn strip_scene(instances: usize) -> Scene {
+        let mut positions = Vec::new();
+        let mut indices = Vec::new();
+        for i in 0..64u32 {
+            let t = tri(i as f32);
+            positions.extend(t.iter().map(|v| v.to_array()));
+            indices.extend([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        let mesh = crate::scene::Mesh::new("strip", positions, indices, Vec3::ONE).unwrap();
+        Scene {
+            name: "strip".into(),
+            meshes: vec![mesh],
+            instances: (0..instances)
+                .map(|k| crate::scene::Instance {
+                    mesh: 0,
+                    transform: Affine3A::from_translation(Vec3::new(0.0, 0.0, -(k as f32))),
+                })
+                .collect(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn every_builder_is_measured_on_every_batch_and_many_instances_are_refused() {
+        // Rays down onto triangles 0, 8, 16, …: each hits, so each tree does some work.
+        let rays: Vec<GpuRay> = (0..8)
+            .map(|k| GpuRay {
+                origin: [8.0 * k as f32 + 0.1, 0.1, 1.0],
+                t_min: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                t_max: f32::INFINITY,
+            })
+            .collect();
+        let trees = measure(
+            &strip_scene(1),
+            &[("primary", false, &rays), ("ao", true, &rays)],
+        )
+        .unwrap();
+        assert_eq!(trees.len(), TreeKind::ALL.len());
+        for t in &trees {
+            assert_eq!(t.batches.len(), 2, "{}", t.tree);
+            for (_, w) in &t.batches {
+                assert_eq!(w.sampled, 8);
+                // Every ray reaches a leaf and tests at least its triangle.
+                assert!(w.nodes >= 1.0 && w.triangles >= 1.0, "{}: {w:?}", t.tree);
+            }
+            assert!(t.sah_cost > 1.0, "{}: {}", t.tree, t.sah_cost);
+        }
+        let err = measure(&strip_scene(2), &[("primary", false, &rays)])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("2 instances") && err.contains("--flatten"),
+            "{err}"
+        );
+    }
+}
