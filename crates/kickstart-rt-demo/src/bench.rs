@@ -677,6 +677,7 @@ fn rays(
             ("ao", Query::Any, ao, ao_hits),
             ("diffuse", Query::Closest, diffuse, diffuse_hits),
         ],
+        blas: one_blas.map(|(b, _)| b),
     })
 }
 
@@ -688,6 +689,8 @@ struct RayBatches {
     width: u32,
     /// Kind, query, rays and our hits of each batch, in the order measured.
     batches: Vec<(&'static str, Query, Vec<GpuRay>, Vec<GpuHit>)>,
+    /// The scene's one BLAS as read back (scenes of one instance).
+    blas: Option<ksrt::cpu::BlasReadback>,
 }
 
 /// One primary ray per pixel through `camera`, row by row from the top: their directions and the
@@ -854,7 +857,7 @@ fn bench_scene(
             .map(|(kind, query, rays, _)| (*kind, matches!(query, Query::Any), rays.as_slice()))
             .collect();
         if let Some(trees) = attempt(&mut errors, "tree work", || {
-            tree_work::measure(scene, &rays)
+            tree_work::measure(scene, &rays, b.blas.as_ref())
         }) {
             let gpu: Vec<(String, Option<WorkPerRay>)> = r
                 .rays

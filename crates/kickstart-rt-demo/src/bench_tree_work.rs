@@ -159,6 +159,7 @@ pub struct TreeWork {
 pub fn measure(
     scene: &Scene,
     batches: &[(&'static str, bool, &[GpuRay])],
+    gpu_tree: Option<&ksrt::cpu::BlasReadback>,
 ) -> AnyResult<Vec<TreeWork>> {
     let [only] = scene.instances.as_slice() else {
         return Err(format!(
@@ -172,9 +173,22 @@ pub fn measure(
         .triangles(Affine3A::IDENTITY)
         .collect();
     let world_to_object = only.transform.inverse();
-    let mut out = Vec::new();
+    let mut trees = Vec::new();
     for kind in TreeKind::ALL {
-        let (build_s, (raw_nodes, raw_tris)) = build_tree(kind, &triangles)?;
+        let (build_s, raw) = build_tree(kind, &triangles)?;
+        trees.push((kind.name(), build_s, raw));
+    }
+    if let Some(gpu) = gpu_tree {
+        let start = std::time::Instant::now();
+        let raw = reinserted(gpu)?;
+        trees.push((
+            "our GPU tree + obvhs reinsertion".into(),
+            start.elapsed().as_secs_f64(),
+            raw,
+        ));
+    }
+    let mut out = Vec::new();
+    for (tree, build_s, (raw_nodes, raw_tris)) in trees {
         let blas = ksrt::cpu::BlasReadback::new(raw_nodes, raw_tris);
         let batches = batches
             .iter()
@@ -186,7 +200,7 @@ pub fn measure(
             })
             .collect();
         out.push(TreeWork {
-            tree: kind.name(),
+            tree,
             build_s,
             sah_cost: f64::from(blas.sah_cost),
             batches,
@@ -202,13 +216,16 @@ pub enum TreeKind {
     Binned,
     /// obvhs's BVH2 with a preset's parameters, leaves of ≤ 4 (as our builders make them).
     Obvhs(Preset),
+    /// obvhs's `medium_build` without its reinsertion passes: PLOC alone, at that search radius.
+    PlocOnly,
 }
 
 impl TreeKind {
     /// Every kind, in the order reported.
-    pub const ALL: [TreeKind; 4] = [
+    pub const ALL: [TreeKind; 5] = [
         TreeKind::Binned,
         TreeKind::Obvhs(Preset::Fastest),
+        TreeKind::PlocOnly,
         TreeKind::Obvhs(Preset::Medium),
         TreeKind::Obvhs(Preset::VerySlow),
     ];
@@ -218,6 +235,7 @@ impl TreeKind {
         match self {
             TreeKind::Binned => "our CPU binned SAH".into(),
             TreeKind::Obvhs(p) => format!("{} (≤ 4 a leaf)", p.name()),
+            TreeKind::PlocOnly => "obvhs medium, no reinsertion".into(),
         }
     }
 }
@@ -244,13 +262,21 @@ pub fn build_tree(kind: TreeKind, triangles: &[[Vec3; 3]]) -> Result<(f64, RawTr
                 gpu_bvh2_raw(&nodes, &cpu.primitive_indices, triangles)?,
             ))
         }
-        TreeKind::Obvhs(preset) => {
+        TreeKind::Obvhs(_) | TreeKind::PlocOnly => {
             // obvhs's input leaves out non-finite triangles: its indices map back through this.
             let finite: Vec<u32> = (0..triangles.len() as u32)
                 .filter(|&i| triangles[i as usize].iter().all(|v| v.is_finite()))
                 .collect();
             let input = obvhs_peer::to_obvhs(triangles);
-            let mut params = preset.params();
+            let mut params = match kind {
+                TreeKind::Obvhs(preset) => preset.params(),
+                _ => {
+                    let mut p = Preset::Medium.params();
+                    p.reinsertion_batch_ratio = 0.0;
+                    p.post_collapse_reinsertion_batch_ratio_multiplier = 0.0;
+                    p
+                }
+            };
             params.max_prims_per_leaf = 4;
             let start = std::time::Instant::now();
             let bvh = obvhs_peer::build_with(&input, params)?;
@@ -277,6 +303,74 @@ pub fn build_tree(kind: TreeKind, triangles: &[[Vec3; 3]]) -> Result<(f64, RawTr
             Ok((build_s, gpu_bvh2_raw(&nodes, &primitives, triangles)?))
         }
     }
+}
+
+/// Our read-back tree as an obvhs BVH2 (each node's two children adjacent; leaves list the
+/// read-back triangle slots), run through obvhs's reinsertion as `medium_build` runs it (batch
+/// 5 % of the nodes, then 10 % as after its leaf collapse), laid out as ours again: what a
+/// reinsertion pass after our GPU build would make. Hits report triangle slots, not primitive
+/// indices (the work counted is the same).
+fn reinserted(gpu: &ksrt::cpu::BlasReadback) -> Result<RawTree, String> {
+    use obvhs::aabb::Aabb;
+    use obvhs::bvh2::node::Bvh2Node;
+    let aabb =
+        |c: &ksrt::cpu::Bvh2Child| Aabb::new(c.min.to_array().into(), c.max.to_array().into());
+    let Some(root) = gpu.nodes.first() else {
+        return Err("the GPU tree is empty".into());
+    };
+    if root.iter().any(|c| c.is_empty()) {
+        return Err("the GPU tree's root has an empty child".into());
+    }
+    let mut whole = aabb(&root[0]);
+    whole = whole.union(&aabb(&root[1]));
+    let mut nodes = vec![Bvh2Node::new(whole, 0, 1)];
+    let mut pending = vec![(0u32, 0usize)];
+    while let Some((ours, k)) = pending.pop() {
+        if nodes.len() > 2 * gpu.nodes.len() + 1 {
+            return Err("the GPU tree has a cycle".into());
+        }
+        let node = gpu
+            .nodes
+            .get(ours as usize)
+            .ok_or_else(|| format!("GPU node {ours} out of range"))?;
+        let first = nodes.len();
+        nodes[k].first_index = first as u32;
+        for (j, c) in node.iter().enumerate() {
+            if c.is_empty() {
+                return Err(format!("GPU node {ours} has an empty child"));
+            }
+            if c.is_leaf() {
+                let (start, count) = c.leaf_range();
+                nodes.push(Bvh2Node::new(aabb(c), count, start));
+            } else {
+                nodes.push(Bvh2Node::new(aabb(c), 0, 0));
+                pending.push((c.reference, first + j));
+            }
+        }
+    }
+    let mut bvh = obvhs::bvh2::Bvh2 {
+        nodes,
+        primitive_indices: (0..gpu.triangles.len() as u32).collect(),
+        ..Default::default()
+    };
+    let mut optimizer = obvhs::bvh2::reinsertion::ReinsertionOptimizer::default();
+    optimizer.run(&mut bvh, 0.05, None);
+    optimizer.run(&mut bvh, 0.1, None);
+    let nodes: Vec<BinaryNode> = bvh
+        .nodes
+        .iter()
+        .map(|n| {
+            let b = n.aabb();
+            let (min, max): ([f32; 3], [f32; 3]) = (b.min.into(), b.max.into());
+            BinaryNode {
+                min: Vec3::from(min),
+                max: Vec3::from(max),
+                first: n.first_index,
+                count: n.prim_count,
+            }
+        })
+        .collect();
+    gpu_bvh2_raw(&nodes, &bvh.primitive_indices, &gpu.triangles)
 }
 
 /// Prints the trees' work beside our GPU tree's (`gpu`: kind and work of each batch).
@@ -423,12 +517,18 @@ mod tests {
                 t_max: f32::INFINITY,
             })
             .collect();
+        let scene = strip_scene(1);
+        let tris: Vec<[Vec3; 3]> = scene.meshes[0].triangles(Affine3A::IDENTITY).collect();
+        let (_, (raw_nodes, raw_tris)) = build_tree(TreeKind::Binned, &tris).unwrap();
+        let gpu = ksrt::cpu::BlasReadback::new(raw_nodes, raw_tris);
         let trees = measure(
-            &strip_scene(1),
+            &scene,
             &[("primary", false, &rays), ("ao", true, &rays)],
+            Some(&gpu),
         )
         .unwrap();
-        assert_eq!(trees.len(), TreeKind::ALL.len());
+        // Every CPU builder, and the given tree after reinsertion.
+        assert_eq!(trees.len(), TreeKind::ALL.len() + 1);
         for t in &trees {
             assert_eq!(t.batches.len(), 2, "{}", t.tree);
             for (_, w) in &t.batches {
@@ -438,12 +538,65 @@ mod tests {
             }
             assert!(t.sah_cost > 1.0, "{}: {}", t.tree, t.sah_cost);
         }
-        let err = measure(&strip_scene(2), &[("primary", false, &rays)])
+        let err = measure(&strip_scene(2), &[("primary", false, &rays)], None)
             .unwrap_err()
             .to_string();
         assert!(
             err.contains("2 instances") && err.contains("--flatten"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn reinsertion_keeps_every_hit_and_lowers_the_sah_of_a_bad_tree() {
+        // A balanced tree over one-triangle leaves in a scrambled order (neighbours in the tree
+        // are far apart on the line), so reinsertion has work. Heap order: node i's children
+        // are 2i+1 and 2i+2; nodes 0..31 inner, 31..63 leaves.
+        let triangles: Vec<[Vec3; 3]> = (0..32).map(|i| tri(((i * 13) % 32) as f32)).collect();
+        let mut boxes = vec![(Vec3::ZERO, Vec3::ZERO); 63];
+        for (k, t) in triangles.iter().enumerate() {
+            boxes[31 + k] = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+        }
+        for i in (0..31).rev() {
+            let (a, b) = (boxes[2 * i + 1], boxes[2 * i + 2]);
+            boxes[i] = (a.0.min(b.0), a.1.max(b.1));
+        }
+        let nodes: Vec<BinaryNode> = (0..63usize)
+            .map(|i| BinaryNode {
+                min: boxes[i].0,
+                max: boxes[i].1,
+                first: if i < 31 {
+                    2 * i as u32 + 1
+                } else {
+                    i as u32 - 31
+                },
+                count: u32::from(i >= 31),
+            })
+            .collect();
+        let primitives: Vec<u32> = (0..32).collect();
+        let before = as_gpu_bvh2(&nodes, &primitives, &triangles).unwrap();
+        let (raw_nodes, raw_tris) = reinserted(&before).unwrap();
+        let after = ksrt::cpu::BlasReadback::new(raw_nodes, raw_tris);
+        assert_eq!(after.triangles.len(), 32);
+        // Reinsertion ran and moved something (obvhs only applies moves that lower the SAH).
+        assert!(
+            after.sah_cost < before.sah_cost,
+            "{} >= {}",
+            after.sah_cost,
+            before.sah_cost
+        );
+        for x in 0..32 {
+            let ray = ksrt::cpu::Ray {
+                origin: Vec3::new(x as f32 + 0.1, 0.1, 1.0),
+                dir: Vec3::NEG_Z,
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            };
+            let hit = after
+                .trace(&ray, false)
+                .0
+                .expect("every triangle is still in the tree");
+            assert!((hit.t - 1.0).abs() < 1e-6);
+        }
     }
 }
