@@ -242,24 +242,14 @@ impl TreeKind {
 
 /// Builds `kind`'s tree over `triangles` in our raw layout, with its CPU build time in seconds.
 pub fn build_tree(kind: TreeKind, triangles: &[[Vec3; 3]]) -> Result<(f64, RawTree), String> {
-    let start = std::time::Instant::now();
     match kind {
         TreeKind::Binned => {
+            let start = std::time::Instant::now();
             let cpu = ksrt::cpu::CpuBvh::build(triangles);
             let build_s = start.elapsed().as_secs_f64();
-            let nodes: Vec<BinaryNode> = cpu
-                .nodes
-                .iter()
-                .map(|n| BinaryNode {
-                    min: n.min,
-                    max: n.max,
-                    first: n.first,
-                    count: n.count,
-                })
-                .collect();
             Ok((
                 build_s,
-                gpu_bvh2_raw(&nodes, &cpu.primitive_indices, triangles)?,
+                gpu_bvh2_raw(&cpu_nodes(&cpu), &cpu.primitive_indices, triangles)?,
             ))
         }
         TreeKind::Obvhs(_) | TreeKind::PlocOnly => {
@@ -278,23 +268,11 @@ pub fn build_tree(kind: TreeKind, triangles: &[[Vec3; 3]]) -> Result<(f64, RawTr
                 }
             };
             params.max_prims_per_leaf = 4;
+            // Timed from here: obvhs's input is made outside, as `--cpu-peers` times it.
             let start = std::time::Instant::now();
             let bvh = obvhs_peer::build_with(&input, params)?;
             let build_s = start.elapsed().as_secs_f64();
-            let nodes: Vec<BinaryNode> = bvh
-                .nodes
-                .iter()
-                .map(|n| {
-                    let b = n.aabb();
-                    let (min, max): ([f32; 3], [f32; 3]) = (b.min.into(), b.max.into());
-                    BinaryNode {
-                        min: Vec3::from(min),
-                        max: Vec3::from(max),
-                        first: n.first_index,
-                        count: n.prim_count,
-                    }
-                })
-                .collect();
+            let nodes = obvhs_nodes(&bvh);
             let primitives: Vec<u32> = bvh
                 .primitive_indices
                 .iter()
@@ -303,6 +281,35 @@ pub fn build_tree(kind: TreeKind, triangles: &[[Vec3; 3]]) -> Result<(f64, RawTr
             Ok((build_s, gpu_bvh2_raw(&nodes, &primitives, triangles)?))
         }
     }
+}
+
+/// Our CPU binned-SAH tree's nodes in the shape [`gpu_bvh2_raw`] reads.
+fn cpu_nodes(cpu: &ksrt::cpu::CpuBvh) -> Vec<BinaryNode> {
+    cpu.nodes
+        .iter()
+        .map(|n| BinaryNode {
+            min: n.min,
+            max: n.max,
+            first: n.first,
+            count: n.count,
+        })
+        .collect()
+}
+
+/// An obvhs BVH2's nodes in the shape [`gpu_bvh2_raw`] reads (obvhs also keeps a node's two
+/// children adjacent).
+fn obvhs_nodes(bvh: &obvhs::bvh2::Bvh2) -> Vec<BinaryNode> {
+    (0..bvh.nodes.len())
+        .map(|i| {
+            let (min, max) = obvhs_peer::node_box(bvh, i);
+            BinaryNode {
+                min,
+                max,
+                first: bvh.nodes[i].first_index,
+                count: bvh.nodes[i].prim_count,
+            }
+        })
+        .collect()
 }
 
 /// Our read-back tree as an obvhs BVH2 (each node's two children adjacent; leaves list the
@@ -356,21 +363,12 @@ fn reinserted(gpu: &ksrt::cpu::BlasReadback) -> Result<RawTree, String> {
     let mut optimizer = obvhs::bvh2::reinsertion::ReinsertionOptimizer::default();
     optimizer.run(&mut bvh, 0.05, None);
     optimizer.run(&mut bvh, 0.1, None);
-    let nodes: Vec<BinaryNode> = bvh
-        .nodes
-        .iter()
-        .map(|n| {
-            let b = n.aabb();
-            let (min, max): ([f32; 3], [f32; 3]) = (b.min.into(), b.max.into());
-            BinaryNode {
-                min: Vec3::from(min),
-                max: Vec3::from(max),
-                first: n.first_index,
-                count: n.prim_count,
-            }
-        })
-        .collect();
-    gpu_bvh2_raw(&nodes, &bvh.primitive_indices, &gpu.triangles)
+    gpu_bvh2_raw(&obvhs_nodes(&bvh), &bvh.primitive_indices, &gpu.triangles)
+}
+
+/// One batch's work in the printed table.
+fn cell(kind: &str, w: &WorkPerRay) -> String {
+    format!("{kind} {:.1} + {:.1}", w.nodes, w.triangles)
 }
 
 /// Prints the trees' work beside our GPU tree's (`gpu`: kind and work of each batch).
@@ -389,7 +387,7 @@ pub fn print(gpu: &[(String, Option<WorkPerRay>)], trees: &[TreeWork]) {
         "—".into(),
         gpu.iter()
             .map(|(kind, w)| match w {
-                Some(w) => format!("{kind} {:.1} + {:.1}", w.nodes, w.triangles),
+                Some(w) => cell(kind, w),
                 None => format!("{kind} —"),
             })
             .collect(),
@@ -399,10 +397,7 @@ pub fn print(gpu: &[(String, Option<WorkPerRay>)], trees: &[TreeWork]) {
             &t.tree,
             format!("{:.2}", t.sah_cost),
             format!("{:.3} s", t.build_s),
-            t.batches
-                .iter()
-                .map(|(kind, w)| format!("{kind} {:.1} + {:.1}", w.nodes, w.triangles))
-                .collect(),
+            t.batches.iter().map(|(kind, w)| cell(kind, w)).collect(),
         );
     }
 }
@@ -423,17 +418,7 @@ mod tests {
     fn a_cpu_tree_laid_out_as_the_gpu_bvh2_finds_the_cpu_hits() {
         let triangles: Vec<[Vec3; 3]> = (0..40).map(|i| tri(i as f32)).collect();
         let cpu = ksrt::cpu::CpuBvh::build(&triangles);
-        let nodes: Vec<BinaryNode> = cpu
-            .nodes
-            .iter()
-            .map(|n| BinaryNode {
-                min: n.min,
-                max: n.max,
-                first: n.first,
-                count: n.count,
-            })
-            .collect();
-        let blas = as_gpu_bvh2(&nodes, &cpu.primitive_indices, &triangles).unwrap();
+        let blas = as_gpu_bvh2(&cpu_nodes(&cpu), &cpu.primitive_indices, &triangles).unwrap();
         assert_eq!(blas.triangles.len(), 40);
         for i in 0..40 {
             let ray = ksrt::cpu::Ray {

@@ -86,7 +86,7 @@ fn area(min: Vec3, max: Vec3) -> f64 {
 }
 
 /// The box of obvhs node `i` in our glam.
-fn node_box(bvh: &Bvh2, i: usize) -> (Vec3, Vec3) {
+pub fn node_box(bvh: &Bvh2, i: usize) -> (Vec3, Vec3) {
     let b = bvh.nodes[i].aabb();
     let (min, max): ([f32; 3], [f32; 3]) = (b.min.into(), b.max.into());
     (Vec3::from(min), Vec3::from(max))

@@ -360,12 +360,19 @@ impl Scene {
     /// meshes repeated): what a renderer that bakes its scene into a single BVH traces, for
     /// `ksrt bench --flatten`. Materials and textures are dropped; lights and camera are kept.
     pub fn flattened(&self) -> Result<Scene, String> {
-        let mut positions = Vec::new();
+        // Checked once for the whole scene, so no vertex index below can overflow.
+        let vertices: usize = self
+            .instances
+            .iter()
+            .map(|inst| self.meshes[inst.mesh].positions.len())
+            .sum();
+        u32::try_from(vertices)
+            .map_err(|_| format!("{}: too many vertices to flatten", self.name))?;
+        let mut positions = Vec::with_capacity(vertices);
         let mut indices = Vec::with_capacity(self.triangle_count() * 3);
         for inst in &self.instances {
             let m = &self.meshes[inst.mesh];
-            let base = u32::try_from(positions.len())
-                .map_err(|_| format!("{}: too many vertices to flatten", self.name))?;
+            let base = positions.len() as u32;
             positions.extend(
                 m.positions
                     .iter()
