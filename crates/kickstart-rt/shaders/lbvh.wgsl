@@ -84,6 +84,11 @@ const SAH_INTERSECTION: f32 = 1.0;
 // In the count word of a subtree: the subtree is cheaper as one leaf (its parent refers to it as
 // a leaf of `count` primitives from `first`).
 const COLLAPSED_BIT: u32 = 0x80000000u;
+// In the count word of a subtree: its leaves are not one range of sorted positions, so neither it
+// nor any subtree above it can become one leaf. Never set in a Karras tree (every subtree is a
+// range); a clustered tree (hploc.wgsl) merges clusters that need not be neighbours.
+const SCATTERED_BIT: u32 = 0x40000000u;
+const COUNT_MASK: u32 = 0x0fffffffu;
 
 fn linear_id(lid: u32, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid;
@@ -411,12 +416,24 @@ fn child_box(c: u32) -> Box {
 }
 
 // SAH summary of a subtree: its cost (area-weighted, not normalised), primitive count and first
-// sorted position, and whether it is cheaper as a single leaf.
+// sorted position, whether it is cheaper as a single leaf, and whether its leaves are the sorted
+// positions [first, first + count) (only then can it be one leaf).
 struct Subtree {
     cost: f32,
     count: u32,
     first: u32,
     collapsed: bool,
+    contiguous: bool,
+}
+
+// The count word of a summary as stored: count and the two flags.
+fn subtree_word(s: Subtree) -> u32 {
+    return s.count | select(0u, COLLAPSED_BIT, s.collapsed) | select(SCATTERED_BIT, 0u, s.contiguous);
+}
+
+fn subtree_from(cost: u32, word: u32, first: u32) -> Subtree {
+    return Subtree(bitcast<f32>(cost), word & COUNT_MASK, first, (word & COLLAPSED_BIT) != 0u,
+                   (word & SCATTERED_BIT) == 0u);
 }
 
 // Surface area, 0 for an empty box, capped at BIG so sums of costs stay comparable (a non-finite
@@ -427,7 +444,7 @@ fn area(b: Box) -> f32 {
 }
 
 fn leaf_subtree(k: u32, b: Box) -> Subtree {
-    return Subtree(area(b) * SAH_INTERSECTION, 1u, k, false);
+    return Subtree(area(b) * SAH_INTERSECTION, 1u, k, false, true);
 }
 
 // The optimal cost of an inner node over children `l` and `r` (box `b`): split, or one leaf when
@@ -437,8 +454,11 @@ fn join_subtrees(b: Box, l: Subtree, r: Subtree) -> Subtree {
     let count = l.count + r.count;
     let split = min(a * SAH_TRAVERSAL + l.cost + r.cost, BIG);
     let as_leaf = min(a * f32(count) * SAH_INTERSECTION, BIG);
-    let collapse = collapsing() && count <= params.max_leaf && as_leaf <= split;
-    return Subtree(select(split, as_leaf, collapse), count, min(l.first, r.first), collapse);
+    let contiguous = l.contiguous && r.contiguous
+        && (l.first + l.count == r.first || r.first + r.count == l.first);
+    let collapse = collapsing() && contiguous && count <= params.max_leaf && as_leaf <= split;
+    return Subtree(select(split, as_leaf, collapse), count, min(l.first, r.first), collapse,
+                   contiguous);
 }
 
 // Whether this dispatch may collapse subtrees (uniform). Builds and refits that may not skip the
@@ -456,15 +476,14 @@ fn subtree_at(node: u32) -> u32 {
 fn store_subtree(node: u32, s: Subtree) {
     let at = subtree_at(node);
     atomicStore(&work[at], bitcast<u32>(s.cost));
-    atomicStore(&work[at + 1u], s.count | select(0u, COLLAPSED_BIT, s.collapsed));
+    atomicStore(&work[at + 1u], subtree_word(s));
     atomicStore(&work[at + 2u], s.first);
 }
 
 fn load_subtree(node: u32) -> Subtree {
     let at = subtree_at(node);
-    let count = atomicLoad(&work[at + 1u]);
-    return Subtree(bitcast<f32>(atomicLoad(&work[at])), count & ~COLLAPSED_BIT,
-                   atomicLoad(&work[at + 2u]), (count & COLLAPSED_BIT) != 0u);
+    return subtree_from(atomicLoad(&work[at]), atomicLoad(&work[at + 1u]),
+                        atomicLoad(&work[at + 2u]));
 }
 
 // The ref a node stores for child `c` (topology encoding) with summary `s`: a collapsed inner
@@ -544,7 +563,7 @@ fn wg_store(slot: u32, b: Box, s: Subtree) {
     wg_boxes[at + 5u] = b.hi.z;
     if collapsing() {
         wg_subtrees[3u * slot] = bitcast<u32>(s.cost);
-        wg_subtrees[3u * slot + 1u] = s.count | select(0u, COLLAPSED_BIT, s.collapsed);
+        wg_subtrees[3u * slot + 1u] = subtree_word(s);
         wg_subtrees[3u * slot + 2u] = s.first;
     }
 }
@@ -565,9 +584,7 @@ fn wg_child_subtree(c: u32, b: Box, block: u32) -> Subtree {
         return leaf_subtree(c & 0x7fffffffu, b);
     }
     let at = 3u * (c - block);
-    let count = wg_subtrees[at + 1u];
-    return Subtree(bitcast<f32>(wg_subtrees[at]), count & ~COLLAPSED_BIT, wg_subtrees[at + 2u],
-                   (count & COLLAPSED_BIT) != 0u);
+    return subtree_from(wg_subtrees[at], wg_subtrees[at + 1u], wg_subtrees[at + 2u]);
 }
 
 @compute @workgroup_size(256)

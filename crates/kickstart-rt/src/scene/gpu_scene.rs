@@ -515,6 +515,9 @@ impl GpuScene {
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
                 key_bits: BLAS_KEY_BITS,
                 centroid_bounds: None,
+                // Fast-trace (leaves collapsed) is also the clustered build: the two together
+                // are what `BuildHint::PreferFastTrace` promises.
+                clustered: max_leaf > 1,
             },
         );
         prims.gather_triangles(
@@ -675,6 +678,7 @@ impl GpuScene {
                     bounds_out: None,
                     key_bits: TLAS_KEY_BITS,
                     centroid_bounds,
+                    clustered: false,
                 },
             );
             self.tlas.refits_since_rebuild = 0;

@@ -1,0 +1,400 @@
+// Clustered BVH build over the LBVH's Morton order: locally-ordered clustering (PLOC, Meister &
+// Bittner 2018) done hierarchically while climbing the Karras tree, after H-PLOC (Benthin et al.
+// 2024). Appended to lbvh.wgsl (its boxes, SAH summaries, node writer and workgroup vote);
+// driven by src/scene/lbvh.rs, which documents the pass order.
+//
+// Entry point (256 invocations, one per sorted leaf; the Karras hierarchy of lbvh_hierarchy is
+// bound at `topology`, base 0):
+//   hploc_climb  climbs the Karras tree bottom-up like lbvh_climb (the second arriver at a node
+//                goes on). A node's clusters are its leaves while it covers at most HP_KEEP of
+//                them; at every node covering more, and at the root, the clusters of its two
+//                children (at most 2 HP_KEEP) are merged by PLOC in workgroup memory until
+//                HP_KEEP remain (one at the root). Each merge makes one node of the output tree,
+//                written in the final node format (boxes, SAH leaf collapsing) and, in
+//                `topo_out`, in the topology format of lbvh.wgsl (so lbvh_climb refits it).
+//
+// Why clusters: a Karras node splits at the highest differing Morton bit, wherever the geometry
+// is; PLOC pairs each cluster with the one whose union box is smallest among its neighbours in
+// Morton order, so boxes hug the geometry (SAH cost and node visits per ray drop, most on
+// scenes whose parts are far apart in Morton order, like architecture).
+//
+// `work` layout (u32 words, all accessed atomically; n primitives):
+//   [0, 6)                        centroid bounds (lbvh_bounds)
+//   6                             output nodes allocated so far (cleared before the climb)
+//   [8, 8 + 6 (n-1))              box of output node X at 8 + 6 X
+//   [8 + 6 (n-1), 8 + 7 (n-1))    per Karras node P: the first arriver's far range end + 1
+//                                 (cleared before the climb; 0 = nobody arrived yet)
+//   [8 + 7 (n-1), 8 + 10 (n-1))   SAH summary of output node X (as lbvh_climb's)
+//   [8 + 10 (n-1), 8 + 11 (n-1))  per Karras node P covering > HP_KEEP leaves: its cluster count
+//   [8 + 11 (n-1), 8 + 12 (n-1) + 1)
+//                                 cluster lists: such a node's clusters from its first sorted
+//                                 position (output node index, or LEAF_BIT | sorted position)
+//
+// Output node indices are handed out from the top (n - 2 down to 0); the root's last merge is
+// the last one made anywhere (everything else happened in its subtrees before), so the root is
+// node 0, where traversal starts.
+
+@group(0) @binding(9) var<storage, read_write> topo_out: array<u32>;
+
+// Lanes of one merge (a slice of the workgroup): the most clusters one merge holds.
+const HP_SLICE: u32 = 32u;
+const HP_SLICES: u32 = 8u;
+// Clusters kept by a node that covers more leaves than this.
+const HP_KEEP: u32 = 16u;
+const HP_NONE: u32 = 0xFFFFFFFFu;
+const HP_COUNTER: u32 = 6u;
+
+// Per slice: the lane whose merge runs now, that merge's parameters (HP_INFO words), the cluster
+// count, and how many merges the current round makes.
+const HP_INFO: u32 = 8u;
+var<workgroup> hp_owner: array<atomic<u32>, 8>;
+var<workgroup> hp_info: array<u32, 64>;
+var<workgroup> hp_count: array<u32, 8>;
+var<workgroup> hp_merges: array<atomic<u32>, 8>;
+var<workgroup> hp_base: array<u32, 8>;
+// Per lane: the cluster it holds (ref, box, SAH summary), its nearest neighbour, and whether it
+// survives the round.
+var<workgroup> hp_ref: array<u32, 256>;
+var<workgroup> hp_box: array<f32, 1536>;
+var<workgroup> hp_sub: array<u32, 768>;
+var<workgroup> hp_nn: array<u32, 256>;
+var<workgroup> hp_keep: array<u32, 256>;
+
+fn hp_xchg_at() -> u32 {
+    return BOXES_AT + 6u * (params.count - 1u);
+}
+
+fn hp_counts_at() -> u32 {
+    return BOXES_AT + 10u * (params.count - 1u);
+}
+
+fn hp_lists_at() -> u32 {
+    return BOXES_AT + 11u * (params.count - 1u);
+}
+
+// Karras parent of a node in topology encoding (the hierarchy is at base 0 of `topology`).
+fn hp_karras_parent(node: u32) -> u32 {
+    let n = params.count;
+    if (node & LEAF_BIT) != 0u {
+        return topology[3u * (n - 1u) + (node & 0x7fffffffu)] & PARENT_INDEX_MASK;
+    }
+    return topology[2u * (n - 1u) + node] & PARENT_INDEX_MASK;
+}
+
+// A cluster as one lane holds it.
+struct Cluster {
+    r: u32,
+    bx: Box,
+    sub: Subtree,
+}
+
+// Cluster `r` from the input (a leaf) or from the output nodes made so far.
+fn hp_load(r: u32) -> Cluster {
+    if (r & LEAF_BIT) != 0u {
+        let k = r & 0x7fffffffu;
+        let b = leaf_box(k);
+        return Cluster(r, b, leaf_subtree(k, b));
+    }
+    return Cluster(r, load_box(r), load_subtree(r));
+}
+
+fn hp_put(li: u32, c: Cluster) {
+    hp_ref[li] = c.r;
+    let at = 6u * li;
+    hp_box[at] = c.bx.lo.x;
+    hp_box[at + 1u] = c.bx.lo.y;
+    hp_box[at + 2u] = c.bx.lo.z;
+    hp_box[at + 3u] = c.bx.hi.x;
+    hp_box[at + 4u] = c.bx.hi.y;
+    hp_box[at + 5u] = c.bx.hi.z;
+    hp_sub[3u * li] = bitcast<u32>(c.sub.cost);
+    hp_sub[3u * li + 1u] = subtree_word(c.sub);
+    hp_sub[3u * li + 2u] = c.sub.first;
+}
+
+fn hp_box_at(li: u32) -> Box {
+    let at = 6u * li;
+    return Box(vec3<f32>(hp_box[at], hp_box[at + 1u], hp_box[at + 2u]),
+               vec3<f32>(hp_box[at + 3u], hp_box[at + 4u], hp_box[at + 5u]));
+}
+
+fn hp_get(li: u32) -> Cluster {
+    return Cluster(hp_ref[li], hp_box_at(li),
+                   subtree_from(hp_sub[3u * li], hp_sub[3u * li + 1u], hp_sub[3u * li + 2u]));
+}
+
+// Surface area for the neighbour search: extents clamped to 1e18 so the result is always finite
+// (never inf, never inf * 0 = NaN): the comparisons below must be a total order for every round
+// to merge (see hp_tie_before).
+fn hp_area(b: Box) -> f32 {
+    let d = clamp(b.hi - b.lo, vec3<f32>(0.0), vec3<f32>(1e18));
+    return 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x);
+}
+
+// Whether candidate `m` ranks before `best` as lane j's neighbour when their merged areas are
+// equal. The order is a function of the pair alone (so the pair with the smallest key overall is
+// always mutual: every round merges at least once), and prefers the partner j ^ 1, then the
+// nearest index: identical boxes then merge in balanced pairs, not in a chain.
+fn hp_tie_before(j: u32, m: u32, best: u32) -> bool {
+    let pm = select(1u, 0u, m == (j ^ 1u));
+    let pb = select(1u, 0u, best == (j ^ 1u));
+    if pm != pb {
+        return pm < pb;
+    }
+    let dm = select(j - m, m - j, m > j);
+    let db = select(j - best, best - j, best > j);
+    if dm != db {
+        return dm < db;
+    }
+    return min(j, m) < min(j, best);
+}
+
+// The output-topology parent slot of child ref `r`.
+fn hp_parent_slot(r: u32) -> u32 {
+    let n = params.count;
+    if (r & LEAF_BIT) != 0u {
+        return params.topo_base + 3u * (n - 1u) + (r & 0x7fffffffu);
+    }
+    return params.topo_base + 2u * (n - 1u) + r;
+}
+
+// One climber: its Karras node (topology encoding), the node's leaf range [lo, hi], and the split
+// of that range between its children (the last leaf of the left child).
+struct HpClimber {
+    node: u32,
+    lo: u32,
+    hi: u32,
+    split: u32,
+    climbing: bool,
+    // The node's clusters must be merged (it covers more than HP_KEEP leaves, or is the root).
+    pending: bool,
+}
+
+@compute @workgroup_size(256)
+fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    // The driver runs lbvh_climb instead below two primitives; `n` is uniform.
+    if n < 2u {
+        return;
+    }
+    let k = linear_id(lid, wid, nwg);
+    let slice = lid / HP_SLICE;
+    let lane = lid % HP_SLICE;
+    let sl = slice * HP_SLICE;
+    let xchg = hp_xchg_at();
+    let counts = hp_counts_at();
+    let lists = hp_lists_at();
+
+    var c: HpClimber;
+    c.node = LEAF_BIT | k;
+    c.lo = k;
+    c.hi = k;
+    c.split = k;
+    c.climbing = k < n;
+    c.pending = false;
+
+    loop {
+        if !wg_any(c.climbing, lid) {
+            break;
+        }
+        // Release: the clusters this node's merge stored (by any lane of the workgroup) before
+        // the exchange below tells the sibling's climber about them.
+        storageBarrier();
+        var left = false;
+        var other = 0u;
+        if c.climbing {
+            let p = hp_karras_parent(c.node);
+            left = topology[2u * p] == c.node;
+            // The sibling needs the end of this node's range it cannot know: the left child's
+            // first leaf, the right child's last.
+            let before = atomicExchange(&work[xchg + p], select(c.hi, c.lo, left) + 1u);
+            // First to arrive: the sibling's climber takes over.
+            c.climbing = before != 0u;
+            other = before - 1u;
+            if c.climbing {
+                c.split = select(c.lo - 1u, c.hi, left);
+                c.lo = min(c.lo, other);
+                c.hi = max(c.hi, other);
+                c.node = p;
+                c.pending = c.hi - c.lo + 1u > HP_KEEP || c.hi - c.lo + 1u == n;
+            }
+        }
+        // Acquire: the sibling's clusters (stored before its exchange) are visible below.
+        storageBarrier();
+
+        // The merges of this step, one per slice at a time.
+        loop {
+            if lid < HP_SLICES {
+                atomicStore(&hp_owner[lid], HP_NONE);
+            }
+            workgroupBarrier();
+            if c.pending {
+                atomicMin(&hp_owner[slice], lane);
+            }
+            workgroupBarrier();
+            let owner = atomicLoad(&hp_owner[slice]);
+            if !wg_any(owner != HP_NONE, lid) {
+                break;
+            }
+            let mine = c.pending && owner == lane;
+            if mine {
+                // Cluster counts of the two children: a child covering at most HP_KEEP leaves
+                // has them as its clusters; a larger one stored its count (it is an inner Karras
+                // node: the left child's index is the split, the right one's the split + 1).
+                let lsize = c.split - c.lo + 1u;
+                let rsize = c.hi - c.split;
+                let at = slice * HP_INFO;
+                hp_info[at] = c.lo;
+                hp_info[at + 1u] = c.split;
+                hp_info[at + 2u] = select(lsize, atomicLoad(&work[counts + c.split]), lsize > HP_KEEP);
+                hp_info[at + 3u] = select(rsize, atomicLoad(&work[counts + c.split + 1u]), rsize > HP_KEEP);
+                hp_info[at + 4u] = select(0u, 1u, lsize > HP_KEEP) | select(0u, 2u, rsize > HP_KEEP)
+                    | select(0u, 4u, c.hi - c.lo + 1u == n);
+                hp_info[at + 5u] = c.node;
+            }
+            // Workgroup memory (the info) and storage (the lists the owner's acquire made
+            // visible) both hand over to the slice's other lanes here.
+            workgroupBarrier();
+            storageBarrier();
+            let busy = owner != HP_NONE;
+            let at = slice * HP_INFO;
+            let lo = hp_info[at];
+            let split = hp_info[at + 1u];
+            let lcount = hp_info[at + 2u];
+            let rcount = hp_info[at + 3u];
+            let flags = hp_info[at + 4u];
+            let root = (flags & 4u) != 0u;
+            let goal = select(HP_KEEP, 1u, root);
+            let total = lcount + rcount;
+            var mine_c: Cluster;
+            if busy && lane < total {
+                var r: u32;
+                if lane < lcount {
+                    r = select(LEAF_BIT | (lo + lane), atomicLoad(&work[lists + lo + lane]),
+                               (flags & 1u) != 0u);
+                } else {
+                    let j = lane - lcount;
+                    r = select(LEAF_BIT | (split + 1u + j),
+                               atomicLoad(&work[lists + split + 1u + j]), (flags & 2u) != 0u);
+                }
+                mine_c = hp_load(r);
+                hp_put(lid, mine_c);
+            }
+            if busy && lane == 0u {
+                hp_count[slice] = total;
+            }
+            workgroupBarrier();
+
+            // PLOC rounds: nearest neighbours, mutual pairs merge, survivors close ranks. Every
+            // round merges at least once (see hp_tie_before), so HP_SLICE rounds always suffice.
+            for (var round = 0u; round < HP_SLICE; round++) {
+                let count = select(0u, hp_count[slice], busy);
+                let merging = busy && count > goal;
+                if !wg_any(merging && lane == 0u, lid) {
+                    break;
+                }
+                let holds = merging && lane < count;
+                if holds {
+                    var best = HP_NONE;
+                    var best_area = 0.0;
+                    for (var m = 0u; m < count; m++) {
+                        if m == lane {
+                            continue;
+                        }
+                        let a = hp_area(union_box(mine_c.bx, hp_box_at(sl + m)));
+                        if best == HP_NONE || a < best_area
+                            || (a == best_area && hp_tie_before(lane, m, best)) {
+                            best = m;
+                            best_area = a;
+                        }
+                    }
+                    hp_nn[lid] = best;
+                }
+                workgroupBarrier();
+                var partner = HP_NONE;
+                var rank = 0u;
+                var keep = holds;
+                if holds {
+                    let m = hp_nn[lid];
+                    if hp_nn[sl + m] == lane {
+                        if lane < m {
+                            partner = m;
+                            rank = atomicAdd(&hp_merges[slice], 1u);
+                        } else {
+                            keep = false;
+                        }
+                    }
+                }
+                workgroupBarrier();
+                if merging && lane == 0u {
+                    // One allocation per slice and round, not one per merge: all merges of the
+                    // device contend for this word.
+                    let made = atomicLoad(&hp_merges[slice]);
+                    atomicStore(&hp_merges[slice], 0u);
+                    hp_base[slice] = atomicAdd(&work[HP_COUNTER], made);
+                }
+                workgroupBarrier();
+                if partner != HP_NONE {
+                    let o = hp_get(sl + partner);
+                    let x = n - 2u - (hp_base[slice] + rank);
+                    let b = union_box(mine_c.bx, o.bx);
+                    let s = join_subtrees(b, mine_c.sub, o.sub);
+                    write_node(x, mine_c.bx, child_ref(mine_c.r, mine_c.sub), o.bx,
+                               child_ref(o.r, o.sub));
+                    store_box(x, b);
+                    store_subtree(x, s);
+                    topo_out[params.topo_base + 2u * x] = mine_c.r;
+                    topo_out[params.topo_base + 2u * x + 1u] = o.r;
+                    topo_out[hp_parent_slot(mine_c.r)] = x;
+                    topo_out[hp_parent_slot(o.r)] = x;
+                    mine_c = Cluster(x, b, s);
+                }
+                hp_keep[lid] = select(0u, 1u, keep);
+                workgroupBarrier();
+                if holds {
+                    var to = 0u;
+                    var left_total = 0u;
+                    for (var m = 0u; m < count; m++) {
+                        let kept = hp_keep[sl + m];
+                        left_total += kept;
+                        if m < lane {
+                            to += kept;
+                        }
+                    }
+                    if keep {
+                        hp_put(sl + to, mine_c);
+                    }
+                    if lane == 0u {
+                        hp_count[slice] = left_total;
+                    }
+                }
+                workgroupBarrier();
+                // The survivors' new slots: each lane takes up the cluster now at its index.
+                if merging && lane < hp_count[slice] {
+                    mine_c = hp_get(lid);
+                }
+                workgroupBarrier();
+            }
+
+            // The node's clusters, for its sibling's climber (or the root's box).
+            let left_count = select(0u, hp_count[slice], busy);
+            if busy && lane < left_count {
+                atomicStore(&work[lists + lo + lane], mine_c.r);
+            }
+            if busy && lane == 0u {
+                atomicStore(&work[counts + hp_info[at + 5u]], left_count);
+                if root {
+                    write_bounds(mine_c.bx);
+                    topo_out[params.topo_base + 2u * (n - 1u)] = NO_PARENT;
+                }
+            }
+            if mine {
+                c.pending = false;
+                if root {
+                    c.climbing = false;
+                }
+            }
+        }
+    }
+}
