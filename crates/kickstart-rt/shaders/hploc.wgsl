@@ -41,6 +41,8 @@ const HP_SLICE: u32 = 32u;
 const HP_SLICES: u32 = 8u;
 // Clusters kept by a node that covers more leaves than this.
 const HP_KEEP: u32 = 16u;
+// Neighbour search radius in cluster order (Morton order of the clusters' first leaves).
+const HP_RADIUS: u32 = 32u;
 const HP_NONE: u32 = 0xFFFFFFFFu;
 const HP_COUNTER: u32 = 6u;
 
@@ -52,13 +54,28 @@ var<workgroup> hp_info: array<u32, 64>;
 var<workgroup> hp_count: array<u32, 8>;
 var<workgroup> hp_merges: array<atomic<u32>, 8>;
 var<workgroup> hp_base: array<u32, 8>;
-// Per lane: the cluster it holds (ref, box, SAH summary), its nearest neighbour, and whether it
-// survives the round.
+// Per lane: the cluster it holds (ref, box, SAH summary) and its nearest neighbour.
 var<workgroup> hp_ref: array<u32, 256>;
 var<workgroup> hp_box: array<f32, 1536>;
 var<workgroup> hp_sub: array<u32, 768>;
 var<workgroup> hp_nn: array<u32, 256>;
-var<workgroup> hp_keep: array<u32, 256>;
+// Per slice: the goal of its merge (HP_NONE: no merge), and the lanes whose clusters survive
+// the round (one bit each).
+var<workgroup> hp_goal: array<u32, 8>;
+var<workgroup> hp_kept: array<atomic<u32>, 8>;
+
+// Whether any slice's merge still has more clusters than its goal (uniform; one barrier). Reads
+// what the slices' first lanes stored before the caller's last barrier.
+fn hp_any_merging(lid: u32) -> bool {
+    if lid == 0u {
+        var more = 0u;
+        for (var s = 0u; s < HP_SLICES; s++) {
+            more |= select(0u, 1u, hp_count[s] > hp_goal[s]);
+        }
+        wg_go = more;
+    }
+    return workgroupUniformLoad(&wg_go) != 0u;
+}
 
 fn hp_xchg_at() -> u32 {
     return BOXES_AT + 6u * (params.count - 1u);
@@ -281,24 +298,31 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                 mine_c = hp_load(r);
                 hp_put(lid, mine_c);
             }
-            if busy && lane == 0u {
+            if lane == 0u {
                 hp_count[slice] = total;
+                hp_goal[slice] = select(HP_NONE, goal, busy);
             }
             workgroupBarrier();
 
             // PLOC rounds: nearest neighbours, mutual pairs merge, survivors close ranks. Every
             // round merges at least once (see hp_tie_before), so HP_SLICE rounds always suffice.
+            // Six barriers a round: each costs the whole workgroup, busy slices or not.
             for (var round = 0u; round < HP_SLICE; round++) {
-                let count = select(0u, hp_count[slice], busy);
-                let merging = busy && count > goal;
-                if !wg_any(merging && lane == 0u, lid) {
+                if !hp_any_merging(lid) {
                     break;
                 }
+                let count = hp_count[slice];
+                let merging = busy && count > goal;
                 let holds = merging && lane < count;
+                if lane == 0u {
+                    atomicStore(&hp_kept[slice], 0u);
+                }
                 if holds {
+                    mine_c = hp_get(lid);
                     var best = HP_NONE;
                     var best_area = 0.0;
-                    for (var m = 0u; m < count; m++) {
+                    let m_end = min(count, lane + HP_RADIUS + 1u);
+                    for (var m = select(0u, lane - HP_RADIUS, lane > HP_RADIUS); m < m_end; m++) {
                         if m == lane {
                             continue;
                         }
@@ -326,6 +350,9 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                         }
                     }
                 }
+                if keep {
+                    atomicOr(&hp_kept[slice], 1u << lane);
+                }
                 workgroupBarrier();
                 if merging && lane == 0u {
                     // One allocation per slice and round, not one per merge: all merges of the
@@ -350,36 +377,27 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                     topo_out[hp_parent_slot(o.r)] = x;
                     mine_c = Cluster(x, b, s);
                 }
-                hp_keep[lid] = select(0u, 1u, keep);
+                // Every read of this round's slots is above.
                 workgroupBarrier();
-                if holds {
-                    var to = 0u;
-                    var left_total = 0u;
-                    for (var m = 0u; m < count; m++) {
-                        let kept = hp_keep[sl + m];
-                        left_total += kept;
-                        if m < lane {
-                            to += kept;
-                        }
-                    }
+                if merging {
+                    let kept = atomicLoad(&hp_kept[slice]);
                     if keep {
-                        hp_put(sl + to, mine_c);
+                        hp_put(sl + countOneBits(kept & ((1u << lane) - 1u)), mine_c);
                     }
                     if lane == 0u {
-                        hp_count[slice] = left_total;
+                        hp_count[slice] = countOneBits(kept);
                     }
-                }
-                workgroupBarrier();
-                // The survivors' new slots: each lane takes up the cluster now at its index.
-                if merging && lane < hp_count[slice] {
-                    mine_c = hp_get(lid);
                 }
                 workgroupBarrier();
             }
+            // Each lane takes up the cluster now at its index.
+            let left_count = select(0u, hp_count[slice], busy);
+            if lane < left_count {
+                mine_c = hp_get(lid);
+            }
 
             // The node's clusters, for its sibling's climber (or the root's box).
-            let left_count = select(0u, hp_count[slice], busy);
-            if busy && lane < left_count {
+            if lane < left_count {
                 atomicStore(&work[lists + lo + lane], mine_c.r);
             }
             if busy && lane == 0u {
