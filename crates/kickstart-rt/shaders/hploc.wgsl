@@ -41,8 +41,11 @@ const HP_SLICE: u32 = 32u;
 const HP_SLICES: u32 = 8u;
 // Clusters kept by a node that covers more leaves than this.
 const HP_KEEP: u32 = 16u;
-// Neighbour search radius in cluster order (Morton order of the clusters' first leaves).
-const HP_RADIUS: u32 = 32u;
+// Neighbour search radius in cluster order (about the Morton order of the clusters' leaves).
+// Measured on the H100 (BENCHMARKS.md, session 21), dragon climb / SAH ratio, apartment's
+// largest mesh SAH ratio: the whole slice (32) 2.11 ms / 1.113 / 1.093; 16: 2.11 / 1.103 / 0.999;
+// 8: 1.80 / 1.110 / 1.061; 4: 1.32 / 1.108 / 1.062 (apartment peer workload 2 % lower).
+const HP_RADIUS: u32 = 8u;
 const HP_NONE: u32 = 0xFFFFFFFFu;
 const HP_COUNTER: u32 = 6u;
 
