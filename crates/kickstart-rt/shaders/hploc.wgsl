@@ -44,8 +44,10 @@ const HP_KEEP: u32 = 16u;
 // Neighbour search radius in cluster order (about the Morton order of the clusters' leaves).
 // Measured on the H100 (BENCHMARKS.md, session 21), dragon climb / SAH ratio, apartment's
 // largest mesh SAH ratio: the whole slice (32) 2.11 ms / 1.113 / 1.093; 16: 2.11 / 1.103 / 0.999;
-// 8: 1.80 / 1.110 / 1.061; 4: 1.32 / 1.108 / 1.062 (apartment peer workload 2 % lower).
-const HP_RADIUS: u32 = 8u;
+// 8: 1.80 / 1.110 / 1.061; 4: 1.32 / 1.108 / 1.062. The apartment baked into one mesh traces 6 %
+// slower at 8 than at 32 (peer workload 1481 against 1571 Mrays/s): a fast-trace build spends
+// the time.
+const HP_RADIUS: u32 = 16u;
 const HP_NONE: u32 = 0xFFFFFFFFu;
 const HP_COUNTER: u32 = 6u;
 

@@ -1642,8 +1642,8 @@ mod tests {
         for (i, b) in aabbs.iter_mut().enumerate() {
             *b = shifted(b, centres[i % centres.len()]);
         }
-        // A soup of overlapping boxes leaves little to gain (lavapipe: 91.9 → 89.3), but the
-        // clustered tree must not be worse; the groups gain a quarter (4.19 → 3.12).
+        // A soup of overlapping boxes leaves little to gain (lavapipe: 91.9 → 90.1), but the
+        // clustered tree must not be worse; the groups gain a quarter (4.19 → 3.08).
         let soup = clustered_boxes(8000, 25);
         for (aabbs, name, most) in [(aabbs, "groups", 0.85), (soup, "soup", 1.0)] {
             let (_, lbvh_sah) =
