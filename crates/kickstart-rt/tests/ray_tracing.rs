@@ -533,9 +533,22 @@ fn half_bits(v: f32) -> u16 {
 }
 
 /// An `allow_update` geometry whose vertices move, refitted, traces exactly like a fresh build
-/// of the moved vertices; TLAS refit after moving instances equals a TLAS rebuild.
+/// of the moved vertices; TLAS refit after moving instances equals a TLAS rebuild. Both BLAS
+/// kinds are refit: the LBVH (`Auto` with `allow_update`) and the clustered fast-trace tree
+/// (`PreferFastTrace`), whose refit climbs a topology without block structure. The fresh build
+/// is a clustered fast-trace tree either way.
 #[test]
 fn refits_equal_rebuilds() {
+    refit_equals_rebuild(BuildHint::Auto);
+    refit_equals_rebuild(BuildHint::PreferFastTrace);
+}
+
+fn refit_equals_rebuild(hint: BuildHint) {
+    let dynamic = |m: &Mesh| {
+        let mut input = mesh_input("dyn", m, true);
+        input.build_hint = hint;
+        input
+    };
     let mut rng = Rng(99);
     let before = Mesh::soup(&mut rng, 3000, 1.0);
     let mut after = before.clone();
@@ -555,7 +568,7 @@ fn refits_equal_rebuilds() {
     c.schedule_bvh_task(GeometryTask {
         operation: TaskOperation::Register,
         handle: ga,
-        input: mesh_input("dyn", &before, true),
+        input: dynamic(&before),
     });
     let ia: Vec<InstanceHandle> = a.create_instance_handles(transforms.len());
     for (h, t) in ia.iter().zip(&transforms) {
@@ -567,7 +580,7 @@ fn refits_equal_rebuilds() {
     c.schedule_bvh_task(GeometryTask {
         operation: TaskOperation::Update,
         handle: ga,
-        input: mesh_input("dyn", &after, true),
+        input: dynamic(&after),
     });
     for (h, t) in ia.iter().zip(&moved) {
         c.schedule_bvh_task(InstanceTask {
@@ -610,7 +623,10 @@ fn refits_equal_rebuilds() {
         oracle.instance(*h, &InstanceInput::new(gb, *t));
     }
     assert_agrees(&compare(&oracle, &rays, &hb, VISIBLE), "rebuild");
-    assert_agrees(&compare(&oracle, &rays, &ha, VISIBLE), "refit");
+    assert_agrees(
+        &compare(&oracle, &rays, &ha, VISIBLE),
+        &format!("{hint:?} refit"),
+    );
     // The triangle data and instance transforms are bit-identical in both contexts, and the tie
     // rule makes the reported hit independent of the tree: refit and rebuild must agree exactly.
     for (k, (x, y)) in ha.iter().zip(&hb).enumerate() {
@@ -629,7 +645,7 @@ fn refits_equal_rebuilds() {
                 y.u.to_bits(),
                 y.v.to_bits()
             ),
-            "ray {k} {:?}: refit {x:?}, rebuild {y:?}",
+            "{hint:?}: ray {k} {:?}: refit {x:?}, rebuild {y:?}",
             rays[k]
         );
     }

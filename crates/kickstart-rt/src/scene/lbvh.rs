@@ -1520,25 +1520,56 @@ mod tests {
 
     #[test]
     fn lbvh_collapsed_leaves_are_the_sah_optimum_of_the_topology() {
+        collapsed_leaves_are_the_optimum(false);
+    }
+
+    /// Builds (clustered or not) over two box sets with leaves of up to 2, 4 and 8: each SAH
+    /// cost must be the collapse optimum of its topology, and below one primitive per leaf.
+    fn collapsed_leaves_are_the_optimum(clustered: bool) {
         let mut lbvh = Lbvh::new(&gpu().device);
+        let refs = LeafRefs::SortedPosition;
         for (aabbs, name) in [
             (clustered_boxes(6000, 3), "clustered"),
             (hard_soup(5003, 8), "hard soup"),
         ] {
-            let (_, single) = build_and_check(&mut lbvh, &aabbs, LeafRefs::SortedPosition);
+            let mut build = |max_leaf| {
+                build_and_check_opts(&mut lbvh, &aabbs, refs, max_leaf, BLAS_KEY_BITS, clustered)
+            };
+            let (_, single) = build(1);
             for max_leaf in [2, 4, 8] {
                 // check_tree: every primitive in exactly one leaf of ≤ max_leaf, exact boxes.
-                let (tree, sah) =
-                    build_and_check_leaves(&mut lbvh, &aabbs, LeafRefs::SortedPosition, max_leaf);
+                let (tree, sah) = build(max_leaf);
                 let optimum = optimal_collapsed_sah(&tree, &aabbs, max_leaf);
                 eprintln!("{name} max_leaf {max_leaf}: SAH {sah:.3} (one per leaf {single:.3})");
-                assert!(
-                    (sah - optimum).abs() <= 1e-4 * optimum,
-                    "{name} max_leaf {max_leaf}: SAH {sah} but the optimum is {optimum}"
-                );
+                assert_is_optimum(sah, optimum, &format!("{name} max_leaf {max_leaf}"));
                 assert!(sah < single, "{name}: collapsing must lower the SAH cost");
             }
         }
+    }
+
+    /// `sah` equals the oracle's `optimum` (f32 boxes against f64 sums).
+    fn assert_is_optimum(sah: f64, optimum: f64, what: &str) {
+        assert!(
+            (sah - optimum).abs() <= 1e-4 * optimum,
+            "{what}: SAH {sah} but the optimum is {optimum}"
+        );
+    }
+
+    /// `before` with every third box moved up to 200 away: decisions made for the old boxes
+    /// no longer hold.
+    fn scatter_a_third(before: &[Aabb], seed: u64) -> Vec<Aabb> {
+        let mut rng = Rng(seed);
+        before
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                if i % 3 == 0 {
+                    shifted(b, rng.vec(-200.0, 200.0))
+                } else {
+                    *b
+                }
+            })
+            .collect()
     }
 
     #[test]
@@ -1561,27 +1592,11 @@ mod tests {
         let mut lbvh = Lbvh::new(&gpu().device);
         let before = clustered_boxes(4000, 5);
         let (tree, _) = build_and_check_leaves(&mut lbvh, &before, LeafRefs::SortedPosition, 4);
-        // Scatter a third of the boxes far away: decisions made for the old boxes no longer
-        // hold.
-        let mut rng = Rng(6);
-        let after: Vec<Aabb> = before
-            .iter()
-            .enumerate()
-            .map(|(i, b)| {
-                if i % 3 == 0 {
-                    shifted(b, rng.vec(-200.0, 200.0))
-                } else {
-                    *b
-                }
-            })
-            .collect();
+        let after = scatter_a_third(&before, 6);
         refit_to(&mut lbvh, &tree, &after, 4);
         let (tree, sah) = check_read_back(tree, &after, false);
         let optimum = optimal_collapsed_sah(&tree, &after, 4);
-        assert!(
-            (sah - optimum).abs() <= 1e-4 * optimum,
-            "refit SAH {sah}, optimum for the new boxes {optimum}"
-        );
+        assert_is_optimum(sah, optimum, "refit for the new boxes");
     }
 
     /// Depth of the tree (root = 1) from its read-back topology.
@@ -1661,23 +1676,7 @@ mod tests {
     fn hploc_collapsed_leaves_are_the_sah_optimum_of_ranges() {
         // Only subtrees whose leaves are one range of sorted positions may be one leaf (a leaf
         // ref is a range); among those the build must take every collapse that pays.
-        let mut lbvh = Lbvh::new(&gpu().device);
-        for (aabbs, name) in [
-            (clustered_boxes(6000, 3), "clustered"),
-            (hard_soup(5003, 8), "hard soup"),
-        ] {
-            let (_, single) = build_and_check_clustered(&mut lbvh, &aabbs, 1);
-            for max_leaf in [2, 4, 8] {
-                let (tree, sah) = build_and_check_clustered(&mut lbvh, &aabbs, max_leaf);
-                let optimum = optimal_collapsed_sah(&tree, &aabbs, max_leaf);
-                eprintln!("{name} max_leaf {max_leaf}: SAH {sah:.3} (one per leaf {single:.3})");
-                assert!(
-                    (sah - optimum).abs() <= 1e-4 * optimum,
-                    "{name} max_leaf {max_leaf}: SAH {sah} but the optimum is {optimum}"
-                );
-                assert!(sah < single, "{name}: collapsing must lower the SAH cost");
-            }
-        }
+        collapsed_leaves_are_the_optimum(true);
     }
 
     #[test]
@@ -1687,18 +1686,7 @@ mod tests {
         // with it.
         let mut lbvh = Lbvh::new(&gpu().device);
         let before = clustered_boxes(5000, 31);
-        let mut rng = Rng(32);
-        let after: Vec<Aabb> = before
-            .iter()
-            .enumerate()
-            .map(|(i, b)| {
-                if i % 3 == 0 {
-                    shifted(b, rng.vec(-200.0, 200.0))
-                } else {
-                    *b
-                }
-            })
-            .collect();
+        let after = scatter_a_third(&before, 32);
         let (tree, _) = build_and_check_clustered(&mut lbvh, &before, 1);
         let refs = |t: &GpuTree| -> Vec<u32> {
             t.node_words.chunks(16).flat_map(|w| [w[3], w[7]]).collect()
@@ -1711,9 +1699,6 @@ mod tests {
         refit_to(&mut lbvh, &tree, &after, 4);
         let (tree, sah) = check_read_back(tree, &after, false);
         let optimum = optimal_collapsed_sah(&tree, &after, 4);
-        assert!(
-            (sah - optimum).abs() <= 1e-4 * optimum,
-            "refit SAH {sah}, optimum for the new boxes {optimum}"
-        );
+        assert_is_optimum(sah, optimum, "clustered refit for the new boxes");
     }
 }
