@@ -121,8 +121,9 @@ pub enum SurfelType {
 /// geometry more closely (lower SAH cost, fewer node visits per ray; most on scenes of separate
 /// parts such as buildings), and turns every subtree of up to
 /// [`BuildHint::FAST_TRACE_MAX_LEAF`] triangles that is cheaper by the surface area heuristic
-/// into one leaf. Either can be refit; a fast-trace refit is slower (its tree has no block
-/// structure for the refit's workgroup-local phase).
+/// into one leaf. Either can be refit (`allow_update`); a fast-trace tree's refit runs only the
+/// device-scope phase of the refit pass (its node numbering has no block structure for the
+/// workgroup-local phase), and its speed has not been measured yet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum BuildHint {
     /// Fast-build when `allow_update` is set, fast-trace otherwise.
