@@ -414,6 +414,16 @@ mod tests {
         ]
     }
 
+    /// A ray straight down onto `tri(x)`, from 1 above it (it hits at t = 1).
+    fn down_at(x: f32) -> ksrt::cpu::Ray {
+        ksrt::cpu::Ray {
+            origin: Vec3::new(x + 0.1, 0.1, 1.0),
+            dir: Vec3::NEG_Z,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        }
+    }
+
     #[test]
     fn a_cpu_tree_laid_out_as_the_gpu_bvh2_finds_the_cpu_hits() {
         let triangles: Vec<[Vec3; 3]> = (0..40).map(|i| tri(i as f32)).collect();
@@ -421,13 +431,7 @@ mod tests {
         let blas = as_gpu_bvh2(&cpu_nodes(&cpu), &cpu.primitive_indices, &triangles).unwrap();
         assert_eq!(blas.triangles.len(), 40);
         for i in 0..40 {
-            let ray = ksrt::cpu::Ray {
-                origin: Vec3::new(i as f32 + 0.1, 0.1, 1.0),
-                dir: Vec3::NEG_Z,
-                t_min: 0.0,
-                t_max: f32::INFINITY,
-            };
-            let (hit, counts) = blas.trace(&ray, false);
+            let (hit, counts) = blas.trace(&down_at(i as f32), false);
             let hit = hit.unwrap();
             assert_eq!(hit.primitive, i);
             assert!((hit.t - 1.0).abs() < 1e-6);
@@ -448,12 +452,7 @@ mod tests {
             count: 1,
         };
         let blas = as_gpu_bvh2(&[leaf], &[0], &triangles).unwrap();
-        let ray = ksrt::cpu::Ray {
-            origin: Vec3::new(0.1, 0.1, 1.0),
-            dir: Vec3::NEG_Z,
-            t_min: 0.0,
-            t_max: f32::INFINITY,
-        };
+        let ray = down_at(0.0);
         assert_eq!(blas.trace(&ray, false).0.unwrap().primitive, 0);
         let big = BinaryNode { count: 9, ..leaf };
         assert!(as_gpu_bvh2(&[big], &[0; 9], &triangles)
@@ -571,14 +570,8 @@ mod tests {
             before.sah_cost
         );
         for x in 0..32 {
-            let ray = ksrt::cpu::Ray {
-                origin: Vec3::new(x as f32 + 0.1, 0.1, 1.0),
-                dir: Vec3::NEG_Z,
-                t_min: 0.0,
-                t_max: f32::INFINITY,
-            };
             let hit = after
-                .trace(&ray, false)
+                .trace(&down_at(x as f32), false)
                 .0
                 .expect("every triangle is still in the tree");
             assert!((hit.t - 1.0).abs() < 1e-6);

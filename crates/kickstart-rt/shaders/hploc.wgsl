@@ -223,18 +223,16 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
         // Release: the clusters this node's merge stored (by any lane of the workgroup) before
         // the exchange below tells the sibling's climber about them.
         storageBarrier();
-        var left = false;
-        var other = 0u;
         if c.climbing {
             let p = hp_karras_parent(c.node);
-            left = topology[2u * p] == c.node;
+            let left = topology[2u * p] == c.node;
             // The sibling needs the end of this node's range it cannot know: the left child's
             // first leaf, the right child's last.
             let before = atomicExchange(&work[xchg + p], select(c.hi, c.lo, left) + 1u);
             // First to arrive: the sibling's climber takes over.
             c.climbing = before != 0u;
-            other = before - 1u;
             if c.climbing {
+                let other = before - 1u;
                 c.split = select(c.lo - 1u, c.hi, left);
                 c.lo = min(c.lo, other);
                 c.hi = max(c.hi, other);
@@ -395,14 +393,11 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                 }
                 workgroupBarrier();
             }
-            // Each lane takes up the cluster now at its index.
+            // The node's clusters, for its sibling's climber (or the root's box): each lane
+            // takes up the cluster now at its index.
             let left_count = select(0u, hp_count[slice], busy);
             if lane < left_count {
                 mine_c = hp_get(lid);
-            }
-
-            // The node's clusters, for its sibling's climber (or the root's box).
-            if lane < left_count {
                 atomicStore(&work[lists + lo + lane], mine_c.r);
             }
             if busy && lane == 0u {

@@ -210,7 +210,8 @@ pub(crate) struct Lbvh {
     climb: wgpu::ComputePipeline,
     hploc: wgpu::ComputePipeline,
     sort: RadixSort,
-    /// Centroid bounds, inner boxes during the climb, arrival counters.
+    /// Centroid bounds, inner boxes during the climb, arrival counters; for a clustered build
+    /// also the cluster counts and lists ([`clustered_work_words`]).
     work: Grown,
     keys: Grown,
     values: Grown,
