@@ -290,6 +290,8 @@ pub struct Report {
     pub height: u32,
     /// Timed repetitions per measurement.
     pub iterations: u32,
+    /// Order of the ray batches' primary rays.
+    pub ray_order: extras::RayOrder,
     /// Per scene.
     pub scenes: Vec<SceneReport>,
     /// Per instance count.
@@ -345,6 +347,8 @@ struct Bench<'a> {
     device: &'a wgpu::Device,
     queue: &'a wgpu::Queue,
     iterations: u32,
+    /// Order of the primary rays of the ray batches (`--ray-order`).
+    ray_order: extras::RayOrder,
     /// The passes of the last task `timed` measured, for the figure's profile.
     last_passes: std::cell::RefCell<Vec<ksrt::PassTiming>>,
     /// Whether a measurement ran already (the first warms up longer, see [`Bench::repeat`]).
@@ -358,6 +362,7 @@ impl<'a> Bench<'a> {
             device,
             queue,
             iterations,
+            ray_order: extras::RayOrder::Rows,
             last_passes: Default::default(),
             warmed: Default::default(),
         }
@@ -637,7 +642,7 @@ fn rays(
             .as_ref()
             .map(|(blas, world_to_object)| work_per_ray(blas, *world_to_object, rays, any))
     };
-    let (dirs, primary) = primary_rays(camera, (width, height));
+    let (dirs, primary) = primary_rays_in(camera, (width, height), bench.ray_order);
     let (primary_time, primary_hits) = bench.trace(&ctx, &primary, Query::Closest)?;
     report.oracle = Some(oracle_check(scene, &primary, &primary_hits));
     let mut primary_batch = batch("primary", primary.len(), &primary_hits, primary_time);
@@ -695,9 +700,19 @@ struct RayBatches {
 
 /// One primary ray per pixel through `camera`, row by row from the top: their directions and the
 /// rays (from the eye, t in [0, ∞)).
-fn primary_rays(camera: &Camera, (width, height): (u32, u32)) -> (Vec<Vec3>, Vec<GpuRay>) {
-    let dirs: Vec<Vec3> = (0..height)
-        .flat_map(|y| (0..width).map(move |x| (x, y)))
+fn primary_rays(camera: &Camera, size: (u32, u32)) -> (Vec<Vec3>, Vec<GpuRay>) {
+    primary_rays_in(camera, size, extras::RayOrder::Rows)
+}
+
+/// [`primary_rays`] with the pixels in `order`.
+fn primary_rays_in(
+    camera: &Camera,
+    (width, height): (u32, u32),
+    order: extras::RayOrder,
+) -> (Vec<Vec3>, Vec<GpuRay>) {
+    let dirs: Vec<Vec3> = order
+        .pixels((width, height))
+        .into_iter()
         .map(|(x, y)| camera.primary_dir(x, y, width, height))
         .collect();
     let rays = dirs
@@ -1290,6 +1305,11 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     }
     // Load every scene first: a wrong name fails before minutes of GPU work.
     opts.extras.check()?;
+    if opts.peer.is_some() && opts.extras.ray_order != extras::RayOrder::Rows {
+        // The driver peer launches the rays as a 2-D image of rows (its own tiling of the launch
+        // then decides their grouping), so tiled rays would be compared in a scrambled order.
+        return Err("--peer needs --ray-order rows (the peer's launch is row by row)".into());
+    }
     let names: Vec<String> = if opts.extras.skip_scenes {
         Vec::new()
     } else if opts.scenes.is_empty() {
@@ -1325,7 +1345,8 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         info.driver_info,
         opts.iterations
     );
-    let bench = Bench::new(&device, &queue, opts.iterations);
+    let mut bench = Bench::new(&device, &queue, opts.iterations);
+    bench.ray_order = opts.extras.ray_order;
     let mut peer = opts.peer.map(|kind| peer::open(kind, &info));
     let mut report = Report {
         sdk_version: ksrt::VERSION.to_string(),
@@ -1337,6 +1358,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         width: opts.size.0,
         height: opts.size.1,
         iterations: opts.iterations,
+        ray_order: opts.extras.ray_order,
         scenes: Vec::new(),
         tlas: Vec::new(),
         extras: Default::default(),

@@ -53,6 +53,13 @@ pub struct ExtraArgs {
     /// renderer with a single BVH over its whole scene would trace it).
     #[arg(long)]
     pub flatten: bool,
+    /// Order of the primary rays in the ray batches (the secondary rays follow their primary
+    /// hits): `rows`, row by row over the image; `tiles`, 8×8-pixel tiles row by row, pixels row
+    /// by row inside a tile (the order a screen-space dispatch of 8×8 workgroups issues them, as
+    /// the SDK's trace tasks and the software peer of issue 4 do). The batch shader takes 64
+    /// consecutive rays a workgroup either way.
+    #[arg(long, value_enum, default_value_t = RayOrder::Rows)]
+    pub ray_order: RayOrder,
     /// Leave out the default per-scene measurements and the TLAS table (run only the passes
     /// asked for).
     #[arg(long)]
@@ -64,6 +71,39 @@ pub struct ExtraArgs {
     /// (no GPU needed).
     #[arg(long, requires = "plots")]
     pub plots_from: Option<PathBuf>,
+}
+
+/// Order of the bench's primary rays (`--ray-order`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RayOrder {
+    /// Row by row over the image.
+    #[default]
+    Rows,
+    /// 8×8-pixel tiles, row by row; inside a tile, row by row.
+    Tiles,
+}
+
+impl RayOrder {
+    /// The pixels of a `width × height` image in this order.
+    pub fn pixels(self, (width, height): (u32, u32)) -> Vec<(u32, u32)> {
+        match self {
+            RayOrder::Rows => (0..height)
+                .flat_map(|y| (0..width).map(move |x| (x, y)))
+                .collect(),
+            RayOrder::Tiles => {
+                const T: u32 = 8;
+                let tiles = (0..height.div_ceil(T))
+                    .flat_map(|ty| (0..width.div_ceil(T)).map(move |tx| (tx, ty)));
+                tiles
+                    .flat_map(|(tx, ty)| {
+                        (0..T).flat_map(move |y| (0..T).map(move |x| (tx * T + x, ty * T + y)))
+                    })
+                    .filter(|&(x, y)| x < width && y < height)
+                    .collect()
+            }
+        }
+    }
 }
 
 impl ExtraArgs {
@@ -185,6 +225,31 @@ pub fn plots_from_json(json: &Path, dir: &Path) -> AnyResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn both_ray_orders_cover_each_pixel_once_and_tiles_are_8_by_8() {
+        for size in [(20, 11), (16, 8), (1, 1), (9, 17)] {
+            let mut rows = RayOrder::Rows.pixels(size);
+            let tiles = RayOrder::Tiles.pixels(size);
+            assert_eq!(rows.len(), (size.0 * size.1) as usize, "{size:?}");
+            assert_eq!(rows[1.min(rows.len() - 1)], (1.min(size.0 - 1), 0));
+            let mut sorted = tiles.clone();
+            sorted.sort_by_key(|&(x, y)| (y, x));
+            rows.sort_by_key(|&(x, y)| (y, x));
+            assert_eq!(sorted, rows, "{size:?}: every pixel once");
+        }
+        // 20 × 11: the first tile's 64 pixels, then the second tile (x 8..16) from its top row.
+        let t = RayOrder::Tiles.pixels((20, 11));
+        assert_eq!(&t[..3], &[(0, 0), (1, 0), (2, 0)]);
+        assert_eq!(t[8], (0, 1));
+        assert_eq!(t[63], (7, 7));
+        assert_eq!(t[64], (8, 0));
+        // The third tile of the first row is 4 pixels wide (x 16..20), 8 high.
+        assert_eq!(t[128..132], [(16, 0), (17, 0), (18, 0), (19, 0)]);
+        assert_eq!(t[132], (16, 1));
+        // The second row of tiles is 3 high (y 8..11) and starts after 3 tiles (64 + 64 + 32).
+        assert_eq!(t[160], (0, 8));
+    }
 
     #[test]
     fn too_few_frames_in_flight_frames_are_refused_by_name() {

@@ -49,14 +49,21 @@ fn tr_flag(f: u32) -> bool {
     return (tp.mode.w & f) != 0u;
 }
 
-// Pixels one dispatch covers: the viewport, or its half in a checkerboard mode.
-fn tr_pixel_count() -> u32 {
+// Invocations are mapped to pixels in 8×8 tiles: one workgroup (RT_WORKGROUP_SIZE = 64) traces
+// one tile, so the rays of a subgroup start from neighbouring pixels (an 8×4 block for 32 lanes)
+// instead of a 32-pixel row strip. Their paths through the BVH share more nodes, so a subgroup
+// diverges less (primary rays above all). The Rust side dispatches one workgroup per tile
+// (src/trace/tasks.rs, `traced_tiles`).
+const TR_TILE: u32 = 8u;
+
+// The grid of traced pixels: the viewport, or its half-width in a checkerboard mode (a grid
+// column then stands for a pair of viewport columns).
+fn tr_grid() -> vec2<u32> {
     let w = gb.viewport.z;
-    let h = gb.viewport.w;
     if tp.mode.x == 0u {
-        return w * h;
+        return vec2<u32>(w, gb.viewport.w);
     }
-    return ((w + 1u) / 2u) * h;
+    return vec2<u32>((w + 1u) / 2u, gb.viewport.w);
 }
 
 struct TrPixel {
@@ -64,22 +71,27 @@ struct TrPixel {
     valid: bool,
 }
 
-// The texel of the i-th traced pixel. Checkerboard traces viewport-relative (x + y) even,
-// inverted traces (x + y) odd; the other pixels are not written.
+// The texel of invocation i (tile i / 64, row-major over the grid's tiles; pixel i % 64
+// row-major in the tile). Checkerboard traces viewport-relative (x + y) even, inverted traces
+// (x + y) odd; the other pixels are not written. `valid` is false for a tile's invocations past
+// the grid's right or bottom edge.
 fn tr_pixel(i: u32) -> TrPixel {
-    let w = gb.viewport.z;
+    let grid = tr_grid();
+    let tiles_x = (grid.x + TR_TILE - 1u) / TR_TILE;
+    let tile = i / (TR_TILE * TR_TILE);
+    let lane = i % (TR_TILE * TR_TILE);
+    let g = vec2<u32>((tile % tiles_x) * TR_TILE + lane % TR_TILE,
+                      (tile / tiles_x) * TR_TILE + lane / TR_TILE);
     var p: TrPixel;
+    p.valid = g.x < grid.x && g.y < grid.y;
     if tp.mode.x == 0u {
-        p.texel = gb_texel(i);
-        p.valid = i < w * gb.viewport.w;
+        p.texel = gb.viewport.xy + g;
         return p;
     }
-    let hw = (w + 1u) / 2u;
-    let row = i / hw;
-    let phase = (row + tp.mode.x - 1u) & 1u;
-    let x = 2u * (i % hw) + phase;
-    p.texel = vec2<u32>(gb.viewport.x + x, gb.viewport.y + row);
-    p.valid = x < w && row < gb.viewport.w;
+    let phase = (g.y + tp.mode.x - 1u) & 1u;
+    let x = 2u * g.x + phase;
+    p.texel = vec2<u32>(gb.viewport.x + x, gb.viewport.y + g.y);
+    p.valid = p.valid && x < gb.viewport.z;
     return p;
 }
 
@@ -210,13 +222,7 @@ fn tr_environment(d: vec3<f32>) -> vec3<f32> {
 // The pixel this invocation traces: `valid` false past the dispatch's pixels, outside the
 // viewport, or where the input mask rejects it (every trace entry point returns then).
 fn tr_invocation_pixel(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> TrPixel {
-    let i = tr_index(wid, nwg, lid);
-    if i >= tr_pixel_count() {
-        var none: TrPixel;
-        none.valid = false;
-        return none;
-    }
-    var px = tr_pixel(i);
+    var px = tr_pixel(tr_index(wid, nwg, lid));
     px.valid = px.valid && gb_mask(px.texel);
     return px;
 }

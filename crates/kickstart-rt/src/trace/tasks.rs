@@ -24,8 +24,23 @@ const AO_WGSL: &str = include_str!("../../shaders/trace_ao.wgsl");
 const SHADOW_WGSL: &str = include_str!("../../shaders/trace_shadow.wgsl");
 const RADIANCE_WGSL: &str = include_str!("../../shaders/trace_radiance.wgsl");
 
-/// Invocations per workgroup (`RT_WORKGROUP_SIZE` of the traversal module).
+/// Invocations per workgroup (`RT_WORKGROUP_SIZE` of the traversal module): one workgroup traces
+/// one `TILE` × `TILE` tile of pixels (`tr_pixel` in `shaders/trace_common.wgsl`).
 const WORKGROUP_SIZE: u32 = 64;
+
+/// Side of the square pixel tile one workgroup traces (`TR_TILE` of `trace_common.wgsl`).
+const TILE: u32 = 8;
+
+/// Workgroups a trace dispatch needs: one per tile of the traced grid (the viewport, or its
+/// half-width in a checkerboard mode). `None` when the tiles' invocations would not fit a u32
+/// (the shader indexes them with one).
+fn traced_tiles(width: u32, height: u32, half: bool) -> Option<u32> {
+    let grid_w = if half { width.div_ceil(2) } else { width };
+    let tiles = u64::from(grid_w.div_ceil(TILE)) * u64::from(height.div_ceil(TILE));
+    u32::try_from(tiles * u64::from(WORKGROUP_SIZE))
+        .ok()
+        .map(|_| tiles as u32)
+}
 
 /// Secondary rays start past `T_MIN_PER_VIEW_DISTANCE × view distance` (with or without a ray
 /// offset): depth-reconstructed positions carry an error that grows with the view distance.
@@ -346,12 +361,7 @@ impl TracePasses {
         let inputs = GBufferInputs::of_trace(c, job.out0);
         let vp = inputs.viewport;
         let half = c.half_resolution_mode != HalfResolutionMode::Off;
-        let pixels = if half {
-            vp.width.div_ceil(2) as u64 * vp.height as u64
-        } else {
-            vp.width as u64 * vp.height as u64
-        };
-        let Ok(pixels) = u32::try_from(pixels) else {
+        let Some(tiles) = traced_tiles(vp.width, vp.height, half) else {
             return Err(Error::input(
                 job.kind.label(),
                 "common.viewport",
@@ -411,12 +421,7 @@ impl TracePasses {
             });
             groups.push(&cache_group);
         }
-        rec.dispatch(
-            job.kind.label(),
-            &p.pipeline,
-            &groups,
-            pixels.div_ceil(WORKGROUP_SIZE),
-        );
+        rec.dispatch(job.kind.label(), &p.pipeline, &groups, tiles);
         Ok(())
     }
 }

@@ -1075,3 +1075,16 @@ fn direct_lighting_is_used_where_the_hit_is_visible_in_it() {
         "{from_screen} on screen, {from_cache} off"
     );
 }
+
+#[test]
+fn a_dispatch_has_one_workgroup_per_tile_of_the_traced_grid() {
+    // 21 × 13 pixels: 3 × 2 tiles of 8; checkerboard traces a grid of 11 × 13, 2 × 2 tiles.
+    assert_eq!(traced_tiles(21, 13, false), Some(6));
+    assert_eq!(traced_tiles(21, 13, true), Some(4));
+    assert_eq!(traced_tiles(1920, 1080, false), Some(240 * 135));
+    assert_eq!(traced_tiles(8, 8, false), Some(1));
+    assert_eq!(traced_tiles(0, 8, false), Some(0));
+    // 2^16 × 2^16 pixels need 2^32 invocations: more than the shader's u32 index holds.
+    assert_eq!(traced_tiles(65_536, 65_536, false), None);
+    assert_eq!(traced_tiles(65_536, 65_528, false), Some(8192 * 8191));
+}
