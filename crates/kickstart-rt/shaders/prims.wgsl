@@ -81,46 +81,72 @@ fn gather_triangles(
     gather_dst[d + 2u] = gather_src[s + 2u];
 }
 
-// ---- instance_aabbs -------------------------------------------------------------------------
+// ---- instance_refs -------------------------------------------------------------------------
+// The TLAS's primitives are instance *refs*: params.b >> 8 = K refs per instance slot (1..8),
+// ref i * K + j naming (slot i, an entry into its BLAS: an inner node index or a leaf reference).
+// With K = 1 the one ref is the BLAS root (node 0) and its box is the instance's world box.
+// With K > 1 the instance's BLAS is opened from the root, largest world-box area first, until K
+// refs (or only leaves) remain: a big instance whose box spans much of the scene is split into
+// subtrees with tighter world boxes, so rays enter fewer instances ("rebraiding", Benthin et al.
+// 2017; +24 % peer workload on the apartment at K = 8, BENCHMARKS.md session 22). Unused refs
+// get the empty box. Each ref's world box goes to instance_boxes[2r..2r+1] and (slot, entry) to
+// the ref table in the TLAS node buffer (after its node slots: see `ref_table_base`).
 // Also merges the boxes' centroid bounds (centroid_bounds.wgsl) when asked (params.b bit 0, the
 // TLAS build): the LBVH then skips its own bounds pass over the boxes, a dependent dispatch
-// fewer. Params: a = count, b = flags, c = first centroid-bounds word.
+// fewer. Params: a = instance slots, b = flags | K << 8, c = first centroid-bounds word.
 
 @group(0) @binding(1) var<storage, read> instances: array<InstanceGpu>;
 @group(0) @binding(2) var<storage, read> geometries: array<GeometryGpu>;
 @group(0) @binding(3) var<storage, read_write> instance_boxes: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> instance_centroid_bounds: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read> ref_blas_nodes: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> ref_table: array<vec4<u32>>;
 
 // 256 rather than WG: a quarter of the device atomics on the six bounds words.
 const INSTANCE_WG: u32 = 256u;
 const MERGE_CENTROID_BOUNDS: u32 = 1u;
+const MAX_REFS: u32 = 8u;
+const REF_LEAF_BIT: u32 = 0x80000000u;
 
 struct StoredBox {
     lo: vec4<f32>,
     hi: vec4<f32>,
 }
 
-// World box of instance slot i as the TLAS stores it (the documented empty box when hidden).
-fn instance_box(i: u32) -> StoredBox {
+// The ref table's first vec4 in a TLAS node buffer of C node slots then C table entries (5 C
+// vec4 in all; traverse.wgsl computes the same).
+fn ref_table_base() -> u32 {
+    return (arrayLength(&ref_table) / 5u) * 4u;
+}
+
+// Whether instance slot i is traced, and its geometry.
+struct Traced {
+    visible: bool,
+    g: GeometryGpu,
+}
+
+fn traced(i: u32) -> Traced {
     let inst = instances[i];
-    var visible = (inst.flags & 1u) != 0u && inst.geometry < arrayLength(&geometries);
-    var g: GeometryGpu;
-    if visible {
-        g = geometries[inst.geometry];
+    var t: Traced;
+    t.visible = (inst.flags & 1u) != 0u && inst.geometry < arrayLength(&geometries);
+    if t.visible {
+        t.g = geometries[inst.geometry];
         // Built with triangles, and a non-empty root box (all triangles dropped leaves it empty).
-        visible = (g.flags & 1u) != 0u && g.tri_count > 0u && all(g.bounds_min.xyz <= g.bounds_max.xyz);
+        t.visible = (t.g.flags & 1u) != 0u && t.g.tri_count > 0u
+            && all(t.g.bounds_min.xyz <= t.g.bounds_max.xyz);
     }
-    if !visible {
-        return StoredBox(EMPTY_MIN, EMPTY_MAX);
-    }
-    let m = inst.object_to_world;
+    return t;
+}
+
+// World box of the object-space box [bmin, bmax] under `m` (object to world), padded.
+fn world_box(m: mat3x4<f32>, bmin: vec3<f32>, bmax: vec3<f32>) -> StoredBox {
     var lo = vec3<f32>(3.0e38);
     var hi = vec3<f32>(-3.0e38);
     for (var c = 0u; c < 8u; c++) {
         let p = vec4<f32>(
-            select(g.bounds_min.x, g.bounds_max.x, (c & 1u) != 0u),
-            select(g.bounds_min.y, g.bounds_max.y, (c & 2u) != 0u),
-            select(g.bounds_min.z, g.bounds_max.z, (c & 4u) != 0u),
+            select(bmin.x, bmax.x, (c & 1u) != 0u),
+            select(bmin.y, bmax.y, (c & 2u) != 0u),
+            select(bmin.z, bmax.z, (c & 4u) != 0u),
             1.0,
         );
         let q = vec3<f32>(dot(m[0], p), dot(m[1], p), dot(m[2], p));
@@ -129,8 +155,8 @@ fn instance_box(i: u32) -> StoredBox {
     }
     // Rounding of the transform (≤ 3 ulp of the sum of the terms' magnitudes, on the GPU or the
     // CPU, fused or not) could shrink the box past a corner: pad by 8 ulp of that sum so the box
-    // contains the exactly transformed geometry box.
-    let extent = max(abs(g.bounds_min.xyz), abs(g.bounds_max.xyz));
+    // contains the exactly transformed object box.
+    let extent = max(abs(bmin), abs(bmax));
     let mag = vec3<f32>(
         dot(abs(m[0].xyz), extent) + abs(m[0].w),
         dot(abs(m[1].xyz), extent) + abs(m[1].w),
@@ -140,22 +166,108 @@ fn instance_box(i: u32) -> StoredBox {
     return StoredBox(vec4<f32>(lo - pad, 0.0), vec4<f32>(hi + pad, 0.0));
 }
 
+fn box_area(b: StoredBox) -> f32 {
+    let d = max(b.hi.xyz - b.lo.xyz, vec3<f32>(0.0));
+    return d.x * d.y + d.y * d.z + d.z * d.x;
+}
+
+// The refs of one instance (n of them, n <= K).
+var<private> r_entry: array<u32, MAX_REFS>;
+var<private> r_lo: array<vec4<f32>, MAX_REFS>;
+var<private> r_hi: array<vec4<f32>, MAX_REFS>;
+
+fn open_instance(i: u32, k: u32) -> u32 {
+    let t = traced(i);
+    if !t.visible {
+        return 0u;
+    }
+    let m = instances[i].object_to_world;
+    let root = world_box(m, t.g.bounds_min.xyz, t.g.bounds_max.xyz);
+    r_entry[0] = 0u;
+    r_lo[0] = root.lo;
+    r_hi[0] = root.hi;
+    var n = 1u;
+    // Each opening replaces one inner ref by its non-empty children (at most two). Bounded: a
+    // chain of one-child nodes (trees of one triangle) would otherwise not raise n.
+    for (var it = 0u; it < 4u * MAX_REFS && n < k; it++) {
+        var pick = MAX_REFS;
+        var best = -1.0;
+        for (var j = 0u; j < n; j++) {
+            if (r_entry[j] & REF_LEAF_BIT) == 0u {
+                let a = box_area(StoredBox(r_lo[j], r_hi[j]));
+                if a > best {
+                    best = a;
+                    pick = j;
+                }
+            }
+        }
+        if pick == MAX_REFS {
+            break;
+        }
+        let at = 4u * (t.g.node_base + r_entry[pick]);
+        let n0 = ref_blas_nodes[at];
+        let n1 = ref_blas_nodes[at + 1u];
+        let n2 = ref_blas_nodes[at + 2u];
+        let n3 = ref_blas_nodes[at + 3u];
+        // Left child: box (n0.xyz, n1.xyz), ref n0.w; right: (n2.xyz, n3.xyz), ref n1.w. An
+        // empty child (min > max) is never entered and is dropped.
+        var kept = 0u;
+        if all(n0.xyz <= n1.xyz) {
+            let b = world_box(m, n0.xyz, n1.xyz);
+            r_entry[pick] = bitcast<u32>(n0.w);
+            r_lo[pick] = b.lo;
+            r_hi[pick] = b.hi;
+            kept = 1u;
+        }
+        if all(n2.xyz <= n3.xyz) {
+            let put = select(pick, n, kept == 1u);
+            let b = world_box(m, n2.xyz, n3.xyz);
+            r_entry[put] = bitcast<u32>(n1.w);
+            r_lo[put] = b.lo;
+            r_hi[put] = b.hi;
+            n += kept;
+            kept += 1u;
+        }
+        if kept == 0u {
+            n -= 1u;
+            r_entry[pick] = r_entry[n];
+            r_lo[pick] = r_lo[n];
+            r_hi[pick] = r_hi[n];
+        }
+    }
+    return n;
+}
+
 @compute @workgroup_size(256)
-fn instance_aabbs(
+fn instance_refs(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
     let i = (wid.y * nwg.x + wid.x) * INSTANCE_WG + lid;
+    let k = clamp(params.b >> 8u, 1u, MAX_REFS);
     wg_bounds_clear(lid);
     workgroupBarrier();
     // No early return: the barriers must be reached by the whole workgroup.
     if i < params.a {
-        let b = instance_box(i);
-        instance_boxes[2u * i] = b.lo;
-        instance_boxes[2u * i + 1u] = b.hi;
-        // From the stored values, as the LBVH's own bounds pass would read them back.
-        wg_bounds_add(b.lo.xyz, b.hi.xyz);
+        let n = open_instance(i, k);
+        let table = ref_table_base();
+        for (var j = 0u; j < k; j++) {
+            let r = i * k + j;
+            var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
+            var entry = 0u;
+            if j < n {
+                b = StoredBox(r_lo[j], r_hi[j]);
+                entry = r_entry[j];
+            }
+            instance_boxes[2u * r] = b.lo;
+            instance_boxes[2u * r + 1u] = b.hi;
+            ref_table[table + r] = vec4<u32>(i, entry, 0u, 0u);
+            // From the stored values, as the LBVH's own bounds pass would read them back.
+            if j < n {
+                wg_bounds_add(b.lo.xyz, b.hi.xyz);
+            }
+        }
     }
     workgroupBarrier();
     if (params.b & MERGE_CENTROID_BOUNDS) != 0u && lid < 6u {

@@ -300,6 +300,9 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
     // function, same bits) when the BLAS is left: less live state per iteration, +0.5 % dragon and
     // +1.6 % apartment peer workload on the H100 (BENCHMARKS.md, session 19).
     var space = rt_space(ray.origin, ray.dir);
+    // TLAS leaves name instance refs; their table follows the node slots (C node slots of 4
+    // vec4, then C entries of 1: see instance_refs in prims.wgsl).
+    let ref_table = (arrayLength(&rt_tlas_nodes) / 5u) * 4u;
     rt_stack_store(0u, 0u, t_min);
     var sp = 1u;
     var blas_sp = RT_STACK_SIZE + 1u;
@@ -362,7 +365,10 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                     }
                 }
             } else {
-                let inst = rt_instances[first];
+                // A ref: (instance slot, entry into its BLAS: the root, or the subtree the TLAS
+                // build opened the instance into).
+                let r = bitcast<vec2<u32>>(rt_tlas_nodes[ref_table + first].xy);
+                let inst = rt_instances[r.x];
                 if (inst.mask & mask) == 0u || (inst.flags & 1u) == 0u {
                     continue;
                 }
@@ -378,9 +384,9 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 );
                 node_base = geo.node_base;
                 tri_base = geo.tri_base;
-                cur_inst = first;
+                cur_inst = r.x;
                 blas_sp = sp;
-                rt_stack_store(sp, 0u, entry_t);
+                rt_stack_store(sp, r.y, entry_t);
                 sp += 1u;
             }
             continue;

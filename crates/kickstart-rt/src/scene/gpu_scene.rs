@@ -7,7 +7,7 @@ use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS};
 use crate::scene::pool::{Pool, Range};
-use crate::scene::prims::Prims;
+use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::trace::debug_view::DebugViewPass;
 use crate::trace::rays::{RayTracer, SceneBuffers};
@@ -606,9 +606,13 @@ impl GpuScene {
     /// Builds (`refit == false`) or refits the TLAS over instance slots `0..slots`.
     pub fn update_tlas(&mut self, rec: &mut Recorder<'_>, slots: u32, refit: bool) -> Result<()> {
         let refit = refit && !self.tlas_needs_rebuild(slots);
-        if slots > self.tlas.capacity {
-            let cap = slots.next_power_of_two().max(64);
-            let need = cap as u64 * NODE_BYTES;
+        let per_instance = refs_per_instance(slots);
+        let refs = slots.saturating_mul(per_instance);
+        if refs > self.tlas.capacity {
+            let cap = refs.next_power_of_two().max(64);
+            // Node slots, then the ref table (one vec4 a ref; traverse.wgsl finds it from the
+            // buffer's length).
+            let need = cap as u64 * (NODE_BYTES + REF_BYTES);
             if need > self.max_binding {
                 return Err(Error::OutOfDeviceMemory {
                     what: "TLAS nodes".into(),
@@ -635,12 +639,15 @@ impl GpuScene {
         rec.scope = if refit { "tlas refit" } else { "tlas build" };
         // A refit keeps the tree and needs no centroid bounds.
         let centroid_bounds = (!refit).then_some((&self.tlas.centroid_bounds, 0));
-        prims.instance_aabbs(
+        prims.instance_refs(
             rec,
             &self.instance_table.buffer,
             &self.geometry_table.buffer,
+            self.nodes.buffer(),
             slots,
+            per_instance,
             &self.tlas.aabbs,
+            &self.tlas.nodes,
             centroid_bounds,
         );
         if refit {
@@ -649,7 +656,7 @@ impl GpuScene {
                 &LbvhRefit {
                     aabbs: &self.tlas.aabbs,
                     aabb_base: 0,
-                    count: slots,
+                    count: refs,
                     nodes: &self.tlas.nodes,
                     node_base: 0,
                     order: &self.tlas.order,
@@ -667,7 +674,7 @@ impl GpuScene {
                 &LbvhBuild {
                     aabbs: &self.tlas.aabbs,
                     aabb_base: 0,
-                    count: slots,
+                    count: refs,
                     nodes: &self.tlas.nodes,
                     node_base: 0,
                     order: &self.tlas.order,
@@ -779,6 +786,28 @@ impl GpuScene {
     }
 }
 
+/// Bytes of one ref-table entry of the TLAS node buffer: (instance slot, BLAS entry, 0, 0).
+const REF_BYTES: u64 = 16;
+
+/// Refs the TLAS's instances are opened into, at most, when an instance is opened at all: the
+/// one-workgroup sort's size (`SMALL_SORT_MAX`), so opening never adds sort dispatches.
+const TLAS_REF_BUDGET: u32 = 1024;
+
+/// Refs each instance slot is opened into (`instance_refs` in `shaders/prims.wgsl`): up to
+/// [`MAX_REFS_PER_INSTANCE`] while the TLAS stays within [`TLAS_REF_BUDGET`] refs, then fewer,
+/// down to one (the instance as a whole) from 513 slots on, and one for a lone instance. Opening
+/// lets rays skip the parts of big instances they do not pass near (the apartment's 67
+/// instances: BENCHMARKS.md session 22); a TLAS of many instances keeps its build cost.
+pub(crate) fn refs_per_instance(slots: u32) -> u32 {
+    if slots <= 1 {
+        // Nothing to be entered instead: a lone instance is the whole scene, and opening it
+        // only adds TLAS levels above its BLAS's (the dragon: -2 % peer workload at 8 refs,
+        // BENCHMARKS.md session 22).
+        return 1;
+    }
+    (TLAS_REF_BUDGET / slots).clamp(1, MAX_REFS_PER_INSTANCE)
+}
+
 /// A TLAS node buffer holding one root with two empty children: before the first TLAS build,
 /// every ray misses at once (a zeroed node would be a self-referencing inner node).
 fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
@@ -858,7 +887,29 @@ pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Resu
 
 #[cfg(test)]
 mod tests {
-    use super::continues;
+    use super::{continues, refs_per_instance, TLAS_REF_BUDGET};
+
+    #[test]
+    fn instances_are_opened_into_at_most_eight_refs_within_the_budget() {
+        // A lone instance (or none) is not opened.
+        assert_eq!(refs_per_instance(0), 1);
+        assert_eq!(refs_per_instance(1), 1);
+        assert_eq!(refs_per_instance(2), 8);
+        assert_eq!(refs_per_instance(67), 8);
+        assert_eq!(refs_per_instance(128), 8);
+        assert_eq!(refs_per_instance(129), 7);
+        assert_eq!(refs_per_instance(512), 2);
+        assert_eq!(refs_per_instance(513), 1);
+        assert_eq!(refs_per_instance(100_000), 1);
+        for slots in 1..3000 {
+            let k = refs_per_instance(slots);
+            assert!((1..=8).contains(&k));
+            assert!(
+                k == 1 || slots * k <= TLAS_REF_BUDGET,
+                "{slots} slots: {k} refs each"
+            );
+        }
+    }
 
     #[test]
     fn only_writes_adjacent_in_both_buffers_share_a_copy() {

@@ -7,11 +7,13 @@ use crate::gpu::Recorder;
 
 /// Threads per workgroup of the triangle entry points of `prims.wgsl` (one primitive each).
 const WORKGROUP: u32 = 64;
-/// Threads per workgroup of `instance_aabbs` (the shader's `INSTANCE_WG`): wider, so fewer
+/// Threads per workgroup of `instance_refs` (the shader's `INSTANCE_WG`): wider, so fewer
 /// workgroups merge the centroid bounds with device atomics.
 const INSTANCE_WORKGROUP: u32 = 256;
-/// `instance_aabbs` flag: merge the boxes' centroid bounds.
+/// `instance_refs` flag: merge the boxes' centroid bounds.
 const MERGE_CENTROID_BOUNDS: u32 = 1;
+/// Most refs one instance is opened into (the shader's `MAX_REFS`).
+pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 8;
 
 /// The three pipelines (one module, one entry point each).
 pub(crate) struct Prims {
@@ -19,8 +21,8 @@ pub(crate) struct Prims {
     triangle_aabbs: wgpu::ComputePipeline,
     /// `gather_triangles` entry point.
     gather_triangles: wgpu::ComputePipeline,
-    /// `instance_aabbs` entry point.
-    instance_aabbs: wgpu::ComputePipeline,
+    /// `instance_refs` entry point.
+    instance_refs: wgpu::ComputePipeline,
     /// Bound in place of missing centroid-bounds words (never written: the flag is off).
     no_bounds: wgpu::Buffer,
 }
@@ -37,7 +39,7 @@ impl Prims {
         Prims {
             triangle_aabbs: make("triangle_aabbs"),
             gather_triangles: make("gather_triangles"),
-            instance_aabbs: make("instance_aabbs"),
+            instance_refs: make("instance_refs"),
             no_bounds: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("kickstart-rt no centroid bounds"),
                 size: 32,
@@ -124,22 +126,24 @@ impl Prims {
         );
     }
 
-    /// World AABBs of instance slots `0..count` into `aabbs` (2 `vec4` each). A live instance
-    /// (flags bit 0) whose geometry is built (flags bit 0) with `tri_count > 0` and a non-empty
-    /// root box gets the box of its 8 transformed corners, padded outward by a few ulp so it
-    /// contains the exactly transformed box; every other slot gets the empty box.
-    ///
-    /// With `centroid_bounds` (buffer with STORAGE and COPY_DST usage, first u32 word), the same
-    /// dispatch zeroes those 6 words and merges the boxes' centroid bounds into them, as the
-    /// LBVH's bounds pass would (for [`crate::scene::lbvh::LbvhBuild::centroid_bounds`]: the TLAS
-    /// build then needs one dependent dispatch fewer).
-    pub fn instance_aabbs(
+    /// The TLAS's primitives, `refs_per_instance` (1..=8) refs per instance slot `0..count`
+    /// (`shaders/prims.wgsl`, `instance_refs`): ref `i * k + j` names slot `i` and an entry into
+    /// its BLAS (the root when k = 1; with k > 1 the BLAS opened largest world box first). Each
+    /// ref's world box goes to `aabbs` (the empty box for unused refs and hidden instances) and
+    /// (slot, entry) to the ref table at the end of `tlas_nodes` (C node slots, then C table
+    /// entries: the buffer holds 80 · C bytes). With `centroid_bounds`, the boxes' centroid
+    /// bounds are also merged into its six words (cleared first) for the LBVH.
+    #[allow(clippy::too_many_arguments)] // the scene's tables and the TLAS's buffers
+    pub fn instance_refs(
         &self,
         rec: &mut Recorder<'_>,
         instances: &wgpu::Buffer,
         geometries: &wgpu::Buffer,
+        blas_nodes: &wgpu::Buffer,
         count: u32,
+        refs_per_instance: u32,
         aabbs: &wgpu::Buffer,
+        tlas_nodes: &wgpu::Buffer,
         centroid_bounds: Option<(&wgpu::Buffer, u32)>,
     ) {
         if count == 0 {
@@ -154,13 +158,14 @@ impl Prims {
             }
             None => (&self.no_bounds, 0, 0),
         };
+        let k = refs_per_instance.clamp(1, MAX_REFS_PER_INSTANCE);
         let params = rec.uniform(
-            "kickstart-rt instance aabbs params",
-            &[count, flags, bounds_base, 0],
+            "kickstart-rt instance refs params",
+            &[count, flags | (k << 8), bounds_base, 0],
         );
         let bind = rec.bind_buffers(
-            "kickstart-rt instance aabbs",
-            &self.instance_aabbs,
+            "kickstart-rt instance refs",
+            &self.instance_refs,
             0,
             &[
                 params.as_entire_binding(),
@@ -168,11 +173,13 @@ impl Prims {
                 geometries.as_entire_binding(),
                 aabbs.as_entire_binding(),
                 bounds.as_entire_binding(),
+                blas_nodes.as_entire_binding(),
+                tlas_nodes.as_entire_binding(),
             ],
         );
         rec.dispatch(
-            "tlas build: instance aabbs",
-            &self.instance_aabbs,
+            "tlas build: instance refs",
+            &self.instance_refs,
             &[&bind],
             count.div_ceil(INSTANCE_WORKGROUP),
         );
@@ -293,7 +300,7 @@ mod tests {
     }
 
     #[test]
-    fn instance_aabbs_bound_transformed_corners_and_hidden_ones_are_empty() {
+    fn instance_refs_of_one_bound_transformed_corners_and_hidden_ones_are_empty() {
         let mut rng = Rng(13);
         let geometry = |built: u32, tri_count: u32, lo: [f32; 3], hi: [f32; 3]| -> Vec<u32> {
             let mut g = vec![0, 0, tri_count, built];
@@ -365,7 +372,22 @@ mod tests {
         let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
         let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * (n + 2)]));
         let prims = Prims::new(&gpu().device);
-        run(|rec| prims.instance_aabbs(rec, &inst_buf, &geo_buf, n as u32, &aabbs, None));
+        // One ref per instance: the BLAS root, never read (a dummy node buffer).
+        let blas = buffer_with(&[0u8; 64]);
+        let tlas = buffer_with(&vec![0xffu8; 80 * n]);
+        run(|rec| {
+            prims.instance_refs(
+                rec, &inst_buf, &geo_buf, &blas, n as u32, 1, &aabbs, &tlas, None,
+            )
+        });
+        // The ref table after the n node slots: (slot, root entry 0) per instance.
+        let table = words(&tlas, 20 * n);
+        for i in 0..n {
+            assert_eq!(
+                &table[16 * n + 4 * i..16 * n + 4 * i + 4],
+                &[i as u32, 0, 0, 0]
+            );
+        }
         let got: Vec<f32> = words(&aabbs, 8 * (n + 2))
             .into_iter()
             .map(f32::from_bits)
@@ -416,8 +438,145 @@ mod tests {
         );
     }
 
+    /// A BVH2 node (our 16-word layout) of two children (box, reference).
+    fn bvh2_node(l: ([f32; 3], [f32; 3], u32), r: ([f32; 3], [f32; 3], u32)) -> Vec<u32> {
+        let mut w = Vec::new();
+        for (v, e) in [(l.0, l.2), (l.1, r.2), (r.0, 0), (r.1, 0)] {
+            w.extend(v.map(f32::to_bits));
+            w.push(e);
+        }
+        w
+    }
+
     #[test]
-    fn instance_aabbs_merge_the_centroid_bounds_of_their_boxes() {
+    fn instance_refs_open_the_largest_subtrees_first_up_to_k() {
+        const LEAF: u32 = 0x8000_0000;
+        let empty = ([1e30f32; 3], [-1e30f32; 3], LEAF);
+        // Geometry 0, nodes from 1 (node_base 1; node 0 of the buffer is junk that must not be
+        // read): root 0 → inner 1 (small, x 0..1) and inner 2 (large, x 10..20); node 1 → leaves
+        // A, B; node 2 → leaf C and inner 3; node 3 → leaves D and E (the larger, x 15..20).
+        let a = ([0.0, 0.0, 0.0], [0.5, 1.0, 1.0], LEAF);
+        let b = ([0.5, 0.0, 0.0], [1.0, 1.0, 1.0], LEAF | 1);
+        let c = ([10.0, 0.0, 0.0], [12.0, 1.0, 1.0], LEAF | (1 << 28) | 2);
+        let d = ([12.0, 0.0, 0.0], [15.0, 1.0, 1.0], LEAF | 4);
+        let e = ([15.0, 0.0, 0.0], [20.0, 1.0, 1.0], LEAF | 5);
+        let mut nodes = vec![0xdead_beef_u32; 16];
+        nodes.extend(bvh2_node(
+            ([0.0; 3], [1.0; 3], 1),
+            ([10.0, 0.0, 0.0], [20.0, 1.0, 1.0], 2),
+        ));
+        nodes.extend(bvh2_node(a, b));
+        nodes.extend(bvh2_node(c, ([12.0, 0.0, 0.0], [20.0, 1.0, 1.0], 3)));
+        nodes.extend(bvh2_node(d, e));
+        // Geometry 1 (node_base 5): one triangle, root = (leaf, empty).
+        let f = ([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], LEAF);
+        nodes.extend(bvh2_node(f, empty));
+        let mut geos: Vec<u32> = vec![1, 0, 6, 1];
+        geos.extend([0.0f32, 0.0, 0.0, 0.0, 20.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        geos.extend([5, 6, 1, 1]);
+        geos.extend([-1.0f32, -1.0, -1.0, 0.0, 1.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        let instance = |x: f32, geometry: u32, flags: u32| -> Vec<u32> {
+            let mut w = Vec::new();
+            for r in 0..3 {
+                let row = [f32::from(r == 0), f32::from(r == 1), f32::from(r == 2)];
+                w.extend([row[0], row[1], row[2], if r == 0 { x } else { 0.0 }].map(f32::to_bits));
+            }
+            w.extend([0u32; 12]);
+            w.extend([geometry, 0xff, flags, 0, 0, 0, 0, 0]);
+            w
+        };
+        // Slots: 0 the tree moved by x + 100, 1 hidden, 2 the one-triangle geometry.
+        let inst: Vec<u32> = [
+            instance(100.0, 0, 1),
+            instance(0.0, 0, 0),
+            instance(0.0, 1, 1),
+        ]
+        .concat();
+        let prims = Prims::new(&gpu().device);
+        let inst_buf = buffer_with(bytemuck::cast_slice(&inst));
+        let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
+        let blas = buffer_with(bytemuck::cast_slice(&nodes));
+        // (k, refs of slot 0 as (entry, x range of the world box), in ref order)
+        type Refs<'a> = &'a [(u32, f32, f32)];
+        let cases: [(u32, Refs); 4] = [
+            (1, &[(0, 100.0, 120.0)]),
+            (2, &[(1, 100.0, 101.0), (2, 110.0, 120.0)]),
+            // Node 2 (larger) opens first, then node 3 (larger than node 1), then node 1.
+            (
+                3,
+                &[(1, 100.0, 101.0), (c.2, 110.0, 112.0), (3, 112.0, 120.0)],
+            ),
+            (
+                8,
+                &[
+                    (a.2, 100.0, 100.5),
+                    (c.2, 110.0, 112.0),
+                    (d.2, 112.0, 115.0),
+                    (e.2, 115.0, 120.0),
+                    (b.2, 100.5, 101.0),
+                ],
+            ),
+        ];
+        for (k, want) in cases {
+            let n = 3usize;
+            let refs = n * k as usize;
+            let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * refs]));
+            let tlas = buffer_with(&vec![0xffu8; 80 * refs]);
+            run(|rec| {
+                prims.instance_refs(
+                    rec, &inst_buf, &geo_buf, &blas, n as u32, k, &aabbs, &tlas, None,
+                )
+            });
+            let table = words(&tlas, 20 * refs);
+            let boxes: Vec<f32> = words(&aabbs, 8 * refs)
+                .into_iter()
+                .map(f32::from_bits)
+                .collect();
+            let at = 16 * refs;
+            for j in 0..k as usize {
+                let e = &table[at + 4 * j..at + 4 * j + 4];
+                let (lo, hi) = (&boxes[8 * j..8 * j + 3], &boxes[8 * j + 4..8 * j + 7]);
+                match want.get(j) {
+                    Some(&(entry, x0, x1)) => {
+                        assert_eq!(e, &[0, entry, 0, 0], "k {k} ref {j}");
+                        // The padded world box: x moved by 100, within 2^-21 of the magnitude.
+                        assert!(
+                            (lo[0] - x0).abs() < 1e-3 && lo[0] <= x0,
+                            "k {k} ref {j}: {lo:?}"
+                        );
+                        assert!(
+                            (hi[0] - x1).abs() < 1e-3 && hi[0] >= x1,
+                            "k {k} ref {j}: {hi:?}"
+                        );
+                    }
+                    None => {
+                        assert_eq!(e, &[0, 0, 0, 0], "k {k} unused ref {j}");
+                        assert_eq!([lo[0], hi[0]], [1e30, -1e30], "k {k} unused ref {j}");
+                    }
+                }
+            }
+            // Slot 1 is hidden: every ref empty, entries 0.
+            for j in 0..k as usize {
+                let r = k as usize + j;
+                assert_eq!(&table[at + 4 * r..at + 4 * r + 4], &[1, 0, 0, 0]);
+                assert_eq!([boxes[8 * r], boxes[8 * r + 4]], [1e30, -1e30]);
+            }
+            // Slot 2: one triangle; opened (k > 1), its root's one leaf child is its only ref.
+            let r = 2 * k as usize;
+            let entry = if k == 1 { 0 } else { f.2 };
+            assert_eq!(
+                &table[at + 4 * r..at + 4 * r + 4],
+                &[2, entry, 0, 0],
+                "k {k}"
+            );
+            for j in 1..k as usize {
+                assert_eq!(boxes[8 * (r + j)], 1e30, "k {k}: slot 2 ref {j} unused");
+            }
+        }
+    }
+
+    #[test]
+    fn instance_refs_merge_the_centroid_bounds_of_their_boxes() {
         // Several workgroups of instances, some hidden (empty boxes, not counted): the words
         // equal the CPU oracle's over the boxes the pass wrote, stale words are zeroed first and
         // the words around them are untouched. All hidden: all zero (nothing counted).
@@ -456,13 +615,18 @@ mod tests {
             let inst_buf = buffer_with(bytemuck::cast_slice(&inst));
             let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * n]));
             let bounds = buffer_with(bytemuck::cast_slice(&[SENTINEL; 10]));
+            let blas = buffer_with(&[0u8; 64]);
+            let tlas = buffer_with(&vec![0u8; 80 * n]);
             run(|rec| {
-                prims.instance_aabbs(
+                prims.instance_refs(
                     rec,
                     &inst_buf,
                     &geo_buf,
+                    &blas,
                     n as u32,
+                    1,
                     &aabbs,
+                    &tlas,
                     Some((&bounds, 2)),
                 )
             });

@@ -209,6 +209,16 @@ fn pack_tlas(mut items: Vec<Item>) -> Vec<[u32; 4]> {
     out
 }
 
+/// The TLAS node buffer as the traversal reads it: `nodes` (4 `vec4` each; leaves name instance
+/// slots) padded to C node slots, then C ref-table entries, entry i = (slot i, BLAS root 0): each
+/// instance is one ref, as the SDK's TLAS at one ref per instance.
+fn with_ref_table(mut nodes: Vec<[u32; 4]>, slots: usize) -> Vec<[u32; 4]> {
+    let c = (nodes.len() / 4).max(slots).max(1);
+    nodes.resize(4 * c, [0; 4]);
+    nodes.extend((0..c as u32).map(|i| [i, 0, 0, 0]));
+    nodes
+}
+
 /// A scene uploaded in the GPU layouts, with its CPU description for the oracle.
 pub(crate) struct TestScene {
     /// Triangles per geometry (index = primitive index).
@@ -298,7 +308,7 @@ impl TestScene {
                 items.push((i as u32, lo - eps, hi + eps));
             }
         }
-        let tlas = pack_tlas(items);
+        let tlas = with_ref_table(pack_tlas(items), instances.len());
         TestScene {
             geometries,
             instances,
