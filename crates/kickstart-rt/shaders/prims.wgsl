@@ -89,8 +89,11 @@ fn gather_triangles(
 // refs (or only leaves) remain: a big instance whose box spans much of the scene is split into
 // subtrees with tighter world boxes, so rays enter fewer instances ("rebraiding", Benthin et al.
 // 2017; +24 % peer workload on the apartment at K = 8, BENCHMARKS.md session 22). Unused refs
-// get the empty box. Each ref's world box goes to instance_boxes[2r..2r+1] and (slot, entry) to
-// the ref table in the TLAS node buffer (after its node slots: see `ref_table_base`).
+// get the empty box. Each ref's world box goes to instance_boxes[2r..2r+1] and (slot, entry,
+// stamp) to the ref table in the TLAS node buffer (after its node slots: see `ref_table_base`).
+// The stamp is the BLAS build's (geometry flags bits 8-31): a ref whose stamp is no longer its
+// geometry's (the BLAS was rebuilt while the TLAS update was deferred) is entered at the BLAS
+// root by the traversal, so stale entries never index another build's nodes.
 // Also merges the boxes' centroid bounds (centroid_bounds.wgsl) when asked (params.b bit 0, the
 // TLAS build): the LBVH then skips its own bounds pass over the boxes, a dependent dispatch
 // fewer. Params: a = instance slots, b = flags | K << 8, c = first centroid-bounds word.
@@ -252,6 +255,12 @@ fn instance_refs(
     if i < params.a {
         let n = open_instance(i, k);
         let table = ref_table_base();
+        // The BLAS build the entries belong to (0 for a hidden instance: its refs are empty).
+        var stamp = 0u;
+        let t = traced(i);
+        if t.visible {
+            stamp = t.g.flags >> 8u;
+        }
         for (var j = 0u; j < k; j++) {
             let r = i * k + j;
             var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
@@ -262,7 +271,7 @@ fn instance_refs(
             }
             instance_boxes[2u * r] = b.lo;
             instance_boxes[2u * r + 1u] = b.hi;
-            ref_table[table + r] = vec4<u32>(i, entry, 0u, 0u);
+            ref_table[table + r] = vec4<u32>(i, entry, stamp, 0u);
             // From the stored values, as the LBVH's own bounds pass would read them back.
             if j < n {
                 wg_bounds_add(b.lo.xyz, b.hi.xyz);

@@ -366,8 +366,8 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 }
             } else {
                 // A ref: (instance slot, entry into its BLAS: the root, or the subtree the TLAS
-                // build opened the instance into).
-                let r = bitcast<vec2<u32>>(rt_tlas_nodes[ref_table + first].xy);
+                // build opened the instance into, the BLAS build's stamp).
+                let r = bitcast<vec3<u32>>(rt_tlas_nodes[ref_table + first].xyz);
                 let inst = rt_instances[r.x];
                 if (inst.mask & mask) == 0u || (inst.flags & 1u) == 0u {
                     continue;
@@ -386,7 +386,10 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 tri_base = geo.tri_base;
                 cur_inst = r.x;
                 blas_sp = sp;
-                rt_stack_store(sp, r.y, entry_t);
+                // A ref made for another build of this BLAS (TLAS update deferred past a rebuild)
+                // is entered at the root: complete, never another build's node indices.
+                let entry = select(0u, r.y, (geo.flags >> 8u) == r.z);
+                rt_stack_store(sp, entry, entry_t);
                 sp += 1u;
             }
             continue;

@@ -241,6 +241,8 @@ pub(crate) struct GpuScene {
     pub geometry_table: Table,
     pub instance_table: Table,
     tlas: Tlas,
+    /// BLAS builds so far (wrapping): the stamp each build writes into its geometry's header.
+    blas_builds: u32,
     scratch_aabbs: wgpu::Buffer,
     scratch_order: wgpu::Buffer,
     /// Dropped-triangle counters of this task's ingestions (two per ingestion).
@@ -269,6 +271,7 @@ impl GpuScene {
                 "kickstart-rt instance table",
                 INSTANCE_RECORD_BYTES,
             ),
+            blas_builds: 0,
             tlas: Tlas {
                 nodes: tlas_nodes,
                 order: storage(device, "kickstart-rt TLAS order", 4),
@@ -536,7 +539,16 @@ impl GpuScene {
             max_leaf,
             refit,
         });
-        Ok([nodes.start, tris.start, n, 1])
+        // The build's stamp (flags bits 8-31): the TLAS's refs name nodes of one build of this
+        // BLAS, so the traversal enters a ref whose stamp is not the geometry's current one at
+        // the BLAS root instead (a TLAS update deferred past a rebuild; see instance_refs).
+        self.blas_builds = self.blas_builds.wrapping_add(1);
+        Ok([
+            nodes.start,
+            tris.start,
+            n,
+            1 | ((self.blas_builds & 0x00ff_ffff) << 8),
+        ])
     }
 
     /// Refits a built `allow_update` BLAS to its re-ingested triangles.

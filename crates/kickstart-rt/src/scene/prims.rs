@@ -471,7 +471,8 @@ mod tests {
         // Geometry 1 (node_base 5): one triangle, root = (leaf, empty).
         let f = ([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], LEAF);
         nodes.extend(bvh2_node(f, empty));
-        let mut geos: Vec<u32> = vec![1, 0, 6, 1];
+        // Geometry 0 carries build stamp 5 (flags bits 8-31), which its refs record.
+        let mut geos: Vec<u32> = vec![1, 0, 6, 1 | (5 << 8)];
         geos.extend([0.0f32, 0.0, 0.0, 0.0, 20.0, 1.0, 1.0, 0.0].map(f32::to_bits));
         geos.extend([5, 6, 1, 1]);
         geos.extend([-1.0f32, -1.0, -1.0, 0.0, 1.0, 1.0, 1.0, 0.0].map(f32::to_bits));
@@ -538,7 +539,7 @@ mod tests {
                 let (lo, hi) = (&boxes[8 * j..8 * j + 3], &boxes[8 * j + 4..8 * j + 7]);
                 match want.get(j) {
                     Some(&(entry, x0, x1)) => {
-                        assert_eq!(e, &[0, entry, 0, 0], "k {k} ref {j}");
+                        assert_eq!(e, &[0, entry, 5, 0], "k {k} ref {j}");
                         // The padded world box: x moved by 100, within 2^-21 of the magnitude.
                         assert!(
                             (lo[0] - x0).abs() < 1e-3 && lo[0] <= x0,
@@ -550,7 +551,7 @@ mod tests {
                         );
                     }
                     None => {
-                        assert_eq!(e, &[0, 0, 0, 0], "k {k} unused ref {j}");
+                        assert_eq!(e, &[0, 0, 5, 0], "k {k} unused ref {j}");
                         assert_eq!([lo[0], hi[0]], [1e30, -1e30], "k {k} unused ref {j}");
                     }
                 }

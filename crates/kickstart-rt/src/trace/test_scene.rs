@@ -226,6 +226,8 @@ pub(crate) struct TestScene {
     /// Instances (index = instance slot).
     pub instances: Vec<TestInstance>,
     world_to_object: Vec<[[f32; 4]; 3]>,
+    /// The TLAS buffer's contents (nodes, then the ref table).
+    tlas: Vec<[u32; 4]>,
     tlas_nodes: wgpu::Buffer,
     instance_buf: wgpu::Buffer,
     geometry_buf: wgpu::Buffer,
@@ -314,6 +316,7 @@ impl TestScene {
             instances,
             world_to_object,
             tlas_nodes: upload(bytemuck::cast_slice(&tlas)),
+            tlas,
             instance_buf: upload(bytemuck::cast_slice(&inst_records)),
             geometry_buf: upload(bytemuck::cast_slice(&geo_records)),
             blas_nodes: upload(bytemuck::cast_slice(&blas)),
@@ -322,6 +325,18 @@ impl TestScene {
     }
 
     /// One identity instance of one geometry.
+    /// Rewrites every ref of the TLAS's ref table as one made for another build of its BLAS
+    /// (stamp 7, the geometries' stamps being 0) whose entry is the leaf of triangle slot 0 only:
+    /// a traversal that trusted the entry would miss the rest of each instance.
+    pub fn make_refs_stale(&mut self) {
+        let c = self.tlas.len() / 5;
+        for e in &mut self.tlas[4 * c..] {
+            e[1] = 0x8000_0000;
+            e[2] = 7;
+        }
+        self.tlas_nodes = upload(bytemuck::cast_slice(&self.tlas));
+    }
+
     pub fn single(tris: Vec<Tri>) -> Self {
         TestScene::new(vec![tris], vec![TestInstance::new(0, Affine3A::IDENTITY)])
     }
