@@ -106,8 +106,10 @@ impl RayTracer {
         // - the traversal's stack index is checked against RT_STACK_SIZE before every push and
         //   is > 0 before every pop; its loop stops after RT_MAX_VISITS node visits;
         // - every scene index comes from data the SDK built (node refs and leaf ranges from its
-        //   BVH builders, instance and geometry tables from validated handles), never from
-        //   the user's buffers;
+        //   BVH builders, the TLAS's ref table from its build, instance and geometry tables from
+        //   validated handles), never from the user's buffers; a ref made for another build of
+        //   its BLAS (a TLAS update deferred past a rebuild) is entered at the BLAS root, so it
+        //   never indexes nodes of another build;
         // - the traversal has no other loop (a leaf's triangles are one per iteration).
         let pipeline = unsafe {
             compute_pipeline_unchecked(device, "kickstart-rt trace rays", &source, "main")
