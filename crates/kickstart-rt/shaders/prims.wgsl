@@ -179,8 +179,8 @@ var<private> r_entry: array<u32, MAX_REFS>;
 var<private> r_lo: array<vec4<f32>, MAX_REFS>;
 var<private> r_hi: array<vec4<f32>, MAX_REFS>;
 
-fn open_instance(i: u32, k: u32) -> u32 {
-    let t = traced(i);
+// Opens instance slot i (traced as `t`) into at most k refs; returns how many.
+fn open_instance(i: u32, t: Traced, k: u32) -> u32 {
     if !t.visible {
         return 0u;
     }
@@ -253,14 +253,11 @@ fn instance_refs(
     workgroupBarrier();
     // No early return: the barriers must be reached by the whole workgroup.
     if i < params.a {
-        let n = open_instance(i, k);
+        let t = traced(i);
+        let n = open_instance(i, t, k);
         let table = ref_table_base();
         // The BLAS build the entries belong to (0 for a hidden instance: its refs are empty).
-        var stamp = 0u;
-        let t = traced(i);
-        if t.visible {
-            stamp = t.g.flags >> 8u;
-        }
+        let stamp = select(0u, t.g.flags >> 8u, t.visible);
         for (var j = 0u; j < k; j++) {
             let r = i * k + j;
             var b = StoredBox(EMPTY_MIN, EMPTY_MAX);

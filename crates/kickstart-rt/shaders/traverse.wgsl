@@ -336,7 +336,7 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
             //   triangles (measured on the H100, BENCHMARKS.md 2026-11-23 session 18: +5 %
             //   dragon, +3 % apartment). The rest is pushed with t_min, so it is never culled:
             //   every triangle of a leaf is tested, as before.
-            // - TLAS leaf of several instances: the first is entered now; the rest lies below
+            // - TLAS leaf of several instance refs: the first is entered now; the rest lies below
             //   that BLAS's entries, so it comes after this BLAS is done, culled by the leaf's
             //   entry distance like any other entry.
             if count > 1u && sp < RT_STACK_SIZE {

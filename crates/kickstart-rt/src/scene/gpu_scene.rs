@@ -798,7 +798,8 @@ impl GpuScene {
     }
 }
 
-/// Bytes of one ref-table entry of the TLAS node buffer: (instance slot, BLAS entry, 0, 0).
+/// Bytes of one ref-table entry of the TLAS node buffer: (instance slot, BLAS entry, build
+/// stamp, 0).
 const REF_BYTES: u64 = 16;
 
 /// Refs the TLAS's instances are opened into, at most, when an instance is opened at all: the
