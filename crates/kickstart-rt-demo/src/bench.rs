@@ -1435,6 +1435,28 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_driver_peer_with_tiled_rays_is_refused_before_any_gpu_work() {
+        let opts = BenchOptions {
+            scenes_dir: PathBuf::from("/nonexistent"),
+            scenes: vec!["dragon".into()],
+            json: None,
+            camera: None,
+            iterations: 1,
+            size: (16, 16),
+            extras: extras::ExtraArgs {
+                ray_order: extras::RayOrder::Tiles,
+                ..Default::default()
+            },
+            peer: Some(PeerKind::VulkanRt),
+        };
+        let err = run(opts).expect_err("refused").to_string();
+        assert!(
+            err.contains("--peer") && err.contains("--ray-order rows"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn stats_median_min_max() {
         let s = Stats::new(vec![3.0, 1.0, 2.0, 10.0]);
         assert_eq!((s.median_ms, s.min_ms, s.max_ms), (2.5, 1.0, 10.0));
