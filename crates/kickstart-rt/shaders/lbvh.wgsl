@@ -66,6 +66,9 @@ struct Params {
 const WG: u32 = 256u;
 const FLAG_PRIMITIVE_REFS: u32 = 1u;
 const FLAG_BOUNDS_OUT: u32 = 2u;
+// Leaf k's box is aabbs[aabb_base + k] (already in sorted order: a BLAS refit's gather writes
+// them so), not aabbs[aabb_base + order[k]]: one coalesced load instead of two dependent ones.
+const FLAG_SORTED_BOXES: u32 = 4u;
 const LEAF_BIT: u32 = 0x80000000u;
 const NO_PARENT: u32 = 0xFFFFFFFFu;
 // In a parent ref: the parent's leaves all lie in one block of WG sorted positions (one climb
@@ -374,6 +377,9 @@ fn write_bounds(b: Box) {
 }
 
 fn leaf_box(k: u32) -> Box {
+    if (params.flags & FLAG_SORTED_BOXES) != 0u {
+        return prim_box(k);
+    }
     return prim_box(order[params.order_base + k]);
 }
 
@@ -520,10 +526,12 @@ fn sibling(c: Climber, lc: u32, rc: u32) -> u32 {
     return select(lc, rc, lc == c.node);
 }
 
-// The second arriver at `parent` (children `lc`, `rc`) joins its subtree with the sibling's
-// (box `sb`, summary `ss`), writes the parent's node and moves up to it, or stops at the root.
-// Both phases of the climb end a step this way; they differ in where the sibling comes from.
-fn climb_up(c: ptr<function, Climber>, parent: u32, lc: u32, rc: u32, sb: Box, ss: Subtree) {
+// The second arriver at `parent` (children `lc`, `rc`, parent ref `up`) joins its subtree with
+// the sibling's (box `sb`, summary `ss`), writes the parent's node and moves up to it, or stops
+// at the root. Every phase of the climb ends a step this way; they differ in where the sibling
+// and the topology come from.
+fn climb_up(c: ptr<function, Climber>, parent: u32, lc: u32, rc: u32, sb: Box, ss: Subtree,
+            up: u32) {
     var lb = sb;
     var ls = ss;
     var rb = (*c).bx;
@@ -542,7 +550,7 @@ fn climb_up(c: ptr<function, Climber>, parent: u32, lc: u32, rc: u32, sb: Box, s
         write_bounds((*c).bx);
         (*c).climbing = false;
     } else {
-        (*c).pref = parent_ref(parent);
+        (*c).pref = up;
     }
 }
 
@@ -592,34 +600,13 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
               @builtin(num_workgroups) nwg: vec3<u32>) {
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
-    // Fewer than two primitives: no inner nodes; one invocation writes the fixed-shape root.
-    // (`n` is uniform, so this return keeps the rest in uniform control flow.)
+    // Fewer than two primitives: no inner nodes. (`n` is uniform, so this return keeps the rest
+    // in uniform control flow.)
     if n < 2u {
-        if k == 0u {
-            let none = empty_box();
-            var l = none;
-            var lref = LEAF_BIT;
-            if n == 1u {
-                l = leaf_box(0u);
-                lref = out_ref(LEAF_BIT);
-            }
-            write_node(0u, l, lref, none, LEAF_BIT);
-            write_bounds(l);
-        }
+        write_tiny_root(k);
         return;
     }
-    let arrival_at = BOXES_AT + 6u * (n - 1u);
-
-    var c: Climber;
-    c.climbing = k < n;
-    c.node = LEAF_BIT | k;
-    c.bx = empty_box();
-    c.pref = NO_PARENT;
-    if c.climbing {
-        c.bx = leaf_box(k);
-        c.pref = parent_ref(c.node);
-    }
-    c.sub = leaf_subtree(k, c.bx);
+    var c = leaf_climber(k);
 
     // Phase 1, in workgroup memory: the nodes whose leaves all lie in this workgroup's block
     // (PARENT_LOCAL_BIT) have both children's climbers here, so their arrivals and boxes need
@@ -650,42 +637,88 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
             let rc = topology[params.topo_base + 2u * parent + 1u];
             let sib = sibling(c, lc, rc);
             let sb = wg_child_box(sib, block);
-            climb_up(&c, parent, lc, rc, sb, wg_child_subtree(sib, sb, block));
+            climb_up(&c, parent, lc, rc, sb, wg_child_subtree(sib, sb, block),
+                     parent_ref(parent));
         }
     }
 
-    // Phase 2, across workgroups: every climber left has a parent that straddles blocks (and so
-    // has every ancestor of it).
+    climb_across(&c, lid);
+}
+
+// The whole BVH of fewer than two primitives: one invocation writes the fixed-shape root.
+fn write_tiny_root(k: u32) {
+    let n = params.count;
+    if k == 0u {
+        let none = empty_box();
+        var l = none;
+        var lref = LEAF_BIT;
+        if n == 1u {
+            l = leaf_box(0u);
+            lref = out_ref(LEAF_BIT);
+        }
+        write_node(0u, l, lref, none, LEAF_BIT);
+        write_bounds(l);
+    }
+}
+
+// The climber of leaf k (not climbing when k is past the primitives).
+fn leaf_climber(k: u32) -> Climber {
+    var c: Climber;
+    c.climbing = k < params.count;
+    c.node = LEAF_BIT | k;
+    c.bx = empty_box();
+    c.pref = NO_PARENT;
+    if c.climbing {
+        c.bx = leaf_box(k);
+        c.pref = parent_ref(c.node);
+    }
+    c.sub = leaf_subtree(k, c.bx);
+    return c;
+}
+
+// The climb's device-scope phase: every climber left has a parent that straddles blocks (and so
+// has every ancestor of it), or the topology has no block structure at all (a clustered tree's
+// refit). Every invocation of the workgroup must call it (it has barriers).
+fn climb_across(c: ptr<function, Climber>, lid: u32) {
+    let arrival_at = BOXES_AT + 6u * (params.count - 1u);
     loop {
         // Uniform trip count: continue while anyone in the workgroup is still climbing.
-        if !wg_any(c.climbing, lid) {
+        if !wg_any((*c).climbing, lid) {
             break;
         }
 
-        let parent = c.pref & PARENT_INDEX_MASK;
-        if c.climbing && (c.node & LEAF_BIT) == 0u {
+        let parent = (*c).pref & PARENT_INDEX_MASK;
+        // The parent's topology does not depend on who arrives second: loaded before the
+        // fences, its latency overlaps theirs instead of following them.
+        var lc = 0u;
+        var rc = 0u;
+        var up = NO_PARENT;
+        if (*c).climbing {
+            lc = topology[params.topo_base + 2u * parent];
+            rc = topology[params.topo_base + 2u * parent + 1u];
+            up = parent_ref(parent);
+        }
+        if (*c).climbing && ((*c).node & LEAF_BIT) == 0u {
             // Inner boxes are published for the sibling's climber (leaves are re-read from the
             // input instead).
-            store_box(c.node, c.bx);
+            store_box((*c).node, (*c).bx);
             if collapsing() {
-                store_subtree(c.node, c.sub);
+                store_subtree((*c).node, (*c).sub);
             }
         }
         // Release: the box above before the arrival below.
         storageBarrier();
-        if c.climbing {
+        if (*c).climbing {
             let before = atomicAdd(&work[arrival_at + parent], 1u);
             // First to arrive: the sibling's box may not exist yet; its climber takes over.
-            c.climbing = before != 0u;
+            (*c).climbing = before != 0u;
         }
         // Acquire: the sibling's box (stored before its arrival) is visible below.
         storageBarrier();
-        if c.climbing {
-            let lc = topology[params.topo_base + 2u * parent];
-            let rc = topology[params.topo_base + 2u * parent + 1u];
-            let sib = sibling(c, lc, rc);
+        if (*c).climbing {
+            let sib = sibling(*c, lc, rc);
             let sb = child_box(sib);
-            climb_up(&c, parent, lc, rc, sb, child_subtree(sib, sb));
+            climb_up(c, parent, lc, rc, sb, child_subtree(sib, sb), up);
         }
     }
 }

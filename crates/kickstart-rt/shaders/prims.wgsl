@@ -43,17 +43,27 @@ fn triangle_aabbs(
     let v0 = aabb_tris[t];
     let v1 = aabb_tris[t + 1u];
     let v2 = aabb_tris[t + 2u];
+    let b = triangle_box(v0, v1, v2);
     let out = 2u * (params.c + k);
-    // Dropped triangles (flag in the second vertex's w) get the empty box; so would a non-finite
-    // one, which ingestion never writes, rather than poisoning the build with NaN bounds.
+    tri_aabbs[out] = b.lo;
+    tri_aabbs[out + 1u] = b.hi;
+}
+
+struct StoredAabb {
+    lo: vec4<f32>,
+    hi: vec4<f32>,
+}
+
+// A staged triangle's box as stored. Dropped triangles (flag in the second vertex's w) get the
+// empty box; so would a non-finite one, which ingestion never writes, rather than poisoning the
+// build with NaN bounds.
+fn triangle_box(v0: vec4<f32>, v1: vec4<f32>, v2: vec4<f32>) -> StoredAabb {
     let dropped = bitcast<u32>(v1.w) == 1u;
     if dropped || is_non_finite(v0.xyz) || is_non_finite(v1.xyz) || is_non_finite(v2.xyz) {
-        tri_aabbs[out] = EMPTY_MIN;
-        tri_aabbs[out + 1u] = EMPTY_MAX;
-        return;
+        return StoredAabb(EMPTY_MIN, EMPTY_MAX);
     }
-    tri_aabbs[out] = vec4<f32>(min(min(v0.xyz, v1.xyz), v2.xyz), 0.0);
-    tri_aabbs[out + 1u] = vec4<f32>(max(max(v0.xyz, v1.xyz), v2.xyz), 0.0);
+    return StoredAabb(vec4<f32>(min(min(v0.xyz, v1.xyz), v2.xyz), 0.0),
+                      vec4<f32>(max(max(v0.xyz, v1.xyz), v2.xyz), 0.0));
 }
 
 // ---- gather_triangles -----------------------------------------------------------------------
@@ -79,6 +89,36 @@ fn gather_triangles(
     gather_dst[d] = gather_src[s];
     gather_dst[d + 1u] = gather_src[s + 1u];
     gather_dst[d + 2u] = gather_src[s + 2u];
+}
+
+// ---- gather_triangles_boxes -----------------------------------------------------------------
+// gather_triangles that also writes each triangle's box at its sorted position k
+// (gather_boxes[2k..2k+1], as triangle_aabbs would at its primitive index): a BLAS refit's one
+// pass before the climb, which then reads the boxes in order (the LBVH's sorted-boxes flag).
+
+@group(0) @binding(4) var<storage, read_write> gather_boxes: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn gather_triangles_boxes(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    let k = linear_id(wid, nwg, lid);
+    if k >= params.c {
+        return;
+    }
+    let s = 3u * (params.a + gather_order[params.b + k]);
+    let d = 3u * (params.d + k);
+    let v0 = gather_src[s];
+    let v1 = gather_src[s + 1u];
+    let v2 = gather_src[s + 2u];
+    gather_dst[d] = v0;
+    gather_dst[d + 1u] = v1;
+    gather_dst[d + 2u] = v2;
+    let b = triangle_box(bitcast<vec4<f32>>(v0), bitcast<vec4<f32>>(v1), bitcast<vec4<f32>>(v2));
+    gather_boxes[2u * k] = b.lo;
+    gather_boxes[2u * k + 1u] = b.hi;
 }
 
 // ---- instance_refs -------------------------------------------------------------------------

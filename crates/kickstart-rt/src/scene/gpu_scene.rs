@@ -532,6 +532,7 @@ impl GpuScene {
             n,
             self.triangles.buffer(),
             tris.start,
+            None,
         );
         g.blas = Some(BlasRanges {
             tris,
@@ -569,13 +570,18 @@ impl GpuScene {
         self.ensure_scratch(n);
         rec.scope = "blas refit";
         let (prims, lbvh) = self.passes.build(&self.device);
-        prims.triangle_aabbs(
+        // The gather comes first and also writes the boxes in sorted order: one pass fewer than
+        // a build's boxes-then-gather, and the climb reads its leaves' boxes coalesced.
+        prims.gather_triangles(
             rec,
             self.staged.buffer(),
             staged.start,
+            self.orders.buffer(),
+            order.start,
             n,
-            &self.scratch_aabbs,
-            0,
+            self.triangles.buffer(),
+            tris.start,
+            Some(&self.scratch_aabbs),
         );
         lbvh.refit(
             rec,
@@ -591,17 +597,8 @@ impl GpuScene {
                 leaf_refs: LeafRefs::SortedPosition,
                 max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                sorted_boxes: true,
             },
-        );
-        prims.gather_triangles(
-            rec,
-            self.staged.buffer(),
-            staged.start,
-            self.orders.buffer(),
-            order.start,
-            n,
-            self.triangles.buffer(),
-            tris.start,
         );
     }
 
@@ -677,6 +674,7 @@ impl GpuScene {
                     leaf_refs: LeafRefs::PrimitiveIndex,
                     max_leaf: 1,
                     bounds_out: None,
+                    sorted_boxes: false,
                 },
             );
             self.tlas.refits_since_rebuild += 1;

@@ -29,7 +29,8 @@
 //! only). Its subtrees need not be ranges of sorted positions; only those that are may become
 //! one leaf.
 //!
-//! Refit runs steps 1 (arrival counters only) and 6 over the stored topology.
+//! Refit runs steps 1 (arrival counters only) and 6 over the stored topology; a BLAS refit's
+//! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]).
 
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
@@ -60,6 +61,8 @@ const KEY_BITS_RANGE: std::ops::RangeInclusive<u32> = 3..=31;
 const FLAG_PRIMITIVE_REFS: u32 = 1;
 /// Params flag: write the root box to `bounds_out`.
 const FLAG_BOUNDS_OUT: u32 = 2;
+/// Params flag: the boxes are in sorted order ([`LbvhRefit::sorted_boxes`]).
+const FLAG_SORTED_BOXES: u32 = 4;
 /// First word of the inner-node boxes in the work buffer (after the centroid-bounds header).
 const BOXES_AT: u64 = 8;
 /// Largest primitive count: a leaf ref has 28 bits for its first primitive.
@@ -146,6 +149,10 @@ pub(crate) struct LbvhRefit<'a> {
     pub max_leaf: u32,
     /// Output: the root box as two `vec4` at this vec4 index.
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
+    /// `aabbs` holds the boxes in sorted order already (leaf `k`'s at `aabb_base + k`, as
+    /// [`crate::scene::prims::Prims::gather_triangles`] writes them), so the climb reads each
+    /// with one coalesced load instead of going through `order`.
+    pub sorted_boxes: bool,
 }
 
 /// Per-dispatch parameters (the shader's `Params`).
@@ -486,6 +493,10 @@ impl Lbvh {
         let work = self.work.get(device, "lbvh work", work_words(n) * 4);
         let dummy = self.dummy.get(device, "lbvh no bounds", 32);
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
+        let mut flags = Self::flags(r.leaf_refs, r.bounds_out.is_some());
+        if r.sorted_boxes {
+            flags |= FLAG_SORTED_BOXES;
+        }
         let params = rec.uniform(
             "lbvh params",
             &Params {
@@ -495,7 +506,7 @@ impl Lbvh {
                 order_base: r.order_base,
                 topo_base: r.topology.1,
                 bounds_base,
-                flags: Self::flags(r.leaf_refs, r.bounds_out.is_some()),
+                flags,
                 max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
                 key_bits: 0,
                 centroid_base: 0,
@@ -852,7 +863,28 @@ mod tests {
 
     /// Refits `tree` (as built) to the primitive boxes `after`, collapsing up to `max_leaf`.
     fn refit_to(lbvh: &mut Lbvh, tree: &GpuTree, after: &[Aabb], max_leaf: u32) {
-        let input = aabb_buffer(after, tree.bases.aabb);
+        refit_to_with(lbvh, tree, after, max_leaf, false);
+    }
+
+    /// [`refit_to`], the boxes given in sorted order (`after[order[k]]` at `k`) when
+    /// `sorted_boxes`, as a BLAS refit's gather writes them.
+    fn refit_to_with(
+        lbvh: &mut Lbvh,
+        tree: &GpuTree,
+        after: &[Aabb],
+        max_leaf: u32,
+        sorted_boxes: bool,
+    ) {
+        let input = if sorted_boxes {
+            let sorted: Vec<Aabb> = tree
+                .order_words
+                .iter()
+                .map(|&p| after[p as usize])
+                .collect();
+            aabb_buffer(&sorted, tree.bases.aabb)
+        } else {
+            aabb_buffer(after, tree.bases.aabb)
+        };
         run(|rec| {
             lbvh.refit(
                 rec,
@@ -868,6 +900,7 @@ mod tests {
                     leaf_refs: tree.leaf_refs,
                     max_leaf,
                     bounds_out: Some((&tree.bounds, tree.bases.bounds)),
+                    sorted_boxes,
                 },
             )
         });
@@ -1381,11 +1414,15 @@ mod tests {
     fn lbvh_refit_equals_exact_boxes_on_same_topology() {
         let mut lbvh = Lbvh::new(&gpu().device);
         let mut rng = Rng(5);
-        for (n, refs) in [
-            (1usize, LeafRefs::PrimitiveIndex),
-            (2, LeafRefs::SortedPosition),
-            (1000, LeafRefs::SortedPosition),
-            (3001, LeafRefs::PrimitiveIndex),
+        for (n, refs, sorted_boxes) in [
+            (1usize, LeafRefs::PrimitiveIndex, false),
+            (2, LeafRefs::SortedPosition, false),
+            (1000, LeafRefs::SortedPosition, false),
+            (3001, LeafRefs::PrimitiveIndex, false),
+            // Boxes in sorted order (a BLAS refit's): leaf k reads box k, not box order[k].
+            (1, LeafRefs::SortedPosition, true),
+            (3001, LeafRefs::SortedPosition, true),
+            (700, LeafRefs::PrimitiveIndex, true),
         ] {
             let before = hard_soup(n, n as u64);
             let (tree, _) = build_and_check(&mut lbvh, &before, refs);
@@ -1405,7 +1442,7 @@ mod tests {
                     _ => shifted(b, rng.vec(-3.0, 3.0)),
                 })
                 .collect();
-            refit_to(&mut lbvh, &tree, &after, 1);
+            refit_to_with(&mut lbvh, &tree, &after, 1, sorted_boxes);
             // Exact boxes of the new primitives over the same tree (the order was made for
             // the old boxes, so empties need not be last any more).
             let order_before = tree.order_words.clone();
@@ -1697,7 +1734,8 @@ mod tests {
         let (tree, _) = check_read_back(tree, &after, false);
         assert_eq!(refs(&tree), refs_before, "refit keeps every ref");
         let (tree, _) = build_and_check_clustered(&mut lbvh, &before, 4);
-        refit_to(&mut lbvh, &tree, &after, 4);
+        // As a fast-trace BLAS is refit: the boxes in sorted order.
+        refit_to_with(&mut lbvh, &tree, &after, 4, true);
         let (tree, sah) = check_read_back(tree, &after, false);
         let optimum = optimal_collapsed_sah(&tree, &after, 4);
         assert_is_optimum(sah, optimum, "clustered refit for the new boxes");

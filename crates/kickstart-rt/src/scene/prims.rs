@@ -21,6 +21,8 @@ pub(crate) struct Prims {
     triangle_aabbs: wgpu::ComputePipeline,
     /// `gather_triangles` entry point.
     gather_triangles: wgpu::ComputePipeline,
+    /// `gather_triangles_boxes` entry point.
+    gather_triangles_boxes: wgpu::ComputePipeline,
     /// `instance_refs` entry point.
     instance_refs: wgpu::ComputePipeline,
     /// Bound in place of missing centroid-bounds words (never written: the flag is off).
@@ -39,6 +41,7 @@ impl Prims {
         Prims {
             triangle_aabbs: make("triangle_aabbs"),
             gather_triangles: make("gather_triangles"),
+            gather_triangles_boxes: make("gather_triangles_boxes"),
             instance_refs: make("instance_refs"),
             no_bounds: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("kickstart-rt no centroid bounds"),
@@ -87,7 +90,9 @@ impl Prims {
     }
 
     /// `dst[dst_base + k] = src[src_base + order[order_base + k]]` for `k < count`, whole
-    /// triangles (3 `vec4`), bit-exact.
+    /// triangles (3 `vec4`), bit-exact. With `boxes`, also each triangle's box at its sorted
+    /// position `k` (vec4 `2k`, `2k + 1`; the empty box for dropped triangles, as
+    /// [`Prims::triangle_aabbs`]): a refit's boxes in the order its climb reads them.
     #[allow(clippy::too_many_arguments)] // the interface the BVH code is written against
     pub fn gather_triangles(
         &self,
@@ -99,6 +104,7 @@ impl Prims {
         count: u32,
         dst: &wgpu::Buffer,
         dst_base: u32,
+        boxes: Option<&wgpu::Buffer>,
     ) {
         if count == 0 {
             return;
@@ -107,23 +113,21 @@ impl Prims {
             "kickstart-rt gather triangles params",
             &[src_base, order_base, count, dst_base],
         );
-        let bind = rec.bind_buffers(
-            "kickstart-rt gather triangles",
-            &self.gather_triangles,
-            0,
-            &[
-                params.as_entire_binding(),
-                src.as_entire_binding(),
-                order.as_entire_binding(),
-                dst.as_entire_binding(),
-            ],
-        );
-        rec.dispatch(
-            "blas build: gather triangles",
-            &self.gather_triangles,
-            &[&bind],
-            count.div_ceil(WORKGROUP),
-        );
+        let mut entries = vec![
+            params.as_entire_binding(),
+            src.as_entire_binding(),
+            order.as_entire_binding(),
+            dst.as_entire_binding(),
+        ];
+        let (pipeline, label) = match boxes {
+            Some(b) => {
+                entries.push(b.as_entire_binding());
+                (&self.gather_triangles_boxes, "gather triangles and boxes")
+            }
+            None => (&self.gather_triangles, "blas build: gather triangles"),
+        };
+        let bind = rec.bind_buffers("kickstart-rt gather triangles", pipeline, 0, &entries);
+        rec.dispatch(label, pipeline, &[&bind], count.div_ceil(WORKGROUP));
     }
 
     /// The TLAS's primitives, `refs_per_instance` (1..=8) refs per instance slot `0..count`
@@ -203,10 +207,9 @@ mod tests {
     /// The empty box as written by the shaders.
     const EMPTY: [[f32; 4]; 2] = [[1e30, 1e30, 1e30, 0.0], [-1e30, -1e30, -1e30, 0.0]];
 
-    #[test]
-    fn triangle_aabbs_are_exact_and_dropped_triangles_empty() {
-        let mut rng = Rng(11);
-        let n = 40usize;
+    /// `n` random staged triangles (3 `vec4` each) and which are dropped: every fifth from 1
+    /// has two equal vertices, from 2 three collinear ones, from 3 is dropped.
+    fn test_triangles(rng: &mut Rng, n: usize) -> (Vec<[f32; 4]>, Vec<bool>) {
         let mut tris = vec![[0f32; 4]; 3 * n];
         let mut dropped = vec![false; n];
         for t in 0..n {
@@ -239,6 +242,26 @@ mod tests {
                 _ => tris[3 * t][3] = f32::from_bits(t as u32), // primitive index in w is ignored
             }
         }
+        (tris, dropped)
+    }
+
+    /// The box words (2 `vec4`) the shaders must write for triangle `t`.
+    fn expected_box_words(tris: &[[f32; 4]], dropped: &[bool], t: usize) -> Vec<u32> {
+        let want = if dropped[t] {
+            EMPTY
+        } else {
+            let v = &tris[3 * t..3 * t + 3];
+            let lo = |a: usize| v[0][a].min(v[1][a]).min(v[2][a]);
+            let hi = |a: usize| v[0][a].max(v[1][a]).max(v[2][a]);
+            [[lo(0), lo(1), lo(2), 0.0], [hi(0), hi(1), hi(2), 0.0]]
+        };
+        want.iter().flatten().map(|f| f.to_bits()).collect()
+    }
+
+    #[test]
+    fn triangle_aabbs_are_exact_and_dropped_triangles_empty() {
+        let mut rng = Rng(11);
+        let (tris, dropped) = test_triangles(&mut rng, 40);
         let (tri_base, count, aabb_base) = (5u32, 30u32, 3u32);
         let tri_buf = buffer_with(bytemuck::cast_slice(&tris));
         let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * 40]));
@@ -253,16 +276,62 @@ mod tests {
                 continue;
             }
             let t = tri_base as usize + k as usize;
-            let want = if dropped[t] {
-                EMPTY
-            } else {
-                let v = &tris[3 * t..3 * t + 3];
-                let lo = |a: usize| v[0][a].min(v[1][a]).min(v[2][a]);
-                let hi = |a: usize| v[0][a].max(v[1][a]).max(v[2][a]);
-                [[lo(0), lo(1), lo(2), 0.0], [hi(0), hi(1), hi(2), 0.0]]
-            };
-            let want_words: Vec<u32> = want.iter().flatten().map(|f| f.to_bits()).collect();
+            let want_words = expected_box_words(&tris, &dropped, t);
             assert_eq!(box_words, &want_words[..], "triangle {t}");
+        }
+    }
+
+    #[test]
+    fn gather_triangles_with_boxes_writes_each_box_at_its_sorted_position() {
+        let mut rng = Rng(13);
+        let (tris, dropped) = test_triangles(&mut rng, 50);
+        let mut perm: Vec<u32> = (0..30).collect();
+        for i in (1..perm.len()).rev() {
+            perm.swap(i, rng.below(i as u32 + 1) as usize);
+        }
+        let mut order = vec![SENTINEL; 4];
+        order.extend(&perm);
+        let (src_base, order_base, count, dst_base) = (7u32, 4u32, 30u32, 2u32);
+        let src_buf = buffer_with(bytemuck::cast_slice(&tris));
+        let order_buf = buffer_with(bytemuck::cast_slice(&order));
+        let dst = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 12 * 40]));
+        let boxes = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * 40]));
+        let prims = Prims::new(&gpu().device);
+        run(|rec| {
+            prims.gather_triangles(
+                rec,
+                &src_buf,
+                src_base,
+                &order_buf,
+                order_base,
+                count,
+                &dst,
+                dst_base,
+                Some(&boxes),
+            )
+        });
+        let src_words: &[u32] = bytemuck::cast_slice(&tris);
+        let got = words(&dst, 12 * 40);
+        let got_boxes = words(&boxes, 8 * 40);
+        for k in 0..40usize {
+            let box_words = &got_boxes[8 * k..8 * k + 8];
+            if k >= count as usize {
+                assert!(box_words.iter().all(|&w| w == SENTINEL), "box {k} written");
+                continue;
+            }
+            // Boxes start at 0 (the refit's scratch), triangles at dst_base.
+            let s = (src_base + perm[k]) as usize;
+            assert_eq!(
+                box_words,
+                &expected_box_words(&tris, &dropped, s)[..],
+                "box {k}"
+            );
+            let d = dst_base as usize + k;
+            assert_eq!(
+                &got[12 * d..12 * d + 12],
+                &src_words[12 * s..12 * s + 12],
+                "dst {d}"
+            );
         }
     }
 
@@ -284,7 +353,7 @@ mod tests {
         let prims = Prims::new(&gpu().device);
         run(|rec| {
             prims.gather_triangles(
-                rec, &src_buf, src_base, &order_buf, order_base, count, &dst, dst_base,
+                rec, &src_buf, src_base, &order_buf, order_base, count, &dst, dst_base, None,
             )
         });
         let got = words(&dst, 12 * 40);
