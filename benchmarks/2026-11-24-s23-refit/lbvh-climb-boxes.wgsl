@@ -1,0 +1,822 @@
+// GPU LBVH (Karras 2012, "Maximizing Parallelism in the Construction of BVHs, Octrees, and k-d
+// Trees") over primitive AABBs, and its refit. Layouts: docs/ray-tracing-core.md. Driven by
+// src/scene/lbvh.rs, which documents the pass order.
+//
+// Entry points (all 256 invocations, 1-D workgroups split into 2-D by the Recorder):
+//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6] (not run
+//                  when the caller's pass merged them: the TLAS's instance boxes)
+//   lbvh_morton    per primitive: Morton key of key_bits bits, min(key_bits / 3, 10) per axis
+//                  (empty: all ones, sorts last), value = index
+//   (radix sort of (keys, values), key_bits bits, by the caller)
+//   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
+//   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
+//                  refit share it)
+//
+// `work` layout (u32 words, all accessed atomically):
+//   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only;
+//                                centroid_bounds.wgsl)
+//   [8, 8 + 6 (n-1))             inner node boxes during the climb (min.xyz, max.xyz bit patterns)
+//   [8 + 6 (n-1), 8 + 7 (n-1))   arrival counters of the inner nodes (cleared before the climb)
+//   [8 + 7 (n-1), 8 + 10 (n-1))  per inner node during the climb: SAH cost (f32 bits), primitive
+//                                count | COLLAPSED_BIT, first sorted position (leaf collapsing)
+//
+// Topology layout (u32 words from topo_base), n >= 2:
+//   [0, 2 (n-1))           children of inner node i at 2i, 2i+1: inner index, or 0x80000000 | k
+//                          for the leaf at sorted position k
+//   [2 (n-1), 3 (n-1))     parent ref of inner node i (0xFFFFFFFF for the root)
+//   [3 (n-1), 4n - 3)      parent ref of leaf k
+//   A parent ref is the parent's inner index | PARENT_LOCAL_BIT (0x40000000) when all of the
+//   parent's leaves lie in one block of 256 sorted positions [256 b, 256 b + 256).
+
+struct Params {
+    count: u32,
+    aabb_base: u32,
+    node_base: u32,
+    order_base: u32,
+    topo_base: u32,
+    bounds_base: u32,
+    // bit 0: leaf refs are primitive indices (order[k]) instead of sorted positions k;
+    // bit 1: write the root box to bounds_out.
+    flags: u32,
+    // Largest leaf the climb may make by collapsing a subtree (1: every leaf holds one
+    // primitive). Only with sorted-position refs: a subtree's primitives are then one range.
+    max_leaf: u32,
+    // Bits of the sort keys (3..=31; builds only): 31 for a BLAS, 24 for a TLAS, whose sort then
+    // needs one digit pass fewer (src/scene/lbvh.rs says why).
+    key_bits: u32,
+    // First of the 6 centroid-bounds words lbvh_morton reads from binding 2: 0 (work's header),
+    // or where the caller's pass merged them in the buffer bound there instead.
+    centroid_base: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> aabbs: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> work: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> keys: array<u32>;
+@group(0) @binding(4) var<storage, read_write> values: array<u32>;
+@group(0) @binding(5) var<storage, read_write> order: array<u32>;
+@group(0) @binding(6) var<storage, read_write> topology: array<u32>;
+// Nodes and bounds are written as bit patterns (u32) so child refs stored in the `w` lanes are
+// never touched by float handling (they are denormals or NaNs as f32).
+@group(0) @binding(7) var<storage, read_write> nodes: array<vec4<u32>>;
+@group(0) @binding(8) var<storage, read_write> bounds_out: array<vec4<u32>>;
+
+const WG: u32 = 256u;
+const FLAG_PRIMITIVE_REFS: u32 = 1u;
+const FLAG_BOUNDS_OUT: u32 = 2u;
+// Leaf k's box is aabbs[aabb_base + k] (already in sorted order: a BLAS refit's gather writes
+// them so), not aabbs[aabb_base + order[k]]: one coalesced load instead of two dependent ones.
+const FLAG_SORTED_BOXES: u32 = 4u;
+const LEAF_BIT: u32 = 0x80000000u;
+const NO_PARENT: u32 = 0xFFFFFFFFu;
+// In a parent ref: the parent's leaves all lie in one block of WG sorted positions (one climb
+// workgroup's). Indices stay below 2^28, so the bit is free.
+const PARENT_LOCAL_BIT: u32 = 0x40000000u;
+const PARENT_INDEX_MASK: u32 = 0x0fffffffu;
+// Empty box while climbing: the largest finite floats, so a union with it is exact for every
+// finite coordinate. Written out as the documented (+1e30, -1e30).
+const BIG: f32 = 3.40282347e38;
+const EMPTY_OUT: f32 = 1e30;
+const BOXES_AT: u32 = 8u;
+// SAH constants of the collapse decision: the CPU builder's (src/cpu/bvh.rs), so the GPU tree's
+// SAH cost is minimised in the same terms the benchmark compares it in.
+const SAH_TRAVERSAL: f32 = 1.0;
+const SAH_INTERSECTION: f32 = 1.0;
+// In the count word of a subtree: the subtree is cheaper as one leaf (its parent refers to it as
+// a leaf of `count` primitives from `first`).
+const COLLAPSED_BIT: u32 = 0x80000000u;
+// In the count word of a subtree: its leaves are not one range of sorted positions, so neither it
+// nor any subtree above it can become one leaf. Never set in a Karras tree (every subtree is a
+// range); a clustered tree (hploc.wgsl) merges clusters that need not be neighbours.
+const SCATTERED_BIT: u32 = 0x40000000u;
+const COUNT_MASK: u32 = 0x0fffffffu;
+
+fn linear_id(lid: u32, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return (wid.y * nwg.x + wid.x) * WG + lid;
+}
+
+struct Box {
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+}
+
+fn empty_box() -> Box {
+    return Box(vec3<f32>(BIG), vec3<f32>(-BIG));
+}
+
+fn is_empty(b: Box) -> bool {
+    return b.lo.x > b.hi.x;
+}
+
+// Primitive `prim`'s box; empty (min.x > max.x, or any NaN) becomes the canonical empty box so
+// it never enlarges a parent.
+fn prim_box(prim: u32) -> Box {
+    let i = 2u * (params.aabb_base + prim);
+    let lo = aabbs[i].xyz;
+    let hi = aabbs[i + 1u].xyz;
+    if stored_box_is_empty(lo, hi) {
+        return empty_box();
+    }
+    return Box(lo, hi);
+}
+
+fn union_box(a: Box, b: Box) -> Box {
+    return Box(min(a.lo, b.lo), max(a.hi, b.hi));
+}
+
+fn centroid(b: Box) -> vec3<f32> {
+    return box_centroid(b.lo, b.hi);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scene bounds of the valid centroids (centroid_bounds.wgsl): workgroup reduce in shared atomics,
+// then one device atomicMax per word into work[0..6]. Skipped when the caller's primitive pass
+// merged them already (the TLAS's instance boxes): lbvh_morton then reads the caller's words.
+
+@compute @workgroup_size(256)
+fn lbvh_bounds(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_id(lid, wid, nwg);
+    wg_bounds_clear(lid);
+    workgroupBarrier();
+    // No early return: the barriers below must be reached by the whole workgroup.
+    if i < params.count {
+        let at = 2u * (params.aabb_base + i);
+        wg_bounds_add(aabbs[at].xyz, aabbs[at + 1u].xyz);
+    }
+    workgroupBarrier();
+    if lid < 6u {
+        let v = wg_bounds_word(lid);
+        if v != 0u {
+            atomicMax(&work[lid], v);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Morton keys.
+
+// Spreads the low 10 bits of v to every third bit.
+fn spread3(v: u32) -> u32 {
+    var x = v & 0x3ffu;
+    x = (x | (x << 16u)) & 0x030000ffu;
+    x = (x | (x << 8u)) & 0x0300f00fu;
+    x = (x | (x << 4u)) & 0x030c30c3u;
+    x = (x | (x << 2u)) & 0x09249249u;
+    return x;
+}
+
+// Cell 0..cells-1 of c in [lo, hi]; a zero or non-finite extent, or a non-finite c, gives cell 0
+// (such primitives still get a leaf; only their place in the order is arbitrary).
+fn cell(c: f32, lo: f32, hi: f32, cells: f32) -> u32 {
+    let extent = hi - lo;
+    let t = (c - lo) / extent * cells;
+    // Finite first: only then is the comparison meaningful (NaN may be assumed away).
+    if !is_finite(extent) || !(extent > 0.0) || !is_finite(t) {
+        return 0u;
+    }
+    return u32(clamp(t, 0.0, cells - 1.0));
+}
+
+@compute @workgroup_size(256)
+fn lbvh_morton(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_id(lid, wid, nwg);
+    if i >= params.count {
+        return;
+    }
+    let b = prim_box(i);
+    // Empty primitives: all ones, the largest key, so they sort last.
+    let empty_key = (1u << params.key_bits) - 1u;
+    var key = empty_key;
+    if !is_empty(b) {
+        // work[0..6], or the caller's words bound in its place (see lbvh_bounds).
+        let cb = params.centroid_base;
+        let lo = vec3<f32>(dec(~atomicLoad(&work[cb])), dec(~atomicLoad(&work[cb + 1u])),
+                           dec(~atomicLoad(&work[cb + 2u])));
+        let hi = vec3<f32>(dec(atomicLoad(&work[cb + 3u])), dec(atomicLoad(&work[cb + 4u])),
+                           dec(atomicLoad(&work[cb + 5u])));
+        let c = centroid(b);
+        // Exact power of two (at most 1024): the same cells as a literal would give.
+        let cells = f32(1u << min(params.key_bits / 3u, 10u));
+        let morton = (spread3(cell(c.x, lo.x, hi.x, cells)) << 2u)
+            | (spread3(cell(c.y, lo.y, hi.y, cells)) << 1u) | spread3(cell(c.z, lo.z, hi.z, cells));
+        // Below the empty key: only when the Morton bits fill the key (24 bits: 8 per axis) can
+        // they equal it, and then the far corner cell joins its neighbour, the next lower code.
+        // With a spare bit (31 = 3 x 10 + 1) no code is lowered.
+        key = min(morton, empty_key - 1u);
+    }
+    keys[i] = key;
+    values[i] = i;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hierarchy (Karras 2012, section 4): inner node i covers a key range starting or ending at i.
+
+// Length of the common prefix of sorted keys i and j, or -1 when j is outside [0, n). Equal keys
+// fall back to the indices (32 + clz(i ^ j)), so duplicates still give a valid binary tree.
+fn delta(i: i32, j: i32) -> i32 {
+    let n = i32(params.count);
+    if j < 0 || j >= n {
+        return -1;
+    }
+    let a = keys[i];
+    let b = keys[j];
+    if a == b {
+        return 32 + i32(countLeadingZeros(u32(i) ^ u32(j)));
+    }
+    return i32(countLeadingZeros(a ^ b));
+}
+
+@compute @workgroup_size(256)
+fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+                  @builtin(num_workgroups) nwg: vec3<u32>) {
+    let k = linear_id(lid, wid, nwg);
+    let n = params.count;
+    if k >= n {
+        return;
+    }
+    // One primitive is never sorted (no keys were made): its order is the identity.
+    order[params.order_base + k] = select(values[k], k, n < 2u);
+    if k + 1u >= n {
+        return; // n - 1 inner nodes
+    }
+    let i = i32(k);
+    let inner_parents = params.topo_base + 2u * (n - 1u);
+    let leaf_parents = params.topo_base + 3u * (n - 1u);
+    if k == 0u {
+        topology[inner_parents] = NO_PARENT;
+    }
+    // Direction of the range: towards the neighbour sharing the longer prefix.
+    let d = select(-1, 1, delta(i, i + 1) - delta(i, i - 1) > 0);
+    let delta_min = delta(i, i - d);
+    // Upper bound of the range length, then binary search for the other end.
+    var l_max = 2;
+    while delta(i, i + l_max * d) > delta_min {
+        l_max *= 2;
+    }
+    var l = 0;
+    var t = l_max / 2;
+    while t >= 1 {
+        if delta(i, i + (l + t) * d) > delta_min {
+            l += t;
+        }
+        t /= 2;
+    }
+    let j = i + l * d;
+    // Split: the last position sharing more than the node's prefix with i.
+    let delta_node = delta(i, j);
+    var s = 0;
+    var div = 2;
+    t = (l + div - 1) / div;
+    loop {
+        if delta(i, i + (s + t) * d) > delta_node {
+            s += t;
+        }
+        if t <= 1 {
+            break;
+        }
+        div *= 2;
+        t = (l + div - 1) / div;
+    }
+    let gamma = i + s * d + min(d, 0);
+    let first = u32(min(i, j));
+    let last = u32(max(i, j));
+    let g = u32(gamma);
+    var left = g;
+    var right = g + 1u;
+    // The children's parent ref says whether this node's leaves all lie in one climb
+    // workgroup's block: the climb then joins it in workgroup memory (see lbvh_climb).
+    let ref_k = k | select(0u, PARENT_LOCAL_BIT, first / WG == last / WG);
+    if first == g {
+        left = LEAF_BIT | g;
+        topology[leaf_parents + g] = ref_k;
+    } else {
+        topology[inner_parents + g] = ref_k;
+    }
+    if last == g + 1u {
+        right = LEAF_BIT | (g + 1u);
+        topology[leaf_parents + g + 1u] = ref_k;
+    } else {
+        topology[inner_parents + g + 1u] = ref_k;
+    }
+    topology[params.topo_base + 2u * k] = left;
+    topology[params.topo_base + 2u * k + 1u] = right;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bottom-up boxes (build and refit), one invocation per leaf.
+//
+// WGSL promises no forward progress between workgroups and only relaxed atomics, so nothing here
+// waits on another invocation. Each invocation climbs from its leaf; at every inner node the
+// FIRST to arrive stops and the SECOND continues with the union of both children. The second
+// must see the first's box, hence:
+//   1. boxes live in `work` and are written/read with atomicStore/atomicLoad (device-coherent);
+//   2. write box -> storageBarrier() -> atomicAdd(arrival) -> storageBarrier() -> read sibling.
+//      storageBarrier() is an OpControlBarrier with Device memory scope and AcquireRelease |
+//      UniformMemory semantics: the first one is a release fence before the arrival increment,
+//      the second an acquire fence after it, so when the second arriver's atomicAdd reads the
+//      first's increment, the first's box stores happen-before the second's loads.
+// storageBarrier() is also a workgroup control barrier, so it must be reached in
+// workgroup-uniform control flow: the climb is a loop whose trip count is uniform (it runs while
+// ANY invocation of the workgroup is still climbing, read through workgroupUniformLoad), and
+// each invocation carries its own `climbing` flag. Inactive invocations just pass the barriers.
+
+var<workgroup> wg_active: atomic<u32>;
+var<workgroup> wg_go: u32;
+
+// Whether `flag` is set in any invocation of the workgroup: the same answer in all of them, so
+// the climb's loops keep a uniform trip count. Every invocation must call it (it has barriers).
+fn wg_any(flag: bool, lid: u32) -> bool {
+    if lid == 0u {
+        atomicStore(&wg_active, 0u);
+    }
+    workgroupBarrier();
+    if flag {
+        atomicAdd(&wg_active, 1u);
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        wg_go = atomicLoad(&wg_active);
+    }
+    return workgroupUniformLoad(&wg_go) != 0u;
+}
+
+// The child ref as written into a node: inner index as is; leaf k -> k or order[k].
+fn out_ref(c: u32) -> u32 {
+    if (c & LEAF_BIT) == 0u || (params.flags & FLAG_PRIMITIVE_REFS) == 0u {
+        return c;
+    }
+    return LEAF_BIT | order[params.order_base + (c & 0x7fffffffu)];
+}
+
+// Box lanes as stored in nodes/bounds_out: the documented (+1e30, -1e30) when empty.
+fn out_lo(b: Box) -> vec3<u32> {
+    return bitcast<vec3<u32>>(select(b.lo, vec3<f32>(EMPTY_OUT), is_empty(b)));
+}
+
+fn out_hi(b: Box) -> vec3<u32> {
+    return bitcast<vec3<u32>>(select(b.hi, vec3<f32>(-EMPTY_OUT), is_empty(b)));
+}
+
+fn write_node(node: u32, l: Box, lref: u32, r: Box, rref: u32) {
+    let at = 4u * (params.node_base + node);
+    nodes[at] = vec4<u32>(out_lo(l), lref);
+    nodes[at + 1u] = vec4<u32>(out_hi(l), rref);
+    nodes[at + 2u] = vec4<u32>(out_lo(r), 0u);
+    nodes[at + 3u] = vec4<u32>(out_hi(r), 0u);
+}
+
+fn write_bounds(b: Box) {
+    if (params.flags & FLAG_BOUNDS_OUT) != 0u {
+        bounds_out[params.bounds_base] = vec4<u32>(out_lo(b), 0u);
+        bounds_out[params.bounds_base + 1u] = vec4<u32>(out_hi(b), 0u);
+    }
+}
+
+fn leaf_box(k: u32) -> Box {
+    if (params.flags & FLAG_SORTED_BOXES) != 0u {
+        return prim_box(k);
+    }
+    return prim_box(order[params.order_base + k]);
+}
+
+fn store_box(node: u32, b: Box) {
+    let at = BOXES_AT + 6u * node;
+    atomicStore(&work[at], bitcast<u32>(b.lo.x));
+    atomicStore(&work[at + 1u], bitcast<u32>(b.lo.y));
+    atomicStore(&work[at + 2u], bitcast<u32>(b.lo.z));
+    atomicStore(&work[at + 3u], bitcast<u32>(b.hi.x));
+    atomicStore(&work[at + 4u], bitcast<u32>(b.hi.y));
+    atomicStore(&work[at + 5u], bitcast<u32>(b.hi.z));
+}
+
+fn load_box(node: u32) -> Box {
+    let at = BOXES_AT + 6u * node;
+    return Box(
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[at])), bitcast<f32>(atomicLoad(&work[at + 1u])),
+                  bitcast<f32>(atomicLoad(&work[at + 2u]))),
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[at + 3u])),
+                  bitcast<f32>(atomicLoad(&work[at + 4u])),
+                  bitcast<f32>(atomicLoad(&work[at + 5u]))));
+}
+
+// Summary of child ref c whose box is `b`: a leaf's is computed, an inner node's was published
+// by its climber (with its box, under the same release/acquire protocol).
+fn child_subtree(c: u32, b: Box) -> Subtree {
+    // Without collapsing no summary was published (and none is needed: nothing collapses).
+    if (c & LEAF_BIT) != 0u || !collapsing() {
+        return leaf_subtree(c & 0x7fffffffu, b);
+    }
+    return load_subtree(c);
+}
+
+// Box of child ref c (topology encoding): leaves from the input, inner nodes from `work`.
+fn child_box(c: u32) -> Box {
+    if (c & LEAF_BIT) != 0u {
+        return leaf_box(c & 0x7fffffffu);
+    }
+    return load_box(c);
+}
+
+// SAH summary of a subtree: its cost (area-weighted, not normalised), primitive count and first
+// sorted position, whether it is cheaper as a single leaf, and whether its leaves are the sorted
+// positions [first, first + count) (only then can it be one leaf).
+struct Subtree {
+    cost: f32,
+    count: u32,
+    first: u32,
+    collapsed: bool,
+    contiguous: bool,
+}
+
+// The count word of a summary as stored: count and the two flags.
+fn subtree_word(s: Subtree) -> u32 {
+    return s.count | select(0u, COLLAPSED_BIT, s.collapsed) | select(SCATTERED_BIT, 0u, s.contiguous);
+}
+
+fn subtree_from(cost: u32, word: u32, first: u32) -> Subtree {
+    return Subtree(bitcast<f32>(cost), word & COUNT_MASK, first, (word & COLLAPSED_BIT) != 0u,
+                   (word & SCATTERED_BIT) == 0u);
+}
+
+// Surface area, 0 for an empty box, capped at BIG so sums of costs stay comparable (a non-finite
+// value may be assumed away by the compiler).
+fn area(b: Box) -> f32 {
+    let d = max(b.hi - b.lo, vec3<f32>(0.0));
+    return min(2.0 * (d.x * d.y + d.y * d.z + d.z * d.x), BIG);
+}
+
+fn leaf_subtree(k: u32, b: Box) -> Subtree {
+    return Subtree(area(b) * SAH_INTERSECTION, 1u, k, false, true);
+}
+
+// The optimal cost of an inner node over children `l` and `r` (box `b`): split, or one leaf when
+// collapsing is on, the leaf fits and it is no more expensive.
+fn join_subtrees(b: Box, l: Subtree, r: Subtree) -> Subtree {
+    let a = area(b);
+    let count = l.count + r.count;
+    let split = min(a * SAH_TRAVERSAL + l.cost + r.cost, BIG);
+    let as_leaf = min(a * f32(count) * SAH_INTERSECTION, BIG);
+    let contiguous = l.contiguous && r.contiguous
+        && (l.first + l.count == r.first || r.first + r.count == l.first);
+    let collapse = collapsing() && contiguous && count <= params.max_leaf && as_leaf <= split;
+    return Subtree(select(split, as_leaf, collapse), count, min(l.first, r.first), collapse,
+                   contiguous);
+}
+
+// Whether this dispatch may collapse subtrees (uniform). Builds and refits that may not skip the
+// summaries' stores and loads, which would otherwise add 3 words per inner node to the climb's
+// device traffic for nothing.
+fn collapsing() -> bool {
+    return (params.flags & FLAG_PRIMITIVE_REFS) == 0u && params.max_leaf > 1u;
+}
+
+fn subtree_at(node: u32) -> u32 {
+    let n = params.count;
+    return BOXES_AT + 7u * (n - 1u) + 3u * node;
+}
+
+fn store_subtree(node: u32, s: Subtree) {
+    let at = subtree_at(node);
+    atomicStore(&work[at], bitcast<u32>(s.cost));
+    atomicStore(&work[at + 1u], subtree_word(s));
+    atomicStore(&work[at + 2u], s.first);
+}
+
+fn load_subtree(node: u32) -> Subtree {
+    let at = subtree_at(node);
+    return subtree_from(atomicLoad(&work[at]), atomicLoad(&work[at + 1u]),
+                        atomicLoad(&work[at + 2u]));
+}
+
+// The ref a node stores for child `c` (topology encoding) with summary `s`: a collapsed inner
+// child becomes a leaf of its whole range (count - 1 in bits 28..30).
+fn child_ref(c: u32, s: Subtree) -> u32 {
+    if (c & LEAF_BIT) == 0u && s.collapsed {
+        return LEAF_BIT | ((s.count - 1u) << 28u) | s.first;
+    }
+    return out_ref(c);
+}
+
+// Parent ref (index | PARENT_LOCAL_BIT) of a node in topology encoding (n >= 2).
+fn parent_ref(node: u32) -> u32 {
+    let n = params.count;
+    if (node & LEAF_BIT) != 0u {
+        return topology[params.topo_base + 3u * (n - 1u) + (node & 0x7fffffffu)];
+    }
+    return topology[params.topo_base + 2u * (n - 1u) + node];
+}
+
+// One invocation's climb: its current node (topology encoding: leaf bit + sorted position, or
+// inner index), that subtree's box and SAH summary, and the node's parent ref (meaningful while
+// climbing: the root is never the current node then).
+struct Climber {
+    node: u32,
+    bx: Box,
+    sub: Subtree,
+    pref: u32,
+    climbing: bool,
+}
+
+// The sibling of the climber's node under a parent whose children are `lc`, `rc`.
+fn sibling(c: Climber, lc: u32, rc: u32) -> u32 {
+    return select(lc, rc, lc == c.node);
+}
+
+// The second arriver at `parent` (children `lc`, `rc`, parent ref `up`) joins its subtree with
+// the sibling's (box `sb`, summary `ss`), writes the parent's node and moves up to it, or stops
+// at the root. Every phase of the climb ends a step this way; they differ in where the sibling
+// and the topology come from.
+fn climb_up(c: ptr<function, Climber>, parent: u32, lc: u32, rc: u32, sb: Box, ss: Subtree,
+            up: u32) {
+    var lb = sb;
+    var ls = ss;
+    var rb = (*c).bx;
+    var rs = (*c).sub;
+    if lc == (*c).node {
+        lb = (*c).bx;
+        ls = (*c).sub;
+        rb = sb;
+        rs = ss;
+    }
+    write_node(parent, lb, child_ref(lc, ls), rb, child_ref(rc, rs));
+    (*c).bx = union_box(lb, rb);
+    (*c).sub = join_subtrees((*c).bx, ls, rs);
+    (*c).node = parent;
+    if parent == 0u {
+        write_bounds((*c).bx);
+        (*c).climbing = false;
+    } else {
+        (*c).pref = up;
+    }
+}
+
+// Phase 1 of the climb: per block-local inner node (slot = index - block start, < WG, since a
+// Karras node's index is one end of its leaf range), its box (6 words) and SAH summary
+// (3 words), and its arrival counter.
+var<workgroup> wg_boxes: array<f32, 1536>;
+var<workgroup> wg_subtrees: array<u32, 768>;
+var<workgroup> wg_arrival: array<atomic<u32>, 256>;
+
+fn wg_store(slot: u32, b: Box, s: Subtree) {
+    let at = 6u * slot;
+    wg_boxes[at] = b.lo.x;
+    wg_boxes[at + 1u] = b.lo.y;
+    wg_boxes[at + 2u] = b.lo.z;
+    wg_boxes[at + 3u] = b.hi.x;
+    wg_boxes[at + 4u] = b.hi.y;
+    wg_boxes[at + 5u] = b.hi.z;
+    if collapsing() {
+        wg_subtrees[3u * slot] = bitcast<u32>(s.cost);
+        wg_subtrees[3u * slot + 1u] = subtree_word(s);
+        wg_subtrees[3u * slot + 2u] = s.first;
+    }
+}
+
+// Box of child ref c of a block-local node: a leaf's from the input, an inner node's from
+// workgroup memory.
+fn wg_child_box(c: u32, block: u32) -> Box {
+    if (c & LEAF_BIT) != 0u {
+        return leaf_box(c & 0x7fffffffu);
+    }
+    let at = 6u * (c - block);
+    return Box(vec3<f32>(wg_boxes[at], wg_boxes[at + 1u], wg_boxes[at + 2u]),
+               vec3<f32>(wg_boxes[at + 3u], wg_boxes[at + 4u], wg_boxes[at + 5u]));
+}
+
+fn wg_child_subtree(c: u32, b: Box, block: u32) -> Subtree {
+    if (c & LEAF_BIT) != 0u || !collapsing() {
+        return leaf_subtree(c & 0x7fffffffu, b);
+    }
+    let at = 3u * (c - block);
+    return subtree_from(wg_subtrees[at], wg_subtrees[at + 1u], wg_subtrees[at + 2u]);
+}
+
+@compute @workgroup_size(256)
+fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+              @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    let k = linear_id(lid, wid, nwg);
+    // Fewer than two primitives: no inner nodes. (`n` is uniform, so this return keeps the rest
+    // in uniform control flow.)
+    if n < 2u {
+        write_tiny_root(k);
+        return;
+    }
+    var c = leaf_climber(k);
+
+    // Phase 1, in workgroup memory: the nodes whose leaves all lie in this workgroup's block
+    // (PARENT_LOCAL_BIT) have both children's climbers here, so their arrivals and boxes need
+    // only workgroup barriers, not the device-scope fences of phase 2. Most inner nodes are
+    // such nodes; a node straddling a block boundary is the exception (a node of s leaves
+    // straddles one with probability about s / WG).
+    let block = k - lid;
+    atomicStore(&wg_arrival[lid], 0u);
+    loop {
+        let local = c.climbing && (c.pref & PARENT_LOCAL_BIT) != 0u;
+        // Its first barrier also orders the arrival counters' clearing before their first use.
+        if !wg_any(local, lid) {
+            break;
+        }
+        let parent = c.pref & PARENT_INDEX_MASK;
+        if local {
+            if (c.node & LEAF_BIT) == 0u {
+                wg_store(c.node - block, c.bx, c.sub);
+            }
+            // First to arrive: the sibling's climber (in this workgroup) takes over.
+            c.climbing = atomicAdd(&wg_arrival[parent - block], 1u) != 0u;
+        }
+        // The first arriver's stores above happen-before the second's loads below, whichever
+        // round the second arrives in.
+        workgroupBarrier();
+        if local && c.climbing {
+            let lc = topology[params.topo_base + 2u * parent];
+            let rc = topology[params.topo_base + 2u * parent + 1u];
+            let sib = sibling(c, lc, rc);
+            let sb = wg_child_box(sib, block);
+            climb_up(&c, parent, lc, rc, sb, wg_child_subtree(sib, sb, block),
+                     parent_ref(parent));
+        }
+    }
+
+    climb_across(&c, lid);
+}
+
+// The whole BVH of fewer than two primitives: one invocation writes the fixed-shape root.
+fn write_tiny_root(k: u32) {
+    let n = params.count;
+    if k == 0u {
+        let none = empty_box();
+        var l = none;
+        var lref = LEAF_BIT;
+        if n == 1u {
+            l = leaf_box(0u);
+            lref = out_ref(LEAF_BIT);
+        }
+        write_node(0u, l, lref, none, LEAF_BIT);
+        write_bounds(l);
+    }
+}
+
+// The climber of leaf k (not climbing when k is past the primitives).
+fn leaf_climber(k: u32) -> Climber {
+    var c: Climber;
+    c.climbing = k < params.count;
+    c.node = LEAF_BIT | k;
+    c.bx = empty_box();
+    c.pref = NO_PARENT;
+    if c.climbing {
+        c.bx = leaf_box(k);
+        c.pref = parent_ref(c.node);
+    }
+    c.sub = leaf_subtree(k, c.bx);
+    return c;
+}
+
+// The climb's device-scope phase: every climber left has a parent that straddles blocks (and so
+// has every ancestor of it), or the topology has no block structure at all (a clustered tree's
+// refit). Every invocation of the workgroup must call it (it has barriers).
+fn climb_across(c: ptr<function, Climber>, lid: u32) {
+    let arrival_at = BOXES_AT + 6u * (params.count - 1u);
+    loop {
+        // Uniform trip count: continue while anyone in the workgroup is still climbing.
+        if !wg_any((*c).climbing, lid) {
+            break;
+        }
+
+        let parent = (*c).pref & PARENT_INDEX_MASK;
+        // The parent's topology does not depend on who arrives second: loaded before the
+        // fences, its latency overlaps theirs instead of following them.
+        var lc = 0u;
+        var rc = 0u;
+        var up = NO_PARENT;
+        if (*c).climbing {
+            lc = topology[params.topo_base + 2u * parent];
+            rc = topology[params.topo_base + 2u * parent + 1u];
+            up = parent_ref(parent);
+        }
+        if (*c).climbing && ((*c).node & LEAF_BIT) == 0u {
+            // Inner boxes are published for the sibling's climber (leaves are re-read from the
+            // input instead).
+            store_box((*c).node, (*c).bx);
+            if collapsing() {
+                store_subtree((*c).node, (*c).sub);
+            }
+        }
+        // Release: the box above before the arrival below.
+        storageBarrier();
+        if (*c).climbing {
+            let before = atomicAdd(&work[arrival_at + parent], 1u);
+            // First to arrive: the sibling's box may not exist yet; its climber takes over.
+            (*c).climbing = before != 0u;
+        }
+        // Acquire: the sibling's box (stored before its arrival) is visible below.
+        storageBarrier();
+        if (*c).climbing {
+            let sib = sibling(*c, lc, rc);
+            let sb = child_box(sib);
+            climb_up(c, parent, lc, rc, sb, child_subtree(sib, sb), up);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// lbvh_climb_boxes: lbvh_climb without subtree summaries (no leaf collapsing: max_leaf 1, or
+// instance refs), for fast-build BLASes, their refits and the TLAS. Its phase 1 reads nothing
+// from device memory after a first, coalesced prefetch of the block's leaf boxes, children and
+// parent refs: every step of lbvh_climb's phase 1 waits on two to four dependent device loads
+// (the parent's children, the sibling leaf's order entry and box, the next parent ref), and
+// those, not arithmetic or barriers, set its pace. The workgroup memory this needs (15 KiB) does
+// not fit beside the summaries within WebGPU's 16 KiB, hence a separate entry point.
+
+// Boxes of the block's inner nodes (slot = index - block) and, from slot WG on, of its leaves
+// (WG + sorted position - block).
+var<workgroup> wg_node_boxes: array<f32, 3072>;
+// Children (topology encoding) and parent refs of the block's inner nodes (slot = index - block).
+var<workgroup> wg_children: array<u32, 512>;
+var<workgroup> wg_parents: array<u32, 256>;
+// One arrival bit per block-local inner node: atomicOr's old word says who came second.
+var<workgroup> wg_arrived: array<atomic<u32>, 8>;
+
+fn wg_put_box(slot: u32, b: Box) {
+    let at = 6u * slot;
+    wg_node_boxes[at] = b.lo.x;
+    wg_node_boxes[at + 1u] = b.lo.y;
+    wg_node_boxes[at + 2u] = b.lo.z;
+    wg_node_boxes[at + 3u] = b.hi.x;
+    wg_node_boxes[at + 4u] = b.hi.y;
+    wg_node_boxes[at + 5u] = b.hi.z;
+}
+
+fn wg_get_box(slot: u32) -> Box {
+    let at = 6u * slot;
+    return Box(vec3<f32>(wg_node_boxes[at], wg_node_boxes[at + 1u], wg_node_boxes[at + 2u]),
+               vec3<f32>(wg_node_boxes[at + 3u], wg_node_boxes[at + 4u], wg_node_boxes[at + 5u]));
+}
+
+// The workgroup slot of a block-local child ref (topology encoding).
+fn wg_slot(c: u32, block: u32) -> u32 {
+    if (c & LEAF_BIT) != 0u {
+        return WG + (c & 0x7fffffffu) - block;
+    }
+    return c - block;
+}
+
+@compute @workgroup_size(256)
+fn lbvh_climb_boxes(@builtin(local_invocation_index) lid: u32,
+                    @builtin(workgroup_id) wid: vec3<u32>,
+                    @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    let k = linear_id(lid, wid, nwg);
+    if n < 2u {
+        write_tiny_root(k);
+        return;
+    }
+    var c = leaf_climber(k);
+    let block = k - lid;
+
+    // Prefetch. A block-local node's index is one end of its leaf range (Karras), so it lies in
+    // [block, block + WG) and so does its parent when that is block-local too.
+    wg_put_box(WG + lid, c.bx);
+    let inner = block + lid;
+    if inner + 1u < n {
+        wg_children[2u * lid] = topology[params.topo_base + 2u * inner];
+        wg_children[2u * lid + 1u] = topology[params.topo_base + 2u * inner + 1u];
+        wg_parents[lid] = topology[params.topo_base + 2u * (n - 1u) + inner];
+    }
+    if lid < 8u {
+        atomicStore(&wg_arrived[lid], 0u);
+    }
+    // (wg_any's first barrier orders the prefetch before its first use.)
+
+    loop {
+        let local = c.climbing && (c.pref & PARENT_LOCAL_BIT) != 0u;
+        if !wg_any(local, lid) {
+            break;
+        }
+        let slot = (c.pref & PARENT_INDEX_MASK) - block;
+        if local {
+            if (c.node & LEAF_BIT) == 0u {
+                wg_put_box(c.node - block, c.bx);
+            }
+            // First to arrive: the sibling's climber (in this workgroup) takes over.
+            let bit = 1u << (slot & 31u);
+            c.climbing = (atomicOr(&wg_arrived[slot >> 5u], bit) & bit) != 0u;
+        }
+        // The first arriver's box store happens-before the second's load, whichever round the
+        // second arrives in.
+        workgroupBarrier();
+        if local && c.climbing {
+            let lc = wg_children[2u * slot];
+            let rc = wg_children[2u * slot + 1u];
+            let sib = sibling(c, lc, rc);
+            let sb = wg_get_box(wg_slot(sib, block));
+            climb_up(&c, block + slot, lc, rc, sb, leaf_subtree(0u, sb), wg_parents[slot]);
+        }
+    }
+
+    climb_across(&c, lid);
+}

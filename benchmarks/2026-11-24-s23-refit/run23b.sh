@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# Session 23, call 2: timing-only variants of the new climb (wrong trees, timing only): p1only
+# (lbvh_climb_boxes without its device-scope phase), nofence (device-scope phase with workgroup
+# barriers instead of storageBarrier), against new.
+set -u
+gunzip .gpu/bin/*.gz; chmod +x .gpu/bin/*
+S=.gpu/data/scenes
+for v in new p1only nofence new; do
+  t0=$(date +%s)
+  timeout 150 .gpu/bin/ksrt-$v bench --scenes $S --scene dragon --iterations 5 --ray-order tiles > $OUT/dragon-$v-$t0.txt 2>&1; echo "== $v dragon rc=$? $(( $(date +%s) - t0 ))s"
+  grep -E "BLAS refit|profile    blas refit|instances  build|tlas build/lbvh climb|tlas refit/lbvh" $OUT/dragon-$v-$t0.txt | sed 's/cache allocation[^,]*, //g' | cut -c1-160
+done
