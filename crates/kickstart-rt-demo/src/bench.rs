@@ -18,6 +18,8 @@ use crate::scene::{self, Camera, Scene};
 use crate::sdk_glue::{self as glue, GpuHit, GpuRay, Query, Tlas};
 use crate::AnyResult;
 
+#[path = "bench_busy.rs"]
+mod busy;
 #[path = "bench_cache.rs"]
 mod cache;
 #[path = "bench_extras.rs"]
@@ -292,6 +294,9 @@ pub struct Report {
     pub iterations: u32,
     /// Order of the ray batches' primary rays.
     pub ray_order: extras::RayOrder,
+    /// GPU work (milliseconds at full clocks) submitted untimed before each timed task
+    /// (`--busy-gpu-ms`; 0: none).
+    pub busy_gpu_ms: f64,
     /// Per scene.
     pub scenes: Vec<SceneReport>,
     /// Per instance count.
@@ -353,6 +358,8 @@ struct Bench<'a> {
     last_passes: std::cell::RefCell<Vec<ksrt::PassTiming>>,
     /// Whether a measurement ran already (the first warms up longer, see [`Bench::repeat`]).
     warmed: std::cell::Cell<bool>,
+    /// Submitted before each timed task (`--busy-gpu-ms`).
+    busy: Option<busy::BusyGpu>,
 }
 
 impl<'a> Bench<'a> {
@@ -365,6 +372,7 @@ impl<'a> Bench<'a> {
             ray_order: extras::RayOrder::Rows,
             last_passes: Default::default(),
             warmed: Default::default(),
+            busy: None,
         }
     }
 
@@ -400,6 +408,9 @@ impl<'a> Bench<'a> {
         span: &[&str],
         after: impl FnOnce(&mut wgpu::CommandEncoder),
     ) -> AnyResult<f64> {
+        if let Some(busy) = &self.busy {
+            busy.submit(self.device, self.queue);
+        }
         let task = gpu::submit(ctx, self.device, self.queue, container, after)?;
         let timings = ctx.wait_for_gpu_timings(task);
         gpu::complete(ctx, self.device, task)?;
@@ -1347,6 +1358,13 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     );
     let mut bench = Bench::new(&device, &queue, opts.iterations);
     bench.ray_order = opts.extras.ray_order;
+    if opts.extras.busy_gpu_ms > 0.0 {
+        bench.busy = Some(busy::BusyGpu::new(&device, opts.extras.busy_gpu_ms));
+        println!(
+            "each timed task follows ~{} ms of untimed GPU work (--busy-gpu-ms)",
+            opts.extras.busy_gpu_ms
+        );
+    }
     let mut peer = opts.peer.map(|kind| peer::open(kind, &info));
     let mut report = Report {
         sdk_version: ksrt::VERSION.to_string(),
@@ -1359,6 +1377,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         height: opts.size.1,
         iterations: opts.iterations,
         ray_order: opts.extras.ray_order,
+        busy_gpu_ms: opts.extras.busy_gpu_ms,
         scenes: Vec::new(),
         tlas: Vec::new(),
         extras: Default::default(),
@@ -1454,6 +1473,23 @@ mod tests {
             err.contains("--peer") && err.contains("--ray-order rows"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn busy_gpu_ms_outside_0_to_1000_is_refused() {
+        for bad in [-1.0, 1000.5, f64::NAN] {
+            let args = extras::ExtraArgs {
+                busy_gpu_ms: bad,
+                ..Default::default()
+            };
+            let err = args.check().expect_err("refused").to_string();
+            assert!(err.contains("--busy-gpu-ms"), "{err}");
+        }
+        let ok = extras::ExtraArgs {
+            busy_gpu_ms: 2.0,
+            ..Default::default()
+        };
+        assert!(ok.check().is_ok());
     }
 
     #[test]

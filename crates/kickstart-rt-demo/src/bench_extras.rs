@@ -60,6 +60,13 @@ pub struct ExtraArgs {
     /// consecutive rays a workgroup either way.
     #[arg(long, value_enum, default_value_t = RayOrder::Rows)]
     pub ray_order: RayOrder,
+    /// Before each timed task, keep the GPU busy for about this many milliseconds (a spin
+    /// kernel submitted just before it, not timed), as a frame's other work would: short tasks
+    /// (refits, TLAS builds) then run at the clocks of a busy GPU, not the lower ones it drops
+    /// to while the CPU prepares the next repetition. 0 (default): no such work, as every
+    /// earlier figure was measured.
+    #[arg(long, default_value_t = 0.0)]
+    pub busy_gpu_ms: f64,
     /// Leave out the default per-scene measurements and the TLAS table (run only the passes
     /// asked for).
     #[arg(long)]
@@ -109,6 +116,13 @@ impl RayOrder {
 impl ExtraArgs {
     /// Checks the values (before any GPU work).
     pub fn check(&self) -> AnyResult<()> {
+        if !(0.0..=1000.0).contains(&self.busy_gpu_ms) {
+            return Err(format!(
+                "--busy-gpu-ms {}: from 0 to 1000 milliseconds",
+                self.busy_gpu_ms
+            )
+            .into());
+        }
         if self.frames_in_flight && self.fif_frames < 8 {
             return Err(format!(
                 "--fif-frames {}: at least 8 frames (a quarter are warm-up)",
