@@ -13,6 +13,8 @@
 //   3. `scatter`: every block scans the RADIX row totals itself (one workgroup scan, cheaper than
 //      another dispatch), ranks its elements stably by digit in workgroup memory and writes them
 //      out as runs of consecutive addresses.
+// Up to SUMMING_MAX_BLOCKS blocks, `scatter_summing` replaces 2 and 3: each block sums the rows
+// it needs itself, so a pass is two dispatches (a TLAS of up to 131072 instance refs).
 // Passes alternate between the caller's buffers and the scratch; after an odd number the result
 // stays in the scratch and the host hands that to the caller (no copy dispatch).
 //
@@ -244,18 +246,54 @@ fn scatter(
     if block >= params.nblocks {
         return;
     }
+    // Digit t's total and its count in earlier blocks, from scan_rows.
+    scatter_block(block, t, hist[RADIX * params.nblocks + t], hist[t * params.nblocks + block]);
+}
+
+// Blocks up to which `scatter_summing` replaces scan_rows + scatter (src/gpu/radix_sort.rs).
+// Thread t then reads row t whole: at most this many loads, all from L2.
+const SUMMING_MAX_BLOCKS: u32 = 128u;
+
+// scatter for few blocks, without a scan_rows dispatch before it: thread t sums digit t's row of
+// the histogram itself (its total, and its count in the blocks before this one). Each block
+// repeats those sums; with at most SUMMING_MAX_BLOCKS entries a row that costs less than the
+// dependent dispatch it saves.
+@compute @workgroup_size(256)
+fn scatter_summing(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) t: u32,
+) {
+    let block = wid.y * nwg.x + wid.x;
+    if block >= params.nblocks {
+        return;
+    }
+    let row = t * params.nblocks;
+    let blocks = min(params.nblocks, SUMMING_MAX_BLOCKS);
+    var before = 0u;
+    var total = 0u;
+    for (var b = 0u; b < blocks; b++) {
+        let c = hist[row + b];
+        before += select(0u, c, b < block);
+        total += c;
+    }
+    scatter_block(block, t, total, before);
+}
+
+// Scatters block `block`, given digit t's total over all blocks and its count in the blocks
+// before this one (thread t passes digit t's). Every thread of the workgroup calls it.
+fn scatter_block(block: u32, t: u32, total: u32, before: u32) {
     let base = block * BLOCK;
     let valid = min(BLOCK, params.count - base);
 
     // Where digit t's elements of this block start globally: all elements of smaller digits
-    // (exclusive prefix of the row totals) plus digit t's elements in earlier blocks (its row
-    // prefix). No barrier after it: thread t reads only its own wg_scan entry here, and the
-    // first split rewrites wg_scan only after a barrier.
-    let total = hist[RADIX * params.nblocks + t];
+    // (exclusive prefix of the row totals) plus digit t's elements in earlier blocks. No barrier
+    // after it: thread t reads only its own wg_scan entry here, and the first split rewrites
+    // wg_scan only after a barrier.
     wg_scan[t] = total;
     workgroupBarrier();
     workgroup_inclusive_scan(t);
-    wg_dest[t] = wg_scan[t] - total + hist[t * params.nblocks + block];
+    wg_dest[t] = wg_scan[t] - total + before;
 
     // Load this thread's consecutive elements. Elements past the end get key 0xffffffff, the
     // largest digit of any pass: being last in the block's order too, they rank after every

@@ -8,7 +8,8 @@
 //! passes, not 8) and 3 dispatches per pass at any size: histogram → prefix sum of each digit's
 //! row (one workgroup per digit, so no multi-level scan) → stable scatter, which scans the 256
 //! digit totals itself. 31-bit keys: 12 dispatches (40 with the former 4-bit digits and
-//! multi-level scan). The scatter ranks a block by two 4-bit splits in workgroup memory:
+//! multi-level scan). Up to [`SUMMING_MAX_BLOCKS`] blocks (131072 pairs) a pass is 2 dispatches:
+//! the scatter sums the histogram rows itself (`scatter_summing`). The scatter ranks a block by two 4-bit splits in workgroup memory:
 //! per-thread counters for all 256 digit values would not fit in 16 KiB, those of 16 nibble
 //! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
 //! Counts up to [`SMALL_SORT_MAX`] take a one-workgroup bitonic network over (key, position)
@@ -32,6 +33,11 @@ const DIGIT_BITS: u32 = 8;
 const RADIX: u32 = 1 << DIGIT_BITS;
 /// Elements per workgroup in `histogram` / `scatter` (256 threads × 4). Must match `BLOCK`.
 const BLOCK: u32 = 1024;
+/// Most blocks a pass sorts with two dispatches (`histogram`, `scatter_summing`: each block
+/// sums the histogram rows itself) instead of three. Must match the shader's
+/// `SUMMING_MAX_BLOCKS`. On the H100 a dependent dispatch costs about 10 µs of gap and work
+/// (BENCHMARKS.md, session 23), more than a block's 128 extra loads per thread.
+pub(crate) const SUMMING_MAX_BLOCKS: u32 = 128;
 
 /// Per-dispatch parameters; layout of `Params` in the shader.
 #[repr(C)]
@@ -54,6 +60,8 @@ pub(crate) struct RadixSort {
     histogram: wgpu::ComputePipeline,
     scan_rows: wgpu::ComputePipeline,
     scatter: wgpu::ComputePipeline,
+    /// `scan_rows` and `scatter` in one, for at most [`SUMMING_MAX_BLOCKS`] blocks.
+    scatter_summing: wgpu::ComputePipeline,
     /// The one-workgroup path for counts up to [`SMALL_SORT_MAX`].
     small: wgpu::ComputePipeline,
     /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
@@ -71,6 +79,7 @@ impl RadixSort {
             histogram: pipeline("histogram"),
             scan_rows: pipeline("scan_rows"),
             scatter: pipeline("scatter"),
+            scatter_summing: pipeline("scatter_summing"),
             small: compute_pipeline(device, "radix sort (small)", SMALL_SOURCE, "sort_small"),
             keys_tmp: None,
             vals_tmp: None,
@@ -85,7 +94,7 @@ impl RadixSort {
     /// Only the low `key_bits` bits of each key are sorted on: keys must be `< 2^key_bits`
     /// (bits above are carried along but do not affect the order). `key_bits` is clamped to
     /// 1..=32 except that 0 sorts nothing; fewer bits mean fewer passes (`ceil(key_bits / 8)`
-    /// of 3 dispatches each). `count` ≤ 1 records nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
+    /// of 3 dispatches each, 2 up to [`SUMMING_MAX_BLOCKS`] blocks). `count` ≤ 1 records nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
     /// with default limits).
     ///
     /// Everything is recorded into `rec.encoder` (no submit); the scratch buffers stay in use
@@ -193,19 +202,19 @@ impl RadixSort {
                 &[&hist_group],
                 nblocks,
             );
-            let scan_group = bind(&self.scan_rows, &uniform, &[(5, hist)]);
-            rec.dispatch("radix sort scan", &self.scan_rows, &[&scan_group], RADIX);
+            let scatter = if nblocks <= SUMMING_MAX_BLOCKS {
+                &self.scatter_summing
+            } else {
+                let scan_group = bind(&self.scan_rows, &uniform, &[(5, hist)]);
+                rec.dispatch("radix sort scan", &self.scan_rows, &[&scan_group], RADIX);
+                &self.scatter
+            };
             let scatter_group = bind(
-                &self.scatter,
+                scatter,
                 &uniform,
                 &[(1, src.0), (2, src.1), (3, dst.0), (4, dst.1), (5, hist)],
             );
-            rec.dispatch(
-                "radix sort scatter",
-                &self.scatter,
-                &[&scatter_group],
-                nblocks,
-            );
+            rec.dispatch("radix sort scatter", scatter, &[&scatter_group], nblocks);
         }
         if passes % 2 == 1 {
             (keys_tmp.clone(), vals_tmp.clone())
@@ -473,6 +482,18 @@ mod tests {
             .map(|i| if (i / 97) % 2 == 0 { 0x0102 } else { 0x0201 })
             .collect();
         check(&keys, 16);
+    }
+
+    #[test]
+    fn radix_sort_both_scatters_at_the_summing_limit() {
+        // Up to SUMMING_MAX_BLOCKS blocks the scatter sums the histogram rows itself; one
+        // element more takes scan_rows and the plain scatter. Both must sort alike.
+        let mut sorter = RadixSort::new(&testing::gpu().device);
+        let at = (SUMMING_MAX_BLOCKS * BLOCK) as usize;
+        for (n, seed) in [(at - 1, 77), (at, 78), (at + 1, 79)] {
+            check_with(&mut sorter, &random_keys(n, 24, seed), 24);
+            check_with(&mut sorter, &random_keys(n, 31, seed + 100), 31);
+        }
     }
 
     #[test]

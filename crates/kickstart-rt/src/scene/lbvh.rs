@@ -45,9 +45,9 @@ const WORKGROUP: u32 = 256;
 /// to millions of triangles, which need the fine grid to be ordered well.
 pub(crate) const BLAS_KEY_BITS: u32 = 31;
 /// Sort key bits of a TLAS build: 8 Morton bits per axis, 3 digit passes instead of 4, and an
-/// odd pass count leaves the result in the sort's scratch, so a TLAS build records 9 sort
-/// dispatches instead of 12 (each a dependent pass: on the H100 about 10 µs of gap plus its own
-/// time). A TLAS has far fewer primitives than a large BLAS (2^24 cells, 168 per instance at
+/// odd pass count leaves the result in the sort's scratch, so a TLAS build records 6 sort
+/// dispatches instead of 8 (up to 131072 refs; 9 instead of 12 above), each a dependent pass: on
+/// the H100 about 10 µs of gap plus its own time. A TLAS has far fewer primitives than a large BLAS (2^24 cells, 168 per instance at
 /// 100k instances), and instances sharing a cell are still split, by index (the hierarchy's
 /// tie-break), so the tree stays valid and only its order within a cell is arbitrary. The cost
 /// is where instances crowd into few cells: a dense cluster in a scene stretched by a far
@@ -1387,21 +1387,24 @@ mod tests {
             assert_eq!(read_words(&order), own.order_words, "order, {n} primitives");
             assert_eq!(read_words(&nodes), own.node_words, "nodes, {n} primitives");
             assert_eq!(read_words(&given), words, "the given words are only read");
-            // Morton, sort (9 dispatches, or 1 up to 1024 primitives), hierarchy, climb.
-            assert_eq!(dispatches, if n > 1024 { 12 } else { 4 });
+            // Morton, sort (6 dispatches, or 1 up to 1024 primitives), hierarchy, climb.
+            assert_eq!(dispatches, if n > 1024 { 9 } else { 4 });
         }
     }
 
     #[test]
     fn lbvh_build_dispatch_counts() {
-        // A BLAS build of more than 1024 primitives: bounds, morton, 4 × 3 sort passes,
-        // hierarchy, climb. A TLAS build: 3 sort passes and no copy back. Up to 1024: one sort
-        // dispatch.
+        // A BLAS build of more than 1024 primitives: bounds, morton, 4 sort passes, hierarchy,
+        // climb; a sort pass is 2 dispatches up to 128 blocks of 1024 (the scatter sums the
+        // histogram rows), 3 above. A TLAS build: 3 sort passes and no copy back. Up to 1024:
+        // one sort dispatch.
         let mut lbvh = Lbvh::new(&gpu().device);
         for (n, bits, expected) in [
-            (5000, BLAS_KEY_BITS, 16),
-            (5000, TLAS_KEY_BITS, 13),
+            (5000, BLAS_KEY_BITS, 12),
+            (5000, TLAS_KEY_BITS, 10),
             (1000, TLAS_KEY_BITS, 5),
+            (128 * 1024, TLAS_KEY_BITS, 10),
+            (128 * 1024 + 1, TLAS_KEY_BITS, 13),
         ] {
             let aabbs = hard_soup(n, 12);
             let (_, _, dispatches) =
