@@ -5,8 +5,7 @@
 // pass at every size. None of them communicates between workgroups (no reliance on forward
 // progress) and none uses subgroup operations:
 //   1. `histogram`: every block of BLOCK elements counts its digits into
-//      hist[digit * nblocks + block] (digit-major, block-minor: row d is digit d over all blocks;
-//      block-major up to SUMMING_MAX_BLOCKS blocks, see hist_at).
+//      hist[digit * nblocks + block] (digit-major, block-minor: row d is digit d over all blocks).
 //   2. `scan_rows`: workgroup d turns row d into its exclusive prefix sum in place and writes the
 //      row total to hist[RADIX * nblocks + d]. One workgroup per row, looping over the row, rather
 //      than a multi-level scan over the whole array: a row has only count / BLOCK entries, so one
@@ -93,18 +92,7 @@ fn histogram(
     for (var r = 0u; r < REPLICAS; r++) {
         sum += atomicLoad(&wg_bins[r * RADIX + t]);
     }
-    hist[hist_at(t, block)] = sum;
-}
-
-// Where block `block`'s count of digit `d` goes: digit-major rows for scan_rows, or, when the
-// pass has few enough blocks for scatter_summing, block-major (RADIX digits of one block
-// together), so that scatter_summing's thread t reads digit t of consecutive blocks with loads
-// that are coalesced across the workgroup.
-fn hist_at(d: u32, block: u32) -> u32 {
-    if params.nblocks <= SUMMING_MAX_BLOCKS {
-        return block * RADIX + d;
-    }
-    return d * params.nblocks + block;
+    hist[t * params.nblocks + block] = sum;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -280,21 +268,14 @@ fn scatter_summing(
     if block >= params.nblocks {
         return;
     }
-    // The host runs this only up to SUMMING_MAX_BLOCKS blocks, whose histogram is block-major
-    // (hist_at). Eight independent loads an iteration, so their latencies overlap.
+    let row = t * params.nblocks;
     let blocks = min(params.nblocks, SUMMING_MAX_BLOCKS);
     var before = 0u;
     var total = 0u;
-    for (var b0 = 0u; b0 < blocks; b0 += 8u) {
-        var c: array<u32, 8>;
-        for (var j = 0u; j < 8u; j++) {
-            let b = min(b0 + j, blocks - 1u);
-            c[j] = select(0u, hist[b * RADIX + t], b0 + j < blocks);
-        }
-        for (var j = 0u; j < 8u; j++) {
-            before += select(0u, c[j], b0 + j < block);
-            total += c[j];
-        }
+    for (var b = 0u; b < blocks; b++) {
+        let c = hist[row + b];
+        before += select(0u, c, b < block);
+        total += c;
     }
     scatter_block(block, t, total, before);
 }
