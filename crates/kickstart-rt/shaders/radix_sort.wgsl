@@ -14,7 +14,7 @@
 //      another dispatch), ranks its elements stably by digit in workgroup memory and writes them
 //      out as runs of consecutive addresses.
 // Up to SUMMING_MAX_BLOCKS blocks, `scatter_summing` replaces 2 and 3: each block sums the rows
-// it needs itself, so a pass is two dispatches (a TLAS of up to 131072 instance refs).
+// it needs itself, so a pass is two dispatches (a TLAS of up to 65536 instance refs).
 // Passes alternate between the caller's buffers and the scratch; after an odd number the result
 // stays in the scratch and the host hands that to the caller (no copy dispatch).
 //
@@ -252,7 +252,7 @@ fn scatter(
 
 // Blocks up to which `scatter_summing` replaces scan_rows + scatter (src/gpu/radix_sort.rs).
 // Thread t then reads row t whole: at most this many loads, all from L2.
-const SUMMING_MAX_BLOCKS: u32 = 128u;
+const SUMMING_MAX_BLOCKS: u32 = 64u;
 
 // scatter for few blocks, without a scan_rows dispatch before it: thread t sums digit t's row of
 // the histogram itself (its total, and its count in the blocks before this one). Each block

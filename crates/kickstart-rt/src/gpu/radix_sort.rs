@@ -8,7 +8,7 @@
 //! passes, not 8) and 3 dispatches per pass at any size: histogram → prefix sum of each digit's
 //! row (one workgroup per digit, so no multi-level scan) → stable scatter, which scans the 256
 //! digit totals itself. 31-bit keys: 12 dispatches (40 with the former 4-bit digits and
-//! multi-level scan). Up to [`SUMMING_MAX_BLOCKS`] blocks (131072 pairs) a pass is 2 dispatches:
+//! multi-level scan). Up to [`SUMMING_MAX_BLOCKS`] blocks (65536 pairs) a pass is 2 dispatches:
 //! the scatter sums the histogram rows itself (`scatter_summing`). The scatter ranks a block by two 4-bit splits in workgroup memory:
 //! per-thread counters for all 256 digit values would not fit in 16 KiB, those of 16 nibble
 //! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
@@ -35,9 +35,11 @@ const RADIX: u32 = 1 << DIGIT_BITS;
 const BLOCK: u32 = 1024;
 /// Most blocks a pass sorts with two dispatches (`histogram`, `scatter_summing`: each block
 /// sums the histogram rows itself) instead of three. Must match the shader's
-/// `SUMMING_MAX_BLOCKS`. On the H100 a dependent dispatch costs about 10 µs of gap and work
-/// (BENCHMARKS.md, session 23), more than a block's 128 extra loads per thread.
-pub(crate) const SUMMING_MAX_BLOCKS: u32 = 128;
+/// `SUMMING_MAX_BLOCKS`. Measured on the H100 (BENCHMARKS.md, session 23): the dispatch saved
+/// (`scan_rows` and its gap) is worth about 15 µs a pass, and the summing costs about as much at
+/// 98 blocks (TLAS of 100 000 instances: 0.300 ms either way) and little at 10 (10 000
+/// instances: 0.214 against 0.256 ms), so the limit sits below the break-even.
+pub(crate) const SUMMING_MAX_BLOCKS: u32 = 64;
 
 /// Per-dispatch parameters; layout of `Params` in the shader.
 #[repr(C)]

@@ -46,7 +46,7 @@ const WORKGROUP: u32 = 256;
 pub(crate) const BLAS_KEY_BITS: u32 = 31;
 /// Sort key bits of a TLAS build: 8 Morton bits per axis, 3 digit passes instead of 4, and an
 /// odd pass count leaves the result in the sort's scratch, so a TLAS build records 6 sort
-/// dispatches instead of 8 (up to 131072 refs; 9 instead of 12 above), each a dependent pass: on
+/// dispatches instead of 8 (up to 65536 refs; 9 instead of 12 above), each a dependent pass: on
 /// the H100 about 10 µs of gap plus its own time. A TLAS has far fewer primitives than a large BLAS (2^24 cells, 168 per instance at
 /// 100k instances), and instances sharing a cell are still split, by index (the hierarchy's
 /// tie-break), so the tree stays valid and only its order within a cell is arbitrary. The cost
@@ -1395,16 +1395,17 @@ mod tests {
     #[test]
     fn lbvh_build_dispatch_counts() {
         // A BLAS build of more than 1024 primitives: bounds, morton, 4 sort passes, hierarchy,
-        // climb; a sort pass is 2 dispatches up to 128 blocks of 1024 (the scatter sums the
-        // histogram rows), 3 above. A TLAS build: 3 sort passes and no copy back. Up to 1024:
-        // one sort dispatch.
+        // climb; a sort pass is 2 dispatches up to SUMMING_MAX_BLOCKS blocks of 1024 (the
+        // scatter sums the histogram rows), 3 above. A TLAS build: 3 sort passes and no copy
+        // back. Up to 1024: one sort dispatch.
+        let limit = crate::gpu::radix_sort::SUMMING_MAX_BLOCKS as usize * 1024;
         let mut lbvh = Lbvh::new(&gpu().device);
         for (n, bits, expected) in [
             (5000, BLAS_KEY_BITS, 12),
             (5000, TLAS_KEY_BITS, 10),
             (1000, TLAS_KEY_BITS, 5),
-            (128 * 1024, TLAS_KEY_BITS, 10),
-            (128 * 1024 + 1, TLAS_KEY_BITS, 13),
+            (limit, TLAS_KEY_BITS, 10),
+            (limit + 1, TLAS_KEY_BITS, 13),
         ] {
             let aabbs = hard_soup(n, 12);
             let (_, _, dispatches) =
