@@ -74,6 +74,23 @@ fn triangle_box(v0: vec4<f32>, v1: vec4<f32>, v2: vec4<f32>) -> StoredAabb {
 @group(0) @binding(2) var<storage, read> gather_order: array<u32>;
 @group(0) @binding(3) var<storage, read_write> gather_dst: array<vec4<u32>>;
 
+struct GatheredTriangle {
+    v0: vec4<u32>,
+    v1: vec4<u32>,
+    v2: vec4<u32>,
+}
+
+// Copies the triangle of sorted position k into place; returns it.
+fn gather_one(k: u32) -> GatheredTriangle {
+    let s = 3u * (params.a + gather_order[params.b + k]);
+    let d = 3u * (params.d + k);
+    let t = GatheredTriangle(gather_src[s], gather_src[s + 1u], gather_src[s + 2u]);
+    gather_dst[d] = t.v0;
+    gather_dst[d + 1u] = t.v1;
+    gather_dst[d + 2u] = t.v2;
+    return t;
+}
+
 @compute @workgroup_size(64)
 fn gather_triangles(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -81,14 +98,9 @@ fn gather_triangles(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let k = linear_id(wid, nwg, lid);
-    if k >= params.c {
-        return;
+    if k < params.c {
+        _ = gather_one(k);
     }
-    let s = 3u * (params.a + gather_order[params.b + k]);
-    let d = 3u * (params.d + k);
-    gather_dst[d] = gather_src[s];
-    gather_dst[d + 1u] = gather_src[s + 1u];
-    gather_dst[d + 2u] = gather_src[s + 2u];
 }
 
 // ---- gather_triangles_boxes -----------------------------------------------------------------
@@ -108,15 +120,9 @@ fn gather_triangles_boxes(
     if k >= params.c {
         return;
     }
-    let s = 3u * (params.a + gather_order[params.b + k]);
-    let d = 3u * (params.d + k);
-    let v0 = gather_src[s];
-    let v1 = gather_src[s + 1u];
-    let v2 = gather_src[s + 2u];
-    gather_dst[d] = v0;
-    gather_dst[d + 1u] = v1;
-    gather_dst[d + 2u] = v2;
-    let b = triangle_box(bitcast<vec4<f32>>(v0), bitcast<vec4<f32>>(v1), bitcast<vec4<f32>>(v2));
+    let t = gather_one(k);
+    let b = triangle_box(bitcast<vec4<f32>>(t.v0), bitcast<vec4<f32>>(t.v1),
+                         bitcast<vec4<f32>>(t.v2));
     gather_boxes[2u * k] = b.lo;
     gather_boxes[2u * k + 1u] = b.hi;
 }

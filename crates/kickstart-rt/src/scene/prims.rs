@@ -285,12 +285,7 @@ mod tests {
     fn gather_triangles_with_boxes_writes_each_box_at_its_sorted_position() {
         let mut rng = Rng(13);
         let (tris, dropped) = test_triangles(&mut rng, 50);
-        let mut perm: Vec<u32> = (0..30).collect();
-        for i in (1..perm.len()).rev() {
-            perm.swap(i, rng.below(i as u32 + 1) as usize);
-        }
-        let mut order = vec![SENTINEL; 4];
-        order.extend(&perm);
+        let (perm, order) = gather_order(&mut rng);
         let (src_base, order_base, count, dst_base) = (7u32, 4u32, 30u32, 2u32);
         let src_buf = buffer_with(bytemuck::cast_slice(&tris));
         let order_buf = buffer_with(bytemuck::cast_slice(&order));
@@ -335,17 +330,24 @@ mod tests {
         }
     }
 
-    #[test]
-    fn gather_triangles_applies_the_permutation_bit_exactly() {
-        let mut rng = Rng(12);
-        // Random bits (NaN and subnormal patterns included): the copy must not touch them.
-        let src: Vec<u32> = (0..50 * 12).map(|_| rng.next() as u32).collect();
+    /// A random permutation of 0..30 and the order buffer's words: 4 sentinels (order_base 4),
+    /// then the permutation.
+    fn gather_order(rng: &mut Rng) -> (Vec<u32>, Vec<u32>) {
         let mut perm: Vec<u32> = (0..30).collect();
         for i in (1..perm.len()).rev() {
             perm.swap(i, rng.below(i as u32 + 1) as usize);
         }
         let mut order = vec![SENTINEL; 4];
         order.extend(&perm);
+        (perm, order)
+    }
+
+    #[test]
+    fn gather_triangles_applies_the_permutation_bit_exactly() {
+        let mut rng = Rng(12);
+        // Random bits (NaN and subnormal patterns included): the copy must not touch them.
+        let src: Vec<u32> = (0..50 * 12).map(|_| rng.next() as u32).collect();
+        let (perm, order) = gather_order(&mut rng);
         let (src_base, order_base, count, dst_base) = (7u32, 4u32, 30u32, 2u32);
         let src_buf = buffer_with(bytemuck::cast_slice(&src));
         let order_buf = buffer_with(bytemuck::cast_slice(&order));
