@@ -118,6 +118,52 @@ impl RadixSort {
         count: u32,
         key_bits: u32,
     ) -> (wgpu::Buffer, wgpu::Buffer) {
+        self.record_passes(rec, keys, values, count, key_bits, false)
+    }
+
+    /// For a sort that will run the digit passes (more than [`SMALL_SORT_MAX`] pairs, at least
+    /// 8 key bits): the histogram buffer, reserved, and the block count, so the caller's pass
+    /// that writes the keys can also count their first digit (`key & 255`) into
+    /// `hist[digit * nblocks + block]`, blocks of 1024 keys in index order (`shaders/lbvh.wgsl`,
+    /// `lbvh_morton_histogram`). Then [`Self::record_after_first_histogram`] sorts.
+    pub fn first_histogram(
+        &mut self,
+        device: &wgpu::Device,
+        count: u32,
+        key_bits: u32,
+    ) -> Option<(wgpu::Buffer, u32)> {
+        if count <= SMALL_SORT_MAX || key_bits < DIGIT_BITS {
+            return None;
+        }
+        let nblocks = count.div_ceil(BLOCK);
+        self.reserve(device, count, hist_len(nblocks));
+        self.hist.clone().map(|h| (h, nblocks))
+    }
+
+    /// [`Self::record`] whose first digit pass takes its histogram as the caller wrote it (see
+    /// [`Self::first_histogram`]): one dispatch fewer.
+    #[must_use = "the sorted pairs may be in the returned scratch buffers, not in `keys`"]
+    pub fn record_after_first_histogram(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        keys: &wgpu::Buffer,
+        values: &wgpu::Buffer,
+        count: u32,
+        key_bits: u32,
+    ) -> (wgpu::Buffer, wgpu::Buffer) {
+        self.record_passes(rec, keys, values, count, key_bits, true)
+    }
+
+    /// [`Self::record`], skipping the first pass's histogram when `first_counted`.
+    fn record_passes(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        keys: &wgpu::Buffer,
+        values: &wgpu::Buffer,
+        count: u32,
+        key_bits: u32,
+        first_counted: bool,
+    ) -> (wgpu::Buffer, wgpu::Buffer) {
         let in_place = (keys.clone(), values.clone());
         if count <= 1 || key_bits == 0 {
             return in_place;
@@ -197,13 +243,15 @@ impl RadixSort {
             } else {
                 ((keys_tmp, vals_tmp), (keys, values))
             };
-            let hist_group = bind(&self.histogram, &uniform, &[(1, src.0), (5, hist)]);
-            rec.dispatch(
-                "radix sort histogram",
-                &self.histogram,
-                &[&hist_group],
-                nblocks,
-            );
+            if !(first_counted && pass == 0) {
+                let hist_group = bind(&self.histogram, &uniform, &[(1, src.0), (5, hist)]);
+                rec.dispatch(
+                    "radix sort histogram",
+                    &self.histogram,
+                    &[&hist_group],
+                    nblocks,
+                );
+            }
             let scatter = if nblocks <= SUMMING_MAX_BLOCKS {
                 &self.scatter_summing
             } else {

@@ -213,6 +213,8 @@ impl Grown {
 pub(crate) struct Lbvh {
     bounds: wgpu::ComputePipeline,
     morton: wgpu::ComputePipeline,
+    /// `lbvh_morton_histogram`: the keys and the sort's first histogram in one pass.
+    morton_histogram: wgpu::ComputePipeline,
     hierarchy: wgpu::ComputePipeline,
     climb: wgpu::ComputePipeline,
     hploc: wgpu::ComputePipeline,
@@ -235,6 +237,8 @@ pub(crate) struct Lbvh {
 const BOUNDS_BINDINGS: &[u32] = &[0, 1, 2];
 /// Bindings of `lbvh_morton`.
 const MORTON_BINDINGS: &[u32] = &[0, 1, 2, 3, 4];
+/// Bindings of `lbvh_morton_histogram` (10: the sort's histogram).
+const MORTON_HISTOGRAM_BINDINGS: &[u32] = &[0, 1, 2, 3, 4, 10];
 /// Bindings of `lbvh_hierarchy`.
 const HIERARCHY_BINDINGS: &[u32] = &[0, 3, 4, 5, 6];
 /// Bindings of `lbvh_climb`.
@@ -245,7 +249,7 @@ const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
 /// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
 /// clustered topology).
 struct Bindings<'a> {
-    all: [&'a wgpu::Buffer; 10],
+    all: [&'a wgpu::Buffer; 11],
 }
 
 impl Bindings<'_> {
@@ -310,6 +314,7 @@ impl Lbvh {
         Lbvh {
             bounds: compute_pipeline(device, "lbvh bounds", src, "lbvh_bounds"),
             morton: compute_pipeline(device, "lbvh morton", src, "lbvh_morton"),
+            morton_histogram: compute_pipeline(device, "lbvh morton", src, "lbvh_morton_histogram"),
             hierarchy: compute_pipeline(device, "lbvh hierarchy", src, "lbvh_hierarchy"),
             climb: compute_pipeline(device, "lbvh climb", src, "lbvh_climb"),
             hploc: compute_pipeline(device, "hploc climb", src, "hploc_climb"),
@@ -437,6 +442,7 @@ impl Lbvh {
                 b.nodes,
                 bounds_out,
                 &topology,
+                &dummy,
             ],
         };
         // Where the sorted pairs end up (the sort's scratch after an odd number of passes).
@@ -462,9 +468,27 @@ impl Lbvh {
                 rec.encoder
                     .clear_buffer(&work, NODE_COUNTER_WORD * 4, Some(4));
             }
-            let bg = morton_bind.group(device, &self.morton, MORTON_BINDINGS);
-            rec.dispatch("lbvh morton", &self.morton, &[&bg], groups(n));
-            sorted = self.sort.record(rec, &keys, &values, n, key_bits);
+            // A sort of more than one workgroup takes its first histogram from the morton pass
+            // (one dependent dispatch fewer).
+            sorted = match self.sort.first_histogram(device, n, key_bits) {
+                Some((hist, nblocks)) => {
+                    let mut all = morton_bind.all;
+                    all[10] = &hist;
+                    let bg = Bindings { all }.group(
+                        device,
+                        &self.morton_histogram,
+                        MORTON_HISTOGRAM_BINDINGS,
+                    );
+                    rec.dispatch("lbvh morton", &self.morton_histogram, &[&bg], nblocks);
+                    self.sort
+                        .record_after_first_histogram(rec, &keys, &values, n, key_bits)
+                }
+                None => {
+                    let bg = morton_bind.group(device, &self.morton, MORTON_BINDINGS);
+                    rec.dispatch("lbvh morton", &self.morton, &[&bg], groups(n));
+                    self.sort.record(rec, &keys, &values, n, key_bits)
+                }
+            };
             bind.all[3] = &sorted.0;
             bind.all[4] = &sorted.1;
         }
@@ -526,6 +550,7 @@ impl Lbvh {
                 r.topology.0,
                 r.nodes,
                 bounds_out,
+                &dummy,
                 &dummy,
             ],
         };
@@ -1387,8 +1412,9 @@ mod tests {
             assert_eq!(read_words(&order), own.order_words, "order, {n} primitives");
             assert_eq!(read_words(&nodes), own.node_words, "nodes, {n} primitives");
             assert_eq!(read_words(&given), words, "the given words are only read");
-            // Morton, sort (6 dispatches, or 1 up to 1024 primitives), hierarchy, climb.
-            assert_eq!(dispatches, if n > 1024 { 9 } else { 4 });
+            // Morton, sort (5 dispatches: the first histogram is the morton pass's; or 1 up to
+            // 1024 primitives), hierarchy, climb.
+            assert_eq!(dispatches, if n > 1024 { 8 } else { 4 });
         }
     }
 
@@ -1396,16 +1422,17 @@ mod tests {
     fn lbvh_build_dispatch_counts() {
         // A BLAS build of more than 1024 primitives: bounds, morton, 4 sort passes, hierarchy,
         // climb; a sort pass is 2 dispatches up to SUMMING_MAX_BLOCKS blocks of 1024 (the
-        // scatter sums the histogram rows), 3 above. A TLAS build: 3 sort passes and no copy
-        // back. Up to 1024: one sort dispatch.
+        // scatter sums the histogram rows), 3 above, and the morton pass makes the first pass's
+        // histogram. A TLAS build: 3 sort passes and no copy back. Up to 1024: one sort
+        // dispatch.
         let limit = crate::gpu::radix_sort::SUMMING_MAX_BLOCKS as usize * 1024;
         let mut lbvh = Lbvh::new(&gpu().device);
         for (n, bits, expected) in [
-            (5000, BLAS_KEY_BITS, 12),
-            (5000, TLAS_KEY_BITS, 10),
+            (5000, BLAS_KEY_BITS, 11),
+            (5000, TLAS_KEY_BITS, 9),
             (1000, TLAS_KEY_BITS, 5),
-            (limit, TLAS_KEY_BITS, 10),
-            (limit + 1, TLAS_KEY_BITS, 13),
+            (limit, TLAS_KEY_BITS, 9),
+            (limit + 1, TLAS_KEY_BITS, 12),
         ] {
             let aabbs = hard_soup(n, 12);
             let (_, _, dispatches) =
