@@ -9,7 +9,9 @@
 //! row (one workgroup per digit, so no multi-level scan) → stable scatter, which scans the 256
 //! digit totals itself. 31-bit keys: 12 dispatches (40 with the former 4-bit digits and
 //! multi-level scan). Up to [`SUMMING_MAX_BLOCKS`] blocks (65536 pairs) a pass is 2 dispatches:
-//! the scatter sums the histogram rows itself (`scatter_summing`). The scatter ranks a block by two 4-bit splits in workgroup memory:
+//! the scatter sums the histogram rows itself (`scatter_summing`). A caller whose own pass
+//! writes the keys can count their first digit into the histogram too
+//! ([`RadixSort::first_histogram`]), saving the first pass's `histogram` dispatch. The scatter ranks a block by two 4-bit splits in workgroup memory:
 //! per-thread counters for all 256 digit values would not fit in 16 KiB, those of 16 nibble
 //! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
 //! Counts up to [`SMALL_SORT_MAX`] take a one-workgroup bitonic network over (key, position)

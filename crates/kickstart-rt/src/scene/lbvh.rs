@@ -7,7 +7,9 @@
 //!    the caller's primitive pass merged them already ([`LbvhBuild::centroid_bounds`]: the
 //!    TLAS's instance boxes, one dependent dispatch fewer);
 //! 3. `lbvh morton`: Morton keys of [`LbvhBuild::key_bits`] bits (`min(key_bits / 3, 10)`
-//!    bits per axis); empty primitives get the all-ones key so they sort last;
+//!    bits per axis); empty primitives get the all-ones key so they sort last. Above 1024
+//!    primitives it also counts the keys' first sort digit into the sort's histogram
+//!    (`lbvh_morton_histogram`, [`RadixSort::first_histogram`]): one dependent dispatch fewer;
 //! 4. [`RadixSort::record`] (`key_bits`, stable), values = primitive indices: 31 bits and 4
 //!    digit passes for a BLAS ([`BLAS_KEY_BITS`]), 24 bits and 3 passes for a TLAS
 //!    ([`TLAS_KEY_BITS`]), whose sorted pairs stay in the sort's scratch (no copy back);
@@ -45,9 +47,10 @@ const WORKGROUP: u32 = 256;
 /// to millions of triangles, which need the fine grid to be ordered well.
 pub(crate) const BLAS_KEY_BITS: u32 = 31;
 /// Sort key bits of a TLAS build: 8 Morton bits per axis, 3 digit passes instead of 4, and an
-/// odd pass count leaves the result in the sort's scratch, so a TLAS build records 6 sort
-/// dispatches instead of 8 (up to 65536 refs; 9 instead of 12 above), each a dependent pass: on
-/// the H100 about 10 µs of gap plus its own time. A TLAS has far fewer primitives than a large BLAS (2^24 cells, 168 per instance at
+/// odd pass count leaves the result in the sort's scratch, so a TLAS build records 5 sort
+/// dispatches instead of 7 (up to 65536 refs; 8 instead of 11 above; the morton pass makes the
+/// first histogram either way), each a dependent pass: on the H100 about 10 µs of gap plus its
+/// own time. A TLAS has far fewer primitives than a large BLAS (2^24 cells, 168 per instance at
 /// 100k instances), and instances sharing a cell are still split, by index (the hierarchy's
 /// tie-break), so the tree stays valid and only its order within a cell is arbitrary. The cost
 /// is where instances crowd into few cells: a dense cluster in a scene stretched by a far
