@@ -549,6 +549,8 @@ mod tests {
     /// - `lbvh_bounds`: `params`, `aabbs` (`prim_box`), `work` (`atomicMax`); workgroup memory
     ///   `wg_bounds: array<atomic<u32>, 6>` = 24 bytes;
     /// - `lbvh_morton`: `params`, `aabbs`, `work` (the scene bounds), `keys`, `values`;
+    /// - `lbvh_morton_histogram`: those and 10 `sort_hist` (the radix sort's histogram);
+    ///   workgroup memory `wg_digit_bins: array<atomic<u32>, 2048>` = 8192 bytes;
     /// - `lbvh_hierarchy`: `params`, `keys` (`delta`), `values`, `order`, `topology`;
     /// - `lbvh_climb`: `params`, `aabbs` (`leaf_box`), `work`, `order`, `topology`, `nodes`
     ///   (`write_node`), `bounds_out` (`write_bounds`). (Its workgroup memory is left out: it
@@ -564,7 +566,13 @@ mod tests {
         let (module, info) = parse_and_validate(&src).expect("lbvh.wgsl is valid");
         assert_eq!(
             compute_entry_points(&module),
-            ["lbvh_bounds", "lbvh_morton", "lbvh_hierarchy", "lbvh_climb"]
+            [
+                "lbvh_bounds",
+                "lbvh_morton",
+                "lbvh_morton_histogram",
+                "lbvh_hierarchy",
+                "lbvh_climb"
+            ]
         );
         let got = |ep| layout_of(&module, &info, ep);
         assert_eq!(
@@ -582,6 +590,20 @@ mod tests {
                     (0, 4, 4, RW)
                 ],
                 0
+            )
+        );
+        assert_eq!(
+            got("lbvh_morton_histogram"),
+            (
+                vec![
+                    (0, 0, 0, U),
+                    (0, 1, 1, R),
+                    (0, 2, 2, RW),
+                    (0, 3, 3, RW),
+                    (0, 4, 4, RW),
+                    (0, 10, 5, RW)
+                ],
+                8192
             )
         );
         assert_eq!(
