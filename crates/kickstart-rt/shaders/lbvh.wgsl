@@ -219,46 +219,30 @@ fn morton_key(i: u32) -> u32 {
 }
 
 // lbvh_morton and the radix sort's first histogram (its digit 0: key bits 0..7) in one pass,
-// for sorts of more than one workgroup (radix_sort.wgsl: blocks of SORT_BLOCK keys in index
-// order; counts at sort_hist[digit * nblocks + block]), so the sort skips its first histogram
-// dispatch (RadixSort::first_histogram).
+// for sorts of more than one block (digit_histogram.wgsl, prepended: the sort's counters and
+// layout), so the sort skips its first histogram dispatch (RadixSort::first_histogram).
 @group(0) @binding(10) var<storage, read_write> sort_hist: array<u32>;
-const SORT_BLOCK: u32 = 1024u;
-// Copies of the 256 counters (replica = invocation % SORT_REPLICAS), as radix_sort.wgsl's
-// histogram: fewer invocations contend per atomic when neighbouring keys share a digit.
-const SORT_REPLICAS: u32 = 8u;
-var<workgroup> wg_digit_bins: array<atomic<u32>, 2048>; // SORT_REPLICAS * 256
 
 @compute @workgroup_size(256)
 fn lbvh_morton_histogram(@builtin(local_invocation_index) lid: u32,
                          @builtin(workgroup_id) wid: vec3<u32>,
                          @builtin(num_workgroups) nwg: vec3<u32>) {
     let block = wid.y * nwg.x + wid.x;
-    let nblocks = (params.count + SORT_BLOCK - 1u) / SORT_BLOCK;
+    let nblocks = (params.count + DIGIT_BLOCK - 1u) / DIGIT_BLOCK;
     if block >= nblocks {
         return;
     }
-    for (var r = 0u; r < SORT_REPLICAS; r++) {
-        atomicStore(&wg_digit_bins[r * 256u + lid], 0u);
-    }
-    workgroupBarrier();
-    let replica = (lid % SORT_REPLICAS) * 256u;
-    for (var j = 0u; j < SORT_BLOCK / WG; j++) {
-        let i = block * SORT_BLOCK + j * WG + lid;
+    digit_bins_clear(lid);
+    for (var j = 0u; j < DIGIT_BLOCK / WG; j++) {
+        let i = block * DIGIT_BLOCK + j * WG + lid;
         if i < params.count {
             let key = morton_key(i);
             keys[i] = key;
             values[i] = i;
-            atomicAdd(&wg_digit_bins[replica + (key & 255u)], 1u);
+            digit_bins_count(key & (DIGIT_VALUES - 1u), lid);
         }
     }
-    workgroupBarrier();
-    // Every digit's count is written, zeros included.
-    var sum = 0u;
-    for (var r = 0u; r < SORT_REPLICAS; r++) {
-        sum += atomicLoad(&wg_digit_bins[r * 256u + lid]);
-    }
-    sort_hist[lid * nblocks + block] = sum;
+    sort_hist[digit_hist_at(lid, block, nblocks)] = digit_bins_total(lid);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -21,12 +21,13 @@
 // Workgroup linear index = wid.y * nwg.x + wid.x (the host splits big 1-D counts into 2-D).
 // Workgroup memory per entry point (WebGPU's default limit is 16384 bytes): histogram 8192,
 // scan_rows 1024, scatter 10240.
+// Needs digit_histogram.wgsl in front (the histogram's counters and layout).
 
 const WG: u32 = 256u;
 // Elements per thread: a thread owns EPT consecutive elements of its block, so ranking
 // "thread-major, then element" is the block's index order, which is what stability needs.
 const EPT: u32 = 4u;
-const BLOCK: u32 = 1024u; // WG * EPT
+const BLOCK: u32 = DIGIT_BLOCK; // WG * EPT (digit_histogram.wgsl)
 // Digit values of one pass. Equal to WG: thread t handles digit t wherever there is one per digit.
 const RADIX: u32 = 256u;
 // Entries of a row that `scan_rows` scans per loop iteration.
@@ -57,12 +58,7 @@ fn digit_of(key: u32) -> u32 {
 // ---------------------------------------------------------------------------------------------
 // Histogram
 
-// REPLICAS copies of the RADIX counters (replica-major; replica = thread index % REPLICAS):
-// fewer threads contend per atomic when a block's keys share digits (sorted or clustered keys,
-// e.g. the high digits of Morton codes).
-const REPLICAS: u32 = 8u;
-var<workgroup> wg_bins: array<atomic<u32>, 2048>; // REPLICAS * RADIX
-
+// Counts in workgroup memory and the histogram's layout: digit_histogram.wgsl (prepended).
 @compute @workgroup_size(256)
 fn histogram(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -73,26 +69,17 @@ fn histogram(
     if block >= params.nblocks {
         return;
     }
-    for (var r = 0u; r < REPLICAS; r++) {
-        atomicStore(&wg_bins[r * RADIX + t], 0u);
-    }
-    workgroupBarrier();
+    digit_bins_clear(t);
     let base = block * BLOCK;
-    let replica = (t % REPLICAS) * RADIX;
     // Strided loads (coalesced): the order does not matter for counting.
     for (var j = 0u; j < EPT; j++) {
         let i = base + j * WG + t;
         if i < params.count {
-            atomicAdd(&wg_bins[replica + digit_of(keys_in[i])], 1u);
+            digit_bins_count(digit_of(keys_in[i]), t);
         }
     }
-    workgroupBarrier();
     // Every digit's count is written, zeros included: no clearing pass needed.
-    var sum = 0u;
-    for (var r = 0u; r < REPLICAS; r++) {
-        sum += atomicLoad(&wg_bins[r * RADIX + t]);
-    }
-    hist[t * params.nblocks + block] = sum;
+    hist[digit_hist_at(t, block, params.nblocks)] = digit_bins_total(t);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -247,7 +234,8 @@ fn scatter(
         return;
     }
     // Digit t's total and its count in earlier blocks, from scan_rows.
-    scatter_block(block, t, hist[RADIX * params.nblocks + t], hist[t * params.nblocks + block]);
+    scatter_block(block, t, hist[RADIX * params.nblocks + t],
+                  hist[digit_hist_at(t, block, params.nblocks)]);
 }
 
 // Blocks up to which `scatter_summing` replaces scan_rows + scatter (src/gpu/radix_sort.rs).
@@ -268,12 +256,11 @@ fn scatter_summing(
     if block >= params.nblocks {
         return;
     }
-    let row = t * params.nblocks;
     let blocks = min(params.nblocks, SUMMING_MAX_BLOCKS);
     var before = 0u;
     var total = 0u;
     for (var b = 0u; b < blocks; b++) {
-        let c = hist[row + b];
+        let c = hist[digit_hist_at(t, b, params.nblocks)];
         before += select(0u, c, b < block);
         total += c;
     }

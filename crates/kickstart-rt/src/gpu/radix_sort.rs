@@ -11,7 +11,8 @@
 //! multi-level scan). Up to [`SUMMING_MAX_BLOCKS`] blocks (65536 pairs) a pass is 2 dispatches:
 //! the scatter sums the histogram rows itself (`scatter_summing`). A caller whose own pass
 //! writes the keys can count their first digit into the histogram too
-//! ([`RadixSort::first_histogram`]), saving the first pass's `histogram` dispatch. The scatter ranks a block by two 4-bit splits in workgroup memory:
+//! ([`RadixSort::first_histogram`], with `shaders/digit_histogram.wgsl`), saving the first
+//! pass's `histogram` dispatch. The scatter ranks a block by two 4-bit splits in workgroup memory:
 //! per-thread counters for all 256 digit values would not fit in 16 KiB, those of 16 nibble
 //! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
 //! Counts up to [`SMALL_SORT_MAX`] take a one-workgroup bitonic network over (key, position)
@@ -22,8 +23,12 @@
 use super::shader::compute_pipeline;
 use super::Recorder;
 
-/// WGSL source of every kernel of the sort.
-const SOURCE: &str = include_str!("../../shaders/radix_sort.wgsl");
+/// WGSL source of every kernel of the sort (after the digit counting it shares with the LBVH's
+/// morton pass).
+const SOURCE: &str = concat!(
+    include_str!("../../shaders/digit_histogram.wgsl"),
+    include_str!("../../shaders/radix_sort.wgsl")
+);
 /// One-workgroup stable sort for small inputs (`shaders/radix_sort_small.wgsl`).
 const SMALL_SOURCE: &str = include_str!("../../shaders/radix_sort_small.wgsl");
 /// Largest count sorted by the one-workgroup path (its workgroup arrays' length).
@@ -98,7 +103,8 @@ impl RadixSort {
     /// Only the low `key_bits` bits of each key are sorted on: keys must be `< 2^key_bits`
     /// (bits above are carried along but do not affect the order). `key_bits` is clamped to
     /// 1..=32 except that 0 sorts nothing; fewer bits mean fewer passes (`ceil(key_bits / 8)`
-    /// of 3 dispatches each, 2 up to [`SUMMING_MAX_BLOCKS`] blocks). `count` ≤ 1 records nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
+    /// of 3 dispatches each, 2 up to [`SUMMING_MAX_BLOCKS`] blocks). `count` ≤ 1 records
+    /// nothing. `count` is limited by the device's `max_storage_buffer_binding_size / 4` (32M
     /// with default limits).
     ///
     /// Everything is recorded into `rec.encoder` (no submit); the scratch buffers stay in use
@@ -125,9 +131,9 @@ impl RadixSort {
 
     /// For a sort that will run the digit passes (more than [`SMALL_SORT_MAX`] pairs, at least
     /// 8 key bits): the histogram buffer, reserved, and the block count, so the caller's pass
-    /// that writes the keys can also count their first digit (`key & 255`) into
-    /// `hist[digit * nblocks + block]`, blocks of 1024 keys in index order (`shaders/lbvh.wgsl`,
-    /// `lbvh_morton_histogram`). Then [`Self::record_after_first_histogram`] sorts.
+    /// that writes the keys can also count their first digit (`key & 255`) into it with
+    /// `shaders/digit_histogram.wgsl` (as `lbvh_morton_histogram` does). Then
+    /// [`Self::record_after_first_histogram`] sorts.
     pub fn first_histogram(
         &mut self,
         device: &wgpu::Device,

@@ -310,6 +310,7 @@ impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
         let src = concat!(
+            include_str!("../../shaders/digit_histogram.wgsl"),
             include_str!("../../shaders/centroid_bounds.wgsl"),
             include_str!("../../shaders/lbvh.wgsl"),
             include_str!("../../shaders/hploc.wgsl")

@@ -504,17 +504,20 @@ pub fn write_spirv(
 mod tests {
     use super::*;
 
-    /// lbvh.wgsl as the SDK compiles it: after centroid_bounds.wgsl, whose helpers it uses.
+    /// lbvh.wgsl as the SDK compiles it: after digit_histogram.wgsl and centroid_bounds.wgsl,
+    /// whose helpers it uses.
     fn lbvh() -> Source {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../kickstart-rt/shaders/");
-        let parts: Vec<(String, String)> = ["centroid_bounds.wgsl", "lbvh.wgsl"]
-            .iter()
-            .map(|name| {
-                let path = format!("{dir}{name}");
-                let text = std::fs::read_to_string(&path).expect("the shader is in the workspace");
-                (path, text)
-            })
-            .collect();
+        let parts: Vec<(String, String)> =
+            ["digit_histogram.wgsl", "centroid_bounds.wgsl", "lbvh.wgsl"]
+                .iter()
+                .map(|name| {
+                    let path = format!("{dir}{name}");
+                    let text =
+                        std::fs::read_to_string(&path).expect("the shader is in the workspace");
+                    (path, text)
+                })
+                .collect();
         Source::concat(&parts)
     }
 
