@@ -11,6 +11,10 @@
 //   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
 //   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
 //                  refit share it)
+//   lbvh_pyramid, lbvh_range_refit
+//                  the refit of a Karras tree with one primitive a leaf and boxes in sorted
+//                  order: the box pyramid's upper levels (box_pyramid.wgsl), then every node's
+//                  boxes from its leaf range, each node on its own
 //
 // `work` layout (u32 words, all accessed atomically):
 //   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only;
@@ -25,6 +29,10 @@
 //                          for the leaf at sorted position k
 //   [2 (n-1), 3 (n-1))     parent ref of inner node i (0xFFFFFFFF for the root)
 //   [3 (n-1), 4n - 3)      parent ref of leaf k
+//   [4n - 3, 5n - 4)       the other end of inner node i's leaf range (one end is i itself):
+//                          node i covers sorted positions [min(i, j), max(i, j)], its left child
+//                          [.., g] and its right child [g + 1, ..], g = left child's index (a
+//                          Karras tree's; a clustered tree's topology has no such section)
 //   A parent ref is the parent's inner index | PARENT_LOCAL_BIT (0x40000000) when all of the
 //   parent's leaves lie in one block of 256 sorted positions [256 b, 256 b + 256).
 
@@ -47,7 +55,8 @@ struct Params {
     // First of the 6 centroid-bounds words lbvh_morton reads from binding 2: 0 (work's header),
     // or where the caller's pass merged them in the buffer bound there instead.
     centroid_base: u32,
-    pad1: u32,
+    // lbvh_pyramid: the pyramid level it reduces (it writes the PYRAMID_PASS_LEVELS above).
+    level: u32,
     pad2: u32,
 }
 
@@ -337,6 +346,12 @@ fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     }
     topology[params.topo_base + 2u * k] = left;
     topology[params.topo_base + 2u * k + 1u] = right;
+    topology[range_ends_at() + k] = u32(j);
+}
+
+// First topology word of the inner nodes' range ends (n >= 2).
+fn range_ends_at() -> u32 {
+    return params.topo_base + 4u * params.count - 3u;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -753,5 +768,146 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
             let sb = child_box(sib);
             climb_up(c, parent, lc, rc, sb, child_subtree(sib, sb), up);
         }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Range refit: a refit of a Karras tree (one primitive a leaf, sorted-position refs) whose leaf
+// boxes are in sorted order. Every inner node covers one range of sorted positions (its range end
+// is in the topology), and the box of a range is the union of at most two boxes per level of the
+// box pyramid over the leaf boxes (box_pyramid.wgsl). So each node's boxes are computed on their
+// own, without the climb's arrivals and device-scope fences: lbvh_pyramid adds the pyramid's
+// levels (the gather wrote the lowest ones), then lbvh_range_refit writes every node. The boxes
+// are the same unions of the same leaf boxes as the climb's, so the nodes are bit-identical.
+
+// The pyramid, level 0 (the sorted leaf boxes) at box aabb_base. Bound read-write in place of
+// `aabbs` (a buffer cannot be bound both ways in one dispatch).
+@group(0) @binding(11) var<storage, read_write> pyramid: array<vec4<f32>>;
+
+// Box `at` of the pyramid (all levels counted from level 0's first box); a stored empty box of
+// level 0 becomes the canonical one.
+fn pyramid_box(at: u32) -> Box {
+    let i = 2u * (params.aabb_base + at);
+    let lo = pyramid[i].xyz;
+    let hi = pyramid[i + 1u].xyz;
+    if stored_box_is_empty(lo, hi) {
+        return empty_box();
+    }
+    return Box(lo, hi);
+}
+
+fn pyramid_store(at: u32, b: Box) {
+    let i = 2u * (params.aabb_base + at);
+    pyramid[i] = vec4<f32>(b.lo, 0.0);
+    pyramid[i + 1u] = vec4<f32>(b.hi, 0.0);
+}
+
+// Levels params.level + 1 ..= params.level + PYRAMID_PASS_LEVELS (those that exist): workgroup w
+// reduces boxes [512 w, 512 w + 512) of params.level, an aligned block of every level above it.
+@compute @workgroup_size(256)
+fn lbvh_pyramid(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+                @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    let block = wid.y * nwg.x + wid.x;
+    var start = pyramid_level_start(n, params.level);
+    var count = pyramid_level_count(n, params.level);
+    let first = 2u * (WG * block + lid);
+    var b = empty_box();
+    if first < count {
+        b = pyramid_box(start + first);
+    }
+    if first + 1u < count {
+        b = union_box(b, pyramid_box(start + first + 1u));
+    }
+    for (var level = 1u; level <= PYRAMID_PASS_LEVELS; level++) {
+        // Uniform: the counts depend on the params only.
+        if count <= 1u {
+            break;
+        }
+        start += count;
+        count = pyramid_parent_count(count);
+        let width = WG >> (level - 1u);
+        let i = ((WG * block) >> (level - 1u)) + lid;
+        if lid < width && i < count {
+            pyramid_store(start + i, b);
+        }
+        if level == PYRAMID_PASS_LEVELS {
+            break;
+        }
+        // The next level's box of this invocation: the union of two of this level's.
+        if lid < width {
+            wg_store_box(lid, b);
+        }
+        workgroupBarrier();
+        if lid < width / 2u {
+            b = union_box(wg_load_box(2u * lid), wg_load_box(2u * lid + 1u));
+        }
+        workgroupBarrier();
+    }
+}
+
+fn wg_store_box(slot: u32, b: Box) {
+    let at = 6u * slot;
+    wg_boxes[at] = b.lo.x;
+    wg_boxes[at + 1u] = b.lo.y;
+    wg_boxes[at + 2u] = b.lo.z;
+    wg_boxes[at + 3u] = b.hi.x;
+    wg_boxes[at + 4u] = b.hi.y;
+    wg_boxes[at + 5u] = b.hi.z;
+}
+
+fn wg_load_box(slot: u32) -> Box {
+    let at = 6u * slot;
+    return Box(vec3<f32>(wg_boxes[at], wg_boxes[at + 1u], wg_boxes[at + 2u]),
+               vec3<f32>(wg_boxes[at + 3u], wg_boxes[at + 4u], wg_boxes[at + 5u]));
+}
+
+// The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
+// first box and even last box are taken and the rest is left to the level above.
+fn range_box(a: u32, b: u32) -> Box {
+    if a == b {
+        return pyramid_box(a);
+    }
+    var acc = empty_box();
+    var l = a;
+    var r = b + 1u;
+    var start = 0u;
+    var count = params.count;
+    // At most 2 x 29 boxes (n <= 2^28); the loop ends when the range is used up.
+    while l < r {
+        if (l & 1u) != 0u {
+            acc = union_box(acc, pyramid_box(start + l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, pyramid_box(start + r));
+        }
+        l >>= 1u;
+        r >>= 1u;
+        start += count;
+        count = pyramid_parent_count(count);
+    }
+    return acc;
+}
+
+// Per inner node (n >= 2: the caller runs lbvh_climb for fewer).
+@compute @workgroup_size(256)
+fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
+                    @builtin(workgroup_id) wid: vec3<u32>,
+                    @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_id(lid, wid, nwg);
+    if i + 1u >= params.count {
+        return;
+    }
+    let lc = topology[params.topo_base + 2u * i];
+    let rc = topology[params.topo_base + 2u * i + 1u];
+    let j = topology[range_ends_at() + i];
+    let g = lc & 0x7fffffffu;
+    let lb = range_box(min(i, j), g);
+    let rb = range_box(g + 1u, max(i, j));
+    write_node(i, lb, out_ref(lc), rb, out_ref(rc));
+    if i == 0u {
+        write_bounds(union_box(lb, rb));
     }
 }

@@ -105,10 +105,17 @@ fn gather_triangles(
 
 // ---- gather_triangles_boxes -----------------------------------------------------------------
 // gather_triangles that also writes each triangle's box at its sorted position k
-// (gather_boxes[2k..2k+1], as triangle_aabbs would at its primitive index): a BLAS refit's one
-// pass before the climb, which then reads the boxes in order (the LBVH's sorted-boxes flag).
+// (gather_boxes[2k..2k+1], as triangle_aabbs would at its primitive index) and levels
+// 1..=PYRAMID_GATHER_LEVELS of the box pyramid over them (box_pyramid.wgsl, after the n boxes):
+// a BLAS refit's one pass before its node boxes are computed (lbvh.wgsl's range refit, or the
+// climb with the sorted-boxes flag, which reads level 0 only). The workgroup's 64 boxes are one
+// aligned block of every level it writes, so the reduction stays in workgroup memory.
 
 @group(0) @binding(4) var<storage, read_write> gather_boxes: array<vec4<f32>>;
+
+// Two halves: a level is read from one and written to the other (one barrier per level).
+var<workgroup> wg_pyramid_lo: array<vec3<f32>, 128>;
+var<workgroup> wg_pyramid_hi: array<vec3<f32>, 128>;
 
 @compute @workgroup_size(64)
 fn gather_triangles_boxes(
@@ -117,14 +124,51 @@ fn gather_triangles_boxes(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let k = linear_id(wid, nwg, lid);
-    if k >= params.c {
-        return;
+    let n = params.c;
+    // Past the end (and for dropped triangles): the pyramid's empty box. No early return: the
+    // barriers below must be reached by the whole workgroup.
+    var lo = vec3<f32>(PYRAMID_EMPTY);
+    var hi = vec3<f32>(-PYRAMID_EMPTY);
+    if k < n {
+        let t = gather_one(k);
+        let b = triangle_box(bitcast<vec4<f32>>(t.v0), bitcast<vec4<f32>>(t.v1),
+                             bitcast<vec4<f32>>(t.v2));
+        gather_boxes[2u * k] = b.lo;
+        gather_boxes[2u * k + 1u] = b.hi;
+        if !stored_box_is_empty(b.lo.xyz, b.hi.xyz) {
+            lo = b.lo.xyz;
+            hi = b.hi.xyz;
+        }
     }
-    let t = gather_one(k);
-    let b = triangle_box(bitcast<vec4<f32>>(t.v0), bitcast<vec4<f32>>(t.v1),
-                         bitcast<vec4<f32>>(t.v2));
-    gather_boxes[2u * k] = b.lo;
-    gather_boxes[2u * k + 1u] = b.hi;
+    wg_pyramid_lo[lid] = lo;
+    wg_pyramid_hi[lid] = hi;
+    let block = k - lid;
+    var start = 0u;
+    var count = n;
+    for (var level = 1u; level <= PYRAMID_GATHER_LEVELS; level++) {
+        // Uniform (n only): the pyramid ends at its level of one box.
+        if count <= 1u {
+            break;
+        }
+        workgroupBarrier();
+        start += count;
+        count = pyramid_parent_count(count);
+        let width = WG >> level;
+        let src_half = 64u * ((level - 1u) & 1u);
+        let dst_half = 64u - src_half;
+        if lid < width {
+            let l = src_half + 2u * lid;
+            let box_lo = min(wg_pyramid_lo[l], wg_pyramid_lo[l + 1u]);
+            let box_hi = max(wg_pyramid_hi[l], wg_pyramid_hi[l + 1u]);
+            wg_pyramid_lo[dst_half + lid] = box_lo;
+            wg_pyramid_hi[dst_half + lid] = box_hi;
+            let i = (block >> level) + lid;
+            if i < count {
+                gather_boxes[2u * (start + i)] = vec4<f32>(box_lo, 0.0);
+                gather_boxes[2u * (start + i) + 1u] = vec4<f32>(box_hi, 0.0);
+            }
+        }
+    }
 }
 
 // ---- instance_refs -------------------------------------------------------------------------

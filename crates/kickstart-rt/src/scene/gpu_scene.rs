@@ -5,9 +5,11 @@
 use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
-use crate::scene::lbvh::{Lbvh, LbvhBuild, LbvhRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS};
+use crate::scene::lbvh::{
+    pyramid_boxes, Lbvh, LbvhBuild, LbvhRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS,
+};
 use crate::scene::pool::{Pool, Range};
-use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
+use crate::scene::prims::{Prims, GATHER_PYRAMID_LEVELS, MAX_REFS_PER_INSTANCE};
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::trace::debug_view::DebugViewPass;
 use crate::trace::rays::{RayTracer, SceneBuffers};
@@ -410,13 +412,16 @@ impl GpuScene {
         );
     }
 
-    fn ensure_scratch(&mut self, prims: u32) {
+    /// Scratch for a build or refit of `prims` primitives: `boxes` boxes (a build's `prims`, a
+    /// refit's whole box pyramid) and the order.
+    fn ensure_scratch(&mut self, prims: u32, boxes: u64) {
         let n = prims.max(1) as u64;
-        if self.scratch_aabbs.size() < n * AABB_BYTES {
+        let boxes = boxes.max(1);
+        if self.scratch_aabbs.size() < boxes * AABB_BYTES {
             self.scratch_aabbs = storage(
                 &self.device,
                 "kickstart-rt build boxes",
-                n.next_power_of_two() * AABB_BYTES,
+                boxes.next_power_of_two() * AABB_BYTES,
             );
         }
         if self.scratch_order.size() < n * 4 {
@@ -487,7 +492,7 @@ impl GpuScene {
         } else {
             None
         };
-        self.ensure_scratch(n);
+        self.ensure_scratch(n, n.into());
         rec.scope = "blas build";
         let (prims, lbvh) = self.passes.build(&self.device);
         prims.triangle_aabbs(
@@ -567,11 +572,13 @@ impl GpuScene {
             return;
         };
         let n = g.triangles;
-        self.ensure_scratch(n);
+        self.ensure_scratch(n, pyramid_boxes(n));
         rec.scope = "blas refit";
         let (prims, lbvh) = self.passes.build(&self.device);
-        // The gather comes first and also writes the boxes in sorted order: one pass fewer than
-        // a build's boxes-then-gather, and the climb reads its leaves' boxes coalesced.
+        // The gather comes first and also writes the boxes in sorted order and the lowest levels
+        // of their box pyramid: one pass fewer than a build's boxes-then-gather, and the refit
+        // reads its leaves' boxes coalesced (the range refit of a fast-build tree from the
+        // pyramid).
         prims.gather_triangles(
             rec,
             self.staged.buffer(),
@@ -598,6 +605,9 @@ impl GpuScene {
                 max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
                 sorted_boxes: true,
+                pyramid_levels: GATHER_PYRAMID_LEVELS,
+                // As in build_blas: fast-trace (leaves collapsed) is the clustered build.
+                clustered: max_leaf > 1,
             },
         );
     }
@@ -675,6 +685,8 @@ impl GpuScene {
                     max_leaf: 1,
                     bounds_out: None,
                     sorted_boxes: false,
+                    pyramid_levels: 0,
+                    clustered: false,
                 },
             );
             self.tlas.refits_since_rebuild += 1;

@@ -32,7 +32,15 @@
 //! one leaf.
 //!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology; a BLAS refit's
-//! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]).
+//! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]). The refit of a Karras tree with one
+//! primitive a leaf and sorted boxes (every fast-build BLAS) is the *range refit* instead: every
+//! inner node covers one range of sorted positions (the hierarchy pass stores each node's other
+//! range end in the topology), and the box of a range is the union of at most two boxes per
+//! level of a pyramid over the sorted leaf boxes (`shaders/box_pyramid.wgsl`). So
+//! `lbvh pyramid` adds the pyramid's levels above those the caller wrote (9 levels a dispatch),
+//! and `lbvh range refit` computes every node's boxes on its own: no arrival counters and no
+//! chains of device-scope round trips from the leaves to the root, which is what bounds the
+//! climb (BENCHMARKS.md, session 23). The nodes are bit-identical to the climb's.
 
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
@@ -154,8 +162,40 @@ pub(crate) struct LbvhRefit<'a> {
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
     /// `aabbs` holds the boxes in sorted order already (leaf `k`'s at `aabb_base + k`, as
     /// [`crate::scene::prims::Prims::gather_triangles`] writes them), so the climb reads each
-    /// with one coalesced load instead of going through `order`.
+    /// with one coalesced load instead of going through `order`. With one primitive a leaf and
+    /// a Karras topology this is the range refit, which also needs room for the whole box
+    /// pyramid in `aabbs` ([`pyramid_boxes`] boxes from `aabb_base`; without it the refit
+    /// climbs).
     pub sorted_boxes: bool,
+    /// Levels `1..=pyramid_levels` of the box pyramid over the sorted boxes are in `aabbs`
+    /// already (the gather writes [`crate::scene::prims::GATHER_PYRAMID_LEVELS`]); the range
+    /// refit adds the rest. 0: it makes them all.
+    pub pyramid_levels: u32,
+    /// The topology is a clustered build's (`hploc climb`), whose nodes are not ranges: the
+    /// refit climbs.
+    pub clustered: bool,
+}
+
+/// Boxes of the box pyramid over `n` boxes (`shaders/box_pyramid.wgsl`): level 0 (the boxes),
+/// then `ceil(n / 2^L)` a level up to the level of one box.
+pub(crate) fn pyramid_boxes(n: u32) -> u64 {
+    let mut total = u64::from(n);
+    let mut count = n;
+    while count > 1 {
+        count = count.div_ceil(2);
+        total += u64::from(count);
+    }
+    total
+}
+
+/// Levels each `lbvh pyramid` dispatch adds (the shader's `PYRAMID_PASS_LEVELS`).
+const PYRAMID_PASS_LEVELS: u32 = 9;
+/// Boxes of the reduced level one `lbvh pyramid` workgroup reads.
+const PYRAMID_PASS_BLOCK: u32 = 1 << PYRAMID_PASS_LEVELS;
+
+/// Boxes in level `level` of the pyramid over `n` boxes.
+fn pyramid_level_count(n: u32, level: u32) -> u32 {
+    (0..level).fold(n, |count, _| count.div_ceil(2))
 }
 
 /// Per-dispatch parameters (the shader's `Params`).
@@ -174,8 +214,10 @@ struct Params {
     key_bits: u32,
     /// First centroid-bounds word in the buffer `lbvh_morton` binds at 2.
     centroid_base: u32,
+    /// `lbvh pyramid`: the pyramid level the dispatch reduces.
+    level: u32,
     /// Pads the uniform to a multiple of 16 bytes.
-    pad: [u32; 2],
+    pad: u32,
 }
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
@@ -221,6 +263,10 @@ pub(crate) struct Lbvh {
     hierarchy: wgpu::ComputePipeline,
     climb: wgpu::ComputePipeline,
     hploc: wgpu::ComputePipeline,
+    /// `lbvh_pyramid`: levels of the range refit's box pyramid.
+    pyramid: wgpu::ComputePipeline,
+    /// `lbvh_range_refit`: every node's boxes from its leaf range.
+    range_refit: wgpu::ComputePipeline,
     sort: RadixSort,
     /// Centroid bounds, inner boxes during the climb, arrival counters; for a clustered build
     /// also the cluster counts and lists ([`clustered_work_words`]).
@@ -248,11 +294,15 @@ const HIERARCHY_BINDINGS: &[u32] = &[0, 3, 4, 5, 6];
 const CLIMB_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8];
 /// Bindings of `hploc_climb`.
 const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
+/// Bindings of `lbvh_pyramid` (11: the pyramid, read-write in place of `aabbs`).
+const PYRAMID_BINDINGS: &[u32] = &[0, 11];
+/// Bindings of `lbvh_range_refit`.
+const RANGE_REFIT_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11];
 
 /// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
-/// clustered topology).
+/// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid).
 struct Bindings<'a> {
-    all: [&'a wgpu::Buffer; 11],
+    all: [&'a wgpu::Buffer; 12],
 }
 
 impl Bindings<'_> {
@@ -310,6 +360,7 @@ impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
         let src = concat!(
+            include_str!("../../shaders/box_pyramid.wgsl"),
             include_str!("../../shaders/digit_histogram.wgsl"),
             include_str!("../../shaders/centroid_bounds.wgsl"),
             include_str!("../../shaders/lbvh.wgsl"),
@@ -322,6 +373,8 @@ impl Lbvh {
             hierarchy: compute_pipeline(device, "lbvh hierarchy", src, "lbvh_hierarchy"),
             climb: compute_pipeline(device, "lbvh climb", src, "lbvh_climb"),
             hploc: compute_pipeline(device, "hploc climb", src, "hploc_climb"),
+            pyramid: compute_pipeline(device, "lbvh pyramid", src, "lbvh_pyramid"),
+            range_refit: compute_pipeline(device, "lbvh range refit", src, "lbvh_range_refit"),
             sort: RadixSort::new(device),
             work: Grown::default(),
             keys: Grown::default(),
@@ -338,9 +391,10 @@ impl Lbvh {
     }
 
     /// u32 words of the topology: children (2 per inner node), parents of inner nodes and of
-    /// leaves. At least 1 so a topology buffer is never empty.
+    /// leaves, and the inner nodes' range ends (the range refit's). At least 1 so a topology
+    /// buffer is never empty.
     pub fn topology_words(count: u32) -> u32 {
-        (4 * count).saturating_sub(3).max(1)
+        (5 * count).saturating_sub(4).max(1)
     }
 
     /// Scratch bytes currently held (grows with the largest build).
@@ -426,7 +480,8 @@ impl Lbvh {
             max_leaf: effective_max_leaf(b.max_leaf, b.leaf_refs),
             key_bits,
             centroid_base: b.centroid_bounds.map_or(0, |(_, base)| base),
-            pad: [0; 2],
+            level: 0,
+            pad: 0,
         };
         let params = rec.uniform("lbvh params", &params_at(topo_base));
         let karras_params = if clustered {
@@ -446,6 +501,7 @@ impl Lbvh {
                 b.nodes,
                 bounds_out,
                 &topology,
+                &dummy,
                 &dummy,
             ],
         };
@@ -518,6 +574,7 @@ impl Lbvh {
             return;
         }
         let device = rec.device;
+        let ranged = Self::refits_by_ranges(r);
         let work = self.work.get(device, "lbvh work", work_words(n) * 4);
         let dummy = self.dummy.get(device, "lbvh no bounds", 32);
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
@@ -525,23 +582,22 @@ impl Lbvh {
         if r.sorted_boxes {
             flags |= FLAG_SORTED_BOXES;
         }
-        let params = rec.uniform(
-            "lbvh params",
-            &Params {
-                count: n,
-                aabb_base: r.aabb_base,
-                node_base: r.node_base,
-                order_base: r.order_base,
-                topo_base: r.topology.1,
-                bounds_base,
-                flags,
-                max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
-                key_bits: 0,
-                centroid_base: 0,
-                pad: [0; 2],
-            },
-        );
-        // Keys, values and the clustered topology are not used by the climb; the dummy fills
+        let params_at = |level: u32| Params {
+            count: n,
+            aabb_base: r.aabb_base,
+            node_base: r.node_base,
+            order_base: r.order_base,
+            topo_base: r.topology.1,
+            bounds_base,
+            flags,
+            max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
+            key_bits: 0,
+            centroid_base: 0,
+            level,
+            pad: 0,
+        };
+        let params = rec.uniform("lbvh params", &params_at(0));
+        // Keys, values and the clustered topology are not used by a refit; the dummy fills
         // their slots.
         let bind = Bindings {
             all: [
@@ -556,11 +612,46 @@ impl Lbvh {
                 bounds_out,
                 &dummy,
                 &dummy,
+                r.aabbs,
             ],
         };
-        Self::clear_arrivals(rec, &work, n);
-        let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
-        rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
+        if !ranged {
+            Self::clear_arrivals(rec, &work, n);
+            let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
+            rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
+            return;
+        }
+        let mut level = r.pyramid_levels;
+        loop {
+            let count = pyramid_level_count(n, level);
+            if count <= 1 {
+                break;
+            }
+            let level_params = rec.uniform("lbvh pyramid params", &params_at(level));
+            let mut all = bind.all;
+            all[0] = &level_params;
+            let bg = Bindings { all }.group(device, &self.pyramid, PYRAMID_BINDINGS);
+            let workgroups = count.div_ceil(PYRAMID_PASS_BLOCK);
+            rec.dispatch("lbvh pyramid", &self.pyramid, &[&bg], workgroups);
+            level += PYRAMID_PASS_LEVELS;
+        }
+        let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
+        rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n - 1));
+    }
+
+    /// Whether `r` is refit from leaf ranges (`lbvh pyramid` + `lbvh range refit`) rather than
+    /// by the climb: a Karras topology, one primitive a leaf (no collapse decisions, which need
+    /// the subtrees' costs bottom-up), sorted boxes with room for the pyramid behind them, and
+    /// at least one inner node.
+    fn refits_by_ranges(r: &LbvhRefit<'_>) -> bool {
+        let room = (u64::from(r.aabb_base) + pyramid_boxes(r.count)) * 32;
+        !r.clustered
+            && r.sorted_boxes
+            && r.leaf_refs == LeafRefs::SortedPosition
+            && effective_max_leaf(r.max_leaf, r.leaf_refs) == 1
+            && r.count >= 2
+            && r.pyramid_levels < 32
+            && r.aabbs.size() >= room
     }
 }
 
@@ -694,6 +785,8 @@ mod tests {
         bases: Bases,
         leaf_refs: LeafRefs,
         max_leaf: u32,
+        /// Built by `hploc climb`: the topology is the clustered tree's.
+        clustered: bool,
         nodes: wgpu::Buffer,
         order: wgpu::Buffer,
         topology: wgpu::Buffer,
@@ -791,6 +884,7 @@ mod tests {
             bases,
             leaf_refs,
             max_leaf,
+            clustered,
             nodes: sentinel_buffer((u64::from(bases.node) + node_count + 1) * 16),
             order: sentinel_buffer(u64::from(bases.order + n) + 1),
             topology: sentinel_buffer(u64::from(bases.topo) + topo_words + 1),
@@ -892,28 +986,88 @@ mod tests {
 
     /// Refits `tree` (as built) to the primitive boxes `after`, collapsing up to `max_leaf`.
     fn refit_to(lbvh: &mut Lbvh, tree: &GpuTree, after: &[Aabb], max_leaf: u32) {
-        refit_to_with(lbvh, tree, after, max_leaf, false);
+        refit_to_with(lbvh, tree, after, max_leaf, RefitBoxes::Primitive);
     }
 
-    /// [`refit_to`], the boxes given in sorted order (`after[order[k]]` at `k`) when
-    /// `sorted_boxes`, as a BLAS refit's gather writes them.
+    /// How a test refit's boxes are given.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    enum RefitBoxes {
+        /// In primitive order (`after[p]` at `p`): the climb.
+        Primitive,
+        /// In sorted order (`after[order[k]]` at `k`), the buffer ending there: the climb.
+        Sorted,
+        /// In sorted order, with room for the box pyramid behind them, filled with junk boxes
+        /// except levels `1..=levels`, which the CPU writes (as a BLAS refit's gather does): the
+        /// range refit where the tree allows it.
+        Pyramid { levels: u32 },
+    }
+
+    /// The box pyramid's levels over `boxes` as the shaders store them: level 0 as given, and
+    /// above it unions with empties canonical (`f32::MAX`, `-f32::MAX`).
+    fn cpu_pyramid(boxes: &[Aabb]) -> Vec<Vec<Aabb>> {
+        let canonical = |b: &Aabb| {
+            if is_empty(b) {
+                ([f32::MAX; 3], [-f32::MAX; 3])
+            } else {
+                *b
+            }
+        };
+        let mut levels = vec![boxes.to_vec()];
+        while levels.last().is_some_and(|l| l.len() > 1) {
+            let below = levels.last().map(Vec::as_slice).unwrap_or_default();
+            let level = below
+                .chunks(2)
+                .map(|pair| {
+                    let a = canonical(&pair[0]);
+                    let b = pair.get(1).map_or(a, canonical);
+                    (
+                        [0, 1, 2].map(|i| a.0[i].min(b.0[i])),
+                        [0, 1, 2].map(|i| a.1[i].max(b.1[i])),
+                    )
+                })
+                .collect();
+            levels.push(level);
+        }
+        levels
+    }
+
+    /// [`refit_to`] with the boxes given as `boxes` says. Returns the refit's dispatches.
     fn refit_to_with(
         lbvh: &mut Lbvh,
         tree: &GpuTree,
         after: &[Aabb],
         max_leaf: u32,
-        sorted_boxes: bool,
-    ) {
-        let input = if sorted_boxes {
-            let sorted: Vec<Aabb> = tree
-                .order_words
-                .iter()
-                .map(|&p| after[p as usize])
-                .collect();
-            aabb_buffer(&sorted, tree.bases.aabb)
-        } else {
-            aabb_buffer(after, tree.bases.aabb)
+        boxes: RefitBoxes,
+    ) -> u32 {
+        let sorted: Vec<Aabb> = tree
+            .order_words
+            .iter()
+            .map(|&p| after[p as usize])
+            .collect();
+        let input = match boxes {
+            RefitBoxes::Primitive => aabb_buffer(after, tree.bases.aabb),
+            RefitBoxes::Sorted => aabb_buffer(&sorted, tree.bases.aabb),
+            RefitBoxes::Pyramid { levels } => {
+                let junk = ([-5e3f32; 3], [5e3f32; 3]);
+                let pyramid = cpu_pyramid(&sorted);
+                let all: Vec<Aabb> = pyramid
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(level, boxes)| {
+                        let given = level == 0 || level as u32 <= levels;
+                        boxes.iter().map(move |b| if given { *b } else { junk })
+                    })
+                    .collect();
+                assert_eq!(all.len() as u64, pyramid_boxes(tree.n), "pyramid size");
+                aabb_buffer(&all, tree.bases.aabb)
+            }
         };
+        let (sorted_boxes, pyramid_levels) = match boxes {
+            RefitBoxes::Primitive => (false, 0),
+            RefitBoxes::Sorted => (true, 0),
+            RefitBoxes::Pyramid { levels } => (true, levels),
+        };
+        let mut dispatches = 0;
         run(|rec| {
             lbvh.refit(
                 rec,
@@ -930,9 +1084,13 @@ mod tests {
                     max_leaf,
                     bounds_out: Some((&tree.bounds, tree.bases.bounds)),
                     sorted_boxes,
+                    pyramid_levels,
+                    clustered: tree.clustered,
                 },
-            )
+            );
+            dispatches = rec.dispatches;
         });
+        dispatches
     }
 
     /// Reads back nodes, order and bounds of `tree` and checks them against `aabbs`.
@@ -1447,17 +1605,32 @@ mod tests {
 
     #[test]
     fn lbvh_refit_equals_exact_boxes_on_same_topology() {
+        use RefitBoxes::{Primitive, Pyramid, Sorted};
         let mut lbvh = Lbvh::new(&gpu().device);
         let mut rng = Rng(5);
-        for (n, refs, sorted_boxes) in [
-            (1usize, LeafRefs::PrimitiveIndex, false),
-            (2, LeafRefs::SortedPosition, false),
-            (1000, LeafRefs::SortedPosition, false),
-            (3001, LeafRefs::PrimitiveIndex, false),
+        // The last column: the refit's dispatches, which say whether it climbed (1) or refit
+        // from ranges (the pyramid passes, 9 levels each above those given, then the nodes).
+        for (n, refs, boxes, dispatches) in [
+            (1usize, LeafRefs::PrimitiveIndex, Primitive, 1),
+            (2, LeafRefs::SortedPosition, Primitive, 1),
+            (1000, LeafRefs::SortedPosition, Primitive, 1),
+            (3001, LeafRefs::PrimitiveIndex, Primitive, 1),
             // Boxes in sorted order (a BLAS refit's): leaf k reads box k, not box order[k].
-            (1, LeafRefs::SortedPosition, true),
-            (3001, LeafRefs::SortedPosition, true),
-            (700, LeafRefs::PrimitiveIndex, true),
+            (1, LeafRefs::SortedPosition, Sorted, 1),
+            (3001, LeafRefs::SortedPosition, Sorted, 1),
+            (700, LeafRefs::PrimitiveIndex, Sorted, 1),
+            // With room for the pyramid: the range refit (one primitive, or primitive refs:
+            // still the climb). 3001 boxes have 12 levels above level 0.
+            (1, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 1),
+            (700, LeafRefs::PrimitiveIndex, Pyramid { levels: 0 }, 1),
+            (2, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 2),
+            (3, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 2),
+            (512, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 2),
+            (513, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 3),
+            (3001, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 3),
+            (3001, LeafRefs::SortedPosition, Pyramid { levels: 6 }, 2),
+            (64, LeafRefs::SortedPosition, Pyramid { levels: 6 }, 1),
+            (40_000, LeafRefs::SortedPosition, Pyramid { levels: 6 }, 3),
         ] {
             let before = hard_soup(n, n as u64);
             let (tree, _) = build_and_check(&mut lbvh, &before, refs);
@@ -1477,18 +1650,36 @@ mod tests {
                     _ => shifted(b, rng.vec(-3.0, 3.0)),
                 })
                 .collect();
-            refit_to_with(&mut lbvh, &tree, &after, 1, sorted_boxes);
+            let what = format!("{n} primitives, {refs:?}, {boxes:?}");
+            let got = refit_to_with(&mut lbvh, &tree, &after, 1, boxes);
+            assert_eq!(got, dispatches, "{what}: dispatches");
             // Exact boxes of the new primitives over the same tree (the order was made for
             // the old boxes, so empties need not be last any more).
             let order_before = tree.order_words.clone();
             let (tree, _) = check_read_back(tree, &after, false);
-            assert_eq!(tree.order_words, order_before, "refit keeps the order");
+            assert_eq!(
+                tree.order_words, order_before,
+                "{what}: refit keeps the order"
+            );
             let refs_after: Vec<u32> = tree
                 .node_words
                 .chunks(16)
                 .flat_map(|w| [w[3], w[7]])
                 .collect();
-            assert_eq!(refs_after, refs_before, "refit keeps every ref");
+            assert_eq!(refs_after, refs_before, "{what}: refit keeps every ref");
+        }
+    }
+
+    #[test]
+    fn pyramid_sizes_match_the_cpu_levels() {
+        for n in [0u32, 1, 2, 3, 63, 64, 65, 511, 512, 513, 3001, 40_000] {
+            let boxes = vec![EMPTY; n as usize];
+            let levels = cpu_pyramid(&boxes);
+            let total: usize = levels.iter().map(Vec::len).sum();
+            assert_eq!(pyramid_boxes(n), total as u64, "{n} boxes");
+            for (level, boxes) in levels.iter().enumerate() {
+                assert_eq!(pyramid_level_count(n, level as u32) as usize, boxes.len());
+            }
         }
     }
 
@@ -1768,9 +1959,16 @@ mod tests {
         refit_to(&mut lbvh, &tree, &after, 1);
         let (tree, _) = check_read_back(tree, &after, false);
         assert_eq!(refs(&tree), refs_before, "refit keeps every ref");
+        // Leaves of one and sorted boxes with room for the pyramid: a Karras tree would be refit
+        // from ranges, a clustered one (its nodes are not ranges) must still climb.
+        let pyramid = RefitBoxes::Pyramid { levels: 0 };
+        let dispatches = refit_to_with(&mut lbvh, &tree, &before, 1, pyramid);
+        assert_eq!(dispatches, 1, "a clustered tree is refit by the climb");
+        let (tree, _) = check_read_back(tree, &before, false);
+        assert_eq!(refs(&tree), refs_before, "refit keeps every ref");
         let (tree, _) = build_and_check_clustered(&mut lbvh, &before, 4);
         // As a fast-trace BLAS is refit: the boxes in sorted order.
-        refit_to_with(&mut lbvh, &tree, &after, 4, true);
+        refit_to_with(&mut lbvh, &tree, &after, 4, RefitBoxes::Sorted);
         let (tree, sah) = check_read_back(tree, &after, false);
         let optimum = optimal_collapsed_sah(&tree, &after, 4);
         assert_is_optimum(sah, optimum, "clustered refit for the new boxes");

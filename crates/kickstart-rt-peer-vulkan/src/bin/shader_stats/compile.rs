@@ -504,20 +504,23 @@ pub fn write_spirv(
 mod tests {
     use super::*;
 
-    /// lbvh.wgsl as the SDK compiles it: after digit_histogram.wgsl and centroid_bounds.wgsl,
-    /// whose helpers it uses.
+    /// lbvh.wgsl as the SDK compiles it: after box_pyramid.wgsl, digit_histogram.wgsl and
+    /// centroid_bounds.wgsl, whose helpers it uses.
     fn lbvh() -> Source {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../kickstart-rt/shaders/");
-        let parts: Vec<(String, String)> =
-            ["digit_histogram.wgsl", "centroid_bounds.wgsl", "lbvh.wgsl"]
-                .iter()
-                .map(|name| {
-                    let path = format!("{dir}{name}");
-                    let text =
-                        std::fs::read_to_string(&path).expect("the shader is in the workspace");
-                    (path, text)
-                })
-                .collect();
+        let parts: Vec<(String, String)> = [
+            "box_pyramid.wgsl",
+            "digit_histogram.wgsl",
+            "centroid_bounds.wgsl",
+            "lbvh.wgsl",
+        ]
+        .iter()
+        .map(|name| {
+            let path = format!("{dir}{name}");
+            let text = std::fs::read_to_string(&path).expect("the shader is in the workspace");
+            (path, text)
+        })
+        .collect();
         Source::concat(&parts)
     }
 
@@ -558,6 +561,10 @@ mod tests {
     /// - `lbvh_climb`: `params`, `aabbs` (`leaf_box`), `work`, `order`, `topology`, `nodes`
     ///   (`write_node`), `bounds_out` (`write_bounds`). (Its workgroup memory is left out: it
     ///   changes whenever the climb is tuned.)
+    /// - `lbvh_pyramid`: `params` and 11 `pyramid` (storage read_write, in place of `aabbs`);
+    ///   workgroup memory `wg_boxes: array<f32, 1536>` = 6144 bytes;
+    /// - `lbvh_range_refit`: `params`, `order` (`out_ref`), `topology`, `nodes`, `bounds_out`
+    ///   and `pyramid`.
     ///
     /// Vulkan bindings are the ranks within the group (wgpu-hal's numbering).
     #[test]
@@ -574,7 +581,9 @@ mod tests {
                 "lbvh_morton",
                 "lbvh_morton_histogram",
                 "lbvh_hierarchy",
-                "lbvh_climb"
+                "lbvh_climb",
+                "lbvh_pyramid",
+                "lbvh_range_refit"
             ]
         );
         let got = |ep| layout_of(&module, &info, ep);
@@ -633,6 +642,24 @@ mod tests {
                 (0, 7, 5, RW),
                 (0, 8, 6, RW),
             ]
+        );
+        assert_eq!(
+            got("lbvh_pyramid"),
+            (vec![(0, 0, 0, U), (0, 11, 1, RW)], 6144)
+        );
+        assert_eq!(
+            got("lbvh_range_refit"),
+            (
+                vec![
+                    (0, 0, 0, U),
+                    (0, 5, 1, RW),
+                    (0, 6, 2, RW),
+                    (0, 7, 3, RW),
+                    (0, 8, 4, RW),
+                    (0, 11, 5, RW)
+                ],
+                0
+            )
         );
     }
 
