@@ -11,10 +11,10 @@
 //   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
 //   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
 //                  refit share it)
-//   lbvh_pyramid, lbvh_range_refit
-//                  the refit of a Karras tree with one primitive a leaf and boxes in sorted
-//                  order: the box pyramid's upper levels (box_pyramid.wgsl), then every node's
-//                  boxes from its leaf range, each node on its own
+//   lbvh_refit_gather, lbvh_pyramid, lbvh_range_refit
+//                  the range refit of a BLAS (a Karras tree, one triangle a leaf) from its
+//                  re-ingested triangles: every node's boxes from its leaf range, each node on
+//                  its own (see the section at the end)
 //
 // `work` layout (u32 words, all accessed atomically):
 //   [0, 6)                       centroid bounds: ~enc(min.xyz), enc(max.xyz) (atomicMax only;
@@ -58,6 +58,11 @@ struct Params {
     // lbvh_pyramid: the pyramid level it reduces (it writes the PYRAMID_PASS_LEVELS above).
     level: u32,
     pad2: u32,
+    // lbvh_refit_gather: first staged triangle (binding 12) and first BLAS triangle (13).
+    tri_src_base: u32,
+    tri_dst_base: u32,
+    pad3: u32,
+    pad4: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -772,20 +777,67 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Range refit: a refit of a Karras tree (one primitive a leaf, sorted-position refs) whose leaf
-// boxes are in sorted order. Every inner node covers one range of sorted positions (its range end
-// is in the topology), and the box of a range is the union of at most two boxes per level of the
-// box pyramid over the leaf boxes (box_pyramid.wgsl). So each node's boxes are computed on their
-// own, without the climb's arrivals and device-scope fences: lbvh_pyramid adds the pyramid's
-// levels (the gather wrote the lowest ones), then lbvh_range_refit writes every node. The boxes
-// are the same unions of the same leaf boxes as the climb's, so the nodes are bit-identical.
+// Range refit of a BLAS: the refit of a Karras tree (one triangle a leaf, sorted-position refs)
+// from its re-ingested triangles, without the climb (docs/ray-tracing-core.md, "Refit").
+//
+// Every inner node of a Karras tree covers one range of sorted positions (the other end than
+// its own index is in the topology), and the box of any range is the union of at most two boxes
+// per level of the *box pyramid* over the sorted leaf boxes: level 0 is the n leaf boxes, level
+// L >= 1 holds ceil(n / 2^L) boxes, box i of it the union of boxes 2i and 2i + 1 of level L - 1
+// (only 2i at the end of an odd level). The levels follow each other in `pyramid` (two vec4 a box:
+// min, max), so box i of level L is box pyramid_level_start(n, L) + i; src/scene/lbvh.rs's
+// `pyramid_boxes` is the same sum. So each node's boxes are computed on their own, in three
+// passes and without arrival counters or chains of device-scope round trips:
+//   lbvh_refit_gather  per sorted position, workgroups of WG: gathers the triangle into sorted
+//                      order (as gather_triangles), makes its box and levels 0..=REFIT_WG_LEVELS
+//                      of the pyramid over the workgroup's block in workgroup memory, writes them
+//                      out, and writes every node whose range lies inside the block (most nodes:
+//                      a node of s leaves straddles a block boundary with probability ~ s / WG)
+//   lbvh_pyramid       the levels above, PYRAMID_PASS_LEVELS a dispatch
+//   lbvh_range_refit   per inner node: the nodes whose range straddles blocks, from `pyramid`
+// The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
+// bit-identical to a climb's.
 
-// The pyramid, level 0 (the sorted leaf boxes) at box aabb_base. Bound read-write in place of
-// `aabbs` (a buffer cannot be bound both ways in one dispatch).
+// Levels the gather's workgroup makes of its block: WG = 2^8 leaves, down to one box.
+const REFIT_WG_LEVELS: u32 = 8u;
+// Levels one lbvh_pyramid workgroup adds: each invocation reduces PYRAMID_SERIAL boxes (4 levels)
+// to one, then the workgroup its WG boxes (8 more).
+const PYRAMID_SERIAL: u32 = 16u;
+const PYRAMID_PASS_LEVELS: u32 = 12u;
+
+// Boxes of the level above a level of `count` boxes (n <= 2^28: no overflow).
+fn pyramid_parent_count(count: u32) -> u32 {
+    return (count + 1u) / 2u;
+}
+
+// First box of level `level` of the pyramid over n boxes.
+fn pyramid_level_start(n: u32, level: u32) -> u32 {
+    var start = 0u;
+    var count = n;
+    for (var l = 0u; l < level; l++) {
+        start += count;
+        count = pyramid_parent_count(count);
+    }
+    return start;
+}
+
+// Boxes in level `level` of the pyramid over n boxes.
+fn pyramid_level_count(n: u32, level: u32) -> u32 {
+    var count = n;
+    for (var l = 0u; l < level; l++) {
+        count = pyramid_parent_count(count);
+    }
+    return count;
+}
+
 @group(0) @binding(11) var<storage, read_write> pyramid: array<vec4<f32>>;
+// The staged (re-ingested) triangles in primitive order, and the BLAS's triangles in sorted order
+// (3 vec4 each, copied as bits: the w lanes hold integers).
+@group(0) @binding(12) var<storage, read> refit_src: array<vec4<u32>>;
+@group(0) @binding(13) var<storage, read_write> refit_dst: array<vec4<u32>>;
 
-// Box `at` of the pyramid (all levels counted from level 0's first box); a stored empty box of
-// level 0 becomes the canonical one.
+// Box `at` of the pyramid (counted from level 0's first box); a stored empty box of level 0
+// becomes the canonical one.
 fn pyramid_box(at: u32) -> Box {
     let i = 2u * (params.aabb_base + at);
     let lo = pyramid[i].xyz;
@@ -802,8 +854,156 @@ fn pyramid_store(at: u32, b: Box) {
     pyramid[i + 1u] = vec4<f32>(b.hi, 0.0);
 }
 
+// The block's pyramid: level L (0..=REFIT_WG_LEVELS) at slots [2 WG - 2 WG / 2^L, + WG / 2^L).
+var<workgroup> wg_pyramid_lo: array<vec3<f32>, 512>;
+var<workgroup> wg_pyramid_hi: array<vec3<f32>, 512>;
+
+fn wg_pyramid_box(slot: u32) -> Box {
+    return Box(wg_pyramid_lo[slot], wg_pyramid_hi[slot]);
+}
+
+// First slot of level `level` of the block's pyramid.
+fn wg_level_slot(level: u32) -> u32 {
+    return 2u * WG - (2u * WG >> level);
+}
+
+// The union of leaf boxes [a, b] (a <= b), positions relative to the block, from the block's
+// pyramid; the same steps as range_box.
+fn wg_range_box(a: u32, b: u32) -> Box {
+    var acc = empty_box();
+    var l = a;
+    var r = b + 1u;
+    var level = 0u;
+    while l < r {
+        let at = wg_level_slot(level);
+        if (l & 1u) != 0u {
+            acc = union_box(acc, wg_pyramid_box(at + l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, wg_pyramid_box(at + r));
+        }
+        l >>= 1u;
+        r >>= 1u;
+        level += 1u;
+    }
+    return acc;
+}
+
+// The union of leaf boxes [a, b] (sorted positions, a <= b) from `pyramid`: at each level, the
+// range's odd first box and even last box are taken and the rest is left to the level above.
+fn range_box(a: u32, b: u32) -> Box {
+    var acc = empty_box();
+    var l = a;
+    var r = b + 1u;
+    var start = 0u;
+    var count = params.count;
+    // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
+    // level of one box.
+    while l < r {
+        if (l & 1u) != 0u {
+            acc = union_box(acc, pyramid_box(start + l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, pyramid_box(start + r));
+        }
+        l >>= 1u;
+        r >>= 1u;
+        start += count;
+        count = pyramid_parent_count(count);
+    }
+    return acc;
+}
+
+// Inner node i's leaf range [first, last] (Karras tree, n >= 2, i < n - 1).
+fn node_range(i: u32) -> vec2<u32> {
+    let j = topology[range_ends_at() + i];
+    return vec2<u32>(min(i, j), max(i, j));
+}
+
+// Writes inner node i (children lc, rc: left over [first, g], right over [g + 1, last]) from
+// its children's boxes, and the root's box to bounds_out.
+fn write_ranged_node(i: u32, lc: u32, rc: u32, lb: Box, rb: Box) {
+    write_node(i, lb, out_ref(lc), rb, out_ref(rc));
+    if i == 0u {
+        write_bounds(union_box(lb, rb));
+    }
+}
+
+@compute @workgroup_size(256)
+fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
+                     @builtin(workgroup_id) wid: vec3<u32>,
+                     @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    let k = linear_id(lid, wid, nwg);
+    let block = k - lid;
+    // Past the end (and for dropped triangles): the empty box. No early return: the barriers
+    // below must be reached by the whole workgroup.
+    var b = empty_box();
+    if k < n {
+        let s = 3u * (params.tri_src_base + order[params.order_base + k]);
+        let d = 3u * (params.tri_dst_base + k);
+        let v0 = refit_src[s];
+        let v1 = refit_src[s + 1u];
+        let v2 = refit_src[s + 2u];
+        refit_dst[d] = v0;
+        refit_dst[d + 1u] = v1;
+        refit_dst[d + 2u] = v2;
+        let stored = triangle_box(bitcast<vec4<f32>>(v0), bitcast<vec4<f32>>(v1),
+                                  bitcast<vec4<f32>>(v2));
+        let at = 2u * (params.aabb_base + k);
+        pyramid[at] = stored.lo;
+        pyramid[at + 1u] = stored.hi;
+        if !stored_box_is_empty(stored.lo.xyz, stored.hi.xyz) {
+            b = Box(stored.lo.xyz, stored.hi.xyz);
+        }
+    }
+    wg_pyramid_lo[lid] = b.lo;
+    wg_pyramid_hi[lid] = b.hi;
+    var start = 0u;
+    var count = n;
+    for (var level = 1u; level <= REFIT_WG_LEVELS; level++) {
+        // Uniform (n only): the pyramid ends at its level of one box, and no range needs more.
+        if count <= 1u {
+            break;
+        }
+        workgroupBarrier();
+        start += count;
+        count = pyramid_parent_count(count);
+        if lid < (WG >> level) {
+            let below = wg_level_slot(level - 1u) + 2u * lid;
+            let up = union_box(wg_pyramid_box(below), wg_pyramid_box(below + 1u));
+            let slot = wg_level_slot(level) + lid;
+            wg_pyramid_lo[slot] = up.lo;
+            wg_pyramid_hi[slot] = up.hi;
+            let i = (block >> level) + lid;
+            if i < count {
+                pyramid_store(start + i, up);
+            }
+        }
+    }
+    workgroupBarrier();
+    // Inner node k, when its range lies inside the block (k is one end of it, so the block is
+    // k's): from workgroup memory. lbvh_range_refit writes the others.
+    if k + 1u < n {
+        let range = node_range(k);
+        if range.x >= block && range.y < block + WG {
+            let lc = topology[params.topo_base + 2u * k];
+            let rc = topology[params.topo_base + 2u * k + 1u];
+            let g = lc & 0x7fffffffu;
+            let lb = wg_range_box(range.x - block, g - block);
+            let rb = wg_range_box(g + 1u - block, range.y - block);
+            write_ranged_node(k, lc, rc, lb, rb);
+        }
+    }
+}
+
 // Levels params.level + 1 ..= params.level + PYRAMID_PASS_LEVELS (those that exist): workgroup w
-// reduces boxes [512 w, 512 w + 512) of params.level, an aligned block of every level above it.
+// reduces boxes [WG PYRAMID_SERIAL w, + WG PYRAMID_SERIAL) of params.level, an aligned block of
+// every level above it.
 @compute @workgroup_size(256)
 fn lbvh_pyramid(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
                 @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -811,38 +1011,50 @@ fn lbvh_pyramid(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id
     let block = wid.y * nwg.x + wid.x;
     var start = pyramid_level_start(n, params.level);
     var count = pyramid_level_count(n, params.level);
-    let first = 2u * (WG * block + lid);
-    var b = empty_box();
-    if first < count {
-        b = pyramid_box(start + first);
-    }
-    if first + 1u < count {
-        b = union_box(b, pyramid_box(start + first + 1u));
-    }
-    for (var level = 1u; level <= PYRAMID_PASS_LEVELS; level++) {
-        // Uniform: the counts depend on the params only.
-        if count <= 1u {
-            break;
+    // This invocation's PYRAMID_SERIAL boxes, reduced in registers to one (4 levels).
+    var boxes: array<Box, 16>;
+    var first = PYRAMID_SERIAL * (WG * block + lid);
+    for (var t = 0u; t < PYRAMID_SERIAL; t++) {
+        boxes[t] = empty_box();
+        if first + t < count {
+            boxes[t] = pyramid_box(start + first + t);
         }
+    }
+    var held = PYRAMID_SERIAL;
+    var level = 0u;
+    while held > 1u && count > 1u {
         start += count;
         count = pyramid_parent_count(count);
-        let width = WG >> (level - 1u);
-        let i = ((WG * block) >> (level - 1u)) + lid;
-        if lid < width && i < count {
-            pyramid_store(start + i, b);
+        held /= 2u;
+        first /= 2u;
+        level += 1u;
+        for (var t = 0u; t < held; t++) {
+            boxes[t] = union_box(boxes[2u * t], boxes[2u * t + 1u]);
+            if first + t < count {
+                pyramid_store(start + first + t, boxes[t]);
+            }
         }
-        if level == PYRAMID_PASS_LEVELS {
-            break;
-        }
-        // The next level's box of this invocation: the union of two of this level's.
-        if lid < width {
-            wg_store_box(lid, b);
-        }
+    }
+    // Then the workgroup's WG boxes (one each) in workgroup memory, as far as they go.
+    var b = boxes[0];
+    var width = WG;
+    while level < PYRAMID_PASS_LEVELS && count > 1u {
+        // Uniform: level and count depend on the params only.
+        wg_store_box(lid, b);
         workgroupBarrier();
-        if lid < width / 2u {
+        width /= 2u;
+        if lid < width {
             b = union_box(wg_load_box(2u * lid), wg_load_box(2u * lid + 1u));
         }
         workgroupBarrier();
+        start += count;
+        count = pyramid_parent_count(count);
+        level += 1u;
+        // The workgroup's block of this level: `width` boxes a workgroup.
+        let i = block * width + lid;
+        if lid < width && i < count {
+            pyramid_store(start + i, b);
+        }
     }
 }
 
@@ -862,36 +1074,7 @@ fn wg_load_box(slot: u32) -> Box {
                vec3<f32>(wg_boxes[at + 3u], wg_boxes[at + 4u], wg_boxes[at + 5u]));
 }
 
-// The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
-// first box and even last box are taken and the rest is left to the level above.
-fn range_box(a: u32, b: u32) -> Box {
-    if a == b {
-        return pyramid_box(a);
-    }
-    var acc = empty_box();
-    var l = a;
-    var r = b + 1u;
-    var start = 0u;
-    var count = params.count;
-    // At most 2 x 29 boxes (n <= 2^28); the loop ends when the range is used up.
-    while l < r {
-        if (l & 1u) != 0u {
-            acc = union_box(acc, pyramid_box(start + l));
-            l += 1u;
-        }
-        if (r & 1u) != 0u {
-            r -= 1u;
-            acc = union_box(acc, pyramid_box(start + r));
-        }
-        l >>= 1u;
-        r >>= 1u;
-        start += count;
-        count = pyramid_parent_count(count);
-    }
-    return acc;
-}
-
-// Per inner node (n >= 2: the caller runs lbvh_climb for fewer).
+// Per inner node whose range straddles blocks of WG (n > WG; lbvh_refit_gather wrote the rest).
 @compute @workgroup_size(256)
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
@@ -900,14 +1083,12 @@ fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
     if i + 1u >= params.count {
         return;
     }
+    let range = node_range(i);
+    if range.x / WG == range.y / WG {
+        return;
+    }
     let lc = topology[params.topo_base + 2u * i];
     let rc = topology[params.topo_base + 2u * i + 1u];
-    let j = topology[range_ends_at() + i];
     let g = lc & 0x7fffffffu;
-    let lb = range_box(min(i, j), g);
-    let rb = range_box(g + 1u, max(i, j));
-    write_node(i, lb, out_ref(lc), rb, out_ref(rc));
-    if i == 0u {
-        write_bounds(union_box(lb, rb));
-    }
+    write_ranged_node(i, lc, rc, range_box(range.x, g), range_box(g + 1u, range.y));
 }

@@ -1,6 +1,6 @@
 // Small per-primitive passes of the BVH builds (docs/ray-tracing-core.md): triangle AABBs,
 // triangle gather into sorted order, instance world AABBs for the TLAS. Each entry point binds
-// only what it uses (automatic layouts are per entry point).
+// only what it uses (automatic layouts are per entry point). Triangle boxes: triangle_box.wgsl.
 
 struct Params {
     a: u32,     // triangle_aabbs: tri_base; gather: src_base; instance_aabbs: count
@@ -12,16 +12,9 @@ struct Params {
 @group(0) @binding(0) var<uniform> params: Params;
 
 const WG: u32 = 64u;
-const EMPTY_MIN: vec4<f32> = vec4<f32>(1e30, 1e30, 1e30, 0.0);
-const EMPTY_MAX: vec4<f32> = vec4<f32>(-1e30, -1e30, -1e30, 0.0);
 
 fn linear_id(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid;
-}
-
-fn is_non_finite(v: vec3<f32>) -> bool {
-    let bits = bitcast<vec3<u32>>(v);
-    return any((bits & vec3<u32>(0x7f800000u)) == vec3<u32>(0x7f800000u));
 }
 
 // ---- triangle_aabbs -------------------------------------------------------------------------
@@ -47,23 +40,6 @@ fn triangle_aabbs(
     let out = 2u * (params.c + k);
     tri_aabbs[out] = b.lo;
     tri_aabbs[out + 1u] = b.hi;
-}
-
-struct StoredAabb {
-    lo: vec4<f32>,
-    hi: vec4<f32>,
-}
-
-// A staged triangle's box as stored. Dropped triangles (flag in the second vertex's w) get the
-// empty box; so would a non-finite one, which ingestion never writes, rather than poisoning the
-// build with NaN bounds.
-fn triangle_box(v0: vec4<f32>, v1: vec4<f32>, v2: vec4<f32>) -> StoredAabb {
-    let dropped = bitcast<u32>(v1.w) == 1u;
-    if dropped || is_non_finite(v0.xyz) || is_non_finite(v1.xyz) || is_non_finite(v2.xyz) {
-        return StoredAabb(EMPTY_MIN, EMPTY_MAX);
-    }
-    return StoredAabb(vec4<f32>(min(min(v0.xyz, v1.xyz), v2.xyz), 0.0),
-                      vec4<f32>(max(max(v0.xyz, v1.xyz), v2.xyz), 0.0));
 }
 
 // ---- gather_triangles -----------------------------------------------------------------------
@@ -105,17 +81,10 @@ fn gather_triangles(
 
 // ---- gather_triangles_boxes -----------------------------------------------------------------
 // gather_triangles that also writes each triangle's box at its sorted position k
-// (gather_boxes[2k..2k+1], as triangle_aabbs would at its primitive index) and levels
-// 1..=PYRAMID_GATHER_LEVELS of the box pyramid over them (box_pyramid.wgsl, after the n boxes):
-// a BLAS refit's one pass before its node boxes are computed (lbvh.wgsl's range refit, or the
-// climb with the sorted-boxes flag, which reads level 0 only). The workgroup's 64 boxes are one
-// aligned block of every level it writes, so the reduction stays in workgroup memory.
+// (gather_boxes[2k..2k+1], as triangle_aabbs would at its primitive index): a BLAS refit's one
+// pass before the climb, which then reads the boxes in order (the LBVH's sorted-boxes flag).
 
 @group(0) @binding(4) var<storage, read_write> gather_boxes: array<vec4<f32>>;
-
-// Two halves: a level is read from one and written to the other (one barrier per level).
-var<workgroup> wg_pyramid_lo: array<vec3<f32>, 128>;
-var<workgroup> wg_pyramid_hi: array<vec3<f32>, 128>;
 
 @compute @workgroup_size(64)
 fn gather_triangles_boxes(
@@ -124,51 +93,14 @@ fn gather_triangles_boxes(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let k = linear_id(wid, nwg, lid);
-    let n = params.c;
-    // Past the end (and for dropped triangles): the pyramid's empty box. No early return: the
-    // barriers below must be reached by the whole workgroup.
-    var lo = vec3<f32>(PYRAMID_EMPTY);
-    var hi = vec3<f32>(-PYRAMID_EMPTY);
-    if k < n {
-        let t = gather_one(k);
-        let b = triangle_box(bitcast<vec4<f32>>(t.v0), bitcast<vec4<f32>>(t.v1),
-                             bitcast<vec4<f32>>(t.v2));
-        gather_boxes[2u * k] = b.lo;
-        gather_boxes[2u * k + 1u] = b.hi;
-        if !stored_box_is_empty(b.lo.xyz, b.hi.xyz) {
-            lo = b.lo.xyz;
-            hi = b.hi.xyz;
-        }
+    if k >= params.c {
+        return;
     }
-    wg_pyramid_lo[lid] = lo;
-    wg_pyramid_hi[lid] = hi;
-    let block = k - lid;
-    var start = 0u;
-    var count = n;
-    for (var level = 1u; level <= PYRAMID_GATHER_LEVELS; level++) {
-        // Uniform (n only): the pyramid ends at its level of one box.
-        if count <= 1u {
-            break;
-        }
-        workgroupBarrier();
-        start += count;
-        count = pyramid_parent_count(count);
-        let width = WG >> level;
-        let src_half = 64u * ((level - 1u) & 1u);
-        let dst_half = 64u - src_half;
-        if lid < width {
-            let l = src_half + 2u * lid;
-            let box_lo = min(wg_pyramid_lo[l], wg_pyramid_lo[l + 1u]);
-            let box_hi = max(wg_pyramid_hi[l], wg_pyramid_hi[l + 1u]);
-            wg_pyramid_lo[dst_half + lid] = box_lo;
-            wg_pyramid_hi[dst_half + lid] = box_hi;
-            let i = (block >> level) + lid;
-            if i < count {
-                gather_boxes[2u * (start + i)] = vec4<f32>(box_lo, 0.0);
-                gather_boxes[2u * (start + i) + 1u] = vec4<f32>(box_hi, 0.0);
-            }
-        }
-    }
+    let t = gather_one(k);
+    let b = triangle_box(bitcast<vec4<f32>>(t.v0), bitcast<vec4<f32>>(t.v1),
+                         bitcast<vec4<f32>>(t.v2));
+    gather_boxes[2u * k] = b.lo;
+    gather_boxes[2u * k + 1u] = b.hi;
 }
 
 // ---- instance_refs -------------------------------------------------------------------------

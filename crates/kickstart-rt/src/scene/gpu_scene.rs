@@ -6,10 +6,10 @@ use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    pyramid_boxes, Lbvh, LbvhBuild, LbvhRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS,
+    Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
-use crate::scene::prims::{Prims, GATHER_PYRAMID_LEVELS, MAX_REFS_PER_INSTANCE};
+use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::trace::debug_view::DebugViewPass;
 use crate::trace::rays::{RayTracer, SceneBuffers};
@@ -412,16 +412,13 @@ impl GpuScene {
         );
     }
 
-    /// Scratch for a build or refit of `prims` primitives: `boxes` boxes (a build's `prims`, a
-    /// refit's whole box pyramid) and the order.
-    fn ensure_scratch(&mut self, prims: u32, boxes: u64) {
+    fn ensure_scratch(&mut self, prims: u32) {
         let n = prims.max(1) as u64;
-        let boxes = boxes.max(1);
-        if self.scratch_aabbs.size() < boxes * AABB_BYTES {
+        if self.scratch_aabbs.size() < n * AABB_BYTES {
             self.scratch_aabbs = storage(
                 &self.device,
                 "kickstart-rt build boxes",
-                boxes.next_power_of_two() * AABB_BYTES,
+                n.next_power_of_two() * AABB_BYTES,
             );
         }
         if self.scratch_order.size() < n * 4 {
@@ -492,7 +489,7 @@ impl GpuScene {
         } else {
             None
         };
-        self.ensure_scratch(n, n.into());
+        self.ensure_scratch(n);
         rec.scope = "blas build";
         let (prims, lbvh) = self.passes.build(&self.device);
         prims.triangle_aabbs(
@@ -557,7 +554,9 @@ impl GpuScene {
         ])
     }
 
-    /// Refits a built `allow_update` BLAS to its re-ingested triangles.
+    /// Refits a built `allow_update` BLAS to its re-ingested triangles: a fast-build tree by the
+    /// range refit ([`Lbvh::refit_triangles`]), a fast-trace (clustered) tree by gathering the
+    /// triangles and their boxes and climbing.
     pub fn refit_blas(&mut self, rec: &mut Recorder<'_>, slot: u32, g: &GeometryGpu) {
         let (
             Some(staged),
@@ -572,13 +571,33 @@ impl GpuScene {
             return;
         };
         let n = g.triangles;
-        self.ensure_scratch(n, pyramid_boxes(n));
         rec.scope = "blas refit";
+        // A fast-build tree (the Karras tree, one triangle a leaf) is refit from its nodes' leaf
+        // ranges, straight from the re-ingested triangles.
+        if max_leaf == 1 && n >= 2 {
+            let (_, lbvh) = self.passes.build(&self.device);
+            lbvh.refit_triangles(
+                rec,
+                &LbvhTriangleRefit {
+                    src: self.staged.buffer(),
+                    src_base: staged.start,
+                    dst: self.triangles.buffer(),
+                    dst_base: tris.start,
+                    count: n,
+                    nodes: self.nodes.buffer(),
+                    node_base: nodes.start,
+                    order: self.orders.buffer(),
+                    order_base: order.start,
+                    topology: (self.topologies.buffer(), topology.start),
+                    bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                },
+            );
+            return;
+        }
+        self.ensure_scratch(n);
         let (prims, lbvh) = self.passes.build(&self.device);
-        // The gather comes first and also writes the boxes in sorted order and the lowest levels
-        // of their box pyramid: one pass fewer than a build's boxes-then-gather, and the refit
-        // reads its leaves' boxes coalesced (the range refit of a fast-build tree from the
-        // pyramid).
+        // The gather comes first and also writes the boxes in sorted order: one pass fewer than
+        // a build's boxes-then-gather, and the climb reads its leaves' boxes coalesced.
         prims.gather_triangles(
             rec,
             self.staged.buffer(),
@@ -605,9 +624,6 @@ impl GpuScene {
                 max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
                 sorted_boxes: true,
-                pyramid_levels: GATHER_PYRAMID_LEVELS,
-                // As in build_blas: fast-trace (leaves collapsed) is the clustered build.
-                clustered: max_leaf > 1,
             },
         );
     }
@@ -685,8 +701,6 @@ impl GpuScene {
                     max_leaf: 1,
                     bounds_out: None,
                     sorted_boxes: false,
-                    pyramid_levels: 0,
-                    clustered: false,
                 },
             );
             self.tlas.refits_since_rebuild += 1;

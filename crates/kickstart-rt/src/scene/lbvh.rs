@@ -32,15 +32,19 @@
 //! one leaf.
 //!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology; a BLAS refit's
-//! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]). The refit of a Karras tree with one
-//! primitive a leaf and sorted boxes (every fast-build BLAS) is the *range refit* instead: every
-//! inner node covers one range of sorted positions (the hierarchy pass stores each node's other
-//! range end in the topology), and the box of a range is the union of at most two boxes per
-//! level of a pyramid over the sorted leaf boxes (`shaders/box_pyramid.wgsl`). So
-//! `lbvh pyramid` adds the pyramid's levels above those the caller wrote (9 levels a dispatch),
-//! and `lbvh range refit` computes every node's boxes on its own: no arrival counters and no
-//! chains of device-scope round trips from the leaves to the root, which is what bounds the
-//! climb (BENCHMARKS.md, session 23). The nodes are bit-identical to the climb's.
+//! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]).
+//!
+//! The refit of a fast-build BLAS (a Karras tree, one triangle a leaf) is the *range refit*
+//! instead ([`Lbvh::refit_triangles`]), which starts from the re-ingested triangles: every inner
+//! node covers one range of sorted positions (the hierarchy pass stores each node's other range
+//! end in the topology), and the box of a range is the union of at most two boxes per level of a
+//! pyramid over the sorted leaf boxes (`shaders/lbvh.wgsl`, "Range refit"). `lbvh refit gather`
+//! gathers the triangles into sorted order, makes the pyramid's lowest levels over each block of
+//! 256 in workgroup memory and writes every node whose range lies inside its block; `lbvh
+//! pyramid` adds the levels above (12 a dispatch); `lbvh range refit` writes the nodes that
+//! straddle blocks. No arrival counters and no chains of device-scope round trips from the leaves
+//! to the root, which is what bounds the climb (BENCHMARKS.md, session 23); the nodes are
+//! bit-identical to the climb's.
 
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
@@ -162,18 +166,36 @@ pub(crate) struct LbvhRefit<'a> {
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
     /// `aabbs` holds the boxes in sorted order already (leaf `k`'s at `aabb_base + k`, as
     /// [`crate::scene::prims::Prims::gather_triangles`] writes them), so the climb reads each
-    /// with one coalesced load instead of going through `order`. With one primitive a leaf and
-    /// a Karras topology this is the range refit, which also needs room for the whole box
-    /// pyramid in `aabbs` ([`pyramid_boxes`] boxes from `aabb_base`; without it the refit
-    /// climbs).
+    /// with one coalesced load instead of going through `order`.
     pub sorted_boxes: bool,
-    /// Levels `1..=pyramid_levels` of the box pyramid over the sorted boxes are in `aabbs`
-    /// already (the gather writes [`crate::scene::prims::GATHER_PYRAMID_LEVELS`]); the range
-    /// refit adds the rest. 0: it makes them all.
-    pub pyramid_levels: u32,
-    /// The topology is a clustered build's (`hploc climb`), whose nodes are not ranges: the
-    /// refit climbs.
-    pub clustered: bool,
+}
+
+/// Inputs and outputs of the range refit of a BLAS built as a Karras tree (not clustered) with
+/// one triangle a leaf and its topology kept: the re-ingested triangles are gathered into
+/// sorted order and every node is refit from its leaf range ([`Lbvh::refit_triangles`]).
+pub(crate) struct LbvhTriangleRefit<'a> {
+    /// Re-ingested triangles in primitive order (3 `vec4` each).
+    pub src: &'a wgpu::Buffer,
+    /// First triangle of the geometry in `src`.
+    pub src_base: u32,
+    /// Output: the BLAS's triangles in sorted order.
+    pub dst: &'a wgpu::Buffer,
+    /// First triangle of the BLAS in `dst`.
+    pub dst_base: u32,
+    /// Number of triangles (as built, at least 2).
+    pub count: u32,
+    /// The nodes written by the build.
+    pub nodes: &'a wgpu::Buffer,
+    /// First node of this BVH.
+    pub node_base: u32,
+    /// The order written by the build.
+    pub order: &'a wgpu::Buffer,
+    /// First u32 of `order`.
+    pub order_base: u32,
+    /// The topology written by the build (buffer, base).
+    pub topology: (&'a wgpu::Buffer, u32),
+    /// Output: the root box as two `vec4` at this vec4 index.
+    pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
 
 /// Boxes of the box pyramid over `n` boxes (`shaders/box_pyramid.wgsl`): level 0 (the boxes),
@@ -188,8 +210,11 @@ pub(crate) fn pyramid_boxes(n: u32) -> u64 {
     total
 }
 
+/// Pyramid levels `lbvh refit gather` makes (the shader's `REFIT_WG_LEVELS`: its workgroup's
+/// block of 256 down to one box).
+const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
 /// Levels each `lbvh pyramid` dispatch adds (the shader's `PYRAMID_PASS_LEVELS`).
-const PYRAMID_PASS_LEVELS: u32 = 9;
+const PYRAMID_PASS_LEVELS: u32 = 12;
 /// Boxes of the reduced level one `lbvh pyramid` workgroup reads.
 const PYRAMID_PASS_BLOCK: u32 = 1 << PYRAMID_PASS_LEVELS;
 
@@ -216,8 +241,13 @@ struct Params {
     centroid_base: u32,
     /// `lbvh pyramid`: the pyramid level the dispatch reduces.
     level: u32,
-    /// Pads the uniform to a multiple of 16 bytes.
     pad: u32,
+    /// `lbvh refit gather`: first staged triangle.
+    tri_src_base: u32,
+    /// `lbvh refit gather`: first BLAS triangle.
+    tri_dst_base: u32,
+    /// Pads the uniform to a multiple of 16 bytes.
+    pad2: [u32; 2],
 }
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
@@ -263,6 +293,8 @@ pub(crate) struct Lbvh {
     hierarchy: wgpu::ComputePipeline,
     climb: wgpu::ComputePipeline,
     hploc: wgpu::ComputePipeline,
+    /// `lbvh_refit_gather`: the range refit's gather, lowest pyramid levels and in-block nodes.
+    refit_gather: wgpu::ComputePipeline,
     /// `lbvh_pyramid`: levels of the range refit's box pyramid.
     pyramid: wgpu::ComputePipeline,
     /// `lbvh_range_refit`: every node's boxes from its leaf range.
@@ -280,6 +312,8 @@ pub(crate) struct Lbvh {
     clustered_topology: Grown,
     /// Bound in place of a missing `bounds_out` (never written: the flag is off).
     dummy: Grown,
+    /// The range refit's box pyramid ([`pyramid_boxes`] boxes of 32 bytes).
+    pyramid_boxes: Grown,
 }
 
 /// Bindings of each entry point (auto layouts only contain what the entry point uses).
@@ -294,15 +328,18 @@ const HIERARCHY_BINDINGS: &[u32] = &[0, 3, 4, 5, 6];
 const CLIMB_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8];
 /// Bindings of `hploc_climb`.
 const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
-/// Bindings of `lbvh_pyramid` (11: the pyramid, read-write in place of `aabbs`).
+/// Bindings of `lbvh_refit_gather` (11: the pyramid, 12: staged triangles, 13: BLAS triangles).
+const REFIT_GATHER_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11, 12, 13];
+/// Bindings of `lbvh_pyramid`.
 const PYRAMID_BINDINGS: &[u32] = &[0, 11];
 /// Bindings of `lbvh_range_refit`.
 const RANGE_REFIT_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11];
 
 /// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
-/// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid).
+/// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid, 12 and 13 =
+/// its source and destination triangles).
 struct Bindings<'a> {
-    all: [&'a wgpu::Buffer; 12],
+    all: [&'a wgpu::Buffer; 14],
 }
 
 impl Bindings<'_> {
@@ -360,9 +397,9 @@ impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
         let src = concat!(
-            include_str!("../../shaders/box_pyramid.wgsl"),
             include_str!("../../shaders/digit_histogram.wgsl"),
             include_str!("../../shaders/centroid_bounds.wgsl"),
+            include_str!("../../shaders/triangle_box.wgsl"),
             include_str!("../../shaders/lbvh.wgsl"),
             include_str!("../../shaders/hploc.wgsl")
         );
@@ -373,6 +410,7 @@ impl Lbvh {
             hierarchy: compute_pipeline(device, "lbvh hierarchy", src, "lbvh_hierarchy"),
             climb: compute_pipeline(device, "lbvh climb", src, "lbvh_climb"),
             hploc: compute_pipeline(device, "hploc climb", src, "hploc_climb"),
+            refit_gather: compute_pipeline(device, "lbvh refit gather", src, "lbvh_refit_gather"),
             pyramid: compute_pipeline(device, "lbvh pyramid", src, "lbvh_pyramid"),
             range_refit: compute_pipeline(device, "lbvh range refit", src, "lbvh_range_refit"),
             sort: RadixSort::new(device),
@@ -382,6 +420,7 @@ impl Lbvh {
             topology: Grown::default(),
             clustered_topology: Grown::default(),
             dummy: Grown::default(),
+            pyramid_boxes: Grown::default(),
         }
     }
 
@@ -405,6 +444,7 @@ impl Lbvh {
             + self.topology.bytes()
             + self.clustered_topology.bytes()
             + self.dummy.bytes()
+            + self.pyramid_boxes.bytes()
             + self.sort.scratch_bytes()
     }
 
@@ -482,6 +522,9 @@ impl Lbvh {
             centroid_base: b.centroid_bounds.map_or(0, |(_, base)| base),
             level: 0,
             pad: 0,
+            tri_src_base: 0,
+            tri_dst_base: 0,
+            pad2: [0; 2],
         };
         let params = rec.uniform("lbvh params", &params_at(topo_base));
         let karras_params = if clustered {
@@ -501,6 +544,8 @@ impl Lbvh {
                 b.nodes,
                 bounds_out,
                 &topology,
+                &dummy,
+                &dummy,
                 &dummy,
                 &dummy,
             ],
@@ -574,7 +619,6 @@ impl Lbvh {
             return;
         }
         let device = rec.device;
-        let ranged = Self::refits_by_ranges(r);
         let work = self.work.get(device, "lbvh work", work_words(n) * 4);
         let dummy = self.dummy.get(device, "lbvh no bounds", 32);
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
@@ -582,22 +626,21 @@ impl Lbvh {
         if r.sorted_boxes {
             flags |= FLAG_SORTED_BOXES;
         }
-        let params_at = |level: u32| Params {
-            count: n,
-            aabb_base: r.aabb_base,
-            node_base: r.node_base,
-            order_base: r.order_base,
-            topo_base: r.topology.1,
-            bounds_base,
-            flags,
-            max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
-            key_bits: 0,
-            centroid_base: 0,
-            level,
-            pad: 0,
-        };
-        let params = rec.uniform("lbvh params", &params_at(0));
-        // Keys, values and the clustered topology are not used by a refit; the dummy fills
+        let params = rec.uniform(
+            "lbvh params",
+            &Params {
+                count: n,
+                aabb_base: r.aabb_base,
+                node_base: r.node_base,
+                order_base: r.order_base,
+                topo_base: r.topology.1,
+                bounds_base,
+                flags,
+                max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
+                ..Params::zeroed()
+            },
+        );
+        // Keys, values and the clustered topology are not used by the climb; the dummy fills
         // their slots.
         let bind = Bindings {
             all: [
@@ -612,16 +655,67 @@ impl Lbvh {
                 bounds_out,
                 &dummy,
                 &dummy,
-                r.aabbs,
+                &dummy,
+                &dummy,
+                &dummy,
             ],
         };
-        if !ranged {
-            Self::clear_arrivals(rec, &work, n);
-            let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
-            rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
+        Self::clear_arrivals(rec, &work, n);
+        let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
+        rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
+    }
+
+    /// Records the range refit of a BLAS (see the module docs): `lbvh refit gather`, then
+    /// `lbvh pyramid` while the pyramid has more than one box on its top level (none up to
+    /// 256 triangles, one up to 2^20), then `lbvh range refit` when there is more than one
+    /// block of 256. Counts below 2 are skipped with an error (a refit's tree has inner nodes).
+    pub fn refit_triangles(&mut self, rec: &mut Recorder<'_>, r: &LbvhTriangleRefit<'_>) {
+        let n = r.count;
+        if !(2..=MAX_COUNT).contains(&n) {
+            log::error!("LBVH range refit of {n} triangles skipped: it needs 2..={MAX_COUNT}");
             return;
         }
-        let mut level = r.pyramid_levels;
+        let device = rec.device;
+        let dummy = self.dummy.get(device, "lbvh no bounds", 32);
+        let pyramid = self
+            .pyramid_boxes
+            .get(device, "lbvh box pyramid", pyramid_boxes(n) * 32);
+        let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
+        let params_at = |level: u32| Params {
+            count: n,
+            node_base: r.node_base,
+            order_base: r.order_base,
+            topo_base: r.topology.1,
+            bounds_base,
+            flags: Self::flags(LeafRefs::SortedPosition, r.bounds_out.is_some()),
+            max_leaf: 1,
+            level,
+            tri_src_base: r.src_base,
+            tri_dst_base: r.dst_base,
+            ..Params::zeroed()
+        };
+        let params = rec.uniform("lbvh params", &params_at(0));
+        let bind = Bindings {
+            all: [
+                &params,
+                &dummy,
+                &dummy,
+                &dummy,
+                &dummy,
+                r.order,
+                r.topology.0,
+                r.nodes,
+                bounds_out,
+                &dummy,
+                &dummy,
+                &pyramid,
+                r.src,
+                r.dst,
+            ],
+        };
+        let bg = bind.group(device, &self.refit_gather, REFIT_GATHER_BINDINGS);
+        rec.dispatch("lbvh refit gather", &self.refit_gather, &[&bg], groups(n));
+        let mut level = REFIT_GATHER_LEVELS;
         loop {
             let count = pyramid_level_count(n, level);
             if count <= 1 {
@@ -635,23 +729,11 @@ impl Lbvh {
             rec.dispatch("lbvh pyramid", &self.pyramid, &[&bg], workgroups);
             level += PYRAMID_PASS_LEVELS;
         }
-        let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
-        rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n - 1));
-    }
-
-    /// Whether `r` is refit from leaf ranges (`lbvh pyramid` + `lbvh range refit`) rather than
-    /// by the climb: a Karras topology, one primitive a leaf (no collapse decisions, which need
-    /// the subtrees' costs bottom-up), sorted boxes with room for the pyramid behind them, and
-    /// at least one inner node.
-    fn refits_by_ranges(r: &LbvhRefit<'_>) -> bool {
-        let room = (u64::from(r.aabb_base) + pyramid_boxes(r.count)) * 32;
-        !r.clustered
-            && r.sorted_boxes
-            && r.leaf_refs == LeafRefs::SortedPosition
-            && effective_max_leaf(r.max_leaf, r.leaf_refs) == 1
-            && r.count >= 2
-            && r.pyramid_levels < 32
-            && r.aabbs.size() >= room
+        // Up to one block every node lies inside it: the gather wrote them all.
+        if n > WORKGROUP {
+            let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
+            rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n - 1));
+        }
     }
 }
 
@@ -785,8 +867,6 @@ mod tests {
         bases: Bases,
         leaf_refs: LeafRefs,
         max_leaf: u32,
-        /// Built by `hploc climb`: the topology is the clustered tree's.
-        clustered: bool,
         nodes: wgpu::Buffer,
         order: wgpu::Buffer,
         topology: wgpu::Buffer,
@@ -884,7 +964,6 @@ mod tests {
             bases,
             leaf_refs,
             max_leaf,
-            clustered,
             nodes: sentinel_buffer((u64::from(bases.node) + node_count + 1) * 16),
             order: sentinel_buffer(u64::from(bases.order + n) + 1),
             topology: sentinel_buffer(u64::from(bases.topo) + topo_words + 1),
@@ -986,88 +1065,28 @@ mod tests {
 
     /// Refits `tree` (as built) to the primitive boxes `after`, collapsing up to `max_leaf`.
     fn refit_to(lbvh: &mut Lbvh, tree: &GpuTree, after: &[Aabb], max_leaf: u32) {
-        refit_to_with(lbvh, tree, after, max_leaf, RefitBoxes::Primitive);
+        refit_to_with(lbvh, tree, after, max_leaf, false);
     }
 
-    /// How a test refit's boxes are given.
-    #[derive(Debug, Clone, Copy, PartialEq)]
-    enum RefitBoxes {
-        /// In primitive order (`after[p]` at `p`): the climb.
-        Primitive,
-        /// In sorted order (`after[order[k]]` at `k`), the buffer ending there: the climb.
-        Sorted,
-        /// In sorted order, with room for the box pyramid behind them, filled with junk boxes
-        /// except levels `1..=levels`, which the CPU writes (as a BLAS refit's gather does): the
-        /// range refit where the tree allows it.
-        Pyramid { levels: u32 },
-    }
-
-    /// The box pyramid's levels over `boxes` as the shaders store them: level 0 as given, and
-    /// above it unions with empties canonical (`f32::MAX`, `-f32::MAX`).
-    fn cpu_pyramid(boxes: &[Aabb]) -> Vec<Vec<Aabb>> {
-        let canonical = |b: &Aabb| {
-            if is_empty(b) {
-                ([f32::MAX; 3], [-f32::MAX; 3])
-            } else {
-                *b
-            }
-        };
-        let mut levels = vec![boxes.to_vec()];
-        while levels.last().is_some_and(|l| l.len() > 1) {
-            let below = levels.last().map(Vec::as_slice).unwrap_or_default();
-            let level = below
-                .chunks(2)
-                .map(|pair| {
-                    let a = canonical(&pair[0]);
-                    let b = pair.get(1).map_or(a, canonical);
-                    (
-                        [0, 1, 2].map(|i| a.0[i].min(b.0[i])),
-                        [0, 1, 2].map(|i| a.1[i].max(b.1[i])),
-                    )
-                })
-                .collect();
-            levels.push(level);
-        }
-        levels
-    }
-
-    /// [`refit_to`] with the boxes given as `boxes` says. Returns the refit's dispatches.
+    /// [`refit_to`], the boxes given in sorted order (`after[order[k]]` at `k`) when
+    /// `sorted_boxes`, as a BLAS refit's gather writes them.
     fn refit_to_with(
         lbvh: &mut Lbvh,
         tree: &GpuTree,
         after: &[Aabb],
         max_leaf: u32,
-        boxes: RefitBoxes,
-    ) -> u32 {
-        let sorted: Vec<Aabb> = tree
-            .order_words
-            .iter()
-            .map(|&p| after[p as usize])
-            .collect();
-        let input = match boxes {
-            RefitBoxes::Primitive => aabb_buffer(after, tree.bases.aabb),
-            RefitBoxes::Sorted => aabb_buffer(&sorted, tree.bases.aabb),
-            RefitBoxes::Pyramid { levels } => {
-                let junk = ([-5e3f32; 3], [5e3f32; 3]);
-                let pyramid = cpu_pyramid(&sorted);
-                let all: Vec<Aabb> = pyramid
-                    .iter()
-                    .enumerate()
-                    .flat_map(|(level, boxes)| {
-                        let given = level == 0 || level as u32 <= levels;
-                        boxes.iter().map(move |b| if given { *b } else { junk })
-                    })
-                    .collect();
-                assert_eq!(all.len() as u64, pyramid_boxes(tree.n), "pyramid size");
-                aabb_buffer(&all, tree.bases.aabb)
-            }
+        sorted_boxes: bool,
+    ) {
+        let input = if sorted_boxes {
+            let sorted: Vec<Aabb> = tree
+                .order_words
+                .iter()
+                .map(|&p| after[p as usize])
+                .collect();
+            aabb_buffer(&sorted, tree.bases.aabb)
+        } else {
+            aabb_buffer(after, tree.bases.aabb)
         };
-        let (sorted_boxes, pyramid_levels) = match boxes {
-            RefitBoxes::Primitive => (false, 0),
-            RefitBoxes::Sorted => (true, 0),
-            RefitBoxes::Pyramid { levels } => (true, levels),
-        };
-        let mut dispatches = 0;
         run(|rec| {
             lbvh.refit(
                 rec,
@@ -1084,13 +1103,9 @@ mod tests {
                     max_leaf,
                     bounds_out: Some((&tree.bounds, tree.bases.bounds)),
                     sorted_boxes,
-                    pyramid_levels,
-                    clustered: tree.clustered,
                 },
-            );
-            dispatches = rec.dispatches;
+            )
         });
-        dispatches
     }
 
     /// Reads back nodes, order and bounds of `tree` and checks them against `aabbs`.
@@ -1605,32 +1620,17 @@ mod tests {
 
     #[test]
     fn lbvh_refit_equals_exact_boxes_on_same_topology() {
-        use RefitBoxes::{Primitive, Pyramid, Sorted};
         let mut lbvh = Lbvh::new(&gpu().device);
         let mut rng = Rng(5);
-        // The last column: the refit's dispatches, which say whether it climbed (1) or refit
-        // from ranges (the pyramid passes, 9 levels each above those given, then the nodes).
-        for (n, refs, boxes, dispatches) in [
-            (1usize, LeafRefs::PrimitiveIndex, Primitive, 1),
-            (2, LeafRefs::SortedPosition, Primitive, 1),
-            (1000, LeafRefs::SortedPosition, Primitive, 1),
-            (3001, LeafRefs::PrimitiveIndex, Primitive, 1),
+        for (n, refs, sorted_boxes) in [
+            (1usize, LeafRefs::PrimitiveIndex, false),
+            (2, LeafRefs::SortedPosition, false),
+            (1000, LeafRefs::SortedPosition, false),
+            (3001, LeafRefs::PrimitiveIndex, false),
             // Boxes in sorted order (a BLAS refit's): leaf k reads box k, not box order[k].
-            (1, LeafRefs::SortedPosition, Sorted, 1),
-            (3001, LeafRefs::SortedPosition, Sorted, 1),
-            (700, LeafRefs::PrimitiveIndex, Sorted, 1),
-            // With room for the pyramid: the range refit (one primitive, or primitive refs:
-            // still the climb). 3001 boxes have 12 levels above level 0.
-            (1, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 1),
-            (700, LeafRefs::PrimitiveIndex, Pyramid { levels: 0 }, 1),
-            (2, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 2),
-            (3, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 2),
-            (512, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 2),
-            (513, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 3),
-            (3001, LeafRefs::SortedPosition, Pyramid { levels: 0 }, 3),
-            (3001, LeafRefs::SortedPosition, Pyramid { levels: 6 }, 2),
-            (64, LeafRefs::SortedPosition, Pyramid { levels: 6 }, 1),
-            (40_000, LeafRefs::SortedPosition, Pyramid { levels: 6 }, 3),
+            (1, LeafRefs::SortedPosition, true),
+            (3001, LeafRefs::SortedPosition, true),
+            (700, LeafRefs::PrimitiveIndex, true),
         ] {
             let before = hard_soup(n, n as u64);
             let (tree, _) = build_and_check(&mut lbvh, &before, refs);
@@ -1650,36 +1650,18 @@ mod tests {
                     _ => shifted(b, rng.vec(-3.0, 3.0)),
                 })
                 .collect();
-            let what = format!("{n} primitives, {refs:?}, {boxes:?}");
-            let got = refit_to_with(&mut lbvh, &tree, &after, 1, boxes);
-            assert_eq!(got, dispatches, "{what}: dispatches");
+            refit_to_with(&mut lbvh, &tree, &after, 1, sorted_boxes);
             // Exact boxes of the new primitives over the same tree (the order was made for
             // the old boxes, so empties need not be last any more).
             let order_before = tree.order_words.clone();
             let (tree, _) = check_read_back(tree, &after, false);
-            assert_eq!(
-                tree.order_words, order_before,
-                "{what}: refit keeps the order"
-            );
+            assert_eq!(tree.order_words, order_before, "refit keeps the order");
             let refs_after: Vec<u32> = tree
                 .node_words
                 .chunks(16)
                 .flat_map(|w| [w[3], w[7]])
                 .collect();
-            assert_eq!(refs_after, refs_before, "{what}: refit keeps every ref");
-        }
-    }
-
-    #[test]
-    fn pyramid_sizes_match_the_cpu_levels() {
-        for n in [0u32, 1, 2, 3, 63, 64, 65, 511, 512, 513, 3001, 40_000] {
-            let boxes = vec![EMPTY; n as usize];
-            let levels = cpu_pyramid(&boxes);
-            let total: usize = levels.iter().map(Vec::len).sum();
-            assert_eq!(pyramid_boxes(n), total as u64, "{n} boxes");
-            for (level, boxes) in levels.iter().enumerate() {
-                assert_eq!(pyramid_level_count(n, level as u32) as usize, boxes.len());
-            }
+            assert_eq!(refs_after, refs_before, "refit keeps every ref");
         }
     }
 
@@ -1959,18 +1941,196 @@ mod tests {
         refit_to(&mut lbvh, &tree, &after, 1);
         let (tree, _) = check_read_back(tree, &after, false);
         assert_eq!(refs(&tree), refs_before, "refit keeps every ref");
-        // Leaves of one and sorted boxes with room for the pyramid: a Karras tree would be refit
-        // from ranges, a clustered one (its nodes are not ranges) must still climb.
-        let pyramid = RefitBoxes::Pyramid { levels: 0 };
-        let dispatches = refit_to_with(&mut lbvh, &tree, &before, 1, pyramid);
-        assert_eq!(dispatches, 1, "a clustered tree is refit by the climb");
-        let (tree, _) = check_read_back(tree, &before, false);
-        assert_eq!(refs(&tree), refs_before, "refit keeps every ref");
         let (tree, _) = build_and_check_clustered(&mut lbvh, &before, 4);
         // As a fast-trace BLAS is refit: the boxes in sorted order.
-        refit_to_with(&mut lbvh, &tree, &after, 4, RefitBoxes::Sorted);
+        refit_to_with(&mut lbvh, &tree, &after, 4, true);
         let (tree, sah) = check_read_back(tree, &after, false);
         let optimum = optimal_collapsed_sah(&tree, &after, 4);
         assert_is_optimum(sah, optimum, "clustered refit for the new boxes");
+    }
+
+    /// `n` random staged triangles (3 `vec4`: xyz, w 0; the second vertex's w = 1 marks a
+    /// dropped triangle), every 11th dropped and every 7th degenerate (a point).
+    fn staged_triangles(rng: &mut Rng, n: usize, spread: f32) -> Vec<[f32; 4]> {
+        let mut tris = Vec::with_capacity(3 * n);
+        for t in 0..n {
+            let c = rng.vec(-spread, spread);
+            let mut v: [[f32; 4]; 3] = std::array::from_fn(|_| {
+                let d = rng.vec(-1.0, 1.0);
+                [c[0] + d[0], c[1] + d[1], c[2] + d[2], 0.0]
+            });
+            if t % 7 == 3 {
+                v[1] = v[0];
+                v[2] = v[0];
+            }
+            if t % 11 == 5 {
+                v[1][3] = f32::from_bits(1);
+            }
+            tris.extend(v);
+        }
+        tris
+    }
+
+    /// Each staged triangle's box as `triangle_box.wgsl` makes it (dropped: the empty box).
+    fn staged_boxes(tris: &[[f32; 4]]) -> Vec<Aabb> {
+        tris.chunks(3)
+            .map(|v| {
+                if v[1][3].to_bits() == 1 {
+                    return EMPTY;
+                }
+                let lo = [0, 1, 2].map(|a| v[0][a].min(v[1][a]).min(v[2][a]));
+                let hi = [0, 1, 2].map(|a| v[0][a].max(v[1][a]).max(v[2][a]));
+                (lo, hi)
+            })
+            .collect()
+    }
+
+    /// Builds a fast-build tree over `before`'s boxes, range-refits it to the triangles `after`
+    /// and checks everything: the refit's dispatches, exact node boxes and root box over the
+    /// same refs, and the triangles gathered bit-exactly into sorted order.
+    fn range_refit_and_check(lbvh: &mut Lbvh, before: &[[f32; 4]], after: &[[f32; 4]]) {
+        let n = (before.len() / 3) as u32;
+        let (tree, _) = build_and_check(lbvh, &staged_boxes(before), LeafRefs::SortedPosition);
+        let refs = |t: &GpuTree| -> Vec<u32> {
+            t.node_words.chunks(16).flat_map(|w| [w[3], w[7]]).collect()
+        };
+        let refs_before = refs(&tree);
+        let (src_base, dst_base) = (5u32, 3u32);
+        let mut src = vec![[7.0f32; 4]; 3 * src_base as usize];
+        src.extend_from_slice(after);
+        let src = buffer_with(bytemuck::cast_slice(&src));
+        let dst = sentinel_buffer((u64::from(dst_base + n) + 1) * 12);
+        let mut dispatches = 0;
+        run(|rec| {
+            lbvh.refit_triangles(
+                rec,
+                &LbvhTriangleRefit {
+                    src: &src,
+                    src_base,
+                    dst: &dst,
+                    dst_base,
+                    count: n,
+                    nodes: &tree.nodes,
+                    node_base: tree.bases.node,
+                    order: &tree.order,
+                    order_base: tree.bases.order,
+                    topology: (&tree.topology, tree.bases.topo),
+                    bounds_out: Some((&tree.bounds, tree.bases.bounds)),
+                },
+            );
+            dispatches = rec.dispatches;
+        });
+        // The gather; the pyramid above its 8 levels (12 levels a dispatch); the nodes that
+        // straddle blocks of 256.
+        let mut expected = 1;
+        let mut level = REFIT_GATHER_LEVELS;
+        while pyramid_level_count(n, level) > 1 {
+            expected += 1;
+            level += PYRAMID_PASS_LEVELS;
+        }
+        if n > 256 {
+            expected += 1;
+        }
+        assert_eq!(dispatches, expected, "{n} triangles: dispatches");
+        let order = tree.order_words.clone();
+        let (tree, _) = check_read_back(tree, &staged_boxes(after), false);
+        assert_eq!(
+            refs(&tree),
+            refs_before,
+            "{n} triangles: the refit keeps every ref"
+        );
+        let got = read_words(&dst);
+        let after_words: &[u32] = bytemuck::cast_slice(after);
+        let base = 12 * dst_base as usize;
+        assert_untouched(&got, base, 12 * n as usize, "gathered triangles");
+        for (k, &p) in order.iter().enumerate() {
+            let p = p as usize;
+            assert_eq!(
+                &got[base + 12 * k..base + 12 * k + 12],
+                &after_words[12 * p..12 * p + 12],
+                "{n} triangles: sorted position {k}"
+            );
+        }
+    }
+
+    #[test]
+    fn range_refit_of_triangles_equals_exact_boxes_and_gathers_them() {
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let mut rng = Rng(41);
+        // One node; one partial block; exactly one block; one more than a block; several
+        // blocks; a pyramid with a partial top (every level odd somewhere).
+        for (n, spread) in [
+            (2usize, 1.0f32),
+            (3, 1.0),
+            (100, 5.0),
+            (256, 20.0),
+            (257, 20.0),
+            (3001, 40.0),
+            (40_000, 100.0),
+        ] {
+            let before = staged_triangles(&mut rng, n, spread);
+            // Move every triangle; a few jump across the scene, a few become dropped and a
+            // few dropped ones come back.
+            let mut after = before.clone();
+            for (t, v) in after.chunks_mut(3).enumerate() {
+                let d = if t % 17 == 0 {
+                    rng.vec(-spread, spread)
+                } else {
+                    rng.vec(-0.5, 0.5)
+                };
+                for x in v.iter_mut() {
+                    for a in 0..3 {
+                        x[a] += d[a];
+                    }
+                }
+                match t % 23 {
+                    4 => v[1][3] = f32::from_bits(1),
+                    16 => v[1][3] = 0.0,
+                    _ => {}
+                }
+            }
+            range_refit_and_check(&mut lbvh, &before, &after);
+        }
+    }
+
+    /// Above 2^20 triangles the pyramid takes two `lbvh pyramid` dispatches (the second from
+    /// level 20). Slow on software Vulkan: run with `--ignored` (the H100 runs).
+    #[test]
+    #[ignore]
+    fn range_refit_of_a_million_triangles_takes_two_pyramid_passes() {
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let mut rng = Rng(43);
+        let n = (1 << 20) + 4097 * 256 / 1024;
+        let before = staged_triangles(&mut rng, n, 500.0);
+        let mut after = before.clone();
+        for v in after.chunks_mut(3) {
+            let d = rng.vec(-1.0, 1.0);
+            for x in v.iter_mut() {
+                for a in 0..3 {
+                    x[a] += d[a];
+                }
+            }
+        }
+        assert!(pyramid_level_count(n as u32, REFIT_GATHER_LEVELS + PYRAMID_PASS_LEVELS) > 1);
+        range_refit_and_check(&mut lbvh, &before, &after);
+    }
+
+    #[test]
+    fn pyramid_boxes_sum_the_levels() {
+        for (n, levels) in [
+            (1u32, vec![1]),
+            (2, vec![2, 1]),
+            (5, vec![5, 3, 2, 1]),
+            (8, vec![8, 4, 2, 1]),
+        ] {
+            let counts: Vec<u32> = (0..levels.len() as u32)
+                .map(|l| pyramid_level_count(n, l))
+                .collect();
+            assert_eq!(counts, levels, "{n} boxes");
+            assert_eq!(
+                pyramid_boxes(n),
+                levels.iter().map(|&c| u64::from(c)).sum::<u64>()
+            );
+        }
     }
 }

@@ -7,10 +7,6 @@ use crate::gpu::Recorder;
 
 /// Threads per workgroup of the triangle entry points of `prims.wgsl` (one primitive each).
 const WORKGROUP: u32 = 64;
-/// Levels of the box pyramid (`shaders/box_pyramid.wgsl`) that [`Prims::gather_triangles`]
-/// writes with the boxes: one per halving of its workgroup (the shader's
-/// `PYRAMID_GATHER_LEVELS`).
-pub(crate) const GATHER_PYRAMID_LEVELS: u32 = WORKGROUP.trailing_zeros();
 /// Threads per workgroup of `instance_refs` (the shader's `INSTANCE_WG`): wider, so fewer
 /// workgroups merge the centroid bounds with device atomics.
 const INSTANCE_WORKGROUP: u32 = 256;
@@ -39,7 +35,7 @@ impl Prims {
         let source = concat!(
             include_str!("../../shaders/scene_types.wgsl"),
             include_str!("../../shaders/centroid_bounds.wgsl"),
-            include_str!("../../shaders/box_pyramid.wgsl"),
+            include_str!("../../shaders/triangle_box.wgsl"),
             include_str!("../../shaders/prims.wgsl")
         );
         let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", source, entry);
@@ -97,9 +93,7 @@ impl Prims {
     /// `dst[dst_base + k] = src[src_base + order[order_base + k]]` for `k < count`, whole
     /// triangles (3 `vec4`), bit-exact. With `boxes`, also each triangle's box at its sorted
     /// position `k` (vec4 `2k`, `2k + 1`; the empty box for dropped triangles, as
-    /// [`Prims::triangle_aabbs`]): a refit's boxes in the order it reads them, and after them
-    /// levels `1..=`[`GATHER_PYRAMID_LEVELS`] of their box pyramid (`shaders/box_pyramid.wgsl`;
-    /// `boxes` must hold [`crate::scene::lbvh::pyramid_boxes`]`(count)` boxes).
+    /// [`Prims::triangle_aabbs`]): a refit's boxes in the order its climb reads them.
     #[allow(clippy::too_many_arguments)] // the interface the BVH code is written against
     pub fn gather_triangles(
         &self,
@@ -290,26 +284,14 @@ mod tests {
 
     #[test]
     fn gather_triangles_with_boxes_writes_each_box_at_its_sorted_position() {
-        // 30: one workgroup, the pyramid ends below level 6; 150: three workgroups, the last
-        // partial, so level 6 has 3 boxes; 64: one full workgroup, level 6 is the top.
-        for (count, seed) in [(30u32, 13u64), (150, 14), (64, 15)] {
-            gather_with_boxes_and_pyramid(count, seed);
-        }
-    }
-
-    /// Gathers `count` of 200 triangles with boxes and checks triangles, boxes and the pyramid's
-    /// levels 1..=GATHER_PYRAMID_LEVELS against the CPU; nothing past them is written.
-    fn gather_with_boxes_and_pyramid(count: u32, seed: u64) {
-        let mut rng = Rng(seed);
-        let (tris, dropped) = test_triangles(&mut rng, 200);
-        let (perm, order) = gather_order(&mut rng, count);
-        let (src_base, order_base, dst_base) = (7u32, 4u32, 2u32);
-        let capacity = count as usize + 10;
-        let box_capacity = crate::scene::lbvh::pyramid_boxes(count) as usize + 10;
+        let mut rng = Rng(13);
+        let (tris, dropped) = test_triangles(&mut rng, 50);
+        let (perm, order) = gather_order(&mut rng);
+        let (src_base, order_base, count, dst_base) = (7u32, 4u32, 30u32, 2u32);
         let src_buf = buffer_with(bytemuck::cast_slice(&tris));
         let order_buf = buffer_with(bytemuck::cast_slice(&order));
-        let dst = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 12 * capacity]));
-        let boxes = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * box_capacity]));
+        let dst = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 12 * 40]));
+        let boxes = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * 40]));
         let prims = Prims::new(&gpu().device);
         run(|rec| {
             prims.gather_triangles(
@@ -325,77 +307,34 @@ mod tests {
             )
         });
         let src_words: &[u32] = bytemuck::cast_slice(&tris);
-        let got = words(&dst, 12 * capacity);
-        let got_boxes = words(&boxes, 8 * box_capacity);
-        let mut level0 = Vec::new();
-        for k in 0..count as usize {
+        let got = words(&dst, 12 * 40);
+        let got_boxes = words(&boxes, 8 * 40);
+        for k in 0..40usize {
+            let box_words = &got_boxes[8 * k..8 * k + 8];
+            if k >= count as usize {
+                assert!(box_words.iter().all(|&w| w == SENTINEL), "box {k} written");
+                continue;
+            }
             // Boxes start at 0 (the refit's scratch), triangles at dst_base.
             let s = (src_base + perm[k]) as usize;
-            let want = expected_box_words(&tris, &dropped, s);
-            assert_eq!(&got_boxes[8 * k..8 * k + 8], &want[..], "{count}: box {k}");
-            level0.push(want);
+            assert_eq!(
+                box_words,
+                &expected_box_words(&tris, &dropped, s)[..],
+                "box {k}"
+            );
             let d = dst_base as usize + k;
             assert_eq!(
                 &got[12 * d..12 * d + 12],
                 &src_words[12 * s..12 * s + 12],
-                "{count}: dst {d}"
+                "dst {d}"
             );
         }
-        // The levels above, from the CPU: unions with empties canonical (f32::MAX).
-        let as_box = |w: &[u32]| -> [[f32; 3]; 2] {
-            let f = |i: usize| f32::from_bits(w[i]);
-            if f(0) > f(4) {
-                [[f32::MAX; 3], [-f32::MAX; 3]]
-            } else {
-                [[f(0), f(1), f(2)], [f(4), f(5), f(6)]]
-            }
-        };
-        let mut level: Vec<[[f32; 3]; 2]> = level0.iter().map(|w| as_box(w)).collect();
-        let mut at = count as usize;
-        let mut levels = 0;
-        while level.len() > 1 && levels < GATHER_PYRAMID_LEVELS {
-            levels += 1;
-            level = level
-                .chunks(2)
-                .map(|p| {
-                    let b = p.get(1).unwrap_or(&p[0]);
-                    [
-                        std::array::from_fn(|a| p[0][0][a].min(b[0][a])),
-                        std::array::from_fn(|a| p[0][1][a].max(b[1][a])),
-                    ]
-                })
-                .collect();
-            for (i, b) in level.iter().enumerate() {
-                let want: Vec<u32> = [b[0], b[1]]
-                    .iter()
-                    .flat_map(|v| [v[0], v[1], v[2], 0.0])
-                    .map(f32::to_bits)
-                    .collect();
-                let k = at + i;
-                assert_eq!(
-                    &got_boxes[8 * k..8 * k + 8],
-                    &want[..],
-                    "{count}: level {levels} box {i}"
-                );
-            }
-            at += level.len();
-        }
-        assert!(
-            got_boxes[8 * at..].iter().all(|&w| w == SENTINEL),
-            "{count}: nothing written past level {levels}"
-        );
-        assert!(
-            got[12 * (dst_base + count) as usize..]
-                .iter()
-                .all(|&w| w == SENTINEL),
-            "{count}: no triangle past the count"
-        );
     }
 
-    /// A random permutation of 0..len and the order buffer's words: 4 sentinels (order_base 4),
+    /// A random permutation of 0..30 and the order buffer's words: 4 sentinels (order_base 4),
     /// then the permutation.
-    fn gather_order(rng: &mut Rng, len: u32) -> (Vec<u32>, Vec<u32>) {
-        let mut perm: Vec<u32> = (0..len).collect();
+    fn gather_order(rng: &mut Rng) -> (Vec<u32>, Vec<u32>) {
+        let mut perm: Vec<u32> = (0..30).collect();
         for i in (1..perm.len()).rev() {
             perm.swap(i, rng.below(i as u32 + 1) as usize);
         }
@@ -409,7 +348,7 @@ mod tests {
         let mut rng = Rng(12);
         // Random bits (NaN and subnormal patterns included): the copy must not touch them.
         let src: Vec<u32> = (0..50 * 12).map(|_| rng.next() as u32).collect();
-        let (perm, order) = gather_order(&mut rng, 30);
+        let (perm, order) = gather_order(&mut rng);
         let (src_base, order_base, count, dst_base) = (7u32, 4u32, 30u32, 2u32);
         let src_buf = buffer_with(bytemuck::cast_slice(&src));
         let order_buf = buffer_with(bytemuck::cast_slice(&order));

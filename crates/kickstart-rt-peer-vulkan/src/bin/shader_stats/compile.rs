@@ -504,14 +504,14 @@ pub fn write_spirv(
 mod tests {
     use super::*;
 
-    /// lbvh.wgsl as the SDK compiles it: after box_pyramid.wgsl, digit_histogram.wgsl and
-    /// centroid_bounds.wgsl, whose helpers it uses.
+    /// lbvh.wgsl as the SDK compiles it: after digit_histogram.wgsl, centroid_bounds.wgsl and
+    /// triangle_box.wgsl, whose helpers it uses.
     fn lbvh() -> Source {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../kickstart-rt/shaders/");
         let parts: Vec<(String, String)> = [
-            "box_pyramid.wgsl",
             "digit_histogram.wgsl",
             "centroid_bounds.wgsl",
+            "triangle_box.wgsl",
             "lbvh.wgsl",
         ]
         .iter()
@@ -561,8 +561,11 @@ mod tests {
     /// - `lbvh_climb`: `params`, `aabbs` (`leaf_box`), `work`, `order`, `topology`, `nodes`
     ///   (`write_node`), `bounds_out` (`write_bounds`). (Its workgroup memory is left out: it
     ///   changes whenever the climb is tuned.)
-    /// - `lbvh_pyramid`: `params` and 11 `pyramid` (storage read_write, in place of `aabbs`);
-    ///   workgroup memory `wg_boxes: array<f32, 1536>` = 6144 bytes;
+    /// - `lbvh_refit_gather`: `params`, `order`, `topology`, `nodes`, `bounds_out`, 11
+    ///   `pyramid`, 12 `refit_src` (storage read) and 13 `refit_dst`; workgroup memory
+    ///   `wg_pyramid_lo`, `wg_pyramid_hi: array<vec3<f32>, 512>` = 2 × 8192 bytes;
+    /// - `lbvh_pyramid`: `params` and `pyramid`; workgroup memory `wg_boxes: array<f32, 1536>`
+    ///   = 6144 bytes;
     /// - `lbvh_range_refit`: `params`, `order` (`out_ref`), `topology`, `nodes`, `bounds_out`
     ///   and `pyramid`.
     ///
@@ -582,6 +585,7 @@ mod tests {
                 "lbvh_morton_histogram",
                 "lbvh_hierarchy",
                 "lbvh_climb",
+                "lbvh_refit_gather",
                 "lbvh_pyramid",
                 "lbvh_range_refit"
             ]
@@ -642,6 +646,22 @@ mod tests {
                 (0, 7, 5, RW),
                 (0, 8, 6, RW),
             ]
+        );
+        assert_eq!(
+            got("lbvh_refit_gather"),
+            (
+                vec![
+                    (0, 0, 0, U),
+                    (0, 5, 1, RW),
+                    (0, 6, 2, RW),
+                    (0, 7, 3, RW),
+                    (0, 8, 4, RW),
+                    (0, 11, 5, RW),
+                    (0, 12, 6, R),
+                    (0, 13, 7, RW)
+                ],
+                16384
+            )
         );
         assert_eq!(
             got("lbvh_pyramid"),
