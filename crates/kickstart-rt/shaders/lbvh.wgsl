@@ -11,7 +11,7 @@
 //   lbvh_hierarchy per sorted position: order[], and for inner nodes children + parents
 //   lbvh_climb     per leaf: bottom-up boxes, writes the final nodes and bounds_out (build and
 //                  refit share it)
-//   lbvh_refit_gather, lbvh_pyramid, lbvh_range_refit
+//   lbvh_refit_gather, lbvh_range_refit
 //                  the range refit of a BLAS (a Karras tree, one triangle a leaf) from its
 //                  re-ingested triangles: every node's boxes from its leaf range, each node on
 //                  its own (see the section at the end)
@@ -55,8 +55,7 @@ struct Params {
     // First of the 6 centroid-bounds words lbvh_morton reads from binding 2: 0 (work's header),
     // or where the caller's pass merged them in the buffer bound there instead.
     centroid_base: u32,
-    // lbvh_pyramid: the pyramid level it reduces (it writes the PYRAMID_PASS_LEVELS above).
-    level: u32,
+    pad1: u32,
     pad2: u32,
     // lbvh_refit_gather: first staged triangle (binding 12) and first BLAS triangle (13).
     tri_src_base: u32,
@@ -786,24 +785,24 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 // L >= 1 holds ceil(n / 2^L) boxes, box i of it the union of boxes 2i and 2i + 1 of level L - 1
 // (only 2i at the end of an odd level). The levels follow each other in `pyramid` (two vec4 a box:
 // min, max), so box i of level L is box pyramid_level_start(n, L) + i; src/scene/lbvh.rs's
-// `pyramid_boxes` is the same sum. So each node's boxes are computed on their own, in three
-// passes and without arrival counters or chains of device-scope round trips:
+// `pyramid_boxes` is the same sum. So each node's boxes are computed on their own, in two passes
+// and without arrival counters per node or chains of device-scope round trips:
 //   lbvh_refit_gather  per sorted position, workgroups of WG: gathers the triangle into sorted
 //                      order (as gather_triangles), makes its box and levels 0..=REFIT_WG_LEVELS
-//                      of the pyramid over the workgroup's block in workgroup memory, writes them
-//                      out, and writes every node whose range lies inside the block (most nodes:
-//                      a node of s leaves straddles a block boundary with probability ~ s / WG)
-//   lbvh_pyramid       the levels above, PYRAMID_PASS_LEVELS a dispatch
-//   lbvh_range_refit   per inner node: the nodes whose range straddles blocks, from `pyramid`
+//                      of the pyramid over the workgroup's block in workgroup memory, writes
+//                      levels 1.. out, writes every node whose range lies inside the block (most
+//                      nodes: a node of s leaves straddles a block boundary with probability
+//                      ~ s / WG) and lists the others; the last block of each group of WG to
+//                      finish makes the pyramid's next REFIT_WG_LEVELS levels over the group, and
+//                      so on up (no pass of its own)
+//   lbvh_range_refit   per block, its listed nodes (those straddling blocks), from `pyramid` and
+//                      the gathered triangles (leaf boxes)
 // The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
 // bit-identical to a climb's.
 
-// Levels the gather's workgroup makes of its block: WG = 2^8 leaves, down to one box.
+// Levels the gather's workgroup makes of its block (WG = 2^8 leaves, down to one box), and each
+// stage above it makes of a group of WG units.
 const REFIT_WG_LEVELS: u32 = 8u;
-// Levels one lbvh_pyramid workgroup adds: each invocation reduces PYRAMID_SERIAL boxes (4 levels)
-// to one, then the workgroup its WG boxes (8 more).
-const PYRAMID_SERIAL: u32 = 16u;
-const PYRAMID_PASS_LEVELS: u32 = 12u;
 
 // Boxes of the level above a level of `count` boxes (n <= 2^28: no overflow).
 fn pyramid_parent_count(count: u32) -> u32 {
@@ -891,33 +890,6 @@ fn wg_range_box(a: u32, b: u32) -> Box {
     return acc;
 }
 
-// The union of leaf boxes [a, b] (sorted positions, a <= b) from `pyramid`: at each level, the
-// range's odd first box and even last box are taken and the rest is left to the level above.
-fn range_box(a: u32, b: u32) -> Box {
-    var acc = empty_box();
-    var l = a;
-    var r = b + 1u;
-    var start = 0u;
-    var count = params.count;
-    // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
-    // level of one box.
-    while l < r {
-        if (l & 1u) != 0u {
-            acc = union_box(acc, pyramid_box(start + l));
-            l += 1u;
-        }
-        if (r & 1u) != 0u {
-            r -= 1u;
-            acc = union_box(acc, pyramid_box(start + r));
-        }
-        l >>= 1u;
-        r >>= 1u;
-        start += count;
-        count = pyramid_parent_count(count);
-    }
-    return acc;
-}
-
 // Inner node i's leaf range [first, last] (Karras tree, n >= 2, i < n - 1).
 fn node_range(i: u32) -> vec2<u32> {
     let j = topology[range_ends_at() + i];
@@ -933,6 +905,87 @@ fn write_ranged_node(i: u32, lc: u32, rc: u32, lb: Box, rb: Box) {
     }
 }
 
+// `work` during a range refit (u32 words, atomic), nb = ceil(n / WG) blocks:
+//   [8, 8 + WG nb)                     per block, its inner nodes whose range straddles blocks
+//   [8 + WG nb, 8 + (WG + 1) nb)       per block, how many
+//   [8 + (WG + 1) nb, 8 + (WG + 2) nb + 3)
+//                                      arrival counters of the pyramid's upper stages (cleared
+//                                      before the refit): stage s counts per group of WG units
+//   [8 + (WG + 2) nb + 3, + 6 (2 nb + 3))
+//                                      the units' published boxes: stage 0's units are the
+//                                      blocks (their level-8 box), stage s's the groups of stage
+//                                      s - 1 (their box REFIT_WG_LEVELS levels up)
+// src/scene/lbvh.rs's `range_refit_work_words` and `range_refit_counters` are the same layout.
+fn straddle_list_at() -> u32 {
+    return 8u;
+}
+
+fn straddle_counts_at(nb: u32) -> u32 {
+    return 8u + WG * nb;
+}
+
+fn stage_counters_at(nb: u32) -> u32 {
+    return 8u + (WG + 1u) * nb;
+}
+
+fn published_at(nb: u32) -> u32 {
+    return 8u + (WG + 2u) * nb + 3u;
+}
+
+fn publish_box(at: u32, b: Box) {
+    atomicStore(&work[at], bitcast<u32>(b.lo.x));
+    atomicStore(&work[at + 1u], bitcast<u32>(b.lo.y));
+    atomicStore(&work[at + 2u], bitcast<u32>(b.lo.z));
+    atomicStore(&work[at + 3u], bitcast<u32>(b.hi.x));
+    atomicStore(&work[at + 4u], bitcast<u32>(b.hi.y));
+    atomicStore(&work[at + 5u], bitcast<u32>(b.hi.z));
+}
+
+fn published_box(at: u32) -> Box {
+    return Box(
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[at])), bitcast<f32>(atomicLoad(&work[at + 1u])),
+                  bitcast<f32>(atomicLoad(&work[at + 2u]))),
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[at + 3u])),
+                  bitcast<f32>(atomicLoad(&work[at + 4u])),
+                  bitcast<f32>(atomicLoad(&work[at + 5u]))));
+}
+
+var<workgroup> wg_straddlers: atomic<u32>;
+var<workgroup> wg_last: u32;
+
+// Reduces the WG boxes held one per invocation (`b`, box `first + lid` of pyramid level
+// `level`) up to REFIT_WG_LEVELS levels in workgroup memory, writing each level's boxes to the
+// pyramid, as far as the pyramid goes. Returns the one box of the last level made (in lid 0).
+// Uniform: every invocation must call it.
+fn reduce_block(b_in: Box, lid: u32, first: u32, level: u32) -> Box {
+    let n = params.count;
+    var b = b_in;
+    var start = pyramid_level_start(n, level);
+    var count = pyramid_level_count(n, level);
+    var width = WG;
+    for (var up = 1u; up <= REFIT_WG_LEVELS; up++) {
+        // Uniform (n only): the pyramid ends at its level of one box.
+        if count <= 1u {
+            break;
+        }
+        workgroupBarrier();
+        wg_pyramid_lo[lid] = b.lo;
+        wg_pyramid_hi[lid] = b.hi;
+        workgroupBarrier();
+        width /= 2u;
+        if lid < width {
+            b = union_box(wg_pyramid_box(2u * lid), wg_pyramid_box(2u * lid + 1u));
+        }
+        start += count;
+        count = pyramid_parent_count(count);
+        let i = (first >> up) + lid;
+        if lid < width && i < count {
+            pyramid_store(start + i, b);
+        }
+    }
+    return b;
+}
+
 @compute @workgroup_size(256)
 fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
                      @builtin(workgroup_id) wid: vec3<u32>,
@@ -940,6 +993,10 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
     let block = k - lid;
+    let nb = (n + WG - 1u) / WG;
+    if lid == 0u {
+        atomicStore(&wg_straddlers, 0u);
+    }
     // Past the end (and for dropped triangles): the empty box. No early return: the barriers
     // below must be reached by the whole workgroup.
     var b = empty_box();
@@ -954,13 +1011,12 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
         refit_dst[d + 2u] = v2;
         let stored = triangle_box(bitcast<vec4<f32>>(v0), bitcast<vec4<f32>>(v1),
                                   bitcast<vec4<f32>>(v2));
-        let at = 2u * (params.aabb_base + k);
-        pyramid[at] = stored.lo;
-        pyramid[at + 1u] = stored.hi;
         if !stored_box_is_empty(stored.lo.xyz, stored.hi.xyz) {
             b = Box(stored.lo.xyz, stored.hi.xyz);
         }
     }
+    // Level 0 stays in workgroup memory only: lbvh_range_refit reads a leaf's box from its
+    // gathered triangle (it needs few).
     wg_pyramid_lo[lid] = b.lo;
     wg_pyramid_hi[lid] = b.hi;
     var start = 0u;
@@ -986,8 +1042,9 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
         }
     }
     workgroupBarrier();
-    // Inner node k, when its range lies inside the block (k is one end of it, so the block is
-    // k's): from workgroup memory. lbvh_range_refit writes the others.
+    // Inner node k: from workgroup memory when its range lies inside the block (k is one end of
+    // it, so the block is k's); otherwise it goes on the block's list for lbvh_range_refit.
+    let w = block / WG;
     if k + 1u < n {
         let range = node_range(k);
         if range.x >= block && range.y < block + WG {
@@ -997,96 +1054,122 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
             let lb = wg_range_box(range.x - block, g - block);
             let rb = wg_range_box(g + 1u - block, range.y - block);
             write_ranged_node(k, lc, rc, lb, rb);
+        } else {
+            let slot = atomicAdd(&wg_straddlers, 1u);
+            atomicStore(&work[straddle_list_at() + block + slot], k);
         }
+    }
+    // The block's top box (level REFIT_WG_LEVELS; with one block the pyramid is complete).
+    var top = wg_pyramid_box(wg_level_slot(REFIT_WG_LEVELS));
+    workgroupBarrier();
+    if lid == 0u {
+        atomicStore(&work[straddle_counts_at(nb) + w], atomicLoad(&wg_straddlers));
+    }
+
+    // The pyramid above the blocks, without another pass: per group of WG units, the last unit
+    // to arrive reduces the group's REFIT_WG_LEVELS levels (the climb's protocol: publish,
+    // release, count the arrival, acquire), then arrives at the next stage as that group.
+    var unit = w;
+    var units = nb;
+    var level = REFIT_WG_LEVELS;
+    var counters = stage_counters_at(nb);
+    var published = published_at(nb);
+    loop {
+        // Uniform (n only).
+        if units <= 1u {
+            break;
+        }
+        if lid == 0u {
+            publish_box(published + 6u * unit, top);
+        }
+        // Release: the box above before the arrival below.
+        storageBarrier();
+        let group = unit / WG;
+        let members = min(WG, units - group * WG);
+        if lid == 0u {
+            wg_last = u32(atomicAdd(&work[counters + group], 1u) + 1u == members);
+        }
+        if workgroupUniformLoad(&wg_last) == 0u {
+            break;
+        }
+        // Acquire: every member's box (published before its arrival) is visible below.
+        storageBarrier();
+        var mine = empty_box();
+        if lid < members {
+            mine = published_box(published + 6u * (group * WG + lid));
+        }
+        top = reduce_block(mine, lid, group * WG, level);
+        counters += (units + WG - 1u) / WG;
+        published += 6u * units;
+        unit = group;
+        units = (units + WG - 1u) / WG;
+        level += REFIT_WG_LEVELS;
     }
 }
 
-// Levels params.level + 1 ..= params.level + PYRAMID_PASS_LEVELS (those that exist): workgroup w
-// reduces boxes [WG PYRAMID_SERIAL w, + WG PYRAMID_SERIAL) of params.level, an aligned block of
-// every level above it.
-@compute @workgroup_size(256)
-fn lbvh_pyramid(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
-                @builtin(num_workgroups) nwg: vec3<u32>) {
-    let n = params.count;
-    let block = wid.y * nwg.x + wid.x;
-    var start = pyramid_level_start(n, params.level);
-    var count = pyramid_level_count(n, params.level);
-    // This invocation's PYRAMID_SERIAL boxes, reduced in registers to one (4 levels).
-    var boxes: array<Box, 16>;
-    var first = PYRAMID_SERIAL * (WG * block + lid);
-    for (var t = 0u; t < PYRAMID_SERIAL; t++) {
-        boxes[t] = empty_box();
-        if first + t < count {
-            boxes[t] = pyramid_box(start + first + t);
-        }
+// The box of leaf k from its gathered triangle (lbvh_refit_gather wrote it).
+fn gathered_leaf_box(k: u32) -> Box {
+    let d = 3u * (params.tri_dst_base + k);
+    let stored = triangle_box(bitcast<vec4<f32>>(refit_dst[d]), bitcast<vec4<f32>>(refit_dst[d + 1u]),
+                              bitcast<vec4<f32>>(refit_dst[d + 2u]));
+    if stored_box_is_empty(stored.lo.xyz, stored.hi.xyz) {
+        return empty_box();
     }
-    var held = PYRAMID_SERIAL;
-    var level = 0u;
-    while held > 1u && count > 1u {
+    return Box(stored.lo.xyz, stored.hi.xyz);
+}
+
+// The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
+// first box and even last box are taken and the rest is left to the level above. Level 0 comes
+// from the gathered triangles, the levels above from `pyramid`.
+fn range_box(a: u32, b: u32) -> Box {
+    var acc = empty_box();
+    var l = a;
+    var r = b + 1u;
+    if (l & 1u) != 0u {
+        acc = union_box(acc, gathered_leaf_box(l));
+        l += 1u;
+    }
+    if (r & 1u) != 0u {
+        r -= 1u;
+        acc = union_box(acc, gathered_leaf_box(r));
+    }
+    l >>= 1u;
+    r >>= 1u;
+    var start = params.count;
+    var count = pyramid_parent_count(params.count);
+    // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
+    // level of one box.
+    while l < r {
+        if (l & 1u) != 0u {
+            acc = union_box(acc, pyramid_box(start + l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, pyramid_box(start + r));
+        }
+        l >>= 1u;
+        r >>= 1u;
         start += count;
         count = pyramid_parent_count(count);
-        held /= 2u;
-        first /= 2u;
-        level += 1u;
-        for (var t = 0u; t < held; t++) {
-            boxes[t] = union_box(boxes[2u * t], boxes[2u * t + 1u]);
-            if first + t < count {
-                pyramid_store(start + first + t, boxes[t]);
-            }
-        }
     }
-    // Then the workgroup's WG boxes (one each) in workgroup memory, as far as they go.
-    var b = boxes[0];
-    var width = WG;
-    while level < PYRAMID_PASS_LEVELS && count > 1u {
-        // Uniform: level and count depend on the params only.
-        wg_store_box(lid, b);
-        workgroupBarrier();
-        width /= 2u;
-        if lid < width {
-            b = union_box(wg_load_box(2u * lid), wg_load_box(2u * lid + 1u));
-        }
-        workgroupBarrier();
-        start += count;
-        count = pyramid_parent_count(count);
-        level += 1u;
-        // The workgroup's block of this level: `width` boxes a workgroup.
-        let i = block * width + lid;
-        if lid < width && i < count {
-            pyramid_store(start + i, b);
-        }
-    }
+    return acc;
 }
 
-fn wg_store_box(slot: u32, b: Box) {
-    let at = 6u * slot;
-    wg_boxes[at] = b.lo.x;
-    wg_boxes[at + 1u] = b.lo.y;
-    wg_boxes[at + 2u] = b.lo.z;
-    wg_boxes[at + 3u] = b.hi.x;
-    wg_boxes[at + 4u] = b.hi.y;
-    wg_boxes[at + 5u] = b.hi.z;
-}
-
-fn wg_load_box(slot: u32) -> Box {
-    let at = 6u * slot;
-    return Box(vec3<f32>(wg_boxes[at], wg_boxes[at + 1u], wg_boxes[at + 2u]),
-               vec3<f32>(wg_boxes[at + 3u], wg_boxes[at + 4u], wg_boxes[at + 5u]));
-}
-
-// Per inner node whose range straddles blocks of WG (n > WG; lbvh_refit_gather wrote the rest).
+// One workgroup per block (n > WG): the block's inner nodes whose range straddles blocks, from
+// the list lbvh_refit_gather made, so the invocations that work are packed into few subgroups
+// (about one node in eight straddles on the dragon).
 @compute @workgroup_size(256)
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = linear_id(lid, wid, nwg);
-    if i + 1u >= params.count {
+    let w = wid.y * nwg.x + wid.x;
+    let nb = (params.count + WG - 1u) / WG;
+    if w >= nb || lid >= atomicLoad(&work[straddle_counts_at(nb) + w]) {
         return;
     }
+    let i = atomicLoad(&work[straddle_list_at() + w * WG + lid]);
     let range = node_range(i);
-    if range.x / WG == range.y / WG {
-        return;
-    }
     let lc = topology[params.topo_base + 2u * i];
     let rc = topology[params.topo_base + 2u * i + 1u];
     let g = lc & 0x7fffffffu;

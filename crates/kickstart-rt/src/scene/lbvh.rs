@@ -39,12 +39,13 @@
 //! node covers one range of sorted positions (the hierarchy pass stores each node's other range
 //! end in the topology), and the box of a range is the union of at most two boxes per level of a
 //! pyramid over the sorted leaf boxes (`shaders/lbvh.wgsl`, "Range refit"). `lbvh refit gather`
-//! gathers the triangles into sorted order, makes the pyramid's lowest levels over each block of
-//! 256 in workgroup memory and writes every node whose range lies inside its block; `lbvh
-//! pyramid` adds the levels above (12 a dispatch); `lbvh range refit` writes the nodes that
-//! straddle blocks. No arrival counters and no chains of device-scope round trips from the leaves
-//! to the root, which is what bounds the climb (BENCHMARKS.md, session 23); the nodes are
-//! bit-identical to the climb's.
+//! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
+//! 256 in workgroup memory, writes every node whose range lies inside its block and lists the
+//! others; the last block of each group of 256 to finish makes the next 8 levels, and so on up.
+//! `lbvh range refit` then writes the listed nodes, which straddle blocks. Two passes, no
+//! arrival counter per node and no chains of device-scope round trips from the leaves to the
+//! root, which is what bounds the climb (BENCHMARKS.md, session 23); the nodes are bit-identical
+//! to the climb's.
 
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
@@ -210,15 +211,23 @@ pub(crate) fn pyramid_boxes(n: u32) -> u64 {
     total
 }
 
-/// Pyramid levels `lbvh refit gather` makes (the shader's `REFIT_WG_LEVELS`: its workgroup's
-/// block of 256 down to one box).
+/// Pyramid levels `lbvh refit gather` makes of each block, and each stage above it of each group
+/// of 256 units (the shader's `REFIT_WG_LEVELS`).
+#[cfg(test)]
 const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
-/// Levels each `lbvh pyramid` dispatch adds (the shader's `PYRAMID_PASS_LEVELS`).
-const PYRAMID_PASS_LEVELS: u32 = 12;
-/// Boxes of the reduced level one `lbvh pyramid` workgroup reads.
-const PYRAMID_PASS_BLOCK: u32 = 1 << PYRAMID_PASS_LEVELS;
+
+/// The range refit's layout in `work` (`shaders/lbvh.wgsl`, above `lbvh_refit_gather`), for `n`
+/// triangles in `nb` blocks: the straddling nodes' lists and counts, then the stage counters
+/// (returned as the word range to clear), then the published boxes. Returns (words, counters).
+fn range_refit_work(n: u32) -> (u64, std::ops::Range<u64>) {
+    let nb = u64::from(n.div_ceil(WORKGROUP));
+    let block = u64::from(WORKGROUP);
+    let counters = 8 + (block + 1) * nb..8 + (block + 2) * nb + 3;
+    (counters.end + 6 * (2 * nb + 3), counters)
+}
 
 /// Boxes in level `level` of the pyramid over `n` boxes.
+#[cfg(test)]
 fn pyramid_level_count(n: u32, level: u32) -> u32 {
     (0..level).fold(n, |count, _| count.div_ceil(2))
 }
@@ -239,9 +248,7 @@ struct Params {
     key_bits: u32,
     /// First centroid-bounds word in the buffer `lbvh_morton` binds at 2.
     centroid_base: u32,
-    /// `lbvh pyramid`: the pyramid level the dispatch reduces.
-    level: u32,
-    pad: u32,
+    pad: [u32; 2],
     /// `lbvh refit gather`: first staged triangle.
     tri_src_base: u32,
     /// `lbvh refit gather`: first BLAS triangle.
@@ -293,10 +300,8 @@ pub(crate) struct Lbvh {
     hierarchy: wgpu::ComputePipeline,
     climb: wgpu::ComputePipeline,
     hploc: wgpu::ComputePipeline,
-    /// `lbvh_refit_gather`: the range refit's gather, lowest pyramid levels and in-block nodes.
+    /// `lbvh_refit_gather`: the range refit's gather, box pyramid and in-block nodes.
     refit_gather: wgpu::ComputePipeline,
-    /// `lbvh_pyramid`: levels of the range refit's box pyramid.
-    pyramid: wgpu::ComputePipeline,
     /// `lbvh_range_refit`: every node's boxes from its leaf range.
     range_refit: wgpu::ComputePipeline,
     sort: RadixSort,
@@ -329,11 +334,9 @@ const CLIMB_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8];
 /// Bindings of `hploc_climb`.
 const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
 /// Bindings of `lbvh_refit_gather` (11: the pyramid, 12: staged triangles, 13: BLAS triangles).
-const REFIT_GATHER_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11, 12, 13];
-/// Bindings of `lbvh_pyramid`.
-const PYRAMID_BINDINGS: &[u32] = &[0, 11];
+const REFIT_GATHER_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 12, 13];
 /// Bindings of `lbvh_range_refit`.
-const RANGE_REFIT_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11];
+const RANGE_REFIT_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 13];
 
 /// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
 /// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid, 12 and 13 =
@@ -411,7 +414,6 @@ impl Lbvh {
             climb: compute_pipeline(device, "lbvh climb", src, "lbvh_climb"),
             hploc: compute_pipeline(device, "hploc climb", src, "hploc_climb"),
             refit_gather: compute_pipeline(device, "lbvh refit gather", src, "lbvh_refit_gather"),
-            pyramid: compute_pipeline(device, "lbvh pyramid", src, "lbvh_pyramid"),
             range_refit: compute_pipeline(device, "lbvh range refit", src, "lbvh_range_refit"),
             sort: RadixSort::new(device),
             work: Grown::default(),
@@ -520,8 +522,7 @@ impl Lbvh {
             max_leaf: effective_max_leaf(b.max_leaf, b.leaf_refs),
             key_bits,
             centroid_base: b.centroid_bounds.map_or(0, |(_, base)| base),
-            level: 0,
-            pad: 0,
+            pad: [0; 2],
             tri_src_base: 0,
             tri_dst_base: 0,
             pad2: [0; 2],
@@ -666,9 +667,8 @@ impl Lbvh {
     }
 
     /// Records the range refit of a BLAS (see the module docs): `lbvh refit gather`, then
-    /// `lbvh pyramid` while the pyramid has more than one box on its top level (none up to
-    /// 256 triangles, one up to 2^20), then `lbvh range refit` when there is more than one
-    /// block of 256. Counts below 2 are skipped with an error (a refit's tree has inner nodes).
+    /// `lbvh range refit` when there is more than one block of 256 triangles. Counts below 2 are
+    /// skipped with an error (a refit's tree has inner nodes).
     pub fn refit_triangles(&mut self, rec: &mut Recorder<'_>, r: &LbvhTriangleRefit<'_>) {
         let n = r.count;
         if !(2..=MAX_COUNT).contains(&n) {
@@ -676,30 +676,35 @@ impl Lbvh {
             return;
         }
         let device = rec.device;
+        let (words, counters) = range_refit_work(n);
+        let work = self
+            .work
+            .get(device, "lbvh work", words.max(work_words(n)) * 4);
         let dummy = self.dummy.get(device, "lbvh no bounds", 32);
         let pyramid = self
             .pyramid_boxes
             .get(device, "lbvh box pyramid", pyramid_boxes(n) * 32);
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
-        let params_at = |level: u32| Params {
-            count: n,
-            node_base: r.node_base,
-            order_base: r.order_base,
-            topo_base: r.topology.1,
-            bounds_base,
-            flags: Self::flags(LeafRefs::SortedPosition, r.bounds_out.is_some()),
-            max_leaf: 1,
-            level,
-            tri_src_base: r.src_base,
-            tri_dst_base: r.dst_base,
-            ..Params::zeroed()
-        };
-        let params = rec.uniform("lbvh params", &params_at(0));
+        let params = rec.uniform(
+            "lbvh params",
+            &Params {
+                count: n,
+                node_base: r.node_base,
+                order_base: r.order_base,
+                topo_base: r.topology.1,
+                bounds_base,
+                flags: Self::flags(LeafRefs::SortedPosition, r.bounds_out.is_some()),
+                max_leaf: 1,
+                tri_src_base: r.src_base,
+                tri_dst_base: r.dst_base,
+                ..Params::zeroed()
+            },
+        );
         let bind = Bindings {
             all: [
                 &params,
                 &dummy,
-                &dummy,
+                &work,
                 &dummy,
                 &dummy,
                 r.order,
@@ -713,26 +718,17 @@ impl Lbvh {
                 r.dst,
             ],
         };
+        rec.encoder.clear_buffer(
+            &work,
+            counters.start * 4,
+            Some((counters.end - counters.start) * 4),
+        );
         let bg = bind.group(device, &self.refit_gather, REFIT_GATHER_BINDINGS);
         rec.dispatch("lbvh refit gather", &self.refit_gather, &[&bg], groups(n));
-        let mut level = REFIT_GATHER_LEVELS;
-        loop {
-            let count = pyramid_level_count(n, level);
-            if count <= 1 {
-                break;
-            }
-            let level_params = rec.uniform("lbvh pyramid params", &params_at(level));
-            let mut all = bind.all;
-            all[0] = &level_params;
-            let bg = Bindings { all }.group(device, &self.pyramid, PYRAMID_BINDINGS);
-            let workgroups = count.div_ceil(PYRAMID_PASS_BLOCK);
-            rec.dispatch("lbvh pyramid", &self.pyramid, &[&bg], workgroups);
-            level += PYRAMID_PASS_LEVELS;
-        }
         // Up to one block every node lies inside it: the gather wrote them all.
         if n > WORKGROUP {
             let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
-            rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n - 1));
+            rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n));
         }
     }
 }
@@ -2020,17 +2016,8 @@ mod tests {
             );
             dispatches = rec.dispatches;
         });
-        // The gather; the pyramid above its 8 levels (12 levels a dispatch); the nodes that
-        // straddle blocks of 256.
-        let mut expected = 1;
-        let mut level = REFIT_GATHER_LEVELS;
-        while pyramid_level_count(n, level) > 1 {
-            expected += 1;
-            level += PYRAMID_PASS_LEVELS;
-        }
-        if n > 256 {
-            expected += 1;
-        }
+        // The gather (which also makes the pyramid); the nodes that straddle blocks of 256.
+        let expected = if n > 256 { 2 } else { 1 };
         assert_eq!(dispatches, expected, "{n} triangles: dispatches");
         let order = tree.order_words.clone();
         let (tree, _) = check_read_back(tree, &staged_boxes(after), false);
@@ -2058,7 +2045,8 @@ mod tests {
         let mut lbvh = Lbvh::new(&gpu().device);
         let mut rng = Rng(41);
         // One node; one partial block; exactly one block; one more than a block; several
-        // blocks; a pyramid with a partial top (every level odd somewhere).
+        // blocks (one group: its last block makes the pyramid's top); more than 256 blocks (two
+        // groups, then a last stage over them); every level odd somewhere.
         for (n, spread) in [
             (2usize, 1.0f32),
             (3, 1.0),
@@ -2067,6 +2055,7 @@ mod tests {
             (257, 20.0),
             (3001, 40.0),
             (40_000, 100.0),
+            (70_001, 150.0),
         ] {
             let before = staged_triangles(&mut rng, n, spread);
             // Move every triangle; a few jump across the scene, a few become dropped and a
@@ -2093,11 +2082,11 @@ mod tests {
         }
     }
 
-    /// Above 2^20 triangles the pyramid takes two `lbvh pyramid` dispatches (the second from
-    /// level 20). Slow on software Vulkan: run with `--ignored` (the H100 runs).
+    /// A million triangles: 4100 blocks, 17 groups at the pyramid's first stage. Slow on
+    /// software Vulkan: run with `--ignored` (the H100 runs).
     #[test]
     #[ignore]
-    fn range_refit_of_a_million_triangles_takes_two_pyramid_passes() {
+    fn range_refit_of_a_million_triangles() {
         let mut lbvh = Lbvh::new(&gpu().device);
         let mut rng = Rng(43);
         let n = (1 << 20) + 4097 * 256 / 1024;
@@ -2111,7 +2100,7 @@ mod tests {
                 }
             }
         }
-        assert!(pyramid_level_count(n as u32, REFIT_GATHER_LEVELS + PYRAMID_PASS_LEVELS) > 1);
+        assert_eq!(pyramid_level_count(n as u32, 2 * REFIT_GATHER_LEVELS), 17);
         range_refit_and_check(&mut lbvh, &before, &after);
     }
 
