@@ -792,9 +792,8 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 //                      of the pyramid over the workgroup's block in workgroup memory, writes
 //                      levels 1.. out, writes every node whose range lies inside the block (most
 //                      nodes: a node of s leaves straddles a block boundary with probability
-//                      ~ s / WG) and lists the others; the last block of each group of WG to
-//                      finish makes the pyramid's next REFIT_WG_LEVELS levels over the group, and
-//                      so on up (no pass of its own)
+//                      ~ s / WG), lists the others, and merges its top box into every level
+//                      above with atomicMax (no pass of its own, no fence, no waiting)
 //   lbvh_range_refit   per block, its listed nodes (those straddling blocks), from `pyramid` and
 //                      the gathered triangles (leaf boxes)
 // The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
@@ -906,16 +905,14 @@ fn write_ranged_node(i: u32, lc: u32, rc: u32, lb: Box, rb: Box) {
 }
 
 // `work` during a range refit (u32 words, atomic), nb = ceil(n / WG) blocks:
-//   [8, 8 + WG nb)                     per block, its inner nodes whose range straddles blocks
-//   [8 + WG nb, 8 + (WG + 1) nb)       per block, how many
-//   [8 + (WG + 1) nb, 8 + (WG + 2) nb + 3)
-//                                      arrival counters of the pyramid's upper stages (cleared
-//                                      before the refit): stage s counts per group of WG units
-//   [8 + (WG + 2) nb + 3, + 6 (2 nb + 3))
-//                                      the units' published boxes: stage 0's units are the
-//                                      blocks (their level-8 box), stage s's the groups of stage
-//                                      s - 1 (their box REFIT_WG_LEVELS levels up)
-// src/scene/lbvh.rs's `range_refit_work_words` and `range_refit_counters` are the same layout.
+//   [8, 8 + WG nb)                 per block, its inner nodes whose range straddles blocks
+//   [8 + WG nb, 8 + (WG + 1) nb)   per block, how many
+//   [8 + (WG + 1) nb, + 6 U)       the pyramid's levels above REFIT_WG_LEVELS (U boxes in all),
+//                                  6 words a box in centroid_bounds.wgsl's encoding (~enc(min),
+//                                  enc(max)): every block merges its top box into each of its
+//                                  ancestors with atomicMax, so they need no pass, no fence and
+//                                  no waiting (cleared before the refit: zero is the identity)
+// src/scene/lbvh.rs's `range_refit_work` is the same layout.
 fn straddle_list_at() -> u32 {
     return 8u;
 }
@@ -924,67 +921,27 @@ fn straddle_counts_at(nb: u32) -> u32 {
     return 8u + WG * nb;
 }
 
-fn stage_counters_at(nb: u32) -> u32 {
-    return 8u + (WG + 1u) * nb;
+// Word of box i of pyramid level `level` (> REFIT_WG_LEVELS) in `work`.
+fn upper_box_at(nb: u32, level: u32, i: u32) -> u32 {
+    let n = params.count;
+    var start = 0u;
+    var count = pyramid_level_count(n, REFIT_WG_LEVELS + 1u);
+    for (var l = REFIT_WG_LEVELS + 1u; l < level; l++) {
+        start += count;
+        count = pyramid_parent_count(count);
+    }
+    return 8u + (WG + 1u) * nb + 6u * (start + i);
 }
 
-fn published_at(nb: u32) -> u32 {
-    return 8u + (WG + 2u) * nb + 3u;
-}
-
-fn publish_box(at: u32, b: Box) {
-    atomicStore(&work[at], bitcast<u32>(b.lo.x));
-    atomicStore(&work[at + 1u], bitcast<u32>(b.lo.y));
-    atomicStore(&work[at + 2u], bitcast<u32>(b.lo.z));
-    atomicStore(&work[at + 3u], bitcast<u32>(b.hi.x));
-    atomicStore(&work[at + 4u], bitcast<u32>(b.hi.y));
-    atomicStore(&work[at + 5u], bitcast<u32>(b.hi.z));
-}
-
-fn published_box(at: u32) -> Box {
+fn upper_box(at: u32) -> Box {
     return Box(
-        vec3<f32>(bitcast<f32>(atomicLoad(&work[at])), bitcast<f32>(atomicLoad(&work[at + 1u])),
-                  bitcast<f32>(atomicLoad(&work[at + 2u]))),
-        vec3<f32>(bitcast<f32>(atomicLoad(&work[at + 3u])),
-                  bitcast<f32>(atomicLoad(&work[at + 4u])),
-                  bitcast<f32>(atomicLoad(&work[at + 5u]))));
+        vec3<f32>(dec(~atomicLoad(&work[at])), dec(~atomicLoad(&work[at + 1u])),
+                  dec(~atomicLoad(&work[at + 2u]))),
+        vec3<f32>(dec(atomicLoad(&work[at + 3u])), dec(atomicLoad(&work[at + 4u])),
+                  dec(atomicLoad(&work[at + 5u]))));
 }
 
 var<workgroup> wg_straddlers: atomic<u32>;
-var<workgroup> wg_last: u32;
-
-// Reduces the WG boxes held one per invocation (`b`, box `first + lid` of pyramid level
-// `level`) up to REFIT_WG_LEVELS levels in workgroup memory, writing each level's boxes to the
-// pyramid, as far as the pyramid goes. Returns the one box of the last level made (in lid 0).
-// Uniform: every invocation must call it.
-fn reduce_block(b_in: Box, lid: u32, first: u32, level: u32) -> Box {
-    let n = params.count;
-    var b = b_in;
-    var start = pyramid_level_start(n, level);
-    var count = pyramid_level_count(n, level);
-    var width = WG;
-    for (var up = 1u; up <= REFIT_WG_LEVELS; up++) {
-        // Uniform (n only): the pyramid ends at its level of one box.
-        if count <= 1u {
-            break;
-        }
-        workgroupBarrier();
-        wg_pyramid_lo[lid] = b.lo;
-        wg_pyramid_hi[lid] = b.hi;
-        workgroupBarrier();
-        width /= 2u;
-        if lid < width {
-            b = union_box(wg_pyramid_box(2u * lid), wg_pyramid_box(2u * lid + 1u));
-        }
-        start += count;
-        count = pyramid_parent_count(count);
-        let i = (first >> up) + lid;
-        if lid < width && i < count {
-            pyramid_store(start + i, b);
-        }
-    }
-    return b;
-}
 
 @compute @workgroup_size(256)
 fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
@@ -1059,51 +1016,23 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
             atomicStore(&work[straddle_list_at() + block + slot], k);
         }
     }
-    // The block's top box (level REFIT_WG_LEVELS; with one block the pyramid is complete).
-    var top = wg_pyramid_box(wg_level_slot(REFIT_WG_LEVELS));
     workgroupBarrier();
     if lid == 0u {
         atomicStore(&work[straddle_counts_at(nb) + w], atomicLoad(&wg_straddlers));
     }
-
-    // The pyramid above the blocks, without another pass: per group of WG units, the last unit
-    // to arrive reduces the group's REFIT_WG_LEVELS levels (the climb's protocol: publish,
-    // release, count the arrival, acquire), then arrives at the next stage as that group.
-    var unit = w;
-    var units = nb;
-    var level = REFIT_WG_LEVELS;
-    var counters = stage_counters_at(nb);
-    var published = published_at(nb);
-    loop {
-        // Uniform (n only).
-        if units <= 1u {
-            break;
+    // The levels above the block's: its top box (level REFIT_WG_LEVELS; with one block the
+    // pyramid is complete) merged into each ancestor, one word an invocation.
+    if nb > 1u {
+        let top = wg_pyramid_box(wg_level_slot(REFIT_WG_LEVELS));
+        let up = lid / 6u;
+        let word = lid % 6u;
+        let level = REFIT_WG_LEVELS + 1u + up;
+        if pyramid_level_count(n, level - 1u) > 1u {
+            let at = upper_box_at(nb, level, w >> (up + 1u)) + word;
+            let bounds = array<f32, 6>(top.lo.x, top.lo.y, top.lo.z, top.hi.x, top.hi.y, top.hi.z);
+            let v = enc(bounds[word]);
+            atomicMax(&work[at], select(v, ~v, word < 3u));
         }
-        if lid == 0u {
-            publish_box(published + 6u * unit, top);
-        }
-        // Release: the box above before the arrival below.
-        storageBarrier();
-        let group = unit / WG;
-        let members = min(WG, units - group * WG);
-        if lid == 0u {
-            wg_last = u32(atomicAdd(&work[counters + group], 1u) + 1u == members);
-        }
-        if workgroupUniformLoad(&wg_last) == 0u {
-            break;
-        }
-        // Acquire: every member's box (published before its arrival) is visible below.
-        storageBarrier();
-        var mine = empty_box();
-        if lid < members {
-            mine = published_box(published + 6u * (group * WG + lid));
-        }
-        top = reduce_block(mine, lid, group * WG, level);
-        counters += (units + WG - 1u) / WG;
-        published += 6u * units;
-        unit = group;
-        units = (units + WG - 1u) / WG;
-        level += REFIT_WG_LEVELS;
     }
 }
 
@@ -1137,9 +1066,10 @@ fn range_box(a: u32, b: u32) -> Box {
     r >>= 1u;
     var start = params.count;
     var count = pyramid_parent_count(params.count);
+    var level = 1u;
     // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
     // level of one box.
-    while l < r {
+    while l < r && level <= REFIT_WG_LEVELS {
         if (l & 1u) != 0u {
             acc = union_box(acc, pyramid_box(start + l));
             l += 1u;
@@ -1151,6 +1081,26 @@ fn range_box(a: u32, b: u32) -> Box {
         l >>= 1u;
         r >>= 1u;
         start += count;
+        count = pyramid_parent_count(count);
+        level += 1u;
+    }
+    // Above the blocks' levels: from `work`, box i of a level 6 words after box i - 1.
+    if l >= r {
+        return acc;
+    }
+    var at = upper_box_at((params.count + WG - 1u) / WG, level, 0u);
+    while l < r {
+        if (l & 1u) != 0u {
+            acc = union_box(acc, upper_box(at + 6u * l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, upper_box(at + 6u * r));
+        }
+        l >>= 1u;
+        r >>= 1u;
+        at += 6u * count;
         count = pyramid_parent_count(count);
     }
     return acc;

@@ -40,12 +40,11 @@
 //! end in the topology), and the box of a range is the union of at most two boxes per level of a
 //! pyramid over the sorted leaf boxes (`shaders/lbvh.wgsl`, "Range refit"). `lbvh refit gather`
 //! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
-//! 256 in workgroup memory, writes every node whose range lies inside its block and lists the
-//! others; the last block of each group of 256 to finish makes the next 8 levels, and so on up.
-//! `lbvh range refit` then writes the listed nodes, which straddle blocks. Two passes, no
-//! arrival counter per node and no chains of device-scope round trips from the leaves to the
-//! root, which is what bounds the climb (BENCHMARKS.md, session 23); the nodes are bit-identical
-//! to the climb's.
+//! 256 in workgroup memory, writes every node whose range lies inside its block, lists the others
+//! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
+//! listed nodes, which straddle blocks. Two passes, no arrival counters, fences or waiting, no
+//! chains of device-scope round trips from the leaves to the root (what bounds the climb:
+//! BENCHMARKS.md, session 23); the nodes are bit-identical to the climb's.
 
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
@@ -216,14 +215,21 @@ pub(crate) fn pyramid_boxes(n: u32) -> u64 {
 #[cfg(test)]
 const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
 
-/// The range refit's layout in `work` (`shaders/lbvh.wgsl`, above `lbvh_refit_gather`), for `n`
-/// triangles in `nb` blocks: the straddling nodes' lists and counts, then the stage counters
-/// (returned as the word range to clear), then the published boxes. Returns (words, counters).
+/// The range refit's layout in `work` (`shaders/lbvh.wgsl`, above `straddle_list_at`), for `n`
+/// triangles in `nb` blocks of 256: the straddling nodes' lists and counts, then the pyramid's
+/// levels above the blocks' 8 (6 words a box; returned as the word range to clear). Returns
+/// (words, that range).
 fn range_refit_work(n: u32) -> (u64, std::ops::Range<u64>) {
     let nb = u64::from(n.div_ceil(WORKGROUP));
     let block = u64::from(WORKGROUP);
-    let counters = 8 + (block + 1) * nb..8 + (block + 2) * nb + 3;
-    (counters.end + 6 * (2 * nb + 3), counters)
+    let mut upper = 0;
+    let mut count = nb;
+    while count > 1 {
+        count = count.div_ceil(2);
+        upper += count;
+    }
+    let start = 8 + (block + 1) * nb;
+    (start + 6 * upper, start..start + 6 * upper)
 }
 
 /// Boxes in level `level` of the pyramid over `n` boxes.
@@ -676,7 +682,7 @@ impl Lbvh {
             return;
         }
         let device = rec.device;
-        let (words, counters) = range_refit_work(n);
+        let (words, upper) = range_refit_work(n);
         let work = self
             .work
             .get(device, "lbvh work", words.max(work_words(n)) * 4);
@@ -718,11 +724,10 @@ impl Lbvh {
                 r.dst,
             ],
         };
-        rec.encoder.clear_buffer(
-            &work,
-            counters.start * 4,
-            Some((counters.end - counters.start) * 4),
-        );
+        if !upper.is_empty() {
+            rec.encoder
+                .clear_buffer(&work, upper.start * 4, Some((upper.end - upper.start) * 4));
+        }
         let bg = bind.group(device, &self.refit_gather, REFIT_GATHER_BINDINGS);
         rec.dispatch("lbvh refit gather", &self.refit_gather, &[&bg], groups(n));
         // Up to one block every node lies inside it: the gather wrote them all.

@@ -562,10 +562,9 @@ mod tests {
     ///   (`write_node`), `bounds_out` (`write_bounds`). (Its workgroup memory is left out: it
     ///   changes whenever the climb is tuned.)
     /// - `lbvh_refit_gather`: `params`, `work` (the straddling nodes' lists, the pyramid's
-    ///   stage counters and published boxes), `order`, `topology`, `nodes`, `bounds_out`, 11
-    ///   `pyramid`, 12 `refit_src` (storage read) and 13 `refit_dst`; workgroup memory
-    ///   `wg_pyramid_lo`, `wg_pyramid_hi: array<vec3<f32>, 512>` = 2 × 8192 bytes, plus
-    ///   `wg_straddlers` and `wg_last`, 4 bytes each;
+    ///   upper levels), `order`, `topology`, `nodes`, `bounds_out`, 11 `pyramid`, 12
+    ///   `refit_src` (storage read) and 13 `refit_dst`; workgroup memory `wg_pyramid_lo`,
+    ///   `wg_pyramid_hi: array<vec3<f32>, 512>` = 2 × 8192 bytes, plus `wg_straddlers`, 4 bytes;
     /// - `lbvh_range_refit`: `params`, `work` (the lists), `order` (`out_ref`), `topology`,
     ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles).
     ///
@@ -660,7 +659,7 @@ mod tests {
                     (0, 12, 7, R),
                     (0, 13, 8, RW)
                 ],
-                16392
+                16388
             )
         );
         assert_eq!(
