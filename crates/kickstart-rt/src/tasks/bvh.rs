@@ -121,10 +121,11 @@ pub enum SurfelType {
 /// geometry more closely (lower SAH cost, fewer node visits per ray; most on scenes of separate
 /// parts such as buildings), and turns every subtree of up to
 /// [`BuildHint::FAST_TRACE_MAX_LEAF`] triangles that is cheaper by the surface area heuristic
-/// into one leaf. Either can be refit (`allow_update`); a fast-trace tree's refit runs only the
-/// device-scope phase of the refit pass (its node numbering has no block structure for the
-/// workgroup-local phase): on the H100 the dragon's refit took 0.56 ms against 0.46 ms for a
-/// fast-build tree (BENCHMARKS.md, session 21).
+/// into one leaf. Either can be refit (`allow_update`). A fast-build tree is refit from its
+/// nodes' leaf ranges, straight from the re-ingested triangles (the range refit: 0.23 ms with
+/// ingestion for the dragon's 871k triangles on the H100, BENCHMARKS.md session 24). A
+/// fast-trace tree's nodes are not ranges: its refit climbs the tree bottom-up through
+/// device-scope round trips and re-decides its leaves (0.56 ms, session 21).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum BuildHint {
     /// Fast-build when `allow_update` is set, fast-trace otherwise.
