@@ -1047,54 +1047,64 @@ fn gathered_leaf_box(k: u32) -> Box {
     return Box(stored.lo.xyz, stored.hi.xyz);
 }
 
-// Box i of pyramid level `level`, whose first box is at `at`: level 0 from the gathered
-// triangles, the blocks' levels from `pyramid` (box index), the levels above them from `work`
-// (word index).
-fn level_box(level: u32, at: u32, i: u32) -> Box {
-    if level == 0u {
-        return gathered_leaf_box(i);
-    }
-    if level <= REFIT_WG_LEVELS {
-        return pyramid_box(at + i);
-    }
-    return upper_box(at + 6u * i);
-}
-
 // The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
-// first box and even last box are taken and the rest is left to the level above (wg_range_box
-// takes the same steps in workgroup memory).
+// first box and even last box are taken and the rest is left to the level above. Level 0 comes
+// from the gathered triangles, the blocks' levels from `pyramid`, the levels above from `work`.
+// The three sources have a loop each (wg_range_box takes the same steps in workgroup memory):
+// one loop choosing the source per box made lbvh range refit 40 % slower on the H100 (0.049
+// against 0.035 ms on the dragon, BENCHMARKS.md session 24).
 fn range_box(a: u32, b: u32) -> Box {
-    let n = params.count;
     var acc = empty_box();
     var l = a;
     var r = b + 1u;
-    var level = 0u;
-    var at = 0u;
-    var count = n;
+    if (l & 1u) != 0u {
+        acc = union_box(acc, gathered_leaf_box(l));
+        l += 1u;
+    }
+    if (r & 1u) != 0u {
+        r -= 1u;
+        acc = union_box(acc, gathered_leaf_box(r));
+    }
+    l >>= 1u;
+    r >>= 1u;
+    var start = params.count;
+    var count = pyramid_parent_count(params.count);
+    var level = 1u;
     // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
     // level of one box.
-    while l < r {
+    while l < r && level <= REFIT_WG_LEVELS {
         if (l & 1u) != 0u {
-            acc = union_box(acc, level_box(level, at, l));
+            acc = union_box(acc, pyramid_box(start + l));
             l += 1u;
         }
         if (r & 1u) != 0u {
             r -= 1u;
-            acc = union_box(acc, level_box(level, at, r));
+            acc = union_box(acc, pyramid_box(start + r));
         }
         l >>= 1u;
         r >>= 1u;
-        // Where the next level starts: level 1 after the n leaf boxes in `pyramid`, the first
-        // level above the blocks' in `work`.
-        if level == REFIT_WG_LEVELS {
-            at = upper_box_at((n + WG - 1u) / WG, level + 1u, 0u);
-        } else if level > REFIT_WG_LEVELS {
-            at += 6u * count;
-        } else {
-            at = select(at + count, n, level == 0u);
-        }
+        start += count;
         count = pyramid_parent_count(count);
         level += 1u;
+    }
+    // Above the blocks' levels: from `work`, box i of a level 6 words after box i - 1.
+    if l >= r {
+        return acc;
+    }
+    var at = upper_box_at((params.count + WG - 1u) / WG, level, 0u);
+    while l < r {
+        if (l & 1u) != 0u {
+            acc = union_box(acc, upper_box(at + 6u * l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, upper_box(at + 6u * r));
+        }
+        l >>= 1u;
+        r >>= 1u;
+        at += 6u * count;
+        count = pyramid_parent_count(count);
     }
     return acc;
 }
