@@ -783,9 +783,10 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 // its own index is in the topology), and the box of any range is the union of at most two boxes
 // per level of the *box pyramid* over the sorted leaf boxes: level 0 is the n leaf boxes, level
 // L >= 1 holds ceil(n / 2^L) boxes, box i of it the union of boxes 2i and 2i + 1 of level L - 1
-// (only 2i at the end of an odd level). The levels follow each other in `pyramid` (two vec4 a box:
-// min, max), so box i of level L is box pyramid_level_start(n, L) + i; src/scene/lbvh.rs's
-// `pyramid_boxes` is the same sum. So each node's boxes are computed on their own, in two passes
+// (only 2i at the end of an odd level). Levels 1..=REFIT_WG_LEVELS follow each other in `pyramid`
+// (two vec4 a box: min, max), box i of level L at pyramid_level_start(n, L) + i - n (level 0 is
+// never stored); the levels above are in `work`. src/scene/lbvh.rs's `pyramid_boxes` is the
+// same sum (with level 0). So each node's boxes are computed on their own, in two passes
 // and without arrival counters per node or chains of device-scope round trips:
 //   lbvh_refit_gather  per sorted position, workgroups of WG: gathers the triangle into sorted
 //                      order (as gather_triangles), makes its box and levels 0..=REFIT_WG_LEVELS
@@ -834,10 +835,11 @@ fn pyramid_level_count(n: u32, level: u32) -> u32 {
 @group(0) @binding(12) var<storage, read> refit_src: array<vec4<u32>>;
 @group(0) @binding(13) var<storage, read_write> refit_dst: array<vec4<u32>>;
 
-// Box `at` of the pyramid (counted from level 0's first box); a stored empty box of level 0
-// becomes the canonical one.
+// Box `at` of the pyramid (counted from level 0's first box, so at >= n: level 0 itself is never
+// stored, as leaf boxes come from the gathered triangles and workgroup memory), canonical when
+// empty.
 fn pyramid_box(at: u32) -> Box {
-    let i = 2u * (params.aabb_base + at);
+    let i = 2u * (at - params.count);
     let lo = pyramid[i].xyz;
     let hi = pyramid[i + 1u].xyz;
     if stored_box_is_empty(lo, hi) {
@@ -847,7 +849,7 @@ fn pyramid_box(at: u32) -> Box {
 }
 
 fn pyramid_store(at: u32, b: Box) {
-    let i = 2u * (params.aabb_base + at);
+    let i = 2u * (at - params.count);
     pyramid[i] = vec4<f32>(b.lo, 0.0);
     pyramid[i + 1u] = vec4<f32>(b.hi, 0.0);
 }

@@ -323,7 +323,7 @@ pub(crate) struct Lbvh {
     clustered_topology: Grown,
     /// Bound in place of a missing `bounds_out` (never written: the flag is off).
     dummy: Grown,
-    /// The range refit's box pyramid ([`pyramid_boxes`] boxes of 32 bytes).
+    /// The range refit's box pyramid above level 0 ([`pyramid_boxes`] − n boxes of 32 bytes).
     pyramid_boxes: Grown,
 }
 
@@ -687,9 +687,11 @@ impl Lbvh {
             .work
             .get(device, "lbvh work", words.max(work_words(n)) * 4);
         let dummy = self.dummy.get(device, "lbvh no bounds", 32);
-        let pyramid = self
-            .pyramid_boxes
-            .get(device, "lbvh box pyramid", pyramid_boxes(n) * 32);
+        let pyramid = self.pyramid_boxes.get(
+            device,
+            "lbvh box pyramid",
+            (pyramid_boxes(n) - u64::from(n)) * 32,
+        );
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
         let params = rec.uniform(
             "lbvh params",
