@@ -198,8 +198,8 @@ pub(crate) struct LbvhTriangleRefit<'a> {
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
 
-/// Boxes of the box pyramid over `n` boxes (`shaders/lbvh.wgsl`, "Range refit"): level 0 (the boxes),
-/// then `ceil(n / 2^L)` a level up to the level of one box.
+/// Boxes of the box pyramid over `n` boxes (`shaders/lbvh.wgsl`, "Range refit"): level 0 (the
+/// boxes), then `ceil(n / 2^L)` a level up to the level of one box.
 pub(crate) fn pyramid_boxes(n: u32) -> u64 {
     let mut total = u64::from(n);
     let mut count = n;
