@@ -210,8 +210,8 @@ pub(crate) fn pyramid_boxes(n: u32) -> u64 {
     total
 }
 
-/// Pyramid levels `lbvh refit gather` makes of each block, and each stage above it of each group
-/// of 256 units (the shader's `REFIT_WG_LEVELS`).
+/// Pyramid levels `lbvh refit gather` makes of each block of 256 in workgroup memory (the
+/// shader's `REFIT_WG_LEVELS`).
 #[cfg(test)]
 const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
 
@@ -308,7 +308,7 @@ pub(crate) struct Lbvh {
     hploc: wgpu::ComputePipeline,
     /// `lbvh_refit_gather`: the range refit's gather, box pyramid and in-block nodes.
     refit_gather: wgpu::ComputePipeline,
-    /// `lbvh_range_refit`: every node's boxes from its leaf range.
+    /// `lbvh_range_refit`: the nodes that straddle blocks, from their leaf ranges.
     range_refit: wgpu::ComputePipeline,
     sort: RadixSort,
     /// Centroid bounds, inner boxes during the climb, arrival counters; for a clustered build
