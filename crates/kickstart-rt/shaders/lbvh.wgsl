@@ -127,8 +127,11 @@ fn is_empty(b: Box) -> bool {
 // it never enlarges a parent.
 fn prim_box(prim: u32) -> Box {
     let i = 2u * (params.aabb_base + prim);
-    let lo = aabbs[i].xyz;
-    let hi = aabbs[i + 1u].xyz;
+    return stored_box(aabbs[i].xyz, aabbs[i + 1u].xyz);
+}
+
+// A box as stored (min, max), with every empty one (min.x > max.x, or any NaN) canonical.
+fn stored_box(lo: vec3<f32>, hi: vec3<f32>) -> Box {
     if stored_box_is_empty(lo, hi) {
         return empty_box();
     }
@@ -784,9 +787,8 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 // per level of the *box pyramid* over the sorted leaf boxes: level 0 is the n leaf boxes, level
 // L >= 1 holds ceil(n / 2^L) boxes, box i of it the union of boxes 2i and 2i + 1 of level L - 1
 // (only 2i at the end of an odd level). Levels 1..=REFIT_WG_LEVELS follow each other in `pyramid`
-// (two vec4 a box: min, max), box i of level L at pyramid_level_start(n, L) + i - n (level 0 is
-// never stored); the levels above are in `work`. src/scene/lbvh.rs's `pyramid_boxes` is the
-// same sum (with level 0). So each node's boxes are computed on their own, in two passes
+// (two vec4 a box: min, max; level 0 is never stored), the levels above are in `work`.
+// src/scene/lbvh.rs sizes `pyramid` by the same sum (`pyramid_boxes` less level 0). So each node's boxes are computed on their own, in two passes
 // and without arrival counters per node or chains of device-scope round trips:
 //   lbvh_refit_gather  per sorted position, workgroups of WG: gathers the triangle into sorted
 //                      order (as gather_triangles), makes its box and levels 0..=REFIT_WG_LEVELS
@@ -800,24 +802,12 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 // The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
 // bit-identical to a climb's.
 
-// Levels the gather's workgroup makes of its block (WG = 2^8 leaves, down to one box), and each
-// stage above it makes of a group of WG units.
+// Levels the gather's workgroup makes of its block (WG = 2^8 leaves, down to one box).
 const REFIT_WG_LEVELS: u32 = 8u;
 
 // Boxes of the level above a level of `count` boxes (n <= 2^28: no overflow).
 fn pyramid_parent_count(count: u32) -> u32 {
     return (count + 1u) / 2u;
-}
-
-// First box of level `level` of the pyramid over n boxes.
-fn pyramid_level_start(n: u32, level: u32) -> u32 {
-    var start = 0u;
-    var count = n;
-    for (var l = 0u; l < level; l++) {
-        start += count;
-        count = pyramid_parent_count(count);
-    }
-    return start;
 }
 
 // Boxes in level `level` of the pyramid over n boxes.
@@ -840,12 +830,7 @@ fn pyramid_level_count(n: u32, level: u32) -> u32 {
 // empty.
 fn pyramid_box(at: u32) -> Box {
     let i = 2u * (at - params.count);
-    let lo = pyramid[i].xyz;
-    let hi = pyramid[i + 1u].xyz;
-    if stored_box_is_empty(lo, hi) {
-        return empty_box();
-    }
-    return Box(lo, hi);
+    return stored_box(pyramid[i].xyz, pyramid[i + 1u].xyz);
 }
 
 fn pyramid_store(at: u32, b: Box) {
@@ -968,11 +953,7 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
         refit_dst[d] = v0;
         refit_dst[d + 1u] = v1;
         refit_dst[d + 2u] = v2;
-        let stored = triangle_box(bitcast<vec4<f32>>(v0), bitcast<vec4<f32>>(v1),
-                                  bitcast<vec4<f32>>(v2));
-        if !stored_box_is_empty(stored.lo.xyz, stored.hi.xyz) {
-            b = Box(stored.lo.xyz, stored.hi.xyz);
-        }
+        b = leaf_triangle_box(v0, v1, v2);
     }
     // Level 0 stays in workgroup memory only: lbvh_range_refit reads a leaf's box from its
     // gathered triangle (it needs few).
@@ -1038,15 +1019,17 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
     }
 }
 
+// A gathered triangle's box (triangle_box.wgsl's rule), canonical when empty.
+fn leaf_triangle_box(v0: vec4<u32>, v1: vec4<u32>, v2: vec4<u32>) -> Box {
+    let stored = triangle_box(bitcast<vec4<f32>>(v0), bitcast<vec4<f32>>(v1),
+                              bitcast<vec4<f32>>(v2));
+    return stored_box(stored.lo.xyz, stored.hi.xyz);
+}
+
 // The box of leaf k from its gathered triangle (lbvh_refit_gather wrote it).
 fn gathered_leaf_box(k: u32) -> Box {
     let d = 3u * (params.tri_dst_base + k);
-    let stored = triangle_box(bitcast<vec4<f32>>(refit_dst[d]), bitcast<vec4<f32>>(refit_dst[d + 1u]),
-                              bitcast<vec4<f32>>(refit_dst[d + 2u]));
-    if stored_box_is_empty(stored.lo.xyz, stored.hi.xyz) {
-        return empty_box();
-    }
-    return Box(stored.lo.xyz, stored.hi.xyz);
+    return leaf_triangle_box(refit_dst[d], refit_dst[d + 1u], refit_dst[d + 2u]);
 }
 
 // The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
