@@ -566,7 +566,9 @@ mod tests {
     ///   `refit_src` (storage read) and 13 `refit_dst`; workgroup memory `wg_pyramid_lo`,
     ///   `wg_pyramid_hi: array<vec3<f32>, 512>` = 2 × 8192 bytes, plus `wg_straddlers`, 4 bytes;
     /// - `lbvh_range_refit`: `params`, `work` (the lists), `order` (`out_ref`), `topology`,
-    ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles).
+    ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles);
+    ///   workgroup memory `wg_lane_lo`, `wg_lane_hi: array<vec3<f32>, 256>` = 2 × 4096 bytes,
+    ///   plus `wg_listed`, 4 bytes.
     ///
     /// Vulkan bindings are the ranks within the group (wgpu-hal's numbering).
     #[test]
@@ -675,7 +677,7 @@ mod tests {
                     (0, 11, 6, RW),
                     (0, 13, 7, RW)
                 ],
-                0
+                8196
             )
         );
     }
