@@ -63,7 +63,10 @@ impl Ingest {
             pipeline: compute_pipeline(
                 device,
                 "kickstart-rt ingest",
-                include_str!("../../shaders/ingest.wgsl"),
+                concat!(
+                    include_str!("../../shaders/ingest_decode.wgsl"),
+                    include_str!("../../shaders/ingest.wgsl")
+                ),
                 "ingest",
             ),
         }
