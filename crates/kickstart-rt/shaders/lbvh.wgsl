@@ -60,8 +60,9 @@ struct Params {
     // lbvh_refit_gather: first staged triangle (binding 12) and first BLAS triangle (13).
     tri_src_base: u32,
     tri_dst_base: u32,
-    pad3: u32,
-    pad4: u32,
+    // lbvh_refit_ingest: rows of ingest_rows in use, and the first of its two counters.
+    ingest_row_count: u32,
+    ingest_counter: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -931,19 +932,21 @@ fn upper_box(at: u32) -> Box {
 
 var<workgroup> wg_straddlers: atomic<u32>;
 
+// lbvh_refit_ingest: the application's bytes (ingest_decode.wgsl reads them as `raw`), the
+// geometry's component rows (as ingest.wgsl's table, at most REFIT_INGEST_ROWS: a uniform keeps
+// the entry point within 8 storage buffers) and its dropped-triangle counters.
+const REFIT_INGEST_ROWS: u32 = 32u;
+@group(0) @binding(14) var<storage, read> raw: array<u32>;
+@group(0) @binding(15) var<uniform> ingest_rows: array<Component, REFIT_INGEST_ROWS>;
+@group(0) @binding(16) var<storage, read_write> ingest_counters: array<atomic<u32>>;
+
 @compute @workgroup_size(256)
 fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
                      @builtin(workgroup_id) wid: vec3<u32>,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
-    let block = k - lid;
-    let nb = (n + WG - 1u) / WG;
-    if lid == 0u {
-        atomicStore(&wg_straddlers, 0u);
-    }
-    // Past the end (and for dropped triangles): the empty box. No early return: the barriers
-    // below must be reached by the whole workgroup.
+    // Past the end (and for dropped triangles): the empty box.
     var b = empty_box();
     if k < n {
         let s = 3u * (params.tri_src_base + order[params.order_base + k]);
@@ -955,6 +958,67 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
         refit_dst[d + 1u] = v1;
         refit_dst[d + 2u] = v2;
         b = leaf_triangle_box(v0, v1, v2);
+    }
+    let root = refit_block(lid, k, b);
+    // With one block the root lies inside it (with more, lbvh_range_refit writes it).
+    if k == 0u && n <= WG {
+        write_bounds(root);
+    }
+}
+
+// lbvh_refit_gather fused with the ingestion, for a refit in the task that ingests the geometry
+// (n > WG: the root is written by lbvh_range_refit, so there is no bounds_out here): each
+// invocation decodes its sorted position's triangle from the application's bytes, as
+// ingest.wgsl would have into the staged triangles, and counts it if dropped. The staged
+// triangles are not written: the ingestion pass, its writes and the gather's random reads of
+// them are saved.
+@compute @workgroup_size(256)
+fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
+                     @builtin(workgroup_id) wid: vec3<u32>,
+                     @builtin(num_workgroups) nwg: vec3<u32>) {
+    let n = params.count;
+    let k = linear_id(lid, wid, nwg);
+    var b = empty_box();
+    if k < n {
+        let p = order[params.order_base + k];
+        // Last row whose tri_start <= p (rows are sorted by tri_start, row 0 starts at 0; a
+        // geometry's triangle index is its ingestion index).
+        var lo = 0u;
+        var hi = min(params.ingest_row_count, REFIT_INGEST_ROWS);
+        while hi - lo > 1u {
+            let mid = (lo + hi) / 2u;
+            if ingest_rows[mid].tri_start <= p {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let tri = ingest_triangle(ingest_rows[lo], p - ingest_rows[lo].tri_start);
+        if tri.dropped != 0u {
+            atomicAdd(&ingest_counters[params.ingest_counter + tri.dropped - 1u], 1u);
+        }
+        let v0 = bitcast<vec4<u32>>(tri.v0);
+        let v1 = bitcast<vec4<u32>>(tri.v1);
+        let v2 = bitcast<vec4<u32>>(tri.v2);
+        let d = 3u * (params.tri_dst_base + k);
+        refit_dst[d] = v0;
+        refit_dst[d + 1u] = v1;
+        refit_dst[d + 2u] = v2;
+        b = leaf_triangle_box(v0, v1, v2);
+    }
+    refit_block(lid, k, b);
+}
+
+// The rest of the refit gather, after invocation lid's leaf box b (sorted position k; the empty
+// box past the end, reached by the whole workgroup for its barriers): the block's pyramid, its
+// in-block nodes, the straddling list and the upper levels. Returns the root's box when this
+// invocation wrote the root (only with one block), else the empty box.
+fn refit_block(lid: u32, k: u32, b: Box) -> Box {
+    let n = params.count;
+    let block = k - lid;
+    let nb = (n + WG - 1u) / WG;
+    if lid == 0u {
+        atomicStore(&wg_straddlers, 0u);
     }
     // Level 0 stays in workgroup memory only: lbvh_range_refit reads a leaf's box from its
     // gathered triangle (it needs few).
@@ -986,6 +1050,7 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
     // Inner node k: from workgroup memory when its range lies inside the block (k is one end of
     // it, so the block is k's); otherwise it goes on the block's list for lbvh_range_refit.
     let w = block / WG;
+    var root = empty_box();
     if k + 1u < n {
         let range = node_range(k);
         if range.x >= block && range.y < block + WG {
@@ -994,7 +1059,10 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
             let g = lc & 0x7fffffffu;
             let lb = wg_range_box(range.x - block, g - block);
             let rb = wg_range_box(g + 1u - block, range.y - block);
-            write_ranged_node(k, lc, rc, lb, rb);
+            write_node(k, lb, out_ref(lc), rb, out_ref(rc));
+            if k == 0u {
+                root = union_box(lb, rb);
+            }
         } else {
             let slot = atomicAdd(&wg_straddlers, 1u);
             atomicStore(&work[straddle_list_at() + block + slot], k);
@@ -1018,6 +1086,7 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
             atomicMax(&work[at], select(v, ~v, word < 3u));
         }
     }
+    return root;
 }
 
 // A gathered triangle's box (triangle_box.wgsl's rule), canonical when empty.

@@ -12,7 +12,8 @@ use crate::gpu::Recorder;
 use crate::handles::*;
 use crate::logging::{LogCallback, Logger, Severity};
 use crate::scene::gpu_scene::{
-    GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE, INSTANCE_RECORD_BYTES,
+    DeferredIngest, GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE,
+    INSTANCE_RECORD_BYTES,
 };
 use crate::scene::ingest::ComponentIngest;
 use crate::staging::{StagingBuffer, StagingPool};
@@ -865,6 +866,7 @@ impl ExecuteContext {
 
         // 4. Geometry ingestion: copy the application's bytes (inside its encoder), then decode
         //    them into the shared staged-triangle pool.
+        let mut deferred: Vec<(GeometryHandle, DeferredIngest)> = Vec::new();
         if !ingestions.is_empty() {
             let raw_bytes: u64 = ingestions
                 .iter()
@@ -923,9 +925,45 @@ impl ExecuteContext {
                 scope: "ingest",
                 dispatches: 0,
             };
-            for (i, ((_, _, staged, _), comps)) in ingestions.iter().zip(&plans).enumerate() {
-                s.scene
-                    .record_ingest(&mut rec, &raw, comps, *staged, i as u32);
+            for (i, ((task, _, staged, triangles), comps)) in
+                ingestions.iter().zip(plans).enumerate()
+            {
+                // An update refit in this task decodes its own triangles (the ingestion fused
+                // into the refit): deferred to step 5, and recorded after it if the refit
+                // waits for a later task (max_blas_build_count).
+                let unique = ingestions
+                    .iter()
+                    .filter(|(t, _, _, _)| t.handle == task.handle)
+                    .count()
+                    == 1;
+                let rows = crate::scene::ingest::component_rows(&comps, staged.start);
+                let fusable = match (&rows, s.geometries.get(task.handle)) {
+                    (Some(rows), Ok(slot)) => {
+                        plan.build.is_some()
+                            && unique
+                            && task.operation == TaskOperation::Update
+                            && slot.data.as_ref().is_some_and(|d| {
+                                d.gpu.pending != Some(PendingBvh::Build)
+                                    && GpuScene::can_refit_from_raw(&d.gpu, *triangles, rows)
+                            })
+                    }
+                    _ => false,
+                };
+                match rows {
+                    Some(rows) if fusable => deferred.push((
+                        task.handle,
+                        DeferredIngest {
+                            raw: raw.clone(),
+                            components: comps,
+                            rows,
+                            staged: *staged,
+                            ingestion: i as u32,
+                        },
+                    )),
+                    _ => s
+                        .scene
+                        .record_ingest(&mut rec, &raw, &comps, *staged, i as u32),
+                }
             }
             ws._inputs.push(raw);
             let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -934,13 +972,6 @@ impl ExecuteContext {
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            encoder.copy_buffer_to_buffer(
-                &s.scene.counters,
-                0,
-                &readback,
-                0,
-                ingestions.len() as u64 * 8,
-            );
             ws.dropped = Some(DroppedReadback {
                 buffer: readback,
                 mapped: Arc::new(AtomicBool::new(false)),
@@ -1034,7 +1065,12 @@ impl ExecuteContext {
                         s.tlas_rebuild = true;
                     }
                     Some(PendingBvh::Refit) => {
-                        s.scene.refit_blas(&mut rec, h.index, &d.gpu);
+                        let fused = deferred
+                            .iter()
+                            .position(|(g, _)| *g == h)
+                            .map(|i| deferred.swap_remove(i).1);
+                        s.scene
+                            .refit_blas(&mut rec, h.index, &d.gpu, fused.as_ref());
                         s.tlas_refit = true;
                     }
                     None => continue,
@@ -1043,6 +1079,30 @@ impl ExecuteContext {
             }
             ws.staging
                 .extend(headers.flush(&self.device, &mut s.staging, encoder));
+        }
+        // Ingestions deferred for refits that step 5 left to a later task.
+        if !deferred.is_empty() {
+            let mut rec = Recorder {
+                device: &self.device,
+                encoder,
+                timestamps: timestamps.as_mut(),
+                scope: "ingest",
+                dispatches: 0,
+            };
+            for (_, d) in deferred.drain(..) {
+                s.scene
+                    .record_ingest(&mut rec, &d.raw, &d.components, d.staged, d.ingestion);
+            }
+        }
+        // The dropped-triangle counts, after every pass that counts them.
+        if let Some(dropped) = &ws.dropped {
+            encoder.copy_buffer_to_buffer(
+                &s.scene.counters,
+                0,
+                &dropped.buffer,
+                0,
+                dropped.buffer.size(),
+            );
         }
 
         // 6. TLAS over every instance slot, in every task that changed something it depends on

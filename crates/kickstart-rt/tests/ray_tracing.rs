@@ -651,6 +651,107 @@ fn refit_equals_rebuild(hint: BuildHint) {
     }
 }
 
+/// An update refit in the task that ingests it decodes the application's bytes itself (the
+/// ingestion fused into the refit); one that `max_blas_build_count` leaves to a later task is
+/// ingested as usual and refit then. Both trace as the CPU oracle says, and the dropped
+/// triangles of a fused refit are counted and reported.
+#[test]
+fn update_refits_in_their_task_and_later_trace_and_report_drops() {
+    let g = gpu();
+    let ctx = context(4);
+    let mut rng = Rng(123);
+    // Two fast-build geometries of more than one block of 256 triangles.
+    let before = [
+        Mesh::soup(&mut rng, 700, 1.0),
+        Mesh::soup(&mut rng, 900, 1.0),
+    ];
+    let mut after = before.clone();
+    for m in &mut after {
+        for p in &mut m.positions {
+            *p += Vec3::new(p.y * 0.3, (p.x * 5.0).sin() * 0.1, 0.05);
+        }
+    }
+    // The first's last triangle references a vertex past the end: dropped by the fused refit.
+    let last = after[0].indices.len() - 1;
+    after[0].indices[last] = 99_999;
+    let geoms = ctx.create_geometry_handles(2);
+    let insts = ctx.create_instance_handles(2);
+    let place = |k: usize| Affine3A::from_translation(Vec3::new(3.0 * k as f32 - 3.0, -1.5, -1.5));
+    let mut c = ctx.create_task_container();
+    for (k, (geom, inst)) in geoms.iter().zip(&insts).enumerate() {
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: *geom,
+            input: mesh_input(&format!("dyn{k}"), &before[k], true),
+        });
+        register_instance(&mut c, *inst, *geom, place(k));
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+
+    // Both updated, one refit allowed: the first is refit now, the second waits.
+    let mut c = ctx.create_task_container();
+    for (k, geom) in geoms.iter().enumerate() {
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Update,
+            handle: *geom,
+            input: mesh_input(&format!("dyn{k}"), &after[k], true),
+        });
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 1,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    assert_eq!(
+        dropped_after_polls(&ctx, &g.device, geoms[0]),
+        DroppedTriangles {
+            out_of_range_indices: 1,
+            non_finite_positions: 0
+        }
+    );
+    assert_eq!(
+        dropped_after_polls(&ctx, &g.device, geoms[1]),
+        DroppedTriangles::default()
+    );
+    // The oracle's copy of the dropped triangle is a point: never hit, and no index shifts.
+    let mut seen = after.clone();
+    seen[0].indices[last] = 0;
+    seen[0].indices[last - 1] = 0;
+    seen[0].indices[last - 2] = 0;
+    // Rays at the updated triangles' centroids (from random points around them).
+    let rays: Vec<GpuRay> = (0..3000)
+        .map(|k| {
+            let m = &seen[k % 2];
+            let t = rng.below(m.indices.len() as u32 / 3) as usize;
+            let c = (0..3)
+                .map(|i| m.positions[m.indices[3 * t + i] as usize])
+                .sum::<Vec3>()
+                / 3.0;
+            let c = place(k % 2).transform_point3(c);
+            let o = c + rng.v(-2.0, 2.0);
+            ray(o, c - o, 0.0, f32::INFINITY)
+        })
+        .collect();
+    let agree = |meshes: [&Mesh; 2], what: &str| {
+        let mut oracle = Oracle::default();
+        for (k, (geom, inst)) in geoms.iter().zip(&insts).enumerate() {
+            oracle.geometry(*geom, meshes[k]);
+            oracle.instance(*inst, &InstanceInput::new(*geom, place(k)));
+        }
+        let hits = closest(&ctx, &rays);
+        let a = compare(&oracle, &rays, &hits, VISIBLE);
+        assert!(a.hits > 1000, "{what}: {} hits", a.hits);
+        assert_agrees(&a, what);
+    };
+    agree([&seen[0], &before[1]], "first refit, second waiting");
+    // A task with no geometry work refits the second from its staged triangles.
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    agree([&seen[0], &seen[1]], "both refit");
+}
+
 /// The instance a hit reports is the index of that instance's data, with instances registered
 /// out of order, destroyed, and their slots reused.
 #[test]

@@ -6,7 +6,8 @@ use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, BLAS_KEY_BITS, TLAS_KEY_BITS,
+    Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles, RefitSource,
+    BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
@@ -46,11 +47,29 @@ pub(crate) struct BlasRanges {
     pub refit: Option<(Range, Range)>,
 }
 
+/// An ingestion left to its geometry's refit in the same task: [`GpuScene::refit_blas`]
+/// decodes the triangles from the application's bytes itself (`lbvh refit ingest`), which saves
+/// the ingestion pass, its staged writes and the refit's gather of them.
+pub(crate) struct DeferredIngest {
+    /// The raw copy of the task's vertex and index bytes.
+    pub raw: wgpu::Buffer,
+    /// The geometry's components in `raw`.
+    pub components: Vec<ComponentIngest>,
+    /// Their table rows ([`crate::scene::ingest::component_rows`]).
+    pub rows: Vec<u32>,
+    /// The geometry's staged range (where a plain ingestion writes).
+    pub staged: Range,
+    /// The ingestion's index in the task (its pair of dropped-triangle counters).
+    pub ingestion: u32,
+}
+
 /// The GPU side of one geometry.
 #[derive(Debug, Default)]
 pub(crate) struct GeometryGpu {
     pub triangles: u32,
-    /// Ingested, unsorted triangles (kept after the build only when `allow_update`).
+    /// Ingested, unsorted triangles (kept after the build only when `allow_update`). A refit
+    /// that decodes its own triangles ([`DeferredIngest`]) leaves them as they were: they are
+    /// read by builds and clustered refits only, which always follow an ingestion into them.
     pub staged: Option<Range>,
     pub blas: Option<BlasRanges>,
     pub pending: Option<PendingBvh>,
@@ -554,10 +573,38 @@ impl GpuScene {
         ])
     }
 
+    /// Whether [`GpuScene::refit_blas`] can decode `triangles` triangles of these component
+    /// rows itself ([`DeferredIngest`]): a fast-build tree (the Karras tree, one triangle a
+    /// leaf) of the same count, with more than one block and few enough rows.
+    pub fn can_refit_from_raw(g: &GeometryGpu, triangles: u32, rows: &[u32]) -> bool {
+        matches!(
+            g.blas,
+            Some(BlasRanges {
+                max_leaf: 1,
+                refit: Some(_),
+                ..
+            })
+        ) && g.staged.is_some()
+            && g.triangles == triangles
+            && Lbvh::can_refit_from_raw(triangles, rows)
+    }
+
     /// Refits a built `allow_update` BLAS to its re-ingested triangles: a fast-build tree by the
     /// range refit ([`Lbvh::refit_triangles`]), a fast-trace (clustered) tree by gathering the
-    /// triangles and their boxes and climbing.
-    pub fn refit_blas(&mut self, rec: &mut Recorder<'_>, slot: u32, g: &GeometryGpu) {
+    /// triangles and their boxes and climbing. With `deferred`, the triangles are decoded from
+    /// the application's bytes by the refit itself when [`GpuScene::can_refit_from_raw`], and
+    /// ingested first otherwise.
+    pub fn refit_blas(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        slot: u32,
+        g: &GeometryGpu,
+        deferred: Option<&DeferredIngest>,
+    ) {
+        let fused = deferred.filter(|d| Self::can_refit_from_raw(g, g.triangles, &d.rows));
+        if let (Some(d), None) = (deferred, fused) {
+            self.record_ingest(rec, &d.raw, &d.components, d.staged, d.ingestion);
+        }
         let (
             Some(staged),
             Some(BlasRanges {
@@ -575,12 +622,23 @@ impl GpuScene {
         // A fast-build tree (the Karras tree, one triangle a leaf) is refit from its nodes' leaf
         // ranges, straight from the re-ingested triangles.
         if max_leaf == 1 && n >= 2 {
+            let source = match fused {
+                Some(d) => RefitSource::Raw(RawTriangles {
+                    raw: &d.raw,
+                    rows: &d.rows,
+                    counters: &self.counters,
+                    counter_base: d.ingestion * 2,
+                }),
+                None => RefitSource::Staged {
+                    triangles: self.staged.buffer(),
+                    base: staged.start,
+                },
+            };
             let (_, lbvh) = self.passes.build(&self.device);
             lbvh.refit_triangles(
                 rec,
                 &LbvhTriangleRefit {
-                    src: self.staged.buffer(),
-                    src_base: staged.start,
+                    source,
                     dst: self.triangles.buffer(),
                     dst_base: tris.start,
                     count: n,

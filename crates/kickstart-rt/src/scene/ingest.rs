@@ -14,7 +14,7 @@ use crate::{IndexFormat, VertexFormat};
 const WORKGROUP: u32 = 64;
 
 /// `u32`s per component row of the table (`Component` in `ingest.wgsl`: 112 bytes).
-const ROW_WORDS: usize = 28;
+pub(crate) const ROW_WORDS: usize = 28;
 
 /// Where one component's bytes sit in the raw copy buffer, and where its triangles go.
 #[derive(Debug, Clone)]
@@ -169,6 +169,19 @@ impl Ingest {
             total.div_ceil(WORKGROUP),
         );
     }
+}
+
+/// The table rows of one geometry's `components` (triangle starts from 0, empty components
+/// left out), as [`Ingest::record`] dispatches them; `None` when a component does not fit the
+/// shader's 32-bit addressing (the ingestion pass then logs and skips it).
+pub(crate) fn component_rows(components: &[ComponentIngest], out_base: u32) -> Option<Vec<u32>> {
+    let mut table = Vec::new();
+    let mut total: u32 = 0;
+    for c in components.iter().filter(|c| c.triangle_count > 0) {
+        table.extend_from_slice(&component_row(c, out_base, total)?);
+        total = total.checked_add(c.triangle_count)?;
+    }
+    Some(table)
 }
 
 /// The table row of `c` (`Component` in `ingest.wgsl`), its triangles starting at `tri_start`

@@ -42,13 +42,18 @@
 //! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
 //! 256 in workgroup memory, writes every node whose range lies inside its block, lists the others
 //! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
-//! listed nodes, which straddle blocks. Two passes, no arrival counters, fences or waiting, no
-//! chains of device-scope round trips from the leaves to the root (what bounds the climb:
-//! BENCHMARKS.md, session 23); the nodes are bit-identical to the climb's.
+//! listed nodes, which straddle blocks, each child's pyramid levels spread over 8 invocations.
+//! Two passes, no arrival counters, fences or waiting, no chains of device-scope round trips from
+//! the leaves to the root (what bounds the climb: BENCHMARKS.md, session 23); the nodes are
+//! bit-identical to the climb's. With [`RefitSource::Raw`], `lbvh refit ingest` takes the
+//! gather's place and decodes the triangles from the application's bytes itself: the ingestion
+//! fused into the refit.
 
 use crate::gpu::shader::compute_pipeline;
 use crate::gpu::Recorder;
+use crate::scene::ingest::ROW_WORDS;
 use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
 
 use crate::gpu::radix_sort::RadixSort;
 
@@ -174,10 +179,8 @@ pub(crate) struct LbvhRefit<'a> {
 /// one triangle a leaf and its topology kept: the re-ingested triangles are gathered into
 /// sorted order and every node is refit from its leaf range ([`Lbvh::refit_triangles`]).
 pub(crate) struct LbvhTriangleRefit<'a> {
-    /// Re-ingested triangles in primitive order (3 `vec4` each).
-    pub src: &'a wgpu::Buffer,
-    /// First triangle of the geometry in `src`.
-    pub src_base: u32,
+    /// Where the new triangles come from.
+    pub source: RefitSource<'a>,
     /// Output: the BLAS's triangles in sorted order.
     pub dst: &'a wgpu::Buffer,
     /// First triangle of the BLAS in `dst`.
@@ -197,6 +200,38 @@ pub(crate) struct LbvhTriangleRefit<'a> {
     /// Output: the root box as two `vec4` at this vec4 index.
     pub bounds_out: Option<(&'a wgpu::Buffer, u32)>,
 }
+
+/// The triangles a range refit takes.
+pub(crate) enum RefitSource<'a> {
+    /// Re-ingested (staged) triangles in primitive order (3 `vec4` each), the geometry's first
+    /// at triangle `base` of `triangles`.
+    Staged {
+        /// The staged-triangle pool.
+        triangles: &'a wgpu::Buffer,
+        /// First triangle of the geometry.
+        base: u32,
+    },
+    /// The application's bytes, decoded by the refit itself (`lbvh refit ingest`): the
+    /// ingestion fused into the refit, for an update refit in the task that ingests it. Needs
+    /// more than one block of triangles ([`Lbvh::can_refit_from_raw`]).
+    Raw(RawTriangles<'a>),
+}
+
+/// The application's bytes of one geometry, as the ingestion pass would decode them.
+pub(crate) struct RawTriangles<'a> {
+    /// The raw copy of the vertex and index bytes.
+    pub raw: &'a wgpu::Buffer,
+    /// The geometry's component rows (`crate::scene::ingest::component_rows`, its triangle
+    /// indices starting at 0), at most [`REFIT_INGEST_ROWS`].
+    pub rows: &'a [u32],
+    /// The dropped-triangle counters.
+    pub counters: &'a wgpu::Buffer,
+    /// First of the geometry's two counters (out-of-range index, non-finite position).
+    pub counter_base: u32,
+}
+
+/// Component rows `lbvh refit ingest` takes (`REFIT_INGEST_ROWS` in `shaders/lbvh.wgsl`).
+pub(crate) const REFIT_INGEST_ROWS: usize = 32;
 
 /// Boxes of the box pyramid over `n` boxes (`shaders/lbvh.wgsl`, "Range refit"): level 0 (the
 /// boxes), then `ceil(n / 2^L)` a level up to the level of one box.
@@ -259,8 +294,10 @@ struct Params {
     tri_src_base: u32,
     /// `lbvh refit gather`: first BLAS triangle.
     tri_dst_base: u32,
-    /// Pads the uniform to a multiple of 16 bytes.
-    pad2: [u32; 2],
+    /// `lbvh refit ingest`: component rows in use.
+    ingest_row_count: u32,
+    /// `lbvh refit ingest`: first of the geometry's two dropped-triangle counters.
+    ingest_counter: u32,
 }
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
@@ -308,6 +345,9 @@ pub(crate) struct Lbvh {
     hploc: wgpu::ComputePipeline,
     /// `lbvh_refit_gather`: the range refit's gather, box pyramid and in-block nodes.
     refit_gather: wgpu::ComputePipeline,
+    /// `lbvh_refit_ingest`: `lbvh_refit_gather` decoding its triangles from the application's
+    /// bytes (the ingestion fused into the refit).
+    refit_ingest: wgpu::ComputePipeline,
     /// `lbvh_range_refit`: the nodes that straddle blocks, from their leaf ranges.
     range_refit: wgpu::ComputePipeline,
     sort: RadixSort,
@@ -341,14 +381,18 @@ const CLIMB_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8];
 const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
 /// Bindings of `lbvh_refit_gather` (11: the pyramid, 12: staged triangles, 13: BLAS triangles).
 const REFIT_GATHER_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 12, 13];
+/// Bindings of `lbvh_refit_ingest` (no 8: its geometries have more than one block, so the
+/// range pass writes the root; no 12: it decodes from 14 with the rows at 15).
+const REFIT_INGEST_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 11, 13, 14, 15, 16];
 /// Bindings of `lbvh_range_refit`.
 const RANGE_REFIT_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 13];
 
 /// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
 /// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid, 12 and 13 =
-/// its source and destination triangles).
+/// its source and destination triangles, 14–16 = the fused refit's raw bytes, component rows
+/// (a uniform) and dropped-triangle counters).
 struct Bindings<'a> {
-    all: [&'a wgpu::Buffer; 14],
+    all: [&'a wgpu::Buffer; 17],
 }
 
 impl Bindings<'_> {
@@ -409,6 +453,7 @@ impl Lbvh {
             include_str!("../../shaders/digit_histogram.wgsl"),
             include_str!("../../shaders/centroid_bounds.wgsl"),
             include_str!("../../shaders/triangle_box.wgsl"),
+            include_str!("../../shaders/ingest_decode.wgsl"),
             include_str!("../../shaders/lbvh.wgsl"),
             include_str!("../../shaders/hploc.wgsl")
         );
@@ -420,6 +465,7 @@ impl Lbvh {
             climb: compute_pipeline(device, "lbvh climb", src, "lbvh_climb"),
             hploc: compute_pipeline(device, "hploc climb", src, "hploc_climb"),
             refit_gather: compute_pipeline(device, "lbvh refit gather", src, "lbvh_refit_gather"),
+            refit_ingest: compute_pipeline(device, "lbvh refit ingest", src, "lbvh_refit_ingest"),
             range_refit: compute_pipeline(device, "lbvh range refit", src, "lbvh_range_refit"),
             sort: RadixSort::new(device),
             work: Grown::default(),
@@ -531,7 +577,8 @@ impl Lbvh {
             pad: [0; 2],
             tri_src_base: 0,
             tri_dst_base: 0,
-            pad2: [0; 2],
+            ingest_row_count: 0,
+            ingest_counter: 0,
         };
         let params = rec.uniform("lbvh params", &params_at(topo_base));
         let karras_params = if clustered {
@@ -551,6 +598,9 @@ impl Lbvh {
                 b.nodes,
                 bounds_out,
                 &topology,
+                &dummy,
+                &dummy,
+                &dummy,
                 &dummy,
                 &dummy,
                 &dummy,
@@ -665,6 +715,9 @@ impl Lbvh {
                 &dummy,
                 &dummy,
                 &dummy,
+                &dummy,
+                &dummy,
+                &dummy,
             ],
         };
         Self::clear_arrivals(rec, &work, n);
@@ -681,6 +734,16 @@ impl Lbvh {
             log::error!("LBVH range refit of {n} triangles skipped: it needs 2..={MAX_COUNT}");
             return;
         }
+        if let RefitSource::Raw(raw) = &r.source {
+            if !Self::can_refit_from_raw(n, raw.rows) {
+                log::error!(
+                    "LBVH range refit of {n} triangles ({} component rows) from raw bytes skipped: \
+                     it needs more than {WORKGROUP} triangles and at most {REFIT_INGEST_ROWS} rows",
+                    raw.rows.len() / ROW_WORDS
+                );
+                return;
+            }
+        }
         let device = rec.device;
         let (words, upper) = range_refit_work(n);
         let work = self
@@ -693,6 +756,27 @@ impl Lbvh {
             (pyramid_boxes(n) - u64::from(n)) * 32,
         );
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
+        let (src, src_base) = match &r.source {
+            RefitSource::Staged { triangles, base } => (*triangles, *base),
+            RefitSource::Raw(_) => (&dummy, 0),
+        };
+        let (raw, rows, counters, ingest_row_count, ingest_counter) = match &r.source {
+            RefitSource::Staged { .. } => (&dummy, None, &dummy, 0, 0),
+            RefitSource::Raw(t) => {
+                // The shader's uniform array has a fixed length: pad the rows to it.
+                let mut table = t.rows.to_vec();
+                table.resize(REFIT_INGEST_ROWS * ROW_WORDS, 0);
+                let rows = rec
+                    .device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("lbvh refit ingest rows"),
+                        contents: bytemuck::cast_slice(&table),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    });
+                let count = (t.rows.len() / ROW_WORDS) as u32;
+                (t.raw, Some(rows), t.counters, count, t.counter_base)
+            }
+        };
         let params = rec.uniform(
             "lbvh params",
             &Params {
@@ -703,8 +787,10 @@ impl Lbvh {
                 bounds_base,
                 flags: Self::flags(LeafRefs::SortedPosition, r.bounds_out.is_some()),
                 max_leaf: 1,
-                tri_src_base: r.src_base,
+                tri_src_base: src_base,
                 tri_dst_base: r.dst_base,
+                ingest_row_count,
+                ingest_counter,
                 ..Params::zeroed()
             },
         );
@@ -722,21 +808,36 @@ impl Lbvh {
                 &dummy,
                 &dummy,
                 &pyramid,
-                r.src,
+                src,
                 r.dst,
+                raw,
+                rows.as_ref().unwrap_or(&dummy),
+                counters,
             ],
         };
         if !upper.is_empty() {
             rec.encoder
                 .clear_buffer(&work, upper.start * 4, Some((upper.end - upper.start) * 4));
         }
-        let bg = bind.group(device, &self.refit_gather, REFIT_GATHER_BINDINGS);
-        rec.dispatch("lbvh refit gather", &self.refit_gather, &[&bg], groups(n));
+        if rows.is_some() {
+            let bg = bind.group(device, &self.refit_ingest, REFIT_INGEST_BINDINGS);
+            rec.dispatch("lbvh refit ingest", &self.refit_ingest, &[&bg], groups(n));
+        } else {
+            let bg = bind.group(device, &self.refit_gather, REFIT_GATHER_BINDINGS);
+            rec.dispatch("lbvh refit gather", &self.refit_gather, &[&bg], groups(n));
+        }
         // Up to one block every node lies inside it: the gather wrote them all.
         if n > WORKGROUP {
             let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
             rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n));
         }
+    }
+
+    /// Whether [`RefitSource::Raw`] can refit `n` triangles of these component rows: more than
+    /// one block (the fused pass leaves the root's box to the range pass) and at most
+    /// [`REFIT_INGEST_ROWS`] rows.
+    pub fn can_refit_from_raw(n: u32, rows: &[u32]) -> bool {
+        n > WORKGROUP && rows.len() <= REFIT_INGEST_ROWS * ROW_WORDS && !rows.is_empty()
     }
 }
 
@@ -773,6 +874,7 @@ mod tests {
     use super::*;
     use crate::cpu::{CpuBvh, SAH_INTERSECTION_COST, SAH_TRAVERSAL_COST};
     use crate::gpu::testing::{buffer_with, gpu, read_back, run};
+    use crate::scene::ingest::{component_rows, ComponentIngest, Ingest};
     use glam::Vec3;
 
     /// A primitive box (min, max) as the AABB input holds it.
@@ -2008,8 +2110,10 @@ mod tests {
             lbvh.refit_triangles(
                 rec,
                 &LbvhTriangleRefit {
-                    src: &src,
-                    src_base,
+                    source: RefitSource::Staged {
+                        triangles: &src,
+                        base: src_base,
+                    },
                     dst: &dst,
                     dst_base,
                     count: n,
@@ -2086,6 +2190,206 @@ mod tests {
                 }
             }
             range_refit_and_check(&mut lbvh, &before, &after);
+        }
+    }
+
+    /// The application's bytes of a geometry of `n` triangles in two components, and how many
+    /// of its triangles the ingestion must drop (out-of-range index, non-finite position):
+    /// component A is a strip of Float32x3 vertices (stride 16, at an unaligned offset) with u32
+    /// indices, every 13th triangle with an index past the end and every 97th vertex NaN;
+    /// component B holds the rest, non-indexed (stride 12) and transformed.
+    fn raw_geometry(
+        rng: &mut Rng,
+        n: u32,
+        spread: f32,
+    ) -> (Vec<u8>, Vec<ComponentIngest>, [u32; 2]) {
+        let n_a = n * 2 / 3;
+        let n_b = n - n_a;
+        let verts_a = n_a + 2;
+        let mut raw = vec![0xABu8; 6];
+        let a_offset = raw.len() as u64;
+        let mut walk = rng.vec(-spread, spread);
+        let mut positions_a = Vec::new();
+        for v in 0..verts_a {
+            let d = rng.vec(-1.0, 1.0);
+            walk = [0, 1, 2].map(|a| (walk[a] + d[a]).clamp(-spread, spread));
+            let p = if v % 97 == 40 {
+                [f32::NAN, 0.0, 0.0]
+            } else {
+                walk
+            };
+            positions_a.push(p);
+            for x in p.iter().chain(&[9.0]) {
+                raw.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+        raw.resize(raw.len().div_ceil(4) * 4, 0xCD);
+        let index_offset = raw.len() as u64;
+        let mut dropped = [0u32; 2];
+        for t in 0..n_a {
+            let mut idx = [t, t + 1, t + 2];
+            if t % 13 == 6 {
+                idx[1] = verts_a + 5;
+            }
+            for i in idx {
+                raw.extend_from_slice(&i.to_le_bytes());
+            }
+            if idx.iter().any(|&i| i >= verts_a) {
+                dropped[0] += 1;
+            } else if idx.iter().any(|&i| positions_a[i as usize][0].is_nan()) {
+                dropped[1] += 1;
+            }
+        }
+        let b_offset = raw.len() as u64;
+        for _ in 0..n_b {
+            let c = rng.vec(-spread, spread);
+            for _ in 0..3 {
+                let d = rng.vec(-1.0, 1.0);
+                for a in 0..3 {
+                    raw.extend_from_slice(&(c[a] + d[a]).to_le_bytes());
+                }
+            }
+        }
+        let component =
+            |offset, stride, count, index, triangles, transform, base| ComponentIngest {
+                vertex_byte_offset: offset,
+                vertex_stride: stride,
+                vertex_format: crate::VertexFormat::Float32x3,
+                vertex_count: count,
+                index,
+                first_index: 0,
+                triangle_count: triangles,
+                transform,
+                primitive_base: base,
+            };
+        let transform = glam::Affine3A::from_scale_rotation_translation(
+            glam::Vec3::new(0.5, 2.0, 1.0),
+            glam::Quat::from_rotation_y(0.3),
+            glam::Vec3::new(10.0, -3.0, 1.0),
+        );
+        let comps = vec![
+            component(
+                a_offset,
+                16,
+                verts_a,
+                Some((index_offset, crate::IndexFormat::Uint32)),
+                n_a,
+                None,
+                0,
+            ),
+            component(b_offset, 12, 3 * n_b, None, n_b, Some(transform), n_a),
+        ];
+        (raw, comps, dropped)
+    }
+
+    #[test]
+    fn range_refit_from_raw_bytes_equals_ingestion_then_refit() {
+        // The fused refit decodes each sorted position's triangle itself: the same triangles,
+        // nodes, root box and dropped-triangle counts as the ingestion pass followed by the
+        // refit of the staged triangles, in two passes instead of three; exact boxes.
+        let g = gpu();
+        let mut lbvh = Lbvh::new(&g.device);
+        let ingest = Ingest::new(&g.device);
+        let mut rng = Rng(47);
+        for (n, spread) in [(257u32, 20.0f32), (3001, 40.0), (40_000, 100.0)] {
+            let (raw, comps, dropped) = raw_geometry(&mut rng, n, spread);
+            assert!(dropped[0] > 0 && dropped[1] > 0, "the data drops both ways");
+            let raw = buffer_with(&raw);
+            let boxes = staged_boxes(&staged_triangles(&mut rng, n as usize, spread));
+            let (src_base, dst_base, counter_base) = (5u32, 3u32, 2u32);
+            let words = (u64::from(dst_base + n) + 1) * 12;
+            // Ingestion into staged triangles, then the refit of them.
+            let (staged_tree, _) = build_and_check(&mut lbvh, &boxes, LeafRefs::SortedPosition);
+            let staged = sentinel_buffer((u64::from(src_base + n) + 1) * 12);
+            let (staged_dst, staged_counters) = (sentinel_buffer(words), buffer_with(&[0u8; 16]));
+            run(|rec| {
+                ingest.record(
+                    rec,
+                    &raw,
+                    &comps,
+                    &staged,
+                    src_base,
+                    &staged_counters,
+                    counter_base,
+                );
+                lbvh.refit_triangles(
+                    rec,
+                    &refit_of(
+                        &staged_tree,
+                        RefitSource::Staged {
+                            triangles: &staged,
+                            base: src_base,
+                        },
+                        &staged_dst,
+                        dst_base,
+                    ),
+                );
+            });
+            // The fused refit.
+            let (tree, _) = build_and_check(&mut lbvh, &boxes, LeafRefs::SortedPosition);
+            let (dst, counters) = (sentinel_buffer(words), buffer_with(&[0u8; 16]));
+            let rows = component_rows(&comps, 0).expect("the components fit");
+            assert!(Lbvh::can_refit_from_raw(n, &rows));
+            let mut dispatches = 0;
+            run(|rec| {
+                let source = RefitSource::Raw(RawTriangles {
+                    raw: &raw,
+                    rows: &rows,
+                    counters: &counters,
+                    counter_base,
+                });
+                lbvh.refit_triangles(rec, &refit_of(&tree, source, &dst, dst_base));
+                dispatches = rec.dispatches;
+            });
+            assert_eq!(dispatches, 2, "{n} triangles: refit ingest, range refit");
+            let counts = read_words(&counters);
+            assert_eq!(counts, read_words(&staged_counters), "{n}: dropped counts");
+            assert_eq!(
+                counts,
+                [0, 0, dropped[0], dropped[1]],
+                "{n}: dropped counts"
+            );
+            let got = read_words(&dst);
+            assert_untouched(&got, 12 * dst_base as usize, 12 * n as usize, "triangles");
+            assert_eq!(got, read_words(&staged_dst), "{n}: the gathered triangles");
+            let staged_words = read_words(&staged);
+            let staged_tris: &[[f32; 4]] =
+                bytemuck::cast_slice(&staged_words[12 * src_base as usize..][..12 * n as usize]);
+            let (staged_tree, _) = check_read_back(staged_tree, &staged_boxes(staged_tris), false);
+            let (tree, _) = check_read_back(tree, &staged_boxes(staged_tris), false);
+            assert_eq!(tree.node_words, staged_tree.node_words, "{n}: nodes");
+            assert_eq!(
+                read_words(&tree.bounds),
+                read_words(&staged_tree.bounds),
+                "{n}: root box"
+            );
+        }
+        // Too few triangles for the fused pass (one block: the root would need bounds_out).
+        assert!(!Lbvh::can_refit_from_raw(256, &[0; ROW_WORDS]));
+        assert!(!Lbvh::can_refit_from_raw(
+            1000,
+            &vec![0; (REFIT_INGEST_ROWS + 1) * ROW_WORDS]
+        ));
+    }
+
+    /// The range refit of `tree` from `source` into `dst` at triangle `dst_base`.
+    fn refit_of<'a>(
+        tree: &'a GpuTree,
+        source: RefitSource<'a>,
+        dst: &'a wgpu::Buffer,
+        dst_base: u32,
+    ) -> LbvhTriangleRefit<'a> {
+        LbvhTriangleRefit {
+            source,
+            dst,
+            dst_base,
+            count: tree.n,
+            nodes: &tree.nodes,
+            node_base: tree.bases.node,
+            order: &tree.order,
+            order_base: tree.bases.order,
+            topology: (&tree.topology, tree.bases.topo),
+            bounds_out: Some((&tree.bounds, tree.bases.bounds)),
         }
     }
 

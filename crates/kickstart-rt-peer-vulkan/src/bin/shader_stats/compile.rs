@@ -504,14 +504,15 @@ pub fn write_spirv(
 mod tests {
     use super::*;
 
-    /// lbvh.wgsl as the SDK compiles it: after digit_histogram.wgsl, centroid_bounds.wgsl and
-    /// triangle_box.wgsl, whose helpers it uses.
+    /// lbvh.wgsl as the SDK compiles it: after digit_histogram.wgsl, centroid_bounds.wgsl,
+    /// triangle_box.wgsl and ingest_decode.wgsl, whose helpers it uses.
     fn lbvh() -> Source {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../kickstart-rt/shaders/");
         let parts: Vec<(String, String)> = [
             "digit_histogram.wgsl",
             "centroid_bounds.wgsl",
             "triangle_box.wgsl",
+            "ingest_decode.wgsl",
             "lbvh.wgsl",
         ]
         .iter()
@@ -565,6 +566,9 @@ mod tests {
     ///   upper levels), `order`, `topology`, `nodes`, `bounds_out`, 11 `pyramid`, 12
     ///   `refit_src` (storage read) and 13 `refit_dst`; workgroup memory `wg_pyramid_lo`,
     ///   `wg_pyramid_hi: array<vec3<f32>, 512>` = 2 × 8192 bytes, plus `wg_straddlers`, 4 bytes;
+    /// - `lbvh_refit_ingest`: as `lbvh_refit_gather` without `bounds_out` and `refit_src`,
+    ///   with 14 `raw` (storage read), 15 `ingest_rows` (a uniform) and 16 `ingest_counters`:
+    ///   eight storage buffers, the default limit;
     /// - `lbvh_range_refit`: `params`, `work` (the lists), `order` (`out_ref`), `topology`,
     ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles);
     ///   workgroup memory `wg_lane_lo`, `wg_lane_hi: array<vec3<f32>, 256>` = 2 × 4096 bytes,
@@ -587,6 +591,7 @@ mod tests {
                 "lbvh_hierarchy",
                 "lbvh_climb",
                 "lbvh_refit_gather",
+                "lbvh_refit_ingest",
                 "lbvh_range_refit"
             ]
         );
@@ -660,6 +665,24 @@ mod tests {
                     (0, 11, 6, RW),
                     (0, 12, 7, R),
                     (0, 13, 8, RW)
+                ],
+                16388
+            )
+        );
+        assert_eq!(
+            got("lbvh_refit_ingest"),
+            (
+                vec![
+                    (0, 0, 0, U),
+                    (0, 2, 1, RW),
+                    (0, 5, 2, RW),
+                    (0, 6, 3, RW),
+                    (0, 7, 4, RW),
+                    (0, 11, 5, RW),
+                    (0, 13, 6, RW),
+                    (0, 14, 7, R),
+                    (0, 15, 8, U),
+                    (0, 16, 9, RW)
                 ],
                 16388
             )
