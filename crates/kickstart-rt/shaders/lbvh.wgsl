@@ -799,8 +799,10 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 //                      ~ s / WG), lists the others, and merges its top box into every level
 //                      above with atomicMax (no pass of its own, no fence, no waiting)
 //   lbvh_range_refit   per block, its listed nodes (those straddling blocks), from `pyramid`,
-//                      the upper levels and the gathered triangles (leaf boxes), each child's
-//                      levels spread over RANGE_LANES invocations
+//                      the upper levels and the gathered triangles (leaf boxes), one
+//                      invocation a node (spreading a node's levels over invocations joined
+//                      through workgroup memory was 1.8-2.3x slower on the H100: BENCHMARKS.md,
+//                      session 25)
 // The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
 // bit-identical to a climb's.
 
@@ -855,7 +857,7 @@ fn wg_level_slot(level: u32) -> u32 {
 }
 
 // The union of leaf boxes [a, b] (a <= b), positions relative to the block, from the block's
-// pyramid, walked bottom-up (lane_range_box takes the same boxes in closed form).
+// pyramid; the same steps as range_box.
 fn wg_range_box(a: u32, b: u32) -> Box {
     var acc = empty_box();
     var l = a;
@@ -1102,112 +1104,84 @@ fn gathered_leaf_box(k: u32) -> Box {
     return leaf_triangle_box(refit_dst[d], refit_dst[d + 1u], refit_dst[d + 2u]);
 }
 
-// Box i of pyramid level `level` (nb blocks), from where the level is kept: level 0 from the
-// gathered triangles, the blocks' levels from `pyramid`, the levels above from `work`.
-fn level_box(nb: u32, level: u32, i: u32) -> Box {
-    if level == 0u {
-        return gathered_leaf_box(i);
-    }
-    if level <= REFIT_WG_LEVELS {
-        var start = 0u;
-        var count = params.count;
-        for (var l = 0u; l < level; l++) {
-            start += count;
-            count = pyramid_parent_count(count);
-        }
-        return pyramid_box(start + i);
-    }
-    return upper_box(upper_box_at(nb, level, i));
-}
-
-// Levels of the pyramid one invocation of lbvh_range_refit takes of a range: RANGE_LANES lanes
-// cover levels 0 .. RANGE_LANES * RANGE_LEVELS_PER_LANE - 1 (n <= 2^28 needs 29).
-const RANGE_LEVELS_PER_LANE: u32 = 4u;
-const RANGE_LANES: u32 = 8u;
-// Listed nodes a round of lbvh_range_refit takes: two children of RANGE_LANES lanes each.
-const RANGE_NODES: u32 = WG / (2u * RANGE_LANES);
-
-// The part of the union of leaf boxes [a, b] (sorted positions, a <= b) that lies in levels
-// first .. first + RANGE_LEVELS_PER_LANE - 1 of the pyramid. The range's boxes at level L are
-// known without the levels below: with l = ceil(a / 2^L) and r = floor((b + 1) / 2^L), the
-// range takes box l when l is odd and box r - 1 when r is odd, while l < r (the bottom-up
-// segment-tree walk of wg_range_box, in closed form). So the levels' loads are independent,
-// and a range's ~20 levels are spread over lanes instead of walked one after another: the walk
-// was a chain of ~40 dependent memory latencies per node.
-fn lane_range_box(nb: u32, a: u32, b: u32, first: u32) -> Box {
+// The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
+// first box and even last box are taken and the rest is left to the level above. Level 0 comes
+// from the gathered triangles, the blocks' levels from `pyramid`, the levels above from `work`.
+// The three sources have a loop each (wg_range_box takes the same steps in workgroup memory):
+// one loop choosing the source per box made lbvh range refit 40 % slower on the H100 (0.049
+// against 0.035 ms on the dragon, BENCHMARKS.md session 24).
+fn range_box(a: u32, b: u32) -> Box {
     var acc = empty_box();
-    for (var level = first; level < first + RANGE_LEVELS_PER_LANE; level++) {
-        // a < 2^28 and level < 32: no overflow.
-        let l = (a + (1u << level) - 1u) >> level;
-        let r = (b + 1u) >> level;
-        if l >= r {
-            break;
-        }
+    var l = a;
+    var r = b + 1u;
+    if (l & 1u) != 0u {
+        acc = union_box(acc, gathered_leaf_box(l));
+        l += 1u;
+    }
+    if (r & 1u) != 0u {
+        r -= 1u;
+        acc = union_box(acc, gathered_leaf_box(r));
+    }
+    l >>= 1u;
+    r >>= 1u;
+    var start = params.count;
+    var count = pyramid_parent_count(params.count);
+    var level = 1u;
+    // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
+    // level of one box.
+    while l < r && level <= REFIT_WG_LEVELS {
         if (l & 1u) != 0u {
-            acc = union_box(acc, level_box(nb, level, l));
+            acc = union_box(acc, pyramid_box(start + l));
+            l += 1u;
         }
         if (r & 1u) != 0u {
-            acc = union_box(acc, level_box(nb, level, r - 1u));
+            r -= 1u;
+            acc = union_box(acc, pyramid_box(start + r));
         }
+        l >>= 1u;
+        r >>= 1u;
+        start += count;
+        count = pyramid_parent_count(count);
+        level += 1u;
     }
-    return acc;
-}
-
-// Each invocation's part of a round: box of (node, child, lane) at lid.
-var<workgroup> wg_lane_lo: array<vec3<f32>, 256>;
-var<workgroup> wg_lane_hi: array<vec3<f32>, 256>;
-var<workgroup> wg_listed: u32;
-
-// The straddling inner node at place `at` of block w's list.
-fn listed_node(w: u32, at: u32) -> u32 {
-    return atomicLoad(&work[straddle_list_at() + w * WG + at]);
-}
-
-// The union of lanes [at, at + RANGE_LANES) of a round, in level order.
-fn lanes_box(at: u32) -> Box {
-    var acc = empty_box();
-    for (var k = 0u; k < RANGE_LANES; k++) {
-        acc = union_box(acc, Box(wg_lane_lo[at + k], wg_lane_hi[at + k]));
+    // Above the blocks' levels: from `work`, box i of a level 6 words after box i - 1.
+    if l >= r {
+        return acc;
+    }
+    var at = upper_box_at((params.count + WG - 1u) / WG, level, 0u);
+    while l < r {
+        if (l & 1u) != 0u {
+            acc = union_box(acc, upper_box(at + 6u * l));
+            l += 1u;
+        }
+        if (r & 1u) != 0u {
+            r -= 1u;
+            acc = union_box(acc, upper_box(at + 6u * r));
+        }
+        l >>= 1u;
+        r >>= 1u;
+        at += 6u * count;
+        count = pyramid_parent_count(count);
     }
     return acc;
 }
 
 // One workgroup per block (n > WG): the block's inner nodes whose range straddles blocks, from
-// the list lbvh_refit_gather made, RANGE_NODES a round; each child's range is split by levels
-// over RANGE_LANES invocations (lane_range_box), whose parts are then joined in level order.
+// the list lbvh_refit_gather made, so the invocations that work are packed into few subgroups
+// (about one node in eight straddles on the dragon).
 @compute @workgroup_size(256)
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
     let w = wid.y * nwg.x + wid.x;
     let nb = (params.count + WG - 1u) / WG;
-    if lid == 0u {
-        wg_listed = select(0u, atomicLoad(&work[straddle_counts_at(nb) + min(w, nb - 1u)]), w < nb);
+    if w >= nb || lid >= atomicLoad(&work[straddle_counts_at(nb) + w]) {
+        return;
     }
-    let listed = workgroupUniformLoad(&wg_listed);
-    let slot = lid / (2u * RANGE_LANES);
-    let right = ((lid / RANGE_LANES) & 1u) != 0u;
-    let lane = lid % RANGE_LANES;
-    for (var first = 0u; first < listed; first += RANGE_NODES) {
-        var part = empty_box();
-        if first + slot < listed {
-            let i = listed_node(w, first + slot);
-            let range = node_range(i);
-            let g = topology[params.topo_base + 2u * i] & 0x7fffffffu;
-            let a = select(range.x, g + 1u, right);
-            let b = select(g, range.y, right);
-            part = lane_range_box(nb, a, b, lane * RANGE_LEVELS_PER_LANE);
-        }
-        wg_lane_lo[lid] = part.lo;
-        wg_lane_hi[lid] = part.hi;
-        workgroupBarrier();
-        if lid < RANGE_NODES && first + lid < listed {
-            let i = listed_node(w, first + lid);
-            let lc = topology[params.topo_base + 2u * i];
-            let rc = topology[params.topo_base + 2u * i + 1u];
-            let at = lid * 2u * RANGE_LANES;
-            write_ranged_node(i, lc, rc, lanes_box(at), lanes_box(at + RANGE_LANES));
-        }
-        workgroupBarrier();
-    }
+    let i = atomicLoad(&work[straddle_list_at() + w * WG + lid]);
+    let range = node_range(i);
+    let lc = topology[params.topo_base + 2u * i];
+    let rc = topology[params.topo_base + 2u * i + 1u];
+    let g = lc & 0x7fffffffu;
+    write_ranged_node(i, lc, rc, range_box(range.x, g), range_box(g + 1u, range.y));
 }

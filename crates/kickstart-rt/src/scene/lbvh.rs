@@ -42,8 +42,7 @@
 //! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
 //! 256 in workgroup memory, writes every node whose range lies inside its block, lists the others
 //! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
-//! listed nodes, which straddle blocks, each child's pyramid levels spread over 8 invocations.
-//! Two passes, no arrival counters, fences or waiting, no chains of device-scope round trips from
+//! listed nodes, which straddle blocks. Two passes, no arrival counters, fences or waiting, no chains of device-scope round trips from
 //! the leaves to the root (what bounds the climb: BENCHMARKS.md, session 23); the nodes are
 //! bit-identical to the climb's. With [`RefitSource::Raw`], `lbvh refit ingest` takes the
 //! gather's place and decodes the triangles from the application's bytes itself: the ingestion

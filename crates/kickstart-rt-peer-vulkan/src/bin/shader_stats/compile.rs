@@ -570,9 +570,7 @@ mod tests {
     ///   with 14 `raw` (storage read), 15 `ingest_rows` (a uniform) and 16 `ingest_counters`:
     ///   eight storage buffers, the default limit;
     /// - `lbvh_range_refit`: `params`, `work` (the lists), `order` (`out_ref`), `topology`,
-    ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles);
-    ///   workgroup memory `wg_lane_lo`, `wg_lane_hi: array<vec3<f32>, 256>` = 2 × 4096 bytes,
-    ///   plus `wg_listed`, 4 bytes.
+    ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles).
     ///
     /// Vulkan bindings are the ranks within the group (wgpu-hal's numbering).
     #[test]
@@ -700,7 +698,7 @@ mod tests {
                     (0, 11, 6, RW),
                     (0, 13, 7, RW)
                 ],
-                8196
+                0
             )
         );
     }
