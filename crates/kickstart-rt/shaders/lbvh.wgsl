@@ -896,24 +896,30 @@ fn write_ranged_node(i: u32, lc: u32, rc: u32, lb: Box, rb: Box) {
 }
 
 // `work` during a range refit (u32 words, atomic), nb = ceil(n / WG) blocks:
-//   [8, 8 + WG nb)                 per block, its inner nodes whose range straddles blocks
-//   [8 + WG nb, 8 + (WG + 1) nb)   per block, how many
-//   [8 + (WG + 1) nb, + 6 U)       the pyramid's levels above REFIT_WG_LEVELS (U boxes in all),
-//                                  6 words a box in centroid_bounds.wgsl's encoding (~enc(min),
-//                                  enc(max)): every block merges its top box into each of its
-//                                  ancestors with atomicMax, so they need no pass, no fence and
-//                                  no waiting (cleared before the refit: zero is the identity)
+//   [0]                    how many inner nodes straddle blocks (cleared before the refit)
+//   [8, 8 + 6 U)           the pyramid's levels above REFIT_WG_LEVELS (U boxes in all), 6 words
+//                          a box in centroid_bounds.wgsl's encoding (~enc(min), enc(max)): every
+//                          block merges its top box into each of its ancestors with atomicMax,
+//                          so they need no pass, no fence and no waiting (cleared before the
+//                          refit: zero is the identity)
+//   [8 + 6 U, + n - 1)     the straddling inner nodes, packed: each block reserves its run with
+//                          one atomicAdd on word 0, so lbvh_range_refit's invocations all work
 // src/scene/lbvh.rs's `range_refit_work` is the same layout.
-fn straddle_list_at() -> u32 {
-    return 8u;
-}
+const STRADDLE_TOTAL: u32 = 0u;
 
-fn straddle_counts_at(nb: u32) -> u32 {
-    return 8u + WG * nb;
+// First word of the packed list: after the U upper boxes.
+fn straddle_list_at() -> u32 {
+    var boxes = 0u;
+    var count = pyramid_level_count(params.count, REFIT_WG_LEVELS);
+    while count > 1u {
+        count = pyramid_parent_count(count);
+        boxes += count;
+    }
+    return 8u + 6u * boxes;
 }
 
 // Word of box i of pyramid level `level` (> REFIT_WG_LEVELS) in `work`.
-fn upper_box_at(nb: u32, level: u32, i: u32) -> u32 {
+fn upper_box_at(level: u32, i: u32) -> u32 {
     let n = params.count;
     var start = 0u;
     var count = pyramid_level_count(n, REFIT_WG_LEVELS + 1u);
@@ -921,7 +927,7 @@ fn upper_box_at(nb: u32, level: u32, i: u32) -> u32 {
         start += count;
         count = pyramid_parent_count(count);
     }
-    return 8u + (WG + 1u) * nb + 6u * (start + i);
+    return 8u + 6u * (start + i);
 }
 
 fn upper_box(at: u32) -> Box {
@@ -933,6 +939,8 @@ fn upper_box(at: u32) -> Box {
 }
 
 var<workgroup> wg_straddlers: atomic<u32>;
+var<workgroup> wg_list_base: u32;
+const NO_SLOT: u32 = 0xffffffffu;
 
 // lbvh_refit_ingest: the application's bytes (ingest_decode.wgsl reads them as `raw`), the
 // geometry's component rows (as ingest.wgsl's table, at most REFIT_INGEST_ROWS: a uniform keeps
@@ -1053,6 +1061,7 @@ fn refit_block(lid: u32, k: u32, b: Box) -> Box {
     // it, so the block is k's); otherwise it goes on the block's list for lbvh_range_refit.
     let w = block / WG;
     var root = empty_box();
+    var slot = NO_SLOT;
     if k + 1u < n {
         let range = node_range(k);
         if range.x >= block && range.y < block + WG {
@@ -1066,13 +1075,18 @@ fn refit_block(lid: u32, k: u32, b: Box) -> Box {
                 root = union_box(lb, rb);
             }
         } else {
-            let slot = atomicAdd(&wg_straddlers, 1u);
-            atomicStore(&work[straddle_list_at() + block + slot], k);
+            slot = atomicAdd(&wg_straddlers, 1u);
         }
     }
+    // The block's run of the packed list (one global atomic a block).
     workgroupBarrier();
     if lid == 0u {
-        atomicStore(&work[straddle_counts_at(nb) + w], atomicLoad(&wg_straddlers));
+        let count = atomicLoad(&wg_straddlers);
+        wg_list_base = select(0u, atomicAdd(&work[STRADDLE_TOTAL], count), count != 0u);
+    }
+    let base = workgroupUniformLoad(&wg_list_base);
+    if slot != NO_SLOT {
+        atomicStore(&work[straddle_list_at() + base + slot], k);
     }
     // The levels above the block's: its top box (level REFIT_WG_LEVELS; with one block the
     // pyramid is complete) merged into each ancestor, one word an invocation.
@@ -1082,7 +1096,7 @@ fn refit_block(lid: u32, k: u32, b: Box) -> Box {
         let word = lid % 6u;
         let level = REFIT_WG_LEVELS + 1u + up;
         if pyramid_level_count(n, level - 1u) > 1u {
-            let at = upper_box_at(nb, level, w >> (up + 1u)) + word;
+            let at = upper_box_at(level, w >> (up + 1u)) + word;
             let bounds = array<f32, 6>(top.lo.x, top.lo.y, top.lo.z, top.hi.x, top.hi.y, top.hi.z);
             let v = enc(bounds[word]);
             atomicMax(&work[at], select(v, ~v, word < 3u));
@@ -1148,7 +1162,7 @@ fn range_box(a: u32, b: u32) -> Box {
     if l >= r {
         return acc;
     }
-    var at = upper_box_at((params.count + WG - 1u) / WG, level, 0u);
+    var at = upper_box_at(level, 0u);
     while l < r {
         if (l & 1u) != 0u {
             acc = union_box(acc, upper_box(at + 6u * l));
@@ -1166,22 +1180,24 @@ fn range_box(a: u32, b: u32) -> Box {
     return acc;
 }
 
-// One workgroup per block (n > WG): the block's inner nodes whose range straddles blocks, from
-// the list lbvh_refit_gather made, so the invocations that work are packed into few subgroups
-// (about one node in eight straddles on the dragon).
+// The inner nodes whose range straddles blocks (n > WG), one invocation each from the packed
+// list lbvh_refit_gather made: about one node in eight on the dragon, so the dispatch is sized
+// for that and strides over the list when there are more (src/scene/lbvh.rs). Every invocation
+// works: with one workgroup a block and most invocations idle, the pass ran in ~3 waves of
+// workgroups on the H100 where it now fits in one.
 @compute @workgroup_size(256)
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
-    let w = wid.y * nwg.x + wid.x;
-    let nb = (params.count + WG - 1u) / WG;
-    if w >= nb || lid >= atomicLoad(&work[straddle_counts_at(nb) + w]) {
-        return;
+    let total = atomicLoad(&work[STRADDLE_TOTAL]);
+    let list = straddle_list_at();
+    let stride = nwg.x * nwg.y * WG;
+    for (var at = linear_id(lid, wid, nwg); at < total; at += stride) {
+        let i = atomicLoad(&work[list + at]);
+        let range = node_range(i);
+        let lc = topology[params.topo_base + 2u * i];
+        let rc = topology[params.topo_base + 2u * i + 1u];
+        let g = lc & 0x7fffffffu;
+        write_ranged_node(i, lc, rc, range_box(range.x, g), range_box(g + 1u, range.y));
     }
-    let i = atomicLoad(&work[straddle_list_at() + w * WG + lid]);
-    let range = node_range(i);
-    let lc = topology[params.topo_base + 2u * i];
-    let rc = topology[params.topo_base + 2u * i + 1u];
-    let g = lc & 0x7fffffffu;
-    write_ranged_node(i, lc, rc, range_box(range.x, g), range_box(g + 1u, range.y));
 }
