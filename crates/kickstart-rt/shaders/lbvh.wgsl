@@ -930,12 +930,15 @@ fn upper_box_at(level: u32, i: u32) -> u32 {
     return 8u + 6u * (start + i);
 }
 
+// lbvh_range_refit reads `work` through this read-only binding of the same buffer instead of
+// binding 2: plain loads may be served by the L1 cache, where atomic loads of binding 2 always
+// go to L2, and the upper levels and the list are read-only by then (the gather is done).
+@group(0) @binding(17) var<storage, read> work_read: array<u32>;
+
 fn upper_box(at: u32) -> Box {
     return Box(
-        vec3<f32>(dec(~atomicLoad(&work[at])), dec(~atomicLoad(&work[at + 1u])),
-                  dec(~atomicLoad(&work[at + 2u]))),
-        vec3<f32>(dec(atomicLoad(&work[at + 3u])), dec(atomicLoad(&work[at + 4u])),
-                  dec(atomicLoad(&work[at + 5u]))));
+        vec3<f32>(dec(~work_read[at]), dec(~work_read[at + 1u]), dec(~work_read[at + 2u])),
+        vec3<f32>(dec(work_read[at + 3u]), dec(work_read[at + 4u]), dec(work_read[at + 5u])));
 }
 
 var<workgroup> wg_straddlers: atomic<u32>;
@@ -956,6 +959,7 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
+    let node = node_topology(k);
     // Past the end (and for dropped triangles): the empty box.
     var b = empty_box();
     if k < n {
@@ -969,7 +973,7 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
         refit_dst[d + 2u] = v2;
         b = leaf_triangle_box(v0, v1, v2);
     }
-    let root = refit_block(lid, k, b);
+    let root = refit_block(lid, k, b, node);
     // With one block the root lies inside it (with more, lbvh_range_refit writes it).
     if k == 0u && n <= WG {
         write_bounds(root);
@@ -988,6 +992,7 @@ fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
+    let node = node_topology(k);
     var b = empty_box();
     if k < n {
         let p = order[params.order_base + k];
@@ -1016,14 +1021,30 @@ fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
         refit_dst[d + 2u] = v2;
         b = leaf_triangle_box(v0, v1, v2);
     }
-    refit_block(lid, k, b);
+    refit_block(lid, k, b, node);
+}
+
+// Inner node k's topology words for refit_block (k < n - 1), loaded before the triangle so
+// their latency overlaps its fetch instead of following the workgroup's barriers.
+struct NodeTopology {
+    other_end: u32,
+    lc: u32,
+    rc: u32,
+}
+
+fn node_topology(k: u32) -> NodeTopology {
+    if k + 1u >= params.count {
+        return NodeTopology(0u, 0u, 0u);
+    }
+    return NodeTopology(topology[range_ends_at() + k], topology[params.topo_base + 2u * k],
+                        topology[params.topo_base + 2u * k + 1u]);
 }
 
 // The rest of the refit gather, after invocation lid's leaf box b (sorted position k; the empty
 // box past the end, reached by the whole workgroup for its barriers): the block's pyramid, its
 // in-block nodes, the straddling list and the upper levels. Returns the root's box when this
 // invocation wrote the root (only with one block), else the empty box.
-fn refit_block(lid: u32, k: u32, b: Box) -> Box {
+fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
     let n = params.count;
     let block = k - lid;
     let nb = (n + WG - 1u) / WG;
@@ -1063,10 +1084,10 @@ fn refit_block(lid: u32, k: u32, b: Box) -> Box {
     var root = empty_box();
     var slot = NO_SLOT;
     if k + 1u < n {
-        let range = node_range(k);
+        let range = vec2<u32>(min(k, node.other_end), max(k, node.other_end));
         if range.x >= block && range.y < block + WG {
-            let lc = topology[params.topo_base + 2u * k];
-            let rc = topology[params.topo_base + 2u * k + 1u];
+            let lc = node.lc;
+            let rc = node.rc;
             let g = lc & 0x7fffffffu;
             let lb = wg_range_box(range.x - block, g - block);
             let rb = wg_range_box(g + 1u - block, range.y - block);
@@ -1118,66 +1139,99 @@ fn gathered_leaf_box(k: u32) -> Box {
     return leaf_triangle_box(refit_dst[d], refit_dst[d + 1u], refit_dst[d + 2u]);
 }
 
-// The union of leaf boxes [a, b] (sorted positions, a <= b): at each level, the range's odd
-// first box and even last box are taken and the rest is left to the level above. Level 0 comes
-// from the gathered triangles, the blocks' levels from `pyramid`, the levels above from `work`.
-// The three sources have a loop each (wg_range_box takes the same steps in workgroup memory):
-// one loop choosing the source per box made lbvh range refit 40 % slower on the H100 (0.049
-// against 0.035 ms on the dragon, BENCHMARKS.md session 24).
-fn range_box(a: u32, b: u32) -> Box {
-    var acc = empty_box();
-    var l = a;
-    var r = b + 1u;
-    if (l & 1u) != 0u {
-        acc = union_box(acc, gathered_leaf_box(l));
-        l += 1u;
+// A bottom-up walk over the pyramid for the union of leaf boxes [a, b] (sorted positions,
+// a <= b): l = a, r = b + 1; at each level the range's odd first box (l) and even last box
+// (r - 1, when r is odd) are taken and the rest is left to the level above (l, r halved).
+struct Walk {
+    l: u32,
+    r: u32,
+    acc: Box,
+}
+
+fn walk_takes_l(w: Walk) -> bool {
+    return w.l < w.r && (w.l & 1u) != 0u;
+}
+
+fn walk_takes_r(w: Walk) -> bool {
+    return w.l < w.r && (w.r & 1u) != 0u;
+}
+
+// The level's boxes a walk may take (index 0 in place of one it does not take): the caller
+// loads both unconditionally, so all its loads of a level are issued before any is waited for.
+fn walk_l(w: Walk) -> u32 {
+    return select(0u, w.l, walk_takes_l(w));
+}
+
+fn walk_r(w: Walk) -> u32 {
+    return select(0u, w.r - 1u, walk_takes_r(w));
+}
+
+// One level of a walk, given the boxes at walk_l and walk_r (l and r - 1 are distinct when
+// both are taken: both odd and l < r).
+fn walk_step(w: Walk, lbox: Box, rbox: Box) -> Walk {
+    var acc = w.acc;
+    let take_l = walk_takes_l(w);
+    let take_r = walk_takes_r(w);
+    if take_l {
+        acc = union_box(acc, lbox);
     }
-    if (r & 1u) != 0u {
-        r -= 1u;
-        acc = union_box(acc, gathered_leaf_box(r));
+    if take_r {
+        acc = union_box(acc, rbox);
     }
-    l >>= 1u;
-    r >>= 1u;
+    return Walk(select(w.l, w.l + 1u, take_l) >> 1u, select(w.r, w.r - 1u, take_r) >> 1u, acc);
+}
+
+fn walks_live(w0: Walk, w1: Walk) -> bool {
+    return w0.l < w0.r || w1.l < w1.r;
+}
+
+// The unions of leaf boxes [a0, b0] and [a1, b1] (a node's two children), walked side by side
+// so that each level's up to four box loads are in flight together: one node's walk was a
+// chain of dependent loads, about 40 for the root's children, and the longest chain was what
+// lbvh range refit took (BENCHMARKS.md, session 25). Level 0 comes from the gathered
+// triangles, the blocks' levels from `pyramid`, the levels above from `work_read`; a loop each
+// (one loop choosing the source per box made the pass 40 % slower, session 24).
+fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
+    var w0 = Walk(a0, b0 + 1u, empty_box());
+    var w1 = Walk(a1, b1 + 1u, empty_box());
+    {
+        let l0 = gathered_leaf_box(walk_l(w0));
+        let r0 = gathered_leaf_box(walk_r(w0));
+        let l1 = gathered_leaf_box(walk_l(w1));
+        let r1 = gathered_leaf_box(walk_r(w1));
+        w0 = walk_step(w0, l0, r0);
+        w1 = walk_step(w1, l1, r1);
+    }
     var start = params.count;
     var count = pyramid_parent_count(params.count);
     var level = 1u;
-    // At most 2 boxes a level; the loop ends when the range is used up, at the latest at the
-    // level of one box.
-    while l < r && level <= REFIT_WG_LEVELS {
-        if (l & 1u) != 0u {
-            acc = union_box(acc, pyramid_box(start + l));
-            l += 1u;
-        }
-        if (r & 1u) != 0u {
-            r -= 1u;
-            acc = union_box(acc, pyramid_box(start + r));
-        }
-        l >>= 1u;
-        r >>= 1u;
+    // The walks end when their ranges are used up, at the latest at the level of one box.
+    while walks_live(w0, w1) && level <= REFIT_WG_LEVELS {
+        let l0 = pyramid_box(start + walk_l(w0));
+        let r0 = pyramid_box(start + walk_r(w0));
+        let l1 = pyramid_box(start + walk_l(w1));
+        let r1 = pyramid_box(start + walk_r(w1));
+        w0 = walk_step(w0, l0, r0);
+        w1 = walk_step(w1, l1, r1);
         start += count;
         count = pyramid_parent_count(count);
         level += 1u;
     }
-    // Above the blocks' levels: from `work`, box i of a level 6 words after box i - 1.
-    if l >= r {
-        return acc;
-    }
-    var at = upper_box_at(level, 0u);
-    while l < r {
-        if (l & 1u) != 0u {
-            acc = union_box(acc, upper_box(at + 6u * l));
-            l += 1u;
+    // Above the blocks' levels: box i of a level 6 words after box i - 1.
+    if walks_live(w0, w1) {
+        var at = upper_box_at(level, 0u);
+        while walks_live(w0, w1) {
+            let l0 = upper_box(at + 6u * walk_l(w0));
+            let r0 = upper_box(at + 6u * walk_r(w0));
+            let l1 = upper_box(at + 6u * walk_l(w1));
+            let r1 = upper_box(at + 6u * walk_r(w1));
+            w0 = walk_step(w0, l0, r0);
+            w1 = walk_step(w1, l1, r1);
+            at += 6u * count;
+            count = pyramid_parent_count(count);
         }
-        if (r & 1u) != 0u {
-            r -= 1u;
-            acc = union_box(acc, upper_box(at + 6u * r));
-        }
-        l >>= 1u;
-        r >>= 1u;
-        at += 6u * count;
-        count = pyramid_parent_count(count);
     }
-    return acc;
+    return array<Box, 2>(w0.acc, w1.acc);
 }
 
 // The inner nodes whose range straddles blocks (n > WG), one invocation each from the packed
@@ -1189,15 +1243,16 @@ fn range_box(a: u32, b: u32) -> Box {
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
-    let total = atomicLoad(&work[STRADDLE_TOTAL]);
+    let total = work_read[STRADDLE_TOTAL];
     let list = straddle_list_at();
     let stride = nwg.x * nwg.y * WG;
     for (var at = linear_id(lid, wid, nwg); at < total; at += stride) {
-        let i = atomicLoad(&work[list + at]);
+        let i = work_read[list + at];
         let range = node_range(i);
         let lc = topology[params.topo_base + 2u * i];
         let rc = topology[params.topo_base + 2u * i + 1u];
         let g = lc & 0x7fffffffu;
-        write_ranged_node(i, lc, rc, range_box(range.x, g), range_box(g + 1u, range.y));
+        let boxes = range_boxes(range.x, g, g + 1u, range.y);
+        write_ranged_node(i, lc, rc, boxes[0], boxes[1]);
     }
 }

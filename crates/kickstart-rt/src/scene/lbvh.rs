@@ -392,14 +392,14 @@ const REFIT_GATHER_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 12, 13];
 /// range pass writes the root; no 12: it decodes from 14 with the rows at 15).
 const REFIT_INGEST_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 11, 13, 14, 15, 16];
 /// Bindings of `lbvh_range_refit`.
-const RANGE_REFIT_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 13];
+const RANGE_REFIT_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11, 13, 17];
 
 /// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
 /// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid, 12 and 13 =
 /// its source and destination triangles, 14–16 = the fused refit's raw bytes, component rows
-/// (a uniform) and dropped-triangle counters).
+/// (a uniform) and dropped-triangle counters, 17 = the work buffer read-only for the range pass).
 struct Bindings<'a> {
-    all: [&'a wgpu::Buffer; 17],
+    all: [&'a wgpu::Buffer; 18],
 }
 
 impl Bindings<'_> {
@@ -614,6 +614,7 @@ impl Lbvh {
                 &dummy,
                 &dummy,
                 &dummy,
+                &dummy,
             ],
         };
         // Where the sorted pairs end up (the sort's scratch after an odd number of passes).
@@ -727,6 +728,7 @@ impl Lbvh {
                 &dummy,
                 &dummy,
                 &dummy,
+                &dummy,
             ],
         };
         Self::clear_arrivals(rec, &work, n);
@@ -822,6 +824,7 @@ impl Lbvh {
                 raw,
                 rows.as_ref().unwrap_or(&dummy),
                 counters,
+                &work,
             ],
         };
         // One block has no straddling nodes and no levels above its own.

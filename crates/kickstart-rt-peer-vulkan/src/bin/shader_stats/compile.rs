@@ -570,8 +570,9 @@ mod tests {
     /// - `lbvh_refit_ingest`: as `lbvh_refit_gather` without `bounds_out` and `refit_src`,
     ///   with 14 `raw` (storage read), 15 `ingest_rows` (a uniform) and 16 `ingest_counters`:
     ///   eight storage buffers, the default limit;
-    /// - `lbvh_range_refit`: `params`, `work` (the lists), `order` (`out_ref`), `topology`,
-    ///   `nodes`, `bounds_out`, `pyramid` and `refit_dst` (leaf boxes from the triangles).
+    /// - `lbvh_range_refit`: `params`, `order` (`out_ref`), `topology`, `nodes`, `bounds_out`,
+    ///   `pyramid`, `refit_dst` (leaf boxes from the triangles) and 17 `work_read` (the list
+    ///   and the upper levels, read-only: not binding 2's atomics).
     ///
     /// Vulkan bindings are the ranks within the group (wgpu-hal's numbering).
     #[test]
@@ -691,13 +692,13 @@ mod tests {
             (
                 vec![
                     (0, 0, 0, U),
-                    (0, 2, 1, RW),
-                    (0, 5, 2, RW),
-                    (0, 6, 3, RW),
-                    (0, 7, 4, RW),
-                    (0, 8, 5, RW),
-                    (0, 11, 6, RW),
-                    (0, 13, 7, RW)
+                    (0, 5, 1, RW),
+                    (0, 6, 2, RW),
+                    (0, 7, 3, RW),
+                    (0, 8, 4, RW),
+                    (0, 11, 5, RW),
+                    (0, 13, 6, RW),
+                    (0, 17, 7, R)
                 ],
                 0
             )
