@@ -800,9 +800,11 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 //                      above with atomicMax (no pass of its own, no fence, no waiting)
 //   lbvh_range_refit   per block, its listed nodes (those straddling blocks), from `pyramid`,
 //                      the upper levels and the gathered triangles (leaf boxes), one
-//                      invocation a node (spreading a node's levels over invocations joined
-//                      through workgroup memory was 1.8-2.3x slower on the H100: BENCHMARKS.md,
-//                      session 25)
+//                      invocation a node walking its two children side by side (range_boxes;
+//                      spreading a node's levels over invocations joined through workgroup
+//                      memory was 1.8-2.3x slower on the H100: BENCHMARKS.md, session 25)
+//   lbvh_refit_ingest  lbvh_refit_gather decoding each triangle from the application's bytes
+//                      (the ingestion fused into the refit)
 // The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
 // bit-identical to a climb's.
 
@@ -896,26 +898,20 @@ fn write_ranged_node(i: u32, lc: u32, rc: u32, lb: Box, rb: Box) {
 }
 
 // `work` during a range refit (u32 words, atomic), nb = ceil(n / WG) blocks:
-//   [0]                    how many inner nodes straddle blocks (cleared before the refit)
-//   [8, 8 + 6 U)           the pyramid's levels above REFIT_WG_LEVELS (U boxes in all), 6 words
-//                          a box in centroid_bounds.wgsl's encoding (~enc(min), enc(max)): every
-//                          block merges its top box into each of its ancestors with atomicMax,
-//                          so they need no pass, no fence and no waiting (cleared before the
-//                          refit: zero is the identity)
-//   [8 + 6 U, + n - 1)     the straddling inner nodes, packed: each block reserves its run with
-//                          one atomicAdd on word 0, so lbvh_range_refit's invocations all work
+//   [8, 8 + WG nb)                 per block, its inner nodes whose range straddles blocks
+//   [8 + WG nb, 8 + (WG + 1) nb)   per block, how many
+//   [8 + (WG + 1) nb, + 6 U)       the pyramid's levels above REFIT_WG_LEVELS (U boxes in all),
+//                                  6 words a box in centroid_bounds.wgsl's encoding (~enc(min),
+//                                  enc(max)): every block merges its top box into each of its
+//                                  ancestors with atomicMax, so they need no pass, no fence and
+//                                  no waiting (cleared before the refit: zero is the identity)
 // src/scene/lbvh.rs's `range_refit_work` is the same layout.
-const STRADDLE_TOTAL: u32 = 0u;
-
-// First word of the packed list: after the U upper boxes.
 fn straddle_list_at() -> u32 {
-    var boxes = 0u;
-    var count = pyramid_level_count(params.count, REFIT_WG_LEVELS);
-    while count > 1u {
-        count = pyramid_parent_count(count);
-        boxes += count;
-    }
-    return 8u + 6u * boxes;
+    return 8u;
+}
+
+fn straddle_counts_at(nb: u32) -> u32 {
+    return 8u + WG * nb;
 }
 
 // Word of box i of pyramid level `level` (> REFIT_WG_LEVELS) in `work`.
@@ -927,7 +923,8 @@ fn upper_box_at(level: u32, i: u32) -> u32 {
         start += count;
         count = pyramid_parent_count(count);
     }
-    return 8u + 6u * (start + i);
+    let nb = (n + WG - 1u) / WG;
+    return 8u + (WG + 1u) * nb + 6u * (start + i);
 }
 
 // lbvh_range_refit reads `work` through this read-only binding of the same buffer instead of
@@ -942,8 +939,6 @@ fn upper_box(at: u32) -> Box {
 }
 
 var<workgroup> wg_straddlers: atomic<u32>;
-var<workgroup> wg_list_base: u32;
-const NO_SLOT: u32 = 0xffffffffu;
 
 // lbvh_refit_ingest: the application's bytes (ingest_decode.wgsl reads them as `raw`), the
 // geometry's component rows (as ingest.wgsl's table, at most REFIT_INGEST_ROWS: a uniform keeps
@@ -1082,7 +1077,6 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
     // it, so the block is k's); otherwise it goes on the block's list for lbvh_range_refit.
     let w = block / WG;
     var root = empty_box();
-    var slot = NO_SLOT;
     if k + 1u < n {
         let range = vec2<u32>(min(k, node.other_end), max(k, node.other_end));
         if range.x >= block && range.y < block + WG {
@@ -1096,18 +1090,13 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
                 root = union_box(lb, rb);
             }
         } else {
-            slot = atomicAdd(&wg_straddlers, 1u);
+            let slot = atomicAdd(&wg_straddlers, 1u);
+            atomicStore(&work[straddle_list_at() + block + slot], k);
         }
     }
-    // The block's run of the packed list (one global atomic a block).
     workgroupBarrier();
     if lid == 0u {
-        let count = atomicLoad(&wg_straddlers);
-        wg_list_base = select(0u, atomicAdd(&work[STRADDLE_TOTAL], count), count != 0u);
-    }
-    let base = workgroupUniformLoad(&wg_list_base);
-    if slot != NO_SLOT {
-        atomicStore(&work[straddle_list_at() + base + slot], k);
+        atomicStore(&work[straddle_counts_at(nb) + w], atomicLoad(&wg_straddlers));
     }
     // The levels above the block's: its top box (level REFIT_WG_LEVELS; with one block the
     // pyramid is complete) merged into each ancestor, one word an invocation.
@@ -1234,25 +1223,23 @@ fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
     return array<Box, 2>(w0.acc, w1.acc);
 }
 
-// The inner nodes whose range straddles blocks (n > WG), one invocation each from the packed
-// list lbvh_refit_gather made: about one node in eight on the dragon, so the dispatch is sized
-// for that and strides over the list when there are more (src/scene/lbvh.rs). Every invocation
-// works: with one workgroup a block and most invocations idle, the pass ran in ~3 waves of
-// workgroups on the H100 where it now fits in one.
+// One workgroup per block (n > WG): the block's inner nodes whose range straddles blocks, from
+// the list lbvh_refit_gather made, so the invocations that work are packed into few subgroups
+// (about one node in eight straddles on the dragon).
 @compute @workgroup_size(256)
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
-    let total = work_read[STRADDLE_TOTAL];
-    let list = straddle_list_at();
-    let stride = nwg.x * nwg.y * WG;
-    for (var at = linear_id(lid, wid, nwg); at < total; at += stride) {
-        let i = work_read[list + at];
-        let range = node_range(i);
-        let lc = topology[params.topo_base + 2u * i];
-        let rc = topology[params.topo_base + 2u * i + 1u];
-        let g = lc & 0x7fffffffu;
-        let boxes = range_boxes(range.x, g, g + 1u, range.y);
-        write_ranged_node(i, lc, rc, boxes[0], boxes[1]);
+    let w = wid.y * nwg.x + wid.x;
+    let nb = (params.count + WG - 1u) / WG;
+    if w >= nb || lid >= work_read[straddle_counts_at(nb) + w] {
+        return;
     }
+    let i = work_read[straddle_list_at() + w * WG + lid];
+    let range = node_range(i);
+    let lc = topology[params.topo_base + 2u * i];
+    let rc = topology[params.topo_base + 2u * i + 1u];
+    let g = lc & 0x7fffffffu;
+    let boxes = range_boxes(range.x, g, g + 1u, range.y);
+    write_ranged_node(i, lc, rc, boxes[0], boxes[1]);
 }

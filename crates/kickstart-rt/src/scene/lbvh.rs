@@ -42,9 +42,10 @@
 //! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
 //! 256 in workgroup memory, writes every node whose range lies inside its block, lists the others
 //! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
-//! listed nodes, which straddle blocks, from one packed list. Two passes, no arrival counters,
-//! fences or waiting, no chains of device-scope round trips from the leaves to the root (what
-//! bounds the climb: BENCHMARKS.md, session 23); the nodes are bit-identical to the climb's. With [`RefitSource::Raw`], `lbvh refit ingest` takes the
+//! listed nodes, which straddle blocks, walking each node's two children side by side. Two
+//! passes, no arrival counters, fences or waiting, no chains of device-scope round trips from the
+//! leaves to the root (what bounds the climb: BENCHMARKS.md, session 23); the nodes are
+//! bit-identical to the climb's. With [`RefitSource::Raw`], `lbvh refit ingest` takes the
 //! gather's place and decodes the triangles from the application's bytes itself: the ingestion
 //! fused into the refit.
 
@@ -249,25 +250,21 @@ pub(crate) fn pyramid_boxes(n: u32) -> u64 {
 #[cfg(test)]
 const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
 
-/// The range refit's layout in `work` (`shaders/lbvh.wgsl`, above `STRADDLE_TOTAL`), for `n`
-/// triangles in blocks of 256: the straddling nodes' count (word 0), the pyramid's levels above
-/// the blocks' 8 (from word 8, 6 words a box), then the packed list of straddling nodes. Returns
-/// (words, the words to clear before the refit: the count and the upper levels).
+/// The range refit's layout in `work` (`shaders/lbvh.wgsl`, above `straddle_list_at`), for `n`
+/// triangles in `nb` blocks of 256: the straddling nodes' lists and counts, then the pyramid's
+/// levels above the blocks' 8 (6 words a box; returned as the word range to clear). Returns
+/// (words, that range).
 fn range_refit_work(n: u32) -> (u64, std::ops::Range<u64>) {
+    let nb = u64::from(n.div_ceil(WORKGROUP));
+    let block = u64::from(WORKGROUP);
     let mut upper = 0;
-    let mut count = u64::from(n.div_ceil(WORKGROUP));
+    let mut count = nb;
     while count > 1 {
         count = count.div_ceil(2);
         upper += count;
     }
-    let list = 8 + 6 * upper;
-    (list + u64::from(n.saturating_sub(1)), 0..list)
-}
-
-/// Workgroups of `lbvh range refit`: enough for one straddling node in 8 (the dragon has one in
-/// 8.4); with more, its invocations stride over the list.
-fn range_refit_groups(n: u32) -> u32 {
-    groups(n.div_ceil(8))
+    let start = 8 + (block + 1) * nb;
+    (start + 6 * upper, start..start + 6 * upper)
 }
 
 /// Boxes in level `level` of the pyramid over `n` boxes.
@@ -368,10 +365,6 @@ pub(crate) struct Lbvh {
     dummy: Grown,
     /// The range refit's box pyramid above level 0 ([`pyramid_boxes`] − n boxes of 32 bytes).
     pyramid_boxes: Grown,
-    /// Tests: workgroups of `lbvh range refit` instead of [`range_refit_groups`] (few, so that
-    /// its invocations stride over the list).
-    #[cfg(test)]
-    range_refit_groups: Option<u32>,
 }
 
 /// Bindings of each entry point (auto layouts only contain what the entry point uses).
@@ -482,8 +475,6 @@ impl Lbvh {
             clustered_topology: Grown::default(),
             dummy: Grown::default(),
             pyramid_boxes: Grown::default(),
-            #[cfg(test)]
-            range_refit_groups: None,
         }
     }
 
@@ -756,7 +747,7 @@ impl Lbvh {
             }
         }
         let device = rec.device;
-        let (words, clear) = range_refit_work(n);
+        let (words, upper) = range_refit_work(n);
         let work = self
             .work
             .get(device, "lbvh work", words.max(work_words(n)) * 4);
@@ -827,10 +818,9 @@ impl Lbvh {
                 &work,
             ],
         };
-        // One block has no straddling nodes and no levels above its own.
-        if n > WORKGROUP {
+        if !upper.is_empty() {
             rec.encoder
-                .clear_buffer(&work, clear.start * 4, Some((clear.end - clear.start) * 4));
+                .clear_buffer(&work, upper.start * 4, Some((upper.end - upper.start) * 4));
         }
         if rows.is_some() {
             let bg = bind.group(device, &self.refit_ingest, REFIT_INGEST_BINDINGS);
@@ -842,11 +832,7 @@ impl Lbvh {
         // Up to one block every node lies inside it: the gather wrote them all.
         if n > WORKGROUP {
             let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
-            #[cfg(test)]
-            let groups = self.range_refit_groups.unwrap_or(range_refit_groups(n));
-            #[cfg(not(test))]
-            let groups = range_refit_groups(n);
-            rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups);
+            rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n));
         }
     }
 
@@ -2207,12 +2193,6 @@ mod tests {
                 }
             }
             range_refit_and_check(&mut lbvh, &before, &after);
-            // One workgroup for the straddling nodes: its invocations stride over the list.
-            if n > 3000 {
-                lbvh.range_refit_groups = Some(1);
-                range_refit_and_check(&mut lbvh, &before, &after);
-                lbvh.range_refit_groups = None;
-            }
         }
     }
 

@@ -122,8 +122,9 @@ pub enum SurfelType {
 /// parts such as buildings), and turns every subtree of up to
 /// [`BuildHint::FAST_TRACE_MAX_LEAF`] triangles that is cheaper by the surface area heuristic
 /// into one leaf. Either can be refit (`allow_update`). A fast-build tree is refit from its
-/// nodes' leaf ranges, straight from the re-ingested triangles (the range refit: 0.23 ms with
-/// ingestion for the dragon's 871k triangles on the H100, BENCHMARKS.md session 24). A
+/// nodes' leaf ranges, straight from the re-ingested triangles (the range refit: 0.167 ms with
+/// ingestion, fused into the refit when both run in one task, for the dragon's 871k triangles
+/// on the H100, BENCHMARKS.md session 25). A
 /// fast-trace tree's nodes are not ranges: its refit climbs the tree bottom-up through
 /// device-scope round trips and re-decides its leaves (0.56 ms, session 21).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
