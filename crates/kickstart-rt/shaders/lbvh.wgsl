@@ -788,9 +788,10 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 // per level of the *box pyramid* over the sorted leaf boxes: level 0 is the n leaf boxes, level
 // L >= 1 holds ceil(n / 2^L) boxes, box i of it the union of boxes 2i and 2i + 1 of level L - 1
 // (only 2i at the end of an odd level). Levels 1..=REFIT_WG_LEVELS follow each other in `pyramid`
-// (two vec4 a box: min, max; level 0 is never stored), the levels above are in `work`.
-// src/scene/lbvh.rs sizes `pyramid` by the same sum (`pyramid_boxes` less level 0). So each node's boxes are computed on their own, in two passes
-// and without arrival counters per node or chains of device-scope round trips:
+// (two vec4 a box: min, max; level 0 is never stored), the levels above are in `work`;
+// src/scene/lbvh.rs sizes `pyramid` by the same sum (`pyramid_boxes` less level 0). So each
+// node's boxes are computed on their own, in two passes and without arrival counters per node
+// or chains of device-scope round trips:
 //   lbvh_refit_gather  per sorted position, workgroups of WG: gathers the triangle into sorted
 //                      order (as gather_triangles), makes its box and levels 0..=REFIT_WG_LEVELS
 //                      of the pyramid over the workgroup's block in workgroup memory, writes
@@ -959,14 +960,7 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
     var b = empty_box();
     if k < n {
         let s = 3u * (params.tri_src_base + order[params.order_base + k]);
-        let d = 3u * (params.tri_dst_base + k);
-        let v0 = refit_src[s];
-        let v1 = refit_src[s + 1u];
-        let v2 = refit_src[s + 2u];
-        refit_dst[d] = v0;
-        refit_dst[d + 1u] = v1;
-        refit_dst[d + 2u] = v2;
-        b = leaf_triangle_box(v0, v1, v2);
+        b = store_gathered(k, refit_src[s], refit_src[s + 1u], refit_src[s + 2u]);
     }
     let root = refit_block(lid, k, b, node);
     // With one block the root lies inside it (with more, lbvh_range_refit writes it).
@@ -1007,14 +1001,8 @@ fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
         if tri.dropped != 0u {
             atomicAdd(&ingest_counters[params.ingest_counter + tri.dropped - 1u], 1u);
         }
-        let v0 = bitcast<vec4<u32>>(tri.v0);
-        let v1 = bitcast<vec4<u32>>(tri.v1);
-        let v2 = bitcast<vec4<u32>>(tri.v2);
-        let d = 3u * (params.tri_dst_base + k);
-        refit_dst[d] = v0;
-        refit_dst[d + 1u] = v1;
-        refit_dst[d + 2u] = v2;
-        b = leaf_triangle_box(v0, v1, v2);
+        b = store_gathered(k, bitcast<vec4<u32>>(tri.v0), bitcast<vec4<u32>>(tri.v1),
+                           bitcast<vec4<u32>>(tri.v2));
     }
     refit_block(lid, k, b, node);
 }
@@ -1113,6 +1101,15 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
         }
     }
     return root;
+}
+
+// Writes sorted position k's triangle into the BLAS's triangles and returns its box.
+fn store_gathered(k: u32, v0: vec4<u32>, v1: vec4<u32>, v2: vec4<u32>) -> Box {
+    let d = 3u * (params.tri_dst_base + k);
+    refit_dst[d] = v0;
+    refit_dst[d + 1u] = v1;
+    refit_dst[d + 2u] = v2;
+    return leaf_triangle_box(v0, v1, v2);
 }
 
 // A gathered triangle's box (triangle_box.wgsl's rule), canonical when empty.

@@ -1,6 +1,6 @@
 //! The SDK instance: handles, working sets, and recording GPU tasks into the engine's encoder.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -866,7 +866,7 @@ impl ExecuteContext {
 
         // 4. Geometry ingestion: copy the application's bytes (inside its encoder), then decode
         //    them into the shared staged-triangle pool.
-        let mut deferred: Vec<(GeometryHandle, DeferredIngest)> = Vec::new();
+        let mut deferred: HashMap<GeometryHandle, DeferredIngest> = HashMap::new();
         if !ingestions.is_empty() {
             let raw_bytes: u64 = ingestions
                 .iter()
@@ -925,42 +925,45 @@ impl ExecuteContext {
                 scope: "ingest",
                 dispatches: 0,
             };
+            // Geometries ingested once in this task (a second ingestion must follow the first).
+            let mut ingested: HashMap<GeometryHandle, u32> = HashMap::new();
+            for (t, _, _, _) in &ingestions {
+                *ingested.entry(t.handle).or_default() += 1;
+            }
             for (i, ((task, _, staged, triangles), comps)) in
                 ingestions.iter().zip(plans).enumerate()
             {
                 // An update refit in this task decodes its own triangles (the ingestion fused
                 // into the refit): deferred to step 5, and recorded after it if the refit
                 // waits for a later task (max_blas_build_count).
-                let unique = ingestions
-                    .iter()
-                    .filter(|(t, _, _, _)| t.handle == task.handle)
-                    .count()
-                    == 1;
-                let rows = crate::scene::ingest::component_rows(&comps, staged.start);
-                let fusable = match (&rows, s.geometries.get(task.handle)) {
-                    (Some(rows), Ok(slot)) => {
-                        plan.build.is_some()
-                            && unique
-                            && task.operation == TaskOperation::Update
-                            && slot.data.as_ref().is_some_and(|d| {
+                let candidate = plan.build.is_some()
+                    && task.operation == TaskOperation::Update
+                    && ingested.get(&task.handle) == Some(&1);
+                let rows = candidate
+                    .then(|| crate::scene::ingest::component_rows(&comps, staged.start))
+                    .flatten()
+                    .filter(|rows| {
+                        s.geometries.get(task.handle).is_ok_and(|slot| {
+                            slot.data.as_ref().is_some_and(|d| {
                                 d.gpu.pending != Some(PendingBvh::Build)
                                     && GpuScene::can_refit_from_raw(&d.gpu, *triangles, rows)
                             })
-                    }
-                    _ => false,
-                };
+                        })
+                    });
                 match rows {
-                    Some(rows) if fusable => deferred.push((
-                        task.handle,
-                        DeferredIngest {
-                            raw: raw.clone(),
-                            components: comps,
-                            rows,
-                            staged: *staged,
-                            ingestion: i as u32,
-                        },
-                    )),
-                    _ => s
+                    Some(rows) => {
+                        deferred.insert(
+                            task.handle,
+                            DeferredIngest {
+                                raw: raw.clone(),
+                                components: comps,
+                                rows,
+                                staged: *staged,
+                                ingestion: i as u32,
+                            },
+                        );
+                    }
+                    None => s
                         .scene
                         .record_ingest(&mut rec, &raw, &comps, *staged, i as u32),
                 }
@@ -1065,10 +1068,7 @@ impl ExecuteContext {
                         s.tlas_rebuild = true;
                     }
                     Some(PendingBvh::Refit) => {
-                        let fused = deferred
-                            .iter()
-                            .position(|(g, _)| *g == h)
-                            .map(|i| deferred.swap_remove(i).1);
+                        let fused = deferred.remove(&h);
                         s.scene
                             .refit_blas(&mut rec, h.index, &d.gpu, fused.as_ref());
                         s.tlas_refit = true;
@@ -1089,7 +1089,10 @@ impl ExecuteContext {
                 scope: "ingest",
                 dispatches: 0,
             };
-            for (_, d) in deferred.drain(..) {
+            // In ingestion order, as they would have been recorded in step 4.
+            let mut rest: Vec<DeferredIngest> = deferred.into_values().collect();
+            rest.sort_by_key(|d| d.ingestion);
+            for d in rest {
                 s.scene
                     .record_ingest(&mut rec, &d.raw, &d.components, d.staged, d.ingestion);
             }

@@ -758,25 +758,31 @@ impl Lbvh {
             (pyramid_boxes(n) - u64::from(n)) * 32,
         );
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
-        let (src, src_base) = match &r.source {
-            RefitSource::Staged { triangles, base } => (*triangles, *base),
-            RefitSource::Raw(_) => (&dummy, 0),
-        };
-        let (raw, rows, counters, ingest_row_count, ingest_counter) = match &r.source {
-            RefitSource::Staged { .. } => (&dummy, None, &dummy, 0, 0),
+        // Staged triangles bind at 12; raw bytes at 14 with their rows (padded to the shader's
+        // fixed-length uniform array) at 15 and the counters at 16.
+        let (src, src_base, raw, rows, counters, ingest_row_count, ingest_counter) = match &r.source
+        {
+            RefitSource::Staged { triangles, base } => {
+                (*triangles, *base, &dummy, None, &dummy, 0, 0)
+            }
             RefitSource::Raw(t) => {
-                // The shader's uniform array has a fixed length: pad the rows to it.
                 let mut table = t.rows.to_vec();
                 table.resize(REFIT_INGEST_ROWS * ROW_WORDS, 0);
-                let rows = rec
-                    .device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("lbvh refit ingest rows"),
-                        contents: bytemuck::cast_slice(&table),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    });
+                let rows = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lbvh refit ingest rows"),
+                    contents: bytemuck::cast_slice(&table),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
                 let count = (t.rows.len() / ROW_WORDS) as u32;
-                (t.raw, Some(rows), t.counters, count, t.counter_base)
+                (
+                    &dummy,
+                    0,
+                    t.raw,
+                    Some(rows),
+                    t.counters,
+                    count,
+                    t.counter_base,
+                )
             }
         };
         let params = rec.uniform(
