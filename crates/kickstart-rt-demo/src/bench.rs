@@ -196,12 +196,17 @@ pub struct SceneReport {
     pub world_triangles: usize,
     /// Camera of the ray batches: eye, target, vertical fov (degrees).
     pub camera: [f32; 7],
-    /// All BLASes built in one task (`ingest` + `blas build` passes).
+    /// All BLASes built in one task (`ingest` + `blas build` passes), fast-trace (`BuildHint::Auto`
+    /// without `allow_update`).
     pub blas_build: Option<Stats>,
     /// Where the last timed BLAS build's GPU time went.
     pub blas_build_profile: Vec<PassProfile>,
     /// Geometry triangles / median BLAS build time, millions per second.
     pub blas_build_mtri_per_s: Option<f64>,
+    /// The same build with `BuildHint::PreferFastBuild` (the Karras tree, one triangle a leaf).
+    pub blas_build_fast_build: Option<Stats>,
+    /// Where the last timed fast-build BLAS build's GPU time went.
+    pub blas_build_fast_build_profile: Vec<PassProfile>,
     /// All BLASes refit after a vertex update (`ingest` + `blas refit` passes).
     pub blas_refit: Option<Stats>,
     /// Where the last timed refit's GPU time went.
@@ -455,7 +460,15 @@ impl<'a> Bench<'a> {
     ) -> AnyResult<(ksrt::ExecuteContext, gpu::SceneHandles)> {
         let ctx = self.context()?;
         let mut c = ctx.create_task_container();
-        let h = gpu::schedule_scene(&ctx, &mut c, scene, uploads, allow_update, instances);
+        let h = gpu::schedule_scene(
+            &ctx,
+            &mut c,
+            scene,
+            uploads,
+            allow_update,
+            ksrt::BuildHint::Auto,
+            instances,
+        );
         c.schedule_bvh_task(glue::bvh_build_task(
             uploads.len() as u32,
             instances.then_some(Tlas::Auto),
@@ -465,17 +478,18 @@ impl<'a> Bench<'a> {
         Ok((ctx, h))
     }
 
-    /// (a) Every BLAS built in one task, from newly registered geometry each time (the previous
-    /// repetition's geometry destroyed first). Returns the context and the last handles for the
-    /// SAH read-back.
+    /// (a) Every BLAS built in one task with `build_hint`, from newly registered geometry each
+    /// time (the previous repetition's geometry destroyed first). Returns the context and the last
+    /// handles for the SAH read-back.
     ///
     /// One context serves every repetition: with a fresh context per build, its set-up (pipelines,
     /// pools) left the GPU idle between builds, its clocks fell, and the same build measured
     /// 1.25 ms in one H100 run and 4.2 ms in another.
-    fn blas_build(
+    pub(crate) fn blas_build(
         &self,
         scene: &Scene,
         uploads: &[UploadedMesh],
+        build_hint: ksrt::BuildHint,
     ) -> AnyResult<(Stats, ksrt::ExecuteContext, gpu::SceneHandles)> {
         let ctx = self.context()?;
         let mut last: Option<gpu::SceneHandles> = None;
@@ -484,7 +498,7 @@ impl<'a> Bench<'a> {
                 ctx.destroy_geometry_handles(&old.geometries)?;
             }
             let mut c = ctx.create_task_container();
-            let h = gpu::schedule_scene(&ctx, &mut c, scene, uploads, false, false);
+            let h = gpu::schedule_scene(&ctx, &mut c, scene, uploads, false, build_hint, false);
             c.schedule_bvh_task(glue::bvh_build_task(uploads.len() as u32, None));
             let ms = self.timed(&ctx, c, &["ingest", "blas build"], |_| {})?;
             last = Some(h);
@@ -807,6 +821,8 @@ impl SceneReport {
             blas_build: None,
             blas_build_profile: Vec::new(),
             blas_build_mtri_per_s: None,
+            blas_build_fast_build: None,
+            blas_build_fast_build_profile: Vec::new(),
             blas_refit: None,
             blas_refit_profile: Vec::new(),
             sah: None,
@@ -837,7 +853,7 @@ fn bench_scene(
     let uploads = gpu::upload_scene(bench.device, scene);
     let mut errors = Vec::new();
     if let Some((stats, ctx, h)) = attempt(&mut errors, "BLAS build", || {
-        bench.blas_build(scene, &uploads)
+        bench.blas_build(scene, &uploads, ksrt::BuildHint::Auto)
     }) {
         r.blas_build_profile = bench.last_profile();
         r.blas_build_mtri_per_s = Some(r.geometry_triangles as f64 / (stats.median_ms * 1e3));
@@ -866,6 +882,14 @@ fn bench_scene(
                 ratio: gpu_sah_cost / cpu_sah_cost,
             })
         });
+    }
+    r.blas_build_fast_build = attempt(&mut errors, "BLAS build (fast-build)", || {
+        Ok(bench
+            .blas_build(scene, &uploads, ksrt::BuildHint::PreferFastBuild)?
+            .0)
+    });
+    if r.blas_build_fast_build.is_some() {
+        r.blas_build_fast_build_profile = bench.last_profile();
     }
     r.blas_refit = attempt(&mut errors, "BLAS refit", || {
         bench.blas_refit(scene, &uploads)
@@ -1006,6 +1030,13 @@ fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
     );
     if !r.blas_build_profile.is_empty() {
         println!("    profile    {}", prof::show(&r.blas_build_profile));
+    }
+    println!("  fast-build   {}", opt(&r.blas_build_fast_build));
+    if !r.blas_build_fast_build_profile.is_empty() {
+        println!(
+            "    profile    {}",
+            prof::show(&r.blas_build_fast_build_profile)
+        );
     }
     println!("  BLAS refit   {}", opt(&r.blas_refit));
     if !r.blas_refit_profile.is_empty() {

@@ -144,7 +144,7 @@ fn compare(bench: &Bench, scene_name: &str, mesh: &Mesh, errors: &mut Vec<String
     };
     if let Some(b) = attempt(errors, &format!("{label}: GPU build"), || {
         let uploads = gpu::upload_scene(bench.device, &single);
-        let (time, ctx, h) = bench.blas_build(&single, &uploads)?;
+        let (time, ctx, h) = bench.blas_build(&single, &uploads, kickstart_rt::BuildHint::Auto)?;
         let sah = glue::blas_sah_cost(&ctx, h.geometries[0])?;
         Ok(PeerBuild {
             builder: "kickstart-rt GPU".into(),

@@ -290,7 +290,7 @@ fn triangle_point(
     };
     if copies == 0 {
         p.blas_build = attempt(errors, &format!("{label}: BLAS build"), || {
-            Ok(bench.blas_build(scene, &uploads)?.0)
+            Ok(bench.blas_build(scene, &uploads, ksrt::BuildHint::Auto)?.0)
         });
     } else {
         p.tlas_build = attempt(errors, &format!("{label}: TLAS build"), || {

@@ -180,13 +180,15 @@ impl SceneHandles {
     }
 }
 
-/// Schedules the registration of every mesh (and, when `instances`, every instance) of `scene`.
+/// Schedules the registration of every mesh (and, when `instances`, every instance) of `scene`,
+/// each geometry with `allow_update` and `build_hint`.
 pub fn schedule_scene(
     ctx: &ksrt::ExecuteContext,
     container: &mut ksrt::TaskContainer,
     scene: &Scene,
     uploads: &[UploadedMesh],
     allow_update: bool,
+    build_hint: ksrt::BuildHint,
     instances: bool,
 ) -> SceneHandles {
     let geometries = ctx.create_geometry_handles(uploads.len());
@@ -194,7 +196,10 @@ pub fn schedule_scene(
         container.schedule_bvh_task(ksrt::GeometryTask {
             operation: ksrt::TaskOperation::Register,
             handle,
-            input: geometry_input(m, allow_update),
+            input: ksrt::GeometryInput {
+                build_hint,
+                ..geometry_input(m, allow_update)
+            },
         });
     }
     let mut handles = Vec::new();

@@ -3,15 +3,22 @@
 // 2024). Appended to lbvh.wgsl (its boxes, SAH summaries, node writer and workgroup vote);
 // driven by src/scene/lbvh.rs, which documents the pass order.
 //
-// Entry point (256 invocations, one per sorted leaf; the Karras hierarchy of lbvh_hierarchy is
+// Entry point (32 invocations, one per sorted leaf; the Karras hierarchy of lbvh_hierarchy is
 // bound at `topology`, base 0):
 //   hploc_climb  climbs the Karras tree bottom-up like lbvh_climb (the second arriver at a node
 //                goes on). A node's clusters are its leaves while it covers at most HP_KEEP of
 //                them; at every node covering more, and at the root, the clusters of its two
 //                children (at most 2 HP_KEEP) are merged by PLOC in workgroup memory until
-//                HP_KEEP remain (one at the root). Each merge makes one node of the output tree,
-//                written in the final node format (boxes, SAH leaf collapsing) and, in
-//                `topo_out`, in the topology format of lbvh.wgsl (so lbvh_climb refits it).
+//                HP_KEEP remain (one at the root), one node at a time, by all 32 invocations.
+//                Each merge makes one node of the output tree, written in the final node format
+//                (boxes, SAH leaf collapsing) and, in `topo_out`, in the topology format of
+//                lbvh.wgsl (so lbvh_climb refits it).
+//
+// Why 32 invocations: a merge needs at most 32 lanes, and the climbers of a workgroup step
+// through every merge's barriers together. In workgroups of 256 (eight merges side by side),
+// every merge waited for the other seven slices' rounds, and the upper levels, with one climber
+// left, held 256 lanes; with 32 the dragon's climb takes 1.40 ms instead of 2.10 on the H100
+// (BENCHMARKS.md, session 26). Two slices of 32 a workgroup measured 1.49 ms.
 //
 // Why clusters: a Karras node splits at the highest differing Morton bit, wherever the geometry
 // is; PLOC pairs each cluster with the one whose union box is smallest among its neighbours in
@@ -20,7 +27,6 @@
 //
 // `work` layout (u32 words, all accessed atomically; n primitives):
 //   [0, 6)                        centroid bounds (lbvh_bounds)
-//   6                             output nodes allocated so far (cleared before the climb)
 //   [8, 8 + 6 (n-1))              box of output node X at 8 + 6 X
 //   [8 + 6 (n-1), 8 + 7 (n-1))    per Karras node P: the first arriver's far range end + 1
 //                                 (cleared before the climb; 0 = nobody arrived yet)
@@ -29,55 +35,61 @@
 //   [8 + 11 (n-1), 8 + 12 (n-1) + 1)
 //                                 cluster lists: such a node's clusters from its first sorted
 //                                 position (output node index, or LEAF_BIT | sorted position)
+//   [8 + 12 (n-1) + 1, 8 + 13 (n-1) + 2)
+//                                 free-slot lists: such a node's unused output slots (one fewer
+//                                 than its clusters) from its first sorted position
 //
-// Output node indices are handed out from the top (n - 2 down to 0); the root's last merge is
-// the last one made anywhere (everything else happened in its subtrees before), so the root is
-// node 0, where traversal starts.
+// Output node slots: the Karras subtree over sorted leaves [lo, hi] holds hi - lo inner nodes,
+// whose indices are a set S of hi - lo numbers in [lo, hi] (the node's own index is lo or hi; a
+// left child [lo, s] has index s and S = [lo + 1, s], a right child [s + 1, hi] has index s + 1
+// and S = [s + 1, hi - 1]). Its c clusters took hi - lo + 1 - c merges, so c - 1 slots of S stay
+// free. A merge at node P uses its children's free slots, then P's own index: cl - 1 + cr - 1 +
+// 1 slots for the cl + cr - cp merges it makes (cp >= 1 clusters stay), and leaves cp - 1 free
+// for its parent. Every slot is used once; the root (index 0, one cluster) uses all of its
+// pool, its own index last, so its last merge, the tree's root, is node 0, where traversal
+// starts. Merges take slots in the order of their lanes, so the tree is the same on every
+// build of the same input (no global counter; its contention cost nothing measurable).
 
 @group(0) @binding(9) var<storage, read_write> topo_out: array<u32>;
 
-// Lanes of one merge (a slice of the workgroup): the most clusters one merge holds.
-const HP_SLICE: u32 = 32u;
-const HP_SLICES: u32 = 8u;
+// Invocations of the climb: the most clusters one merge holds.
+const HP_WG: u32 = 32u;
 // Clusters kept by a node that covers more leaves than this.
 const HP_KEEP: u32 = 16u;
 // Neighbour search radius in cluster order (about the Morton order of the clusters' leaves).
-// Measured on the H100 (BENCHMARKS.md, session 21), dragon climb / SAH ratio, apartment's
-// largest mesh SAH ratio: the whole slice (32) 2.11 ms / 1.113 / 1.093; 16: 2.11 / 1.103 / 0.999;
-// 8: 1.80 / 1.110 / 1.061; 4: 1.32 / 1.108 / 1.062. The apartment baked into one mesh traces 6 %
-// slower at 8 than at 32 (peer workload 1481 against 1571 Mrays/s): a fast-trace build spends
-// the time.
+// Measured on the H100 (BENCHMARKS.md, session 21, workgroups of 256), dragon climb / SAH ratio,
+// apartment's largest mesh SAH ratio: the whole slice (32) 2.11 ms / 1.113 / 1.093; 16: 2.11 /
+// 1.103 / 0.999; 8: 1.80 / 1.110 / 1.061; 4: 1.32 / 1.108 / 1.062. The apartment baked into one
+// mesh traces 6 % slower at 8 than at 32 (peer workload 1481 against 1571 Mrays/s): a
+// fast-trace build spends the time. In workgroups of 32 (session 26) radius 8 saves almost
+// nothing (dragon build 2.025 against 2.04 ms).
 const HP_RADIUS: u32 = 16u;
 const HP_NONE: u32 = 0xFFFFFFFFu;
-const HP_COUNTER: u32 = 6u;
 
-// Per slice: the lane whose merge runs now, that merge's parameters (HP_INFO words), the cluster
-// count, and how many merges the current round makes.
-const HP_INFO: u32 = 8u;
-var<workgroup> hp_owner: array<atomic<u32>, 8>;
-var<workgroup> hp_info: array<u32, 64>;
-var<workgroup> hp_count: array<u32, 8>;
-var<workgroup> hp_merges: array<atomic<u32>, 8>;
-var<workgroup> hp_base: array<u32, 8>;
+// The merge running now: its parameters (HP_INFO words), the owner of its node, the cluster
+// count and goal, the lanes merging this round and those whose clusters survive it (one bit
+// each), and the first pool slot this round's merges take.
+const HP_INFO: u32 = 6u;
+var<workgroup> hp_owner: atomic<u32>;
+var<workgroup> hp_info: array<u32, HP_INFO>;
+var<workgroup> hp_count: u32;
+var<workgroup> hp_goal: u32;
+var<workgroup> hp_merges: atomic<u32>;
+var<workgroup> hp_kept: atomic<u32>;
+var<workgroup> hp_base: u32;
+// The output slots the merge may use (see the layout notes).
+var<workgroup> hp_pool: array<u32, HP_WG>;
 // Per lane: the cluster it holds (ref, box, SAH summary) and its nearest neighbour.
-var<workgroup> hp_ref: array<u32, 256>;
-var<workgroup> hp_box: array<f32, 1536>;
-var<workgroup> hp_sub: array<u32, 768>;
-var<workgroup> hp_nn: array<u32, 256>;
-// Per slice: the goal of its merge (HP_NONE: no merge), and the lanes whose clusters survive
-// the round (one bit each).
-var<workgroup> hp_goal: array<u32, 8>;
-var<workgroup> hp_kept: array<atomic<u32>, 8>;
+var<workgroup> hp_ref: array<u32, HP_WG>;
+var<workgroup> hp_box: array<f32, 192>;
+var<workgroup> hp_sub: array<u32, 96>;
+var<workgroup> hp_nn: array<u32, HP_WG>;
 
-// Whether any slice's merge still has more clusters than its goal (uniform; one barrier). Reads
-// what the slices' first lanes stored before the caller's last barrier.
-fn hp_any_merging(lid: u32) -> bool {
-    if lid == 0u {
-        var more = 0u;
-        for (var s = 0u; s < HP_SLICES; s++) {
-            more |= select(0u, 1u, hp_count[s] > hp_goal[s]);
-        }
-        wg_go = more;
+// Whether the merge still has more clusters than its goal (uniform; one barrier). Reads what
+// lane 0 stored before the caller's last barrier.
+fn hp_merging(lane: u32) -> bool {
+    if lane == 0u {
+        wg_go = select(0u, 1u, hp_count > hp_goal);
     }
     return workgroupUniformLoad(&wg_go) != 0u;
 }
@@ -92,6 +104,10 @@ fn hp_counts_at() -> u32 {
 
 fn hp_lists_at() -> u32 {
     return BOXES_AT + 11u * (params.count - 1u);
+}
+
+fn hp_free_at() -> u32 {
+    return BOXES_AT + 12u * (params.count - 1u) + 1u;
 }
 
 // Karras parent of a node in topology encoding (the hierarchy is at base 0 of `topology`).
@@ -192,21 +208,19 @@ struct HpClimber {
     pending: bool,
 }
 
-@compute @workgroup_size(256)
-fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+@compute @workgroup_size(32)
+fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {
     let n = params.count;
     // The driver runs lbvh_climb instead below two primitives; `n` is uniform.
     if n < 2u {
         return;
     }
-    let k = linear_id(lid, wid, nwg);
-    let slice = lid / HP_SLICE;
-    let lane = lid % HP_SLICE;
-    let sl = slice * HP_SLICE;
+    let k = (wid.y * nwg.x + wid.x) * HP_WG + lane;
     let xchg = hp_xchg_at();
     let counts = hp_counts_at();
     let lists = hp_lists_at();
+    let free = hp_free_at();
 
     var c: HpClimber;
     c.node = LEAF_BIT | k;
@@ -217,7 +231,7 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
     c.pending = false;
 
     loop {
-        if !wg_any(c.climbing, lid) {
+        if !wg_any(c.climbing, lane) {
             break;
         }
         // Release: the clusters this node's merge stored (by any lane of the workgroup) before
@@ -243,52 +257,52 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
         // Acquire: the sibling's clusters (stored before its exchange) are visible below.
         storageBarrier();
 
-        // The merges of this step, one per slice at a time.
+        // The merges of this step, one node at a time.
         loop {
-            if lid < HP_SLICES {
-                atomicStore(&hp_owner[lid], HP_NONE);
+            if lane == 0u {
+                atomicStore(&hp_owner, HP_NONE);
             }
             workgroupBarrier();
             if c.pending {
-                atomicMin(&hp_owner[slice], lane);
+                atomicMin(&hp_owner, lane);
             }
             workgroupBarrier();
-            let owner = atomicLoad(&hp_owner[slice]);
-            if !wg_any(owner != HP_NONE, lid) {
+            if lane == 0u {
+                wg_go = atomicLoad(&hp_owner);
+            }
+            let owner = workgroupUniformLoad(&wg_go);
+            if owner == HP_NONE {
                 break;
             }
-            let mine = c.pending && owner == lane;
-            if mine {
+            if owner == lane {
                 // Cluster counts of the two children: a child covering at most HP_KEEP leaves
                 // has them as its clusters; a larger one stored its count (it is an inner Karras
                 // node: the left child's index is the split, the right one's the split + 1).
                 let lsize = c.split - c.lo + 1u;
                 let rsize = c.hi - c.split;
-                let at = slice * HP_INFO;
-                hp_info[at] = c.lo;
-                hp_info[at + 1u] = c.split;
-                hp_info[at + 2u] = select(lsize, atomicLoad(&work[counts + c.split]), lsize > HP_KEEP);
-                hp_info[at + 3u] = select(rsize, atomicLoad(&work[counts + c.split + 1u]), rsize > HP_KEEP);
-                hp_info[at + 4u] = select(0u, 1u, lsize > HP_KEEP) | select(0u, 2u, rsize > HP_KEEP)
+                hp_info[0] = c.lo;
+                hp_info[1] = c.split;
+                hp_info[2] = select(lsize, atomicLoad(&work[counts + c.split]), lsize > HP_KEEP);
+                hp_info[3] = select(rsize, atomicLoad(&work[counts + c.split + 1u]), rsize > HP_KEEP);
+                hp_info[4] = select(0u, 1u, lsize > HP_KEEP) | select(0u, 2u, rsize > HP_KEEP)
                     | select(0u, 4u, c.hi - c.lo + 1u == n);
-                hp_info[at + 5u] = c.node;
+                hp_info[5] = c.node;
+                c.pending = false;
             }
             // Workgroup memory (the info) and storage (the lists the owner's acquire made
-            // visible) both hand over to the slice's other lanes here.
+            // visible) both hand over to the other lanes here.
             workgroupBarrier();
             storageBarrier();
-            let busy = owner != HP_NONE;
-            let at = slice * HP_INFO;
-            let lo = hp_info[at];
-            let split = hp_info[at + 1u];
-            let lcount = hp_info[at + 2u];
-            let rcount = hp_info[at + 3u];
-            let flags = hp_info[at + 4u];
+            let lo = hp_info[0];
+            let split = hp_info[1];
+            let lcount = hp_info[2];
+            let rcount = hp_info[3];
+            let flags = hp_info[4];
+            let node = hp_info[5];
             let root = (flags & 4u) != 0u;
-            let goal = select(HP_KEEP, 1u, root);
             let total = lcount + rcount;
             var mine_c: Cluster;
-            if busy && lane < total {
+            if lane < total {
                 var r: u32;
                 if lane < lcount {
                     r = select(LEAF_BIT | (lo + lane), atomicLoad(&work[lists + lo + lane]),
@@ -299,29 +313,43 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                                atomicLoad(&work[lists + split + 1u + j]), (flags & 2u) != 0u);
                 }
                 mine_c = hp_load(r);
-                hp_put(lid, mine_c);
+                hp_put(lane, mine_c);
+            }
+            if lane + 1u < total {
+                // The pool: the children's free slots (a small child's are its whole index
+                // set), then the node's own index (see the layout notes).
+                var slot = node;
+                if lane + 1u < lcount {
+                    slot = select(lo + 1u + lane, atomicLoad(&work[free + lo + lane]),
+                                  (flags & 1u) != 0u);
+                } else if lane + 2u < total {
+                    let j = lane + 1u - lcount;
+                    slot = select(split + 1u + j, atomicLoad(&work[free + split + 1u + j]),
+                                  (flags & 2u) != 0u);
+                }
+                hp_pool[lane] = slot;
             }
             if lane == 0u {
-                hp_count[slice] = total;
-                hp_goal[slice] = select(HP_NONE, goal, busy);
+                hp_count = total;
+                hp_goal = select(HP_KEEP, 1u, root);
+                hp_base = 0u;
+                atomicStore(&hp_merges, 0u);
             }
             workgroupBarrier();
 
             // PLOC rounds: nearest neighbours, mutual pairs merge, survivors close ranks. Every
-            // round merges at least once (see hp_tie_before), so HP_SLICE rounds always suffice.
-            // Six barriers a round: each costs the whole workgroup, busy slices or not.
-            for (var round = 0u; round < HP_SLICE; round++) {
-                if !hp_any_merging(lid) {
+            // round merges at least once (see hp_tie_before), so HP_WG rounds always suffice.
+            for (var round = 0u; round < HP_WG; round++) {
+                if !hp_merging(lane) {
                     break;
                 }
-                let count = hp_count[slice];
-                let merging = busy && count > goal;
-                let holds = merging && lane < count;
+                let count = hp_count;
+                let holds = lane < count;
                 if lane == 0u {
-                    atomicStore(&hp_kept[slice], 0u);
+                    atomicStore(&hp_kept, 0u);
                 }
                 if holds {
-                    mine_c = hp_get(lid);
+                    mine_c = hp_get(lane);
                     var best = HP_NONE;
                     var best_area = 0.0;
                     let m_end = min(count, lane + HP_RADIUS + 1u);
@@ -329,45 +357,38 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                         if m == lane {
                             continue;
                         }
-                        let a = hp_area(union_box(mine_c.bx, hp_box_at(sl + m)));
+                        let a = hp_area(union_box(mine_c.bx, hp_box_at(m)));
                         if best == HP_NONE || a < best_area
                             || (a == best_area && hp_tie_before(lane, m, best)) {
                             best = m;
                             best_area = a;
                         }
                     }
-                    hp_nn[lid] = best;
+                    hp_nn[lane] = best;
                 }
                 workgroupBarrier();
                 var partner = HP_NONE;
-                var rank = 0u;
                 var keep = holds;
                 if holds {
-                    let m = hp_nn[lid];
-                    if hp_nn[sl + m] == lane {
+                    let m = hp_nn[lane];
+                    if hp_nn[m] == lane {
                         if lane < m {
                             partner = m;
-                            rank = atomicAdd(&hp_merges[slice], 1u);
+                            atomicOr(&hp_merges, 1u << lane);
                         } else {
                             keep = false;
                         }
                     }
                 }
                 if keep {
-                    atomicOr(&hp_kept[slice], 1u << lane);
+                    atomicOr(&hp_kept, 1u << lane);
                 }
                 workgroupBarrier();
-                if merging && lane == 0u {
-                    // One allocation per slice and round, not one per merge: all merges of the
-                    // device contend for this word.
-                    let made = atomicLoad(&hp_merges[slice]);
-                    atomicStore(&hp_merges[slice], 0u);
-                    hp_base[slice] = atomicAdd(&work[HP_COUNTER], made);
-                }
-                workgroupBarrier();
+                let mergers = atomicLoad(&hp_merges);
                 if partner != HP_NONE {
-                    let o = hp_get(sl + partner);
-                    let x = n - 2u - (hp_base[slice] + rank);
+                    // Slots in the order of the merging lanes: the build is deterministic.
+                    let o = hp_get(partner);
+                    let x = hp_pool[hp_base + countOneBits(mergers & ((1u << lane) - 1u))];
                     let b = union_box(mine_c.bx, o.bx);
                     let s = join_subtrees(b, mine_c.sub, o.sub);
                     write_node(x, mine_c.bx, child_ref(mine_c.r, mine_c.sub), o.bx,
@@ -382,36 +403,36 @@ fn hploc_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id)
                 }
                 // Every read of this round's slots is above.
                 workgroupBarrier();
-                if merging {
-                    let kept = atomicLoad(&hp_kept[slice]);
-                    if keep {
-                        hp_put(sl + countOneBits(kept & ((1u << lane) - 1u)), mine_c);
-                    }
-                    if lane == 0u {
-                        hp_count[slice] = countOneBits(kept);
-                    }
+                let kept = atomicLoad(&hp_kept);
+                if keep {
+                    hp_put(countOneBits(kept & ((1u << lane) - 1u)), mine_c);
+                }
+                if lane == 0u {
+                    hp_count = countOneBits(kept);
+                    hp_base += countOneBits(mergers);
+                    atomicStore(&hp_merges, 0u);
                 }
                 workgroupBarrier();
             }
             // The node's clusters, for its sibling's climber (or the root's box): each lane
-            // takes up the cluster now at its index.
-            let left_count = select(0u, hp_count[slice], busy);
+            // takes up the cluster now at its index; the slots left (one fewer) go with them.
+            let left_count = hp_count;
             if lane < left_count {
-                mine_c = hp_get(lid);
+                mine_c = hp_get(lane);
                 atomicStore(&work[lists + lo + lane], mine_c.r);
             }
-            if busy && lane == 0u {
-                atomicStore(&work[counts + hp_info[at + 5u]], left_count);
+            if lane + 1u < left_count {
+                atomicStore(&work[free + lo + lane], hp_pool[hp_base + lane]);
+            }
+            if lane == 0u {
+                atomicStore(&work[counts + node], left_count);
                 if root {
                     write_bounds(mine_c.bx);
                     topo_out[params.topo_base + 2u * (n - 1u)] = NO_PARENT;
                 }
             }
-            if mine {
-                c.pending = false;
-                if root {
-                    c.climbing = false;
-                }
+            if owner == lane && root {
+                c.climbing = false;
             }
         }
     }

@@ -24,9 +24,9 @@
 //!    the buffer, unreferenced).
 //!
 //! With [`LbvhBuild::clustered`] (the fast-trace BLAS), step 5 writes the Karras hierarchy to
-//! the builder's scratch and step 6 is `hploc climb` instead (`shaders/hploc.wgsl`): the same
-//! bottom-up walk, merging clusters by PLOC at every node that covers more than 16 leaves
-//! (H-PLOC), writing the nodes and the caller's topology of the clustered tree (whose parent
+//! the builder's scratch and step 6 is `hploc climb` instead (`shaders/hploc.wgsl`, workgroups of
+//! 32): the same bottom-up walk, merging clusters by PLOC at every node that covers more than 16
+//! leaves (H-PLOC), writing the nodes and the caller's topology of the clustered tree (whose parent
 //! refs never carry the block-local bit, so a refit of it runs the climb's device-scope phase
 //! only). Its subtrees need not be ranges of sorted positions; only those that are may become
 //! one leaf.
@@ -377,6 +377,9 @@ const MORTON_HISTOGRAM_BINDINGS: &[u32] = &[0, 1, 2, 3, 4, 10];
 const HIERARCHY_BINDINGS: &[u32] = &[0, 3, 4, 5, 6];
 /// Bindings of `lbvh_climb`.
 const CLIMB_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8];
+/// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/hploc.wgsl`).
+const HPLOC_WORKGROUP: u32 = 32;
+
 /// Bindings of `hploc_climb`.
 const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
 /// Bindings of `lbvh_refit_gather` (11: the pyramid, 12: staged triangles, 13: BLAS triangles).
@@ -429,13 +432,10 @@ fn work_words(n: u32) -> u64 {
 }
 
 /// Words of the work buffer of a clustered build (`shaders/hploc.wgsl`): [`work_words`], then a
-/// cluster count per Karras node and a cluster-list slot per primitive.
+/// cluster count per Karras node, a cluster-list slot and a free-slot-list slot per primitive.
 fn clustered_work_words(n: u32) -> u64 {
-    work_words(n) + u64::from(n.saturating_sub(1)) + u64::from(n)
+    work_words(n) + u64::from(n.saturating_sub(1)) + 2 * u64::from(n)
 }
-
-/// Word of the work buffer counting the output nodes of a clustered build.
-const NODE_COUNTER_WORD: u64 = 6;
 
 /// The `max_leaf` a dispatch uses: clamped to 1..=MAX_LEAF, and 1 for primitive-index refs
 /// (a TLAS leaf's instances are not one range).
@@ -627,10 +627,6 @@ impl Lbvh {
                     Bindings { all: bind.all }
                 }
             };
-            if clustered {
-                rec.encoder
-                    .clear_buffer(&work, NODE_COUNTER_WORD * 4, Some(4));
-            }
             // A sort of more than one workgroup takes its first histogram from the morton pass
             // (one dependent dispatch fewer).
             sorted = match self.sort.first_histogram(device, n, key_bits) {
@@ -662,7 +658,12 @@ impl Lbvh {
         bind.all[0] = &params;
         if clustered {
             let bg = bind.group(device, &self.hploc, HPLOC_BINDINGS);
-            rec.dispatch("hploc climb", &self.hploc, &[&bg], groups(n));
+            rec.dispatch(
+                "hploc climb",
+                &self.hploc,
+                &[&bg],
+                n.div_ceil(HPLOC_WORKGROUP).max(1),
+            );
         } else {
             let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
             rec.dispatch("lbvh climb", &self.climb, &[&bg], groups(n));
@@ -2028,6 +2029,32 @@ mod tests {
             assert!(
                 ploc_sah < most * lbvh_sah,
                 "{name}: clustered SAH {ploc_sah} vs LBVH {lbvh_sah}"
+            );
+        }
+    }
+
+    #[test]
+    fn hploc_builds_the_same_tree_every_time() {
+        // Output slots come from each node's pool, in the order of its merging lanes, not from
+        // a device-wide counter: the same input gives the same nodes and topology word for word,
+        // whatever order the workgroups ran in. Between the builds the builder runs another
+        // input, so nothing is left over from the first.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let mut rng = Rng(41);
+        let aabbs: Vec<Aabb> = (0..20_000).map(|_| random_box(&mut rng)).collect();
+        let other: Vec<Aabb> = (0..20_000).map(|_| random_box(&mut rng)).collect();
+        for max_leaf in [1, 4] {
+            let (first, _) = build_and_check_clustered(&mut lbvh, &aabbs, max_leaf);
+            let topo_first = read_words(&first.topology);
+            build_and_check_clustered(&mut lbvh, &other, max_leaf);
+            let (second, _) = build_and_check_clustered(&mut lbvh, &aabbs, max_leaf);
+            assert!(
+                first.node_words == second.node_words,
+                "max_leaf {max_leaf}: the nodes differ between two builds of the same boxes"
+            );
+            assert!(
+                topo_first == read_words(&second.topology),
+                "max_leaf {max_leaf}: the topology differs between two builds of the same boxes"
             );
         }
     }
