@@ -3,13 +3,14 @@
 // 2024). Appended to lbvh.wgsl (its boxes, SAH summaries, node writer and workgroup vote);
 // driven by src/scene/lbvh.rs, which documents the pass order.
 //
-// Entry point (32 invocations, one per sorted leaf; the Karras hierarchy of lbvh_hierarchy is
-// bound at `topology`, base 0):
+// Entry point (32 invocations, one per Karras inner node; the Karras hierarchy of lbvh_hierarchy
+// is bound at `topology`, base 0, with its range ends):
 //   hploc_climb  climbs the Karras tree bottom-up like lbvh_climb (the second arriver at a node
-//                goes on). A node's clusters are its leaves while it covers at most HP_KEEP of
-//                them; at every node covering more, and at the root, the clusters of its two
-//                children (at most 2 HP_KEEP) are merged by PLOC in workgroup memory until
-//                HP_KEEP remain (one at the root), one node at a time, by all 32 invocations.
+//                goes on), from the nodes that merge: a node's clusters are its leaves while it
+//                covers at most HP_KEEP of them; at every node covering more, and at the root,
+//                the clusters of its two children (at most 2 HP_KEEP) are merged by PLOC in
+//                workgroup memory until HP_KEEP remain (one at the root), one node at a time, by
+//                all 32 invocations.
 //                Each merge makes one node of the output tree, written in the final node format
 //                (boxes, SAH leaf collapsing) and, in `topo_out`, in the topology format of
 //                lbvh.wgsl (so lbvh_climb refits it).
@@ -18,7 +19,9 @@
 // through every merge's barriers together. In workgroups of 256 (eight merges side by side),
 // every merge waited for the other seven slices' rounds, and the upper levels, with one climber
 // left, held 256 lanes; with 32 the dragon's climb takes 1.40 ms instead of 2.10 on the H100
-// (BENCHMARKS.md, session 26). Two slices of 32 a workgroup measured 1.49 ms.
+// (BENCHMARKS.md, session 26). Two slices of 32 a workgroup measured 1.49 ms. Starting the
+// climbers at the merging nodes instead of the leaves (no exchange through device memory on
+// the levels of at most HP_KEEP leaves) took it to 1.15 ms.
 //
 // Why clusters: a Karras node splits at the highest differing Morton bit, wherever the geometry
 // is; PLOC pairs each cluster with the one whose union box is smallest among its neighbours in
@@ -27,14 +30,16 @@
 //
 // `work` layout (u32 words, all accessed atomically; n primitives):
 //   [0, 6)                        centroid bounds (lbvh_bounds)
-//   [8, 8 + 6 (n-1))              box of output node X at 8 + 6 X
+//   [8, 8 + 6 (n-1))              cluster lists' boxes: list slot K's at 8 + 6 K
 //   [8 + 6 (n-1), 8 + 7 (n-1))    per Karras node P: the first arriver's far range end + 1
 //                                 (cleared before the climb; 0 = nobody arrived yet)
-//   [8 + 7 (n-1), 8 + 10 (n-1))   SAH summary of output node X (as lbvh_climb's)
+//   [8 + 7 (n-1), 8 + 10 (n-1))   cluster lists' SAH summaries (as lbvh_climb's), by list slot
 //   [8 + 10 (n-1), 8 + 11 (n-1))  per Karras node P covering > HP_KEEP leaves: its cluster count
 //   [8 + 11 (n-1), 8 + 12 (n-1) + 1)
 //                                 cluster lists: such a node's clusters from its first sorted
-//                                 position (output node index, or LEAF_BIT | sorted position)
+//                                 position (output node index, or LEAF_BIT | sorted position);
+//                                 slots above n - 2 are never used (a listed node covers more
+//                                 than HP_KEEP leaves, the root one cluster at slot 0)
 //   [8 + 12 (n-1) + 1, 8 + 13 (n-1) + 2)
 //                                 free-slot lists: such a node's unused output slots (one fewer
 //                                 than its clusters) from its first sorted position
@@ -110,13 +115,19 @@ fn hp_free_at() -> u32 {
     return BOXES_AT + 12u * (params.count - 1u) + 1u;
 }
 
-// Karras parent of a node in topology encoding (the hierarchy is at base 0 of `topology`).
+// Karras parent of inner node `node` (the hierarchy is at base 0 of `topology`).
 fn hp_karras_parent(node: u32) -> u32 {
-    let n = params.count;
-    if (node & LEAF_BIT) != 0u {
-        return topology[3u * (n - 1u) + (node & 0x7fffffffu)] & PARENT_INDEX_MASK;
+    return topology[2u * (params.count - 1u) + node] & PARENT_INDEX_MASK;
+}
+
+// Leaves covered by Karras child `r` (topology encoding): one for a leaf, else the inner node's
+// range (it starts or ends at its index; the hierarchy stored the other end).
+fn hp_child_size(r: u32) -> u32 {
+    if (r & LEAF_BIT) != 0u {
+        return 1u;
     }
-    return topology[2u * (n - 1u) + node] & PARENT_INDEX_MASK;
+    let end = topology[4u * params.count - 3u + r];
+    return max(end, r) - min(end, r) + 1u;
 }
 
 // A cluster as one lane holds it.
@@ -126,14 +137,15 @@ struct Cluster {
     sub: Subtree,
 }
 
-// Cluster `r` from the input (a leaf) or from the output nodes made so far.
-fn hp_load(r: u32) -> Cluster {
-    if (r & LEAF_BIT) != 0u {
-        let k = r & 0x7fffffffu;
-        let b = leaf_box(k);
-        return Cluster(r, b, leaf_subtree(k, b));
+// The cluster at sorted position `k` of a child's range: the leaf itself where the child covers
+// at most HP_KEEP leaves, else the child's list entry (ref, box and summary side by side, so
+// all three loads are in flight together).
+fn hp_load(k: u32, listed: bool) -> Cluster {
+    if listed {
+        return Cluster(atomicLoad(&work[hp_lists_at() + k]), load_box(k), load_subtree(k));
     }
-    return Cluster(r, load_box(r), load_subtree(r));
+    let b = leaf_box(k);
+    return Cluster(LEAF_BIT | k, b, leaf_subtree(k, b));
 }
 
 fn hp_put(li: u32, c: Cluster) {
@@ -222,41 +234,38 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
     let lists = hp_lists_at();
     let free = hp_free_at();
 
+    // Climbers start at the nodes that merge (more than HP_KEEP leaves, or the root), one
+    // invocation per Karras inner node: below them there is nothing to do (a node of at most
+    // HP_KEEP leaves keeps them as its clusters). A node whose children are both that small
+    // starts at once; one with a single small child lets that child arrive for it here, so the
+    // other child's climber, arriving second, goes on (or this invocation, if it arrives
+    // second).
     var c: HpClimber;
-    c.node = LEAF_BIT | k;
-    c.lo = k;
-    c.hi = k;
-    c.split = k;
-    c.climbing = k < n;
+    c.climbing = false;
     c.pending = false;
+    if k + 1u < n {
+        let end = topology[4u * n - 3u + k];
+        c.node = k;
+        c.lo = min(k, end);
+        c.hi = max(k, end);
+        let size = c.hi - c.lo + 1u;
+        if size > HP_KEEP || size == n {
+            let l = topology[2u * k];
+            c.split = l & 0x7fffffffu;
+            let small_l = hp_child_size(l) <= HP_KEEP;
+            let small_r = hp_child_size(topology[2u * k + 1u]) <= HP_KEEP;
+            c.climbing = small_l && small_r;
+            if small_l != small_r {
+                let before = atomicExchange(&work[xchg + k], select(c.hi, c.lo, small_l) + 1u);
+                c.climbing = before != 0u;
+            }
+            c.pending = c.climbing;
+        }
+    }
+    // Acquire: a climber that arrived second sees the other child's clusters below.
+    storageBarrier();
 
     loop {
-        if !wg_any(c.climbing, lane) {
-            break;
-        }
-        // Release: the clusters this node's merge stored (by any lane of the workgroup) before
-        // the exchange below tells the sibling's climber about them.
-        storageBarrier();
-        if c.climbing {
-            let p = hp_karras_parent(c.node);
-            let left = topology[2u * p] == c.node;
-            // The sibling needs the end of this node's range it cannot know: the left child's
-            // first leaf, the right child's last.
-            let before = atomicExchange(&work[xchg + p], select(c.hi, c.lo, left) + 1u);
-            // First to arrive: the sibling's climber takes over.
-            c.climbing = before != 0u;
-            if c.climbing {
-                let other = before - 1u;
-                c.split = select(c.lo - 1u, c.hi, left);
-                c.lo = min(c.lo, other);
-                c.hi = max(c.hi, other);
-                c.node = p;
-                c.pending = c.hi - c.lo + 1u > HP_KEEP || c.hi - c.lo + 1u == n;
-            }
-        }
-        // Acquire: the sibling's clusters (stored before its exchange) are visible below.
-        storageBarrier();
-
         // The merges of this step, one node at a time.
         loop {
             if lane == 0u {
@@ -303,16 +312,9 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
             let total = lcount + rcount;
             var mine_c: Cluster;
             if lane < total {
-                var r: u32;
-                if lane < lcount {
-                    r = select(LEAF_BIT | (lo + lane), atomicLoad(&work[lists + lo + lane]),
-                               (flags & 1u) != 0u);
-                } else {
-                    let j = lane - lcount;
-                    r = select(LEAF_BIT | (split + 1u + j),
-                               atomicLoad(&work[lists + split + 1u + j]), (flags & 2u) != 0u);
-                }
-                mine_c = hp_load(r);
+                let left = lane < lcount;
+                mine_c = hp_load(select(split + 1u + lane - lcount, lo + lane, left),
+                                 (flags & select(2u, 1u, left)) != 0u);
                 hp_put(lane, mine_c);
             }
             if lane + 1u < total {
@@ -393,8 +395,6 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
                     let s = join_subtrees(b, mine_c.sub, o.sub);
                     write_node(x, mine_c.bx, child_ref(mine_c.r, mine_c.sub), o.bx,
                                child_ref(o.r, o.sub));
-                    store_box(x, b);
-                    store_subtree(x, s);
                     topo_out[params.topo_base + 2u * x] = mine_c.r;
                     topo_out[params.topo_base + 2u * x + 1u] = o.r;
                     topo_out[hp_parent_slot(mine_c.r)] = x;
@@ -420,6 +420,8 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
             if lane < left_count {
                 mine_c = hp_get(lane);
                 atomicStore(&work[lists + lo + lane], mine_c.r);
+                store_box(lo + lane, mine_c.bx);
+                store_subtree(lo + lane, mine_c.sub);
             }
             if lane + 1u < left_count {
                 atomicStore(&work[free + lo + lane], hp_pool[hp_base + lane]);
@@ -435,5 +437,32 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
                 c.climbing = false;
             }
         }
+
+        if !wg_any(c.climbing, lane) {
+            break;
+        }
+        // Release: the clusters this node's merge stored (by any lane of the workgroup) before
+        // the exchange below tells the sibling's climber about them.
+        storageBarrier();
+        if c.climbing {
+            let p = hp_karras_parent(c.node);
+            // A left child [lo, s] is inner node s, a right one [s + 1, hi] node s + 1.
+            let left = c.node == c.hi;
+            // The sibling needs the end of this node's range it cannot know: the left child's
+            // first leaf, the right child's last.
+            let before = atomicExchange(&work[xchg + p], select(c.hi, c.lo, left) + 1u);
+            // First to arrive: the sibling's climber takes over.
+            c.climbing = before != 0u;
+            if c.climbing {
+                let other = before - 1u;
+                c.split = select(c.lo - 1u, c.hi, left);
+                c.lo = min(c.lo, other);
+                c.hi = max(c.hi, other);
+                c.node = p;
+                c.pending = true;
+            }
+        }
+        // Acquire: the sibling's clusters (stored before its exchange) are visible below.
+        storageBarrier();
     }
 }
