@@ -266,6 +266,8 @@ pub(crate) struct GpuScene {
     blas_builds: u32,
     scratch_aabbs: wgpu::Buffer,
     scratch_order: wgpu::Buffer,
+    /// Topology of a fast-build BLAS built without `allow_update`: its range refit reads it.
+    scratch_topology: wgpu::Buffer,
     /// Dropped-triangle counters of this task's ingestions (two per ingestion).
     pub counters: wgpu::Buffer,
     passes: Passes,
@@ -306,6 +308,7 @@ impl GpuScene {
             },
             scratch_aabbs: storage(device, "kickstart-rt build boxes", AABB_BYTES),
             scratch_order: storage(device, "kickstart-rt build order", 4),
+            scratch_topology: storage(device, "kickstart-rt build topology", 4),
             counters: storage(device, "kickstart-rt ingestion counters", 8),
             passes: Passes::default(),
         }
@@ -324,6 +327,7 @@ impl GpuScene {
     pub fn scratch_bytes(&self) -> u64 {
         self.scratch_aabbs.size()
             + self.scratch_order.size()
+            + self.scratch_topology.size()
             + self.counters.size()
             + self.passes.lbvh.as_ref().map_or(0, |l| l.scratch_bytes())
     }
@@ -523,6 +527,26 @@ impl GpuScene {
             Some((o, _)) => (self.orders.buffer(), o.start),
             None => (&self.scratch_order, 0),
         };
+        // A fast-build tree (the Karras tree, one triangle a leaf) gets its nodes and sorted
+        // triangles from the range refit's two passes instead of the climb and the gather: the
+        // same nodes, without the climb's chains of device-scope round trips (dragon on the
+        // H100, BENCHMARKS.md session 26).
+        let by_ranges = max_leaf == 1 && n >= 2;
+        if by_ranges && refit.is_none() {
+            let bytes = u64::from(Lbvh::topology_words(n)) * 4;
+            if self.scratch_topology.size() < bytes {
+                self.scratch_topology = storage(
+                    &self.device,
+                    "kickstart-rt build topology",
+                    bytes.next_power_of_two(),
+                );
+            }
+        }
+        let topology = match refit {
+            Some((_, t)) => Some((self.topologies.buffer(), t.start)),
+            None if by_ranges => Some((&self.scratch_topology, 0)),
+            None => None,
+        };
         lbvh.build(
             rec,
             &LbvhBuild {
@@ -533,7 +557,7 @@ impl GpuScene {
                 node_base: nodes.start,
                 order,
                 order_base,
-                topology: refit.map(|(_, t)| (self.topologies.buffer(), t.start)),
+                topology,
                 leaf_refs: LeafRefs::SortedPosition,
                 max_leaf,
                 bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
@@ -542,19 +566,40 @@ impl GpuScene {
                 // Fast-trace (leaves collapsed) is also the clustered build: the two together
                 // are what `BuildHint::PreferFastTrace` promises.
                 clustered: max_leaf > 1,
+                hierarchy_only: by_ranges,
             },
         );
-        prims.gather_triangles(
-            rec,
-            self.staged.buffer(),
-            staged.start,
-            order,
-            order_base,
-            n,
-            self.triangles.buffer(),
-            tris.start,
-            None,
-        );
+        match topology {
+            Some(topology) if by_ranges => lbvh.refit_triangles(
+                rec,
+                &LbvhTriangleRefit {
+                    source: RefitSource::Staged {
+                        triangles: self.staged.buffer(),
+                        base: staged.start,
+                    },
+                    dst: self.triangles.buffer(),
+                    dst_base: tris.start,
+                    count: n,
+                    nodes: self.nodes.buffer(),
+                    node_base: nodes.start,
+                    order,
+                    order_base,
+                    topology,
+                    bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                },
+            ),
+            _ => prims.gather_triangles(
+                rec,
+                self.staged.buffer(),
+                staged.start,
+                order,
+                order_base,
+                n,
+                self.triangles.buffer(),
+                tris.start,
+                None,
+            ),
+        }
         g.blas = Some(BlasRanges {
             tris,
             nodes,
@@ -780,6 +825,7 @@ impl GpuScene {
                     key_bits: TLAS_KEY_BITS,
                     centroid_bounds,
                     clustered: false,
+                    hierarchy_only: false,
                 },
             );
             self.tlas.refits_since_rebuild = 0;

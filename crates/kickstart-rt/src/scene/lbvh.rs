@@ -141,6 +141,12 @@ pub(crate) struct LbvhBuild<'a> {
     /// Karras tree as it is: a lower SAH cost for a slower build. Only with
     /// [`LeafRefs::SortedPosition`] (ignored otherwise).
     pub clustered: bool,
+    /// Stop after the hierarchy: the caller writes the nodes and `bounds_out` itself with
+    /// [`Lbvh::refit_triangles`] over this build's `order` and `topology` (a fast-build BLAS of
+    /// at least two triangles: the range refit's two passes replace the climb and the triangle
+    /// gather, with bit-identical nodes). Only for an unclustered build with `max_leaf` 1 and a
+    /// `topology`.
+    pub hierarchy_only: bool,
 }
 
 /// Inputs and outputs of one refit: the same topology as a previous build, new boxes. Leaf `k`
@@ -656,6 +662,9 @@ impl Lbvh {
             rec.dispatch("lbvh hierarchy", &self.hierarchy, &[&bg], groups(n));
         }
         bind.all[0] = &params;
+        if b.hierarchy_only && !clustered && b.max_leaf <= 1 && n >= 2 && b.topology.is_some() {
+            return;
+        }
         if clustered {
             let bg = bind.group(device, &self.hploc, HPLOC_BINDINGS);
             rec.dispatch(
@@ -1104,6 +1113,7 @@ mod tests {
                     key_bits,
                     centroid_bounds: None,
                     clustered,
+                    hierarchy_only: false,
                 },
             )
         });
@@ -1509,6 +1519,7 @@ mod tests {
                         key_bits: sets[i].1,
                         centroid_bounds: None,
                         clustered: false,
+                        hierarchy_only: false,
                     },
                 );
             }
@@ -1677,6 +1688,7 @@ mod tests {
                     key_bits,
                     centroid_bounds,
                     clustered: false,
+                    hierarchy_only: false,
                 },
             );
             dispatches = rec.dispatches;
