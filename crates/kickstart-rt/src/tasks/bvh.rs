@@ -121,7 +121,9 @@ pub enum SurfelType {
 /// geometry more closely (lower SAH cost, fewer node visits per ray; most on scenes of separate
 /// parts such as buildings), and turns every subtree of up to
 /// [`BuildHint::FAST_TRACE_MAX_LEAF`] triangles that is cheaper by the surface area heuristic
-/// into one leaf. Either can be refit (`allow_update`). A fast-build tree is refit from its
+/// into one leaf. For the dragon's 871k triangles on the H100 (BENCHMARKS.md session 26) the
+/// fast-build build takes 0.69 ms and the fast-trace build 1.75 ms (SAH cost 1.10× a CPU
+/// binned-SAH build's). Either can be refit (`allow_update`). A fast-build tree is refit from its
 /// nodes' leaf ranges, straight from the re-ingested triangles (the range refit: 0.167 ms with
 /// ingestion, fused into the refit when both run in one task, for the dragon's 871k triangles
 /// on the H100, BENCHMARKS.md session 25). A
