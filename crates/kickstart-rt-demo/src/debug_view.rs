@@ -59,15 +59,7 @@ pub fn trace(
     let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
     let uploads = gpu::upload_scene(device, scene);
     let mut c = ctx.create_task_container();
-    gpu::schedule_scene(
-        &ctx,
-        &mut c,
-        scene,
-        &uploads,
-        false,
-        ksrt::BuildHint::Auto,
-        true,
-    );
+    gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);
     // Every BLAS in this one task, so the trace below sees the whole scene.
     c.schedule_bvh_task(ksrt::BvhBuildTask {
         max_blas_build_count: (uploads.len() as u32).max(1),

@@ -219,6 +219,25 @@ pub fn schedule_scene(
     }
 }
 
+/// Schedules the registration of every mesh and instance of `scene` as a renderer's static scene
+/// (no `allow_update`, `BuildHint::Auto`: fast-trace BLASes).
+pub fn schedule_static_scene(
+    ctx: &ksrt::ExecuteContext,
+    container: &mut ksrt::TaskContainer,
+    scene: &Scene,
+    uploads: &[UploadedMesh],
+) -> SceneHandles {
+    schedule_scene(
+        ctx,
+        container,
+        scene,
+        uploads,
+        false,
+        ksrt::BuildHint::Auto,
+        true,
+    )
+}
+
 /// Builds `container` into a new encoder, lets `after` record more (read-back copies), submits.
 pub fn submit(
     ctx: &ksrt::ExecuteContext,

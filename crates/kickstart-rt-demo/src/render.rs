@@ -34,15 +34,7 @@ pub fn render(
     let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
     let uploads = crate::gpu::upload_scene(device, scene);
     let mut c = ctx.create_task_container();
-    crate::gpu::schedule_scene(
-        &ctx,
-        &mut c,
-        scene,
-        &uploads,
-        false,
-        ksrt::BuildHint::Auto,
-        true,
-    );
+    crate::gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);
     ctx.invoke_gpu_task(c)?;
     device.poll(wgpu::PollType::wait_indefinitely())?;
     println!(

@@ -110,15 +110,7 @@ impl Renderer {
         let ctx = ksrt::ExecuteContext::new(device, queue, settings)?;
         let uploads = gpu::upload_scene(device, scene);
         let mut c = ctx.create_task_container();
-        gpu::schedule_scene(
-            &ctx,
-            &mut c,
-            scene,
-            &uploads,
-            false,
-            ksrt::BuildHint::Auto,
-            true,
-        );
+        gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);
         c.schedule_bvh_task(crate::sdk_glue::bvh_build_task(
             uploads.len().max(1) as u32,
             Some(crate::sdk_glue::Tlas::Auto),
