@@ -651,6 +651,82 @@ fn refit_equals_rebuild(hint: BuildHint) {
     }
 }
 
+/// A fast-build BLAS (`PreferFastBuild`, or `Auto` with `allow_update`) gets its nodes from the
+/// range refit's passes right after the hierarchy: one block of 256 triangles or less, exactly
+/// one, one and a bit, several; each geometry under one instance, traced against the CPU oracle.
+#[test]
+fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
+    let ctx = context(4);
+    let mut rng = Rng(77);
+    let counts = [2u32, 3, 17, 255, 256, 257, 513, 2000];
+    let mut c = ctx.create_task_container();
+    let mut oracle = Oracle::default();
+    let geometries = ctx.create_geometry_handles(2 * counts.len());
+    let instances = ctx.create_instance_handles(geometries.len());
+    let mut centroids: Vec<Vec<Vec3>> = Vec::new();
+    for (k, ((&g, &i), allow_update)) in geometries
+        .iter()
+        .zip(&instances)
+        .zip([false, true].into_iter().cycle())
+        .enumerate()
+    {
+        let mesh = Mesh::soup(&mut rng, counts[k / 2], 1.0);
+        let mut input = mesh_input("fast-build", &mesh, allow_update);
+        input.build_hint = if allow_update {
+            BuildHint::Auto
+        } else {
+            BuildHint::PreferFastBuild
+        };
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: g,
+            input,
+        });
+        // Side by side along x, so rays cross several geometries.
+        let t = Affine3A::from_translation(Vec3::new(3.0 * k as f32, 0.0, 0.0));
+        register_instance(&mut c, i, g, t);
+        oracle.geometry(g, &mesh);
+        oracle.instance(i, &InstanceInput::new(g, t));
+        let shift = Vec3::from(t.translation);
+        centroids.push(
+            mesh.triangles()
+                .iter()
+                .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
+                .collect(),
+        );
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: geometries.len() as u32,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    // Random rays (misses, bounded and axis-aligned ones), then rays at every geometry's
+    // triangles from around it.
+    let mut rays = random_rays(&mut rng, 2000, 2.0);
+    for (k, r) in rays.iter_mut().enumerate() {
+        r.origin[0] += 3.0 * (k % geometries.len()) as f32;
+    }
+    let random = rays.len();
+    for k in 0..2000 {
+        let targets = &centroids[k % centroids.len()];
+        let at = targets[rng.below(targets.len() as u32) as usize];
+        let o = at + rng.v(-2.0, 2.0);
+        rays.push(ray(o, at - o, 0.0, f32::INFINITY));
+    }
+    let hits = closest(&ctx, &rays);
+    assert_agrees(
+        &compare(&oracle, &rays, &hits, VISIBLE),
+        "fast-build BLASes",
+    );
+    // The soups hold degenerate triangles too, which rays at their centroids miss (lavapipe:
+    // 1881 of 2000 hit).
+    let aimed_hits = hits[random..].iter().filter(|h| h.t >= 0.0).count();
+    assert!(
+        aimed_hits > 1600,
+        "{aimed_hits} of 2000 rays aimed at triangles hit"
+    );
+}
+
 /// An update refit in the task that ingests it decodes the application's bytes itself (the
 /// ingestion fused into the refit); one that `max_blas_build_count` leaves to a later task is
 /// ingested as usual and refit then. Both trace as the CPU oracle says, and the dropped
