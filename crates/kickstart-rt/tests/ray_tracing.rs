@@ -687,10 +687,19 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
         register_instance(&mut c, i, g, t);
         oracle.geometry(g, &mesh);
         oracle.instance(i, &InstanceInput::new(g, t));
+        // Not the soup's slivers and degenerate triangles, whose hit or miss at the centroid
+        // is a matter of rounding (FMA on the H100 and not on the CPU: 3 of 4000 rays).
         let shift = Vec3::from(t.translation);
         centroids.push(
             mesh.triangles()
                 .iter()
+                .filter(|v| {
+                    let longest = (v[1] - v[0])
+                        .length_squared()
+                        .max((v[2] - v[1]).length_squared())
+                        .max((v[0] - v[2]).length_squared());
+                    (v[1] - v[0]).cross(v[2] - v[0]).length() > 0.05 * longest
+                })
                 .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
                 .collect(),
         );
@@ -701,15 +710,21 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
     });
     build_submit_complete(&ctx, c);
     // Random rays (misses, bounded and axis-aligned ones), then rays at every geometry's
-    // triangles from around it.
+    // well-shaped triangles from around it.
     let mut rays = random_rays(&mut rng, 2000, 2.0);
     for (k, r) in rays.iter_mut().enumerate() {
         r.origin[0] += 3.0 * (k % geometries.len()) as f32;
     }
     let random = rays.len();
+    // (A tiny soup may have no well-shaped triangle: its rays are left out.)
+    let targets: Vec<&Vec<Vec3>> = centroids.iter().filter(|c| !c.is_empty()).collect();
+    assert!(
+        targets.len() >= centroids.len() - 4,
+        "too few geometries to aim at"
+    );
     for k in 0..2000 {
-        let targets = &centroids[k % centroids.len()];
-        let at = targets[rng.below(targets.len() as u32) as usize];
+        let of = targets[k % targets.len()];
+        let at = of[rng.below(of.len() as u32) as usize];
         let o = at + rng.v(-2.0, 2.0);
         rays.push(ray(o, at - o, 0.0, f32::INFINITY));
     }
@@ -718,11 +733,9 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
         &compare(&oracle, &rays, &hits, VISIBLE),
         "fast-build BLASes",
     );
-    // The soups hold degenerate triangles too, which rays at their centroids miss (lavapipe:
-    // 1881 of 2000 hit).
     let aimed_hits = hits[random..].iter().filter(|h| h.t >= 0.0).count();
     assert!(
-        aimed_hits > 1600,
+        aimed_hits > 1900,
         "{aimed_hits} of 2000 rays aimed at triangles hit"
     );
 }
