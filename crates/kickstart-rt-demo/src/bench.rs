@@ -485,7 +485,7 @@ impl<'a> Bench<'a> {
     /// One context serves every repetition: with a fresh context per build, its set-up (pipelines,
     /// pools) left the GPU idle between builds, its clocks fell, and the same build measured
     /// 1.25 ms in one H100 run and 4.2 ms in another.
-    pub(crate) fn blas_build(
+    fn blas_build(
         &self,
         scene: &Scene,
         uploads: &[UploadedMesh],

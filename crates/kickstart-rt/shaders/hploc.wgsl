@@ -120,13 +120,18 @@ fn hp_karras_parent(node: u32) -> u32 {
     return topology[2u * (params.count - 1u) + node] & PARENT_INDEX_MASK;
 }
 
-// Leaves covered by Karras child `r` (topology encoding): one for a leaf, else the inner node's
-// range (it starts or ends at its index; the hierarchy stored the other end).
+// The other end of inner Karras node `node`'s leaf range (it starts or ends at its index), as
+// lbvh_hierarchy stored it (range_ends_at, here at base 0).
+fn hp_range_end(node: u32) -> u32 {
+    return topology[4u * params.count - 3u + node];
+}
+
+// Leaves covered by Karras child `r` (topology encoding).
 fn hp_child_size(r: u32) -> u32 {
     if (r & LEAF_BIT) != 0u {
         return 1u;
     }
-    let end = topology[4u * params.count - 3u + r];
+    let end = hp_range_end(r);
     return max(end, r) - min(end, r) + 1u;
 }
 
@@ -244,7 +249,7 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
     c.climbing = false;
     c.pending = false;
     if k + 1u < n {
-        let end = topology[4u * n - 3u + k];
+        let end = hp_range_end(k);
         c.node = k;
         c.lo = min(k, end);
         c.hi = max(k, end);

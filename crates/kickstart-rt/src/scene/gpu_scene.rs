@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles, RefitSource,
+    Grown, Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles, RefitSource,
     BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
@@ -267,7 +267,7 @@ pub(crate) struct GpuScene {
     scratch_aabbs: wgpu::Buffer,
     scratch_order: wgpu::Buffer,
     /// Topology of a fast-build BLAS built without `allow_update`: its range refit reads it.
-    scratch_topology: wgpu::Buffer,
+    scratch_topology: Grown,
     /// Dropped-triangle counters of this task's ingestions (two per ingestion).
     pub counters: wgpu::Buffer,
     passes: Passes,
@@ -308,7 +308,7 @@ impl GpuScene {
             },
             scratch_aabbs: storage(device, "kickstart-rt build boxes", AABB_BYTES),
             scratch_order: storage(device, "kickstart-rt build order", 4),
-            scratch_topology: storage(device, "kickstart-rt build topology", 4),
+            scratch_topology: Grown::default(),
             counters: storage(device, "kickstart-rt ingestion counters", 8),
             passes: Passes::default(),
         }
@@ -327,7 +327,7 @@ impl GpuScene {
     pub fn scratch_bytes(&self) -> u64 {
         self.scratch_aabbs.size()
             + self.scratch_order.size()
-            + self.scratch_topology.size()
+            + self.scratch_topology.bytes()
             + self.counters.size()
             + self.passes.lbvh.as_ref().map_or(0, |l| l.scratch_bytes())
     }
@@ -532,20 +532,17 @@ impl GpuScene {
         // same nodes, without the climb's chains of device-scope round trips (dragon on the
         // H100, BENCHMARKS.md session 26).
         let by_ranges = max_leaf == 1 && n >= 2;
-        if by_ranges && refit.is_none() {
-            let bytes = u64::from(Lbvh::topology_words(n)) * 4;
-            if self.scratch_topology.size() < bytes {
-                self.scratch_topology = storage(
-                    &self.device,
-                    "kickstart-rt build topology",
-                    bytes.next_power_of_two(),
-                );
-            }
-        }
-        let topology = match refit {
-            Some((_, t)) => Some((self.topologies.buffer(), t.start)),
-            None if by_ranges => Some((&self.scratch_topology, 0)),
-            None => None,
+        let scratch_topology = (by_ranges && refit.is_none()).then(|| {
+            self.scratch_topology.get(
+                &self.device,
+                "kickstart-rt build topology",
+                u64::from(Lbvh::topology_words(n)) * 4,
+            )
+        });
+        let topology = match (refit, &scratch_topology) {
+            (Some((_, t)), _) => Some((self.topologies.buffer(), t.start)),
+            (None, Some(scratch)) => Some((scratch, 0)),
+            (None, None) => None,
         };
         lbvh.build(
             rec,
@@ -569,8 +566,8 @@ impl GpuScene {
                 hierarchy_only: by_ranges,
             },
         );
-        match topology {
-            Some(topology) if by_ranges => lbvh.refit_triangles(
+        match topology.filter(|_| by_ranges) {
+            Some(topology) => lbvh.refit_triangles(
                 rec,
                 &LbvhTriangleRefit {
                     source: RefitSource::Staged {
@@ -588,7 +585,7 @@ impl GpuScene {
                     bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
                 },
             ),
-            _ => prims.gather_triangles(
+            None => prims.gather_triangles(
                 rec,
                 self.staged.buffer(),
                 staged.start,

@@ -144,8 +144,8 @@ pub(crate) struct LbvhBuild<'a> {
     /// Stop after the hierarchy: the caller writes the nodes and `bounds_out` itself with
     /// [`Lbvh::refit_triangles`] over this build's `order` and `topology` (a fast-build BLAS of
     /// at least two triangles: the range refit's two passes replace the climb and the triangle
-    /// gather, with bit-identical nodes). Only for an unclustered build with `max_leaf` 1 and a
-    /// `topology`.
+    /// gather, with bit-identical nodes). So it needs a `topology`, `max_leaf` 1 and no
+    /// clustering; the caller decides and nothing here second-guesses it.
     pub hierarchy_only: bool,
 }
 
@@ -308,13 +308,18 @@ struct Params {
 
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
 #[derive(Default)]
-struct Grown {
+pub(crate) struct Grown {
     buffer: Option<wgpu::Buffer>,
 }
 
 impl Grown {
     /// A buffer of at least `size` bytes (at least 32, so every binding has a valid minimum).
-    fn get(&mut self, device: &wgpu::Device, label: &'static str, size: u64) -> wgpu::Buffer {
+    pub(crate) fn get(
+        &mut self,
+        device: &wgpu::Device,
+        label: &'static str,
+        size: u64,
+    ) -> wgpu::Buffer {
         let size = size.max(32);
         if let Some(b) = &self.buffer {
             if b.size() >= size {
@@ -335,7 +340,7 @@ impl Grown {
     }
 
     /// Bytes held.
-    fn bytes(&self) -> u64 {
+    pub(crate) fn bytes(&self) -> u64 {
         self.buffer.as_ref().map_or(0, |b| b.size())
     }
 }
@@ -662,7 +667,7 @@ impl Lbvh {
             rec.dispatch("lbvh hierarchy", &self.hierarchy, &[&bg], groups(n));
         }
         bind.all[0] = &params;
-        if b.hierarchy_only && !clustered && b.max_leaf <= 1 && n >= 2 && b.topology.is_some() {
+        if b.hierarchy_only {
             return;
         }
         if clustered {
