@@ -28,15 +28,53 @@ pub fn adapter() -> AnyResult<wgpu::Adapter> {
 }
 
 /// A device with the SDK's required features and every optional one the adapter has (which
-/// includes `TIMESTAMP_QUERY`, the benchmark's GPU timing).
+/// includes `TIMESTAMP_QUERY`, the benchmark's GPU timing), less those named in
+/// `KSRT_DISABLE_FEATURES` ([`disabled_features`]).
 pub fn device(adapter: &wgpu::Adapter) -> AnyResult<(wgpu::Device, wgpu::Queue)> {
+    let optional = ksrt::optional_features_supported(adapter) - disabled_features()?;
     let desc = wgpu::DeviceDescriptor {
         label: Some("ksrt"),
-        required_features: ksrt::required_features() | ksrt::optional_features_supported(adapter),
+        required_features: ksrt::required_features() | optional,
         required_limits: ksrt::required_limits().using_resolution(adapter.limits()),
         ..Default::default()
     };
     Ok(pollster::block_on(adapter.request_device(&desc))?)
+}
+
+/// Optional SDK features named in the environment variable `KSRT_DISABLE_FEATURES`
+/// (comma-separated wgpu names, e.g. `PASSTHROUGH_SHADERS,SUBGROUP`): the device is created
+/// without them, so the SDK's fallback for each runs (and can be measured against the fast path
+/// in one binary).
+pub fn disabled_features() -> AnyResult<wgpu::Features> {
+    let Ok(list) = std::env::var("KSRT_DISABLE_FEATURES") else {
+        return Ok(wgpu::Features::empty());
+    };
+    parse_feature_list(&list)
+}
+
+/// The optional features named in `list` (comma-separated; blanks ignored).
+fn parse_feature_list(list: &str) -> AnyResult<wgpu::Features> {
+    let mut features = wgpu::Features::empty();
+    for name in list.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        let found = ksrt::optional_features()
+            .iter_names()
+            .find(|(n, _)| n.eq_ignore_ascii_case(name));
+        match found {
+            Some((_, f)) => features |= f,
+            None => {
+                let known: Vec<&str> = ksrt::optional_features()
+                    .iter_names()
+                    .map(|(n, _)| n)
+                    .collect();
+                return Err(format!(
+                    "KSRT_DISABLE_FEATURES: `{name}` is not an optional SDK feature (known: {})",
+                    known.join(", ")
+                )
+                .into());
+            }
+        }
+    }
+    Ok(features)
 }
 
 /// `ksrt info`.
@@ -292,4 +330,29 @@ pub fn readback_buffer(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn feature_lists_name_optional_features_only() {
+        let f = parse_feature_list(" passthrough_shaders, SUBGROUP ,").expect("valid list");
+        assert_eq!(
+            f,
+            wgpu::Features::PASSTHROUGH_SHADERS | wgpu::Features::SUBGROUP
+        );
+        assert_eq!(
+            parse_feature_list("").expect("empty"),
+            wgpu::Features::empty()
+        );
+        let err = parse_feature_list("RAY_QUERY")
+            .expect_err("not optional")
+            .to_string();
+        assert!(
+            err.contains("RAY_QUERY") && err.contains("PASSTHROUGH_SHADERS"),
+            "{err}"
+        );
+    }
 }

@@ -18,6 +18,9 @@ pub fn optional_features() -> wgpu::Features {
         | wgpu::Features::SHADER_INT64_ATOMIC_MIN_MAX
         | wgpu::Features::PIPELINE_CACHE
         | wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES
+        // Vulkan: the traversal passes are created from our own SPIR-V, whose traversal stack
+        // is not zero-filled per invocation (src/gpu/spirv.rs). Elsewhere it is not used.
+        | wgpu::Features::PASSTHROUGH_SHADERS
 }
 
 /// Limits the SDK needs: WebGPU's defaults, which every desktop adapter exceeds.

@@ -14,10 +14,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::storage_entry;
 use crate::error::{Error, Result};
-use crate::gpu::shader::{assemble, compute_pipeline};
+use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline, GroupLayout};
 use crate::gpu::Recorder;
 use crate::scene::gpu_scene::storage;
-use crate::trace::rays::{SceneBuffers, TRAVERSE_WGSL};
+use crate::trace::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use crate::{DepthType, DirectLightingInjectionTask};
 
 const INJECT_WGSL: &str = include_str!("../../shaders/cache_inject.wgsl");
@@ -97,48 +97,66 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
             .replace("DEPTH_TEXTURE_TYPE", ty)
             .replace("DEPTH_LOAD", load),
     ]);
-    let scene = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("kickstart-rt injection scene"),
-        entries: &(0..5).map(|b| storage_entry(b, true)).collect::<Vec<_>>(),
-    });
-    let cache = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("kickstart-rt injection cache"),
-        entries: &[storage_entry(0, true), storage_entry(2, false)],
-    });
-    let io = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("kickstart-rt injection inputs"),
-        entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
+    let scene_entries: Vec<_> = (0..5).map(|b| storage_entry(b, true)).collect();
+    let cache_entries = [storage_entry(0, true), storage_entry(2, false)];
+    let io_entries = [
+        wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
             },
-            texture_entry(1, depth_format),
-            texture_entry(2, false),
-        ],
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("kickstart-rt injection"),
-        bind_group_layouts: &[Some(&scene), Some(&cache), Some(&io)],
-        immediate_size: 0,
-    });
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("kickstart-rt injection"),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("kickstart-rt injection"),
-        layout: Some(&layout),
-        module: &module,
-        entry_point: Some("inject"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+            count: None,
+        },
+        texture_entry(1, depth_format),
+        texture_entry(2, false),
+    ];
+    let layout = |label, entries: &[wgpu::BindGroupLayoutEntry]| {
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries,
+        })
+    };
+    let scene = layout("kickstart-rt injection scene", &scene_entries);
+    let cache = layout("kickstart-rt injection cache", &cache_entries);
+    let io = layout("kickstart-rt injection inputs", &io_entries);
+    let bindings = |entries: &[wgpu::BindGroupLayoutEntry]| -> Vec<u32> {
+        entries.iter().map(|e| e.binding).collect()
+    };
+    let (scene_bindings, cache_bindings, io_bindings) = (
+        bindings(&scene_entries),
+        bindings(&cache_entries),
+        bindings(&io_entries),
+    );
+    let groups = [
+        GroupLayout {
+            layout: &scene,
+            bindings: &scene_bindings,
+        },
+        GroupLayout {
+            layout: &cache,
+            bindings: &cache_bindings,
+        },
+        GroupLayout {
+            layout: &io,
+            bindings: &io_bindings,
+        },
+    ];
+    // SAFETY: with naga's checks on, only the dropped zero fill needs an argument: the
+    // traversal reads `rt_stack` only below its stack pointer, where it wrote first.
+    let (pipeline, _) = unsafe {
+        traversal_pipeline(
+            device,
+            "kickstart-rt injection",
+            &source,
+            "inject",
+            &groups,
+            true,
+            &[TRAVERSAL_STACK],
+        )
+    };
     InjectPipeline {
         layouts: [scene, cache, io],
         pipeline,

@@ -4,6 +4,7 @@
 pub(crate) mod radix_sort;
 pub(crate) mod recorder;
 pub(crate) mod shader;
+pub(crate) mod spirv;
 #[cfg(test)]
 pub(crate) mod testing;
 

@@ -32,35 +32,6 @@ fn pipeline_with_auto_layout(
     })
 }
 
-/// A compute pipeline like [`compute_pipeline`], compiled without naga's runtime checks
-/// (`ShaderRuntimeChecks::unchecked()`: no index clamps, no forced loop bounding).
-///
-/// Only for shaders whose every index and loop is bounded by construction; the caller names the
-/// argument. Measured on the H100 for the ray batch pass: +3–4 % rays/s (BENCHMARKS.md).
-///
-/// # Safety
-///
-/// Every array index in `source` must be in bounds and every loop must terminate for all data
-/// the SDK can bind to it.
-pub(crate) unsafe fn compute_pipeline_unchecked(
-    device: &wgpu::Device,
-    label: &str,
-    source: &str,
-    entry_point: &str,
-) -> wgpu::ComputePipeline {
-    // SAFETY: the caller guarantees the shader is in bounds and terminates (see above).
-    let module = unsafe {
-        device.create_shader_module_trusted(
-            wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            },
-            wgpu::ShaderRuntimeChecks::unchecked(),
-        )
-    };
-    pipeline_with_auto_layout(device, label, &module, entry_point)
-}
-
 /// A compute pipeline from WGSL `source` with explicit bind group layouts (`layouts[i]` is group
 /// `i`): needed where a shared module declares bindings a pass may not use (the G-buffer), since
 /// an automatic layout would drop them.
@@ -75,6 +46,110 @@ pub(crate) fn compute_pipeline_with_layouts(
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
+    pipeline_with_layouts(device, label, &module, entry_point, layouts)
+}
+
+/// A bind group layout and the binding numbers of its entries.
+pub(crate) struct GroupLayout<'a> {
+    /// The layout.
+    pub layout: &'a wgpu::BindGroupLayout,
+    /// The binding number of each of its entries.
+    pub bindings: &'a [u32],
+}
+
+/// A traversal pass's compute pipeline (explicit layouts, `layouts[i]` is group `i`) whose
+/// `uninitialized` private arrays are not zero-filled at the start of each invocation, where the
+/// device allows it (Vulkan with `Features::PASSTHROUGH_SHADERS`: see [`super::spirv`]); otherwise,
+/// or if that compilation fails, the same pipeline from WGSL. `checked`: naga's runtime checks
+/// as `ShaderRuntimeChecks::checked()` writes them, else as `unchecked()`. Also returns whether
+/// the pipeline came from our own SPIR-V (see [`spirv_accepted`]).
+///
+/// # Safety
+///
+/// With `checked == false`, every array index in `source` must be in bounds and every loop must
+/// terminate for all data the SDK can bind to it. Either way, the shader must never read an
+/// element of an `uninitialized` variable before writing it.
+pub(crate) unsafe fn traversal_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    entry_point: &str,
+    layouts: &[GroupLayout<'_>],
+    checked: bool,
+    uninitialized: &[&str],
+) -> (wgpu::ComputePipeline, bool) {
+    let groups: Vec<&wgpu::BindGroupLayout> = layouts.iter().map(|g| g.layout).collect();
+    if spirv_accepted(device) {
+        let bindings: Vec<&[u32]> = layouts.iter().map(|g| g.bindings).collect();
+        let request = super::spirv::SpirvRequest {
+            entry_point,
+            layout_bindings: &bindings,
+            checked,
+            uninitialized,
+        };
+        match super::spirv::compile_without_zero_init(source, &request) {
+            Ok(compiled) => {
+                let [x, y, z] = compiled.workgroup_size;
+                let entry_points = [wgpu::PassthroughShaderEntryPoint {
+                    name: entry_point.into(),
+                    workgroup_size: (x, y, z),
+                }];
+                // SAFETY: the words are naga's own SPIR-V for the validated module, written with
+                // the options wgpu-hal uses and the pipeline's own binding numbers; the only
+                // change is the dropped initializers, which the caller guarantees are never read.
+                let module = unsafe {
+                    device.create_shader_module_passthrough(
+                        wgpu::ShaderModuleDescriptorPassthrough {
+                            label: Some(label),
+                            entry_points: entry_points[..].into(),
+                            spirv: Some(compiled.words.into()),
+                            ..Default::default()
+                        },
+                    )
+                };
+                log::debug!(
+                    "{label}: created from own SPIR-V (zero fill dropped: {uninitialized:?})"
+                );
+                let pipeline = pipeline_with_layouts(device, label, &module, entry_point, &groups);
+                return (pipeline, true);
+            }
+            Err(e) => log::warn!("{label}: own SPIR-V failed ({e}); created from WGSL instead"),
+        }
+    }
+    let descriptor = wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    };
+    let module = if checked {
+        device.create_shader_module(descriptor)
+    } else {
+        // SAFETY: the caller guarantees the shader is in bounds and terminates (see above).
+        unsafe {
+            device.create_shader_module_trusted(descriptor, wgpu::ShaderRuntimeChecks::unchecked())
+        }
+    };
+    let pipeline = pipeline_with_layouts(device, label, &module, entry_point, &groups);
+    (pipeline, false)
+}
+
+/// Whether [`traversal_pipeline`] may give `device` our own SPIR-V: a Vulkan device with
+/// `Features::PASSTHROUGH_SHADERS` enabled.
+pub(crate) fn spirv_accepted(device: &wgpu::Device) -> bool {
+    device
+        .features()
+        .contains(wgpu::Features::PASSTHROUGH_SHADERS)
+        && device.adapter_info().backend == wgpu::Backend::Vulkan
+}
+
+/// The compute pipeline of `module`'s `entry_point` with explicit layouts (`layouts[i]` is group
+/// `i`).
+fn pipeline_with_layouts(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry_point: &str,
+    layouts: &[&wgpu::BindGroupLayout],
+) -> wgpu::ComputePipeline {
     let groups: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().copied().map(Some).collect();
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
@@ -84,7 +159,7 @@ pub(crate) fn compute_pipeline_with_layouts(
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(label),
         layout: Some(&layout),
-        module: &module,
+        module,
         entry_point: Some(entry_point),
         compilation_options: Default::default(),
         cache: None,

@@ -237,6 +237,9 @@ pub(crate) struct GBufferBinder {
 }
 
 impl GBufferBinder {
+    /// The binding numbers of the layout's entries: the uniform, then five textures.
+    pub const BINDINGS: [u32; 6] = [0, 1, 2, 3, 4, 5];
+
     /// Creates the layout and the 1×1 placeholder texture.
     pub fn new(device: &wgpu::Device) -> Self {
         let texture = |binding| wgpu::BindGroupLayoutEntry {

@@ -1,7 +1,7 @@
 //! Ray batches: rays from a buffer are traced through the scene (closest or any hit) and their
 //! hits written to a buffer. Also holds the scene bindings every tracing pass shares.
 
-use crate::gpu::shader::{assemble, compute_pipeline_unchecked};
+use crate::gpu::shader::{assemble, traversal_pipeline, GroupLayout};
 use crate::gpu::Recorder;
 use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
@@ -40,6 +40,9 @@ pub(crate) struct SceneBuffers<'a> {
 }
 
 impl SceneBuffers<'_> {
+    /// The binding numbers of the `@group(0)` scene bindings, in [`Self::layout`]'s order.
+    pub const BINDINGS: [u32; 5] = [0, 1, 2, 3, 4];
+
     /// The explicit layout of the `@group(0)` scene bindings (five read-only storage buffers), for
     /// pipelines built with explicit layouts.
     pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
@@ -55,7 +58,7 @@ impl SceneBuffers<'_> {
         };
         device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("kickstart-rt scene"),
-            entries: &[entry(0), entry(1), entry(2), entry(3), entry(4)],
+            entries: &Self::BINDINGS.map(entry),
         })
     }
 
@@ -80,6 +83,41 @@ impl SceneBuffers<'_> {
     }
 }
 
+/// The traversal module's stack (`var<private> rt_stack`): written before it is read, so the
+/// passes that include the module may drop its zero fill ([`traversal_pipeline`]).
+pub(crate) const TRAVERSAL_STACK: &str = "rt_stack";
+
+/// Bindings of the ray batch's `@group(1)`: parameters, rays, hits.
+const IO_BINDINGS: [u32; 3] = [0, 1, 2];
+
+/// The layout of the ray batch's `@group(1)` ([`IO_BINDINGS`]).
+fn io_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("kickstart-rt trace rays io"),
+        entries: &[
+            buffer(IO_BINDINGS[0], wgpu::BufferBindingType::Uniform),
+            buffer(
+                IO_BINDINGS[1],
+                wgpu::BufferBindingType::Storage { read_only: true },
+            ),
+            buffer(
+                IO_BINDINGS[2],
+                wgpu::BufferBindingType::Storage { read_only: false },
+            ),
+        ],
+    })
+}
+
 /// Uniform parameters of the ray batch shader (`TraceParams`).
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy)]
@@ -93,6 +131,9 @@ struct TraceParams {
 /// The ray batch pass (`trace rays`).
 pub(crate) struct RayTracer {
     pipeline: wgpu::ComputePipeline,
+    /// Whether the pipeline came from our own SPIR-V (no stack zero fill).
+    #[cfg_attr(not(test), allow(dead_code))] // tests: a silent fallback to WGSL must fail them
+    own_spirv: bool,
 }
 
 impl RayTracer {
@@ -100,6 +141,18 @@ impl RayTracer {
     /// layout serves every batch).
     pub fn new(device: &wgpu::Device) -> Self {
         let source = assemble(&[TRAVERSE_WGSL, TRACE_RAYS_WGSL]);
+        let scene_layout = SceneBuffers::layout(device);
+        let io_layout = io_layout(device);
+        let layouts = [
+            GroupLayout {
+                layout: &scene_layout,
+                bindings: &SceneBuffers::BINDINGS,
+            },
+            GroupLayout {
+                layout: &io_layout,
+                bindings: &IO_BINDINGS,
+            },
+        ];
         // SAFETY: the pass is bounded by construction, so naga's checks only cost time:
         // - the ray and hit bindings hold exactly `count` records and `main` returns for
         //   i >= count;
@@ -110,11 +163,24 @@ impl RayTracer {
         //   validated handles), never from the user's buffers; a ref made for another build of
         //   its BLAS (a TLAS update deferred past a rebuild) is entered at the BLAS root, so it
         //   never indexes nodes of another build;
-        // - the traversal has no other loop (a leaf's triangles are one per iteration).
-        let pipeline = unsafe {
-            compute_pipeline_unchecked(device, "kickstart-rt trace rays", &source, "main")
+        // - the traversal has no other loop (a leaf's triangles are one per iteration);
+        // - `rt_stack` is read only below the stack pointer, and every entry there was written
+        //   first (a push stores, then raises the pointer), so it needs no zero fill.
+        let (pipeline, own_spirv) = unsafe {
+            traversal_pipeline(
+                device,
+                "kickstart-rt trace rays",
+                &source,
+                "main",
+                &layouts,
+                false,
+                &[TRAVERSAL_STACK],
+            )
         };
-        RayTracer { pipeline }
+        RayTracer {
+            pipeline,
+            own_spirv,
+        }
     }
 
     /// Records tracing `count` rays read from `rays` (buffer, byte offset) into `hits` (buffer,
@@ -196,6 +262,18 @@ mod tests {
     use glam::{Affine3A, Quat, Vec3};
 
     const MISS: u32 = u32::MAX;
+
+    #[test]
+    fn the_pass_comes_from_own_spirv_where_the_device_takes_it() {
+        // A pass that silently fell back to WGSL would zero-fill its stack per invocation again
+        // (+45 % primary rays/s on the H100 without it, BENCHMARKS.md session 27).
+        let g = crate::gpu::testing::gpu();
+        let tracer = RayTracer::new(&g.device);
+        assert_eq!(
+            tracer.own_spirv,
+            crate::gpu::shader::spirv_accepted(&g.device)
+        );
+    }
 
     fn ray(origin: Vec3, dir: Vec3) -> Ray {
         Ray {

@@ -11,9 +11,9 @@
 
 use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
-use super::rays::{SceneBuffers, TRAVERSE_WGSL};
+use super::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use super::sampling::blue_noise_texture;
-use crate::gpu::shader::{assemble, compute_pipeline_with_layouts};
+use crate::gpu::shader::{assemble, traversal_pipeline, GroupLayout};
 use crate::gpu::Recorder;
 use crate::tasks::*;
 use crate::{Error, InstanceInclusionMask, Result};
@@ -121,6 +121,9 @@ struct Pipeline {
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
     pipeline: wgpu::ComputePipeline,
     io_layout: wgpu::BindGroupLayout,
+    /// Whether the pipeline came from our own SPIR-V (no stack zero fill).
+    #[cfg_attr(not(test), allow(dead_code))] // tests: a silent fallback to WGSL must fail them
+    own_spirv: bool,
 }
 
 /// What one trace task asks of its pass.
@@ -254,18 +257,53 @@ impl TracePasses {
             ""
         };
         let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
-        let io_layout = io_layout(device, formats);
-        let mut layouts = vec![&self.scene_layout, self.gbuffer.layout(), &io_layout];
+        let io_entries = io_layout_entries(formats);
+        let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("kickstart-rt trace io"),
+            entries: &io_entries,
+        });
+        let io_bindings: Vec<u32> = io_entries.iter().map(|e| e.binding).collect();
+        let cache_bindings =
+            crate::cache::DirectLightingCache::sample_layout_entries().map(|e| e.binding);
+        let mut layouts = vec![
+            GroupLayout {
+                layout: &self.scene_layout,
+                bindings: &SceneBuffers::BINDINGS,
+            },
+            GroupLayout {
+                layout: self.gbuffer.layout(),
+                bindings: &GBufferBinder::BINDINGS,
+            },
+            GroupLayout {
+                layout: &io_layout,
+                bindings: &io_bindings,
+            },
+        ];
         if kind.reads_cache() {
-            layouts.push(&self.cache_layout);
+            layouts.push(GroupLayout {
+                layout: &self.cache_layout,
+                bindings: &cache_bindings,
+            });
         }
-        let pipeline =
-            compute_pipeline_with_layouts(device, kind.label(), &source, entry, &layouts);
+        // SAFETY: with naga's checks on, only the dropped zero fill needs an argument: the
+        // traversal reads `rt_stack` only below its stack pointer, where it wrote first.
+        let (pipeline, own_spirv) = unsafe {
+            traversal_pipeline(
+                device,
+                kind.label(),
+                &source,
+                entry,
+                &layouts,
+                true,
+                &[TRAVERSAL_STACK],
+            )
+        };
         self.pipelines.push(Pipeline {
             kind,
             formats,
             pipeline,
             io_layout,
+            own_spirv,
         });
         Ok(self.pipelines.len() - 1)
     }
@@ -427,10 +465,9 @@ impl TracePasses {
 }
 
 /// The explicit layout of group 2: uniform, three sampled textures, one or two storage outputs.
-fn io_layout(
-    device: &wgpu::Device,
+fn io_layout_entries(
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
-) -> wgpu::BindGroupLayout {
+) -> Vec<wgpu::BindGroupLayoutEntry> {
     let texture = |binding| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -470,10 +507,7 @@ fn io_layout(
     if let Some(f) = formats.1 {
         entries.push(storage(5, f));
     }
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("kickstart-rt trace io"),
-        entries: &entries,
-    })
+    entries
 }
 
 /// The pass uniform of `job`.

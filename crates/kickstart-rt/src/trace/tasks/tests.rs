@@ -597,6 +597,12 @@ fn every_pipeline_compiles_including_prepared_ones() {
             (wgpu::TextureFormat::Rgba8Unorm, None)
         )
         .is_err());
+    // Where the device takes our SPIR-V, every pass must come from it (a pass that silently fell
+    // back to WGSL would zero-fill its stack per invocation again).
+    let expected = crate::gpu::shader::spirv_accepted(&g.device);
+    for p in &passes.pipelines {
+        assert_eq!(p.own_spirv, expected, "{} {:?}", p.kind.label(), p.formats);
+    }
 }
 
 // ---- specular and diffuse, against a stand-in cache ---------------------------------------------
