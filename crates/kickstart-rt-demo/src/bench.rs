@@ -365,6 +365,8 @@ struct Bench<'a> {
     warmed: std::cell::Cell<bool>,
     /// Submitted before each timed task (`--busy-gpu-ms`).
     busy: Option<busy::BusyGpu>,
+    /// The measurements to run (`--sections`; empty: all).
+    sections: Vec<extras::Section>,
 }
 
 impl<'a> Bench<'a> {
@@ -378,6 +380,7 @@ impl<'a> Bench<'a> {
             last_passes: Default::default(),
             warmed: Default::default(),
             busy: None,
+            sections: Vec::new(),
         }
     }
 
@@ -852,9 +855,16 @@ fn bench_scene(
     let mut r = SceneReport::new(name, scene, &camera);
     let uploads = gpu::upload_scene(bench.device, scene);
     let mut errors = Vec::new();
-    if let Some((stats, ctx, h)) = attempt(&mut errors, "BLAS build", || {
-        bench.blas_build(scene, &uploads, ksrt::BuildHint::Auto)
-    }) {
+    let runs = |s: extras::Section| s.runs_in(&bench.sections);
+    let builds = runs(extras::Section::Builds);
+    if let Some((stats, ctx, h)) = builds
+        .then(|| {
+            attempt(&mut errors, "BLAS build", || {
+                bench.blas_build(scene, &uploads, ksrt::BuildHint::Auto)
+            })
+        })
+        .flatten()
+    {
         r.blas_build_profile = bench.last_profile();
         r.blas_build_mtri_per_s = Some(r.geometry_triangles as f64 / (stats.median_ms * 1e3));
         r.blas_build = Some(stats);
@@ -883,23 +893,29 @@ fn bench_scene(
             })
         });
     }
-    r.blas_build_fast_build = attempt(&mut errors, "BLAS build (fast-build)", || {
-        Ok(bench
-            .blas_build(scene, &uploads, ksrt::BuildHint::PreferFastBuild)?
-            .0)
-    });
-    if r.blas_build_fast_build.is_some() {
-        r.blas_build_fast_build_profile = bench.last_profile();
+    if builds {
+        r.blas_build_fast_build = attempt(&mut errors, "BLAS build (fast-build)", || {
+            Ok(bench
+                .blas_build(scene, &uploads, ksrt::BuildHint::PreferFastBuild)?
+                .0)
+        });
+        if r.blas_build_fast_build.is_some() {
+            r.blas_build_fast_build_profile = bench.last_profile();
+        }
+        r.blas_refit = attempt(&mut errors, "BLAS refit", || {
+            bench.blas_refit(scene, &uploads)
+        });
+        if r.blas_refit.is_some() {
+            r.blas_refit_profile = bench.last_profile();
+        }
     }
-    r.blas_refit = attempt(&mut errors, "BLAS refit", || {
-        bench.blas_refit(scene, &uploads)
-    });
-    if r.blas_refit.is_some() {
-        r.blas_refit_profile = bench.last_profile();
-    }
-    let batches = attempt(&mut errors, "rays", || {
-        rays(bench, scene, &uploads, &camera, size, &mut r)
-    });
+    let batches = runs(extras::Section::Rays)
+        .then(|| {
+            attempt(&mut errors, "rays", || {
+                rays(bench, scene, &uploads, &camera, size, &mut r)
+            })
+        })
+        .flatten();
     if let (true, Some(b)) = (measure_tree_work, &batches) {
         let rays: Vec<(&'static str, bool, &[GpuRay])> = b
             .batches
@@ -928,12 +944,16 @@ fn bench_scene(
             &r,
         ));
     }
-    r.cache = attempt(&mut errors, "lighting cache", || {
-        cache::cache_bench(bench, scene, &uploads, &camera, size)
-    });
-    attempt(&mut errors, "trace tasks", || {
-        trace_tasks(bench, scene, &uploads, &camera, size, &mut r)
-    });
+    if runs(extras::Section::Cache) {
+        r.cache = attempt(&mut errors, "lighting cache", || {
+            cache::cache_bench(bench, scene, &uploads, &camera, size)
+        });
+    }
+    if runs(extras::Section::Tasks) {
+        attempt(&mut errors, "trace tasks", || {
+            trace_tasks(bench, scene, &uploads, &camera, size, &mut r)
+        });
+    }
     r.errors = errors;
     r
 }
@@ -1389,6 +1409,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     );
     let mut bench = Bench::new(&device, &queue, opts.iterations);
     bench.ray_order = opts.extras.ray_order;
+    bench.sections = opts.extras.sections.clone();
     if opts.extras.busy_gpu_ms > 0.0 {
         bench.busy = Some(busy::BusyGpu::new(&device, opts.extras.busy_gpu_ms));
         println!(
@@ -1433,12 +1454,13 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         }
         report.scenes.push(r);
     }
-    let tlas_counts: &[u32] = if opts.extras.skip_scenes {
-        &[]
-    } else {
-        println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
-        &TLAS_INSTANCE_COUNTS
-    };
+    let tlas_counts: &[u32] =
+        if opts.extras.skip_scenes || !extras::Section::Tlas.runs_in(&opts.extras.sections) {
+            &[]
+        } else {
+            println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
+            &TLAS_INSTANCE_COUNTS
+        };
     for &count in tlas_counts {
         let t = bench_tlas(&bench, count);
         let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);

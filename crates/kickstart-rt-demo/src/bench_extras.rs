@@ -71,6 +71,12 @@ pub struct ExtraArgs {
     /// asked for).
     #[arg(long)]
     pub skip_scenes: bool,
+    /// The default measurements to run (comma-separated; all when not given): `builds` (BLAS
+    /// build, fast-build, refit, SAH), `rays` (the ray batches and the peer workload), `cache`
+    /// (lighting cache), `tasks` (the SDK's trace tasks), `tlas` (the TLAS table). A shorter
+    /// run for experiments on one part.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub sections: Vec<Section>,
     /// Draw the results of the passes run as PNG charts into this folder.
     #[arg(long)]
     pub plots: Option<PathBuf>,
@@ -78,6 +84,28 @@ pub struct ExtraArgs {
     /// (no GPU needed).
     #[arg(long, requires = "plots")]
     pub plots_from: Option<PathBuf>,
+}
+
+/// A part of the default measurements (`--sections`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Section {
+    /// BLAS build (fast-trace and fast-build), refit and SAH cost.
+    Builds,
+    /// Primary, AO and diffuse ray batches and the peer workload.
+    Rays,
+    /// The lighting cache.
+    Cache,
+    /// The SDK's trace tasks.
+    Tasks,
+    /// The TLAS table.
+    Tlas,
+}
+
+impl Section {
+    /// Whether `sections` (`--sections`; empty: all) includes this one.
+    pub fn runs_in(self, sections: &[Section]) -> bool {
+        sections.is_empty() || sections.contains(&self)
+    }
 }
 
 /// Order of the bench's primary rays (`--ray-order`).

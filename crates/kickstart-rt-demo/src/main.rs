@@ -659,4 +659,20 @@ mod tests {
         ));
         assert!(Cli::try_parse_from(["ksrt", "bench", "--peer", "optix"]).is_err());
     }
+
+    #[test]
+    fn bench_sections_select_measurements() {
+        use bench::extras::Section;
+        let sections = |args: &[&str]| match Cli::try_parse_from(args).map(|c| c.command) {
+            Ok(Command::Bench { extras, .. }) => Ok(extras.sections),
+            Ok(_) => panic!("not bench"),
+            Err(e) => Err(e),
+        };
+        let some = sections(&["ksrt", "bench", "--sections", "rays,tasks"]).expect("parses");
+        assert_eq!(some, vec![Section::Rays, Section::Tasks]);
+        assert!(Section::Rays.runs_in(&some) && !Section::Builds.runs_in(&some));
+        let all = sections(&["ksrt", "bench"]).expect("parses");
+        assert!(Section::Tlas.runs_in(&all) && Section::Cache.runs_in(&all));
+        assert!(sections(&["ksrt", "bench", "--sections", "rays,bvh"]).is_err());
+    }
 }
