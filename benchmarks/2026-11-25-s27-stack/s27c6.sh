@@ -1,0 +1,16 @@
+#!/bin/bash
+# Session 27 call 6: vwk (the shear permutation packed in one word: fewer registers) against
+# HEAD's traversal, one binary (c18fbac + dev-wide-hook.diff), rays only; registers of both.
+cd "$(dirname "$0")/../.."
+gunzip .gpu/bin/*.gz 2>/dev/null; chmod +x .gpu/bin/*
+S=.gpu/data/scenes
+B=.gpu/bin/ksrt-dev
+D=.gpu/data
+run() { local name=$1; shift; local t0=$(date +%s); timeout 150 "$@" > $OUT/$name.txt 2>&1; echo "== $name rc=$? $(( $(date +%s) - t0 ))s"; grep -E "^    (primary|ao|diffuse) .*rays|peer workload|oracle" $OUT/$name.txt | cut -c1-110; }
+A="--scenes $S --iterations 5 --ray-order tiles --busy-gpu-ms 5 --sections rays"
+for round in 1 2; do
+  for v in d0 vwk; do
+    KSRT_DEV_TRACE_WGSL=$D/$v.wgsl run $v-$round $B bench $A --scene dragon --scene apartment
+  done
+done
+for v in d0 vwk; do .gpu/bin/shader-stats --entry main --unchecked $D/$v.wgsl 2>&1 | grep -E "Register Count|Local Memory|Binary Size" | sed "s/^/[$v] /"; done
