@@ -119,9 +119,11 @@ fn spv_options(request: &SpirvRequest<'_>) -> Result<spv::Options<'static>, Stri
         naga::proc::BoundsCheckPolicy::Unchecked
     };
     Ok(spv::Options {
-        // SPIR-V 1.3: what every Vulkan 1.1 driver accepts (wgpu-hal writes the newest the
-        // device's API version allows; the code the driver makes of it is the same).
-        lang_version: (1, 3),
+        // SPIR-V 1.0: what every Vulkan driver accepts, as wgpu-hal writes for a Vulkan 1.0
+        // device (it writes the newest the device's API version allows; the traversal passes use
+        // nothing newer, and the driver's code is the same). wgpu does not tell us the device's
+        // API version, and a newer version would fail on a Vulkan 1.0 device.
+        lang_version: (1, 0),
         // Names only (no source or line info): they find the variables to change.
         flags: spv::WriterFlags::DEBUG,
         // An unmapped binding is an error: the layouts must name every binding the shader uses.
