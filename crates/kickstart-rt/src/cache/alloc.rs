@@ -8,8 +8,9 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{inject::Injector, storage_entry, transfer::Transferer, CacheParams};
+use super::{inject::Injector, transfer::Transferer, CacheParams};
 use crate::error::{Error, Result};
+use crate::gpu::layout::{storage_entry, uniform_entry};
 use crate::gpu::shader::assemble;
 use crate::gpu::Recorder;
 use crate::scene::gpu_scene::storage;
@@ -357,16 +358,7 @@ impl DirectLightingCache {
                     storage_entry(2, false),
                     storage_entry(3, false),
                     storage_entry(4, false),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 5,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
+                    uniform_entry(5),
                 ],
             });
             let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -12,8 +12,8 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::storage_entry;
 use crate::error::{Error, Result};
+use crate::gpu::layout::{storage_entry, uniform_entry};
 use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline, GroupLayout};
 use crate::gpu::Recorder;
 use crate::scene::gpu_scene::storage;
@@ -100,16 +100,7 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
     let scene_entries: Vec<_> = (0..5).map(|b| storage_entry(b, true)).collect();
     let cache_entries = [storage_entry(0, true), storage_entry(2, false)];
     let io_entries = [
-        wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        },
+        uniform_entry(0),
         texture_entry(1, depth_format),
         texture_entry(2, false),
     ];

@@ -38,6 +38,7 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::context::{DenoisingContextInput, DenoisingMethod, SignalType};
 use crate::error::{Error, Result};
+use crate::gpu::layout::{float_texture_entry, storage_entry, uniform_entry};
 use crate::gpu::shader::{assemble, compute_pipeline_with_layouts};
 use crate::gpu::Recorder;
 use crate::handles::DenoisingContextHandle;
@@ -335,45 +336,6 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
     }
 }
 
-fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 fn layout(
     device: &wgpu::Device,
     label: &str,
@@ -442,9 +404,9 @@ impl Pipelines {
             "kickstart-rt denoise temporal inputs",
             &[
                 uniform_entry(0),
-                texture_entry(1),
-                texture_entry(2),
-                texture_entry(3),
+                float_texture_entry(1),
+                float_texture_entry(2),
+                float_texture_entry(3),
             ],
         );
         let temporal_buffers = layout(

@@ -1,6 +1,7 @@
 //! Small wgpu helpers shared by every pass: recording dispatches (with optional timestamps),
 //! shader assembly and pipeline creation, and the GPU radix sort.
 
+pub(crate) mod layout;
 pub(crate) mod radix_sort;
 pub(crate) mod recorder;
 pub(crate) mod shader;

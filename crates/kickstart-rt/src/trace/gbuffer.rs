@@ -22,6 +22,7 @@
 //! - Normals are decoded by type (octahedral: Cigolle et al. 2014), transformed by
 //!   `normal_to_world` and normalised.
 
+use crate::gpu::layout::{float_texture_entry, uniform_entry};
 use crate::tasks::{
     DenoiseTaskCommon, DepthInput, DepthType, NormalInput, NormalType, RoughnessInput,
     SpecularInput, TextureInput, TraceTaskCommon, ViewInfo, Viewport,
@@ -242,34 +243,15 @@ impl GBufferBinder {
 
     /// Creates the layout and the 1×1 placeholder texture.
     pub fn new(device: &wgpu::Device) -> Self {
-        let texture = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("kickstart-rt g-buffer"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                texture(1),
-                texture(2),
-                texture(3),
-                texture(4),
-                texture(5),
+                uniform_entry(0),
+                float_texture_entry(1),
+                float_texture_entry(2),
+                float_texture_entry(3),
+                float_texture_entry(4),
+                float_texture_entry(5),
             ],
         });
         let placeholder = device

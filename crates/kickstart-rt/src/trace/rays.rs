@@ -1,6 +1,7 @@
 //! Ray batches: rays from a buffer are traced through the scene (closest or any hit) and their
 //! hits written to a buffer. Also holds the scene bindings every tracing pass shares.
 
+use crate::gpu::layout::{storage_entry, uniform_entry};
 use crate::gpu::shader::{assemble, traversal_pipeline, GroupLayout};
 use crate::gpu::Recorder;
 use bytemuck::{Pod, Zeroable};
@@ -46,19 +47,9 @@ impl SceneBuffers<'_> {
     /// The explicit layout of the `@group(0)` scene bindings (five read-only storage buffers), for
     /// pipelines built with explicit layouts.
     pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-        let entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("kickstart-rt scene"),
-            entries: &Self::BINDINGS.map(entry),
+            entries: &Self::BINDINGS.map(|b| storage_entry(b, true)),
         })
     }
 
@@ -92,28 +83,12 @@ const IO_BINDINGS: [u32; 3] = [0, 1, 2];
 
 /// The layout of the ray batch's `@group(1)` ([`IO_BINDINGS`]).
 fn io_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("kickstart-rt trace rays io"),
         entries: &[
-            buffer(IO_BINDINGS[0], wgpu::BufferBindingType::Uniform),
-            buffer(
-                IO_BINDINGS[1],
-                wgpu::BufferBindingType::Storage { read_only: true },
-            ),
-            buffer(
-                IO_BINDINGS[2],
-                wgpu::BufferBindingType::Storage { read_only: false },
-            ),
+            uniform_entry(IO_BINDINGS[0]),
+            storage_entry(IO_BINDINGS[1], true),
+            storage_entry(IO_BINDINGS[2], false),
         ],
     })
 }

@@ -13,6 +13,7 @@ use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
 use super::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use super::sampling::blue_noise_texture;
+use crate::gpu::layout::{float_texture_entry, uniform_entry};
 use crate::gpu::shader::{assemble, traversal_pipeline, GroupLayout};
 use crate::gpu::Recorder;
 use crate::tasks::*;
@@ -468,16 +469,6 @@ impl TracePasses {
 fn io_layout_entries(
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
 ) -> Vec<wgpu::BindGroupLayoutEntry> {
-    let texture = |binding| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    };
     let storage = |binding, format| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -489,19 +480,10 @@ fn io_layout_entries(
         count: None,
     };
     let mut entries = vec![
-        wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        },
-        texture(1),
-        texture(2),
-        texture(3),
+        uniform_entry(0),
+        float_texture_entry(1),
+        float_texture_entry(2),
+        float_texture_entry(3),
         storage(4, formats.0),
     ];
     if let Some(f) = formats.1 {
