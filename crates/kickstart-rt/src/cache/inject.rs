@@ -13,8 +13,8 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
-use crate::gpu::layout::{storage_entry, uniform_entry};
-use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline, GroupLayout};
+use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
+use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline};
 use crate::gpu::Recorder;
 use crate::scene::gpu_scene::storage;
 use crate::trace::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
@@ -97,44 +97,22 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
             .replace("DEPTH_TEXTURE_TYPE", ty)
             .replace("DEPTH_LOAD", load),
     ]);
-    let scene_entries: Vec<_> = (0..5).map(|b| storage_entry(b, true)).collect();
-    let cache_entries = [storage_entry(0, true), storage_entry(2, false)];
-    let io_entries = [
-        uniform_entry(0),
-        texture_entry(1, depth_format),
-        texture_entry(2, false),
-    ];
-    let layout = |label, entries: &[wgpu::BindGroupLayoutEntry]| {
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(label),
-            entries,
-        })
-    };
-    let scene = layout("kickstart-rt injection scene", &scene_entries);
-    let cache = layout("kickstart-rt injection cache", &cache_entries);
-    let io = layout("kickstart-rt injection inputs", &io_entries);
-    let bindings = |entries: &[wgpu::BindGroupLayoutEntry]| -> Vec<u32> {
-        entries.iter().map(|e| e.binding).collect()
-    };
-    let (scene_bindings, cache_bindings, io_bindings) = (
-        bindings(&scene_entries),
-        bindings(&cache_entries),
-        bindings(&io_entries),
+    let scene = SceneBuffers::layout(device);
+    let cache = BoundLayout::new(
+        device,
+        "kickstart-rt injection cache",
+        &[storage_entry(0, true), storage_entry(2, false)],
     );
-    let groups = [
-        GroupLayout {
-            layout: &scene,
-            bindings: &scene_bindings,
-        },
-        GroupLayout {
-            layout: &cache,
-            bindings: &cache_bindings,
-        },
-        GroupLayout {
-            layout: &io,
-            bindings: &io_bindings,
-        },
-    ];
+    let io = BoundLayout::new(
+        device,
+        "kickstart-rt injection inputs",
+        &[
+            uniform_entry(0),
+            texture_entry(1, depth_format),
+            texture_entry(2, false),
+        ],
+    );
+    let groups = [scene.group(), cache.group(), io.group()];
     // SAFETY: with naga's checks on, only the dropped zero fill needs an argument: the
     // traversal reads `rt_stack` only below its stack pointer, where it wrote first.
     let (pipeline, _) = unsafe {
@@ -144,12 +122,12 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
             &source,
             "inject",
             &groups,
-            true,
+            wgpu::ShaderRuntimeChecks::checked(),
             &[TRAVERSAL_STACK],
         )
     };
     InjectPipeline {
-        layouts: [scene, cache, io],
+        layouts: [scene.layout, cache.layout, io.layout],
         pipeline,
     }
 }

@@ -1,6 +1,8 @@
 //! WGSL assembly and compute pipeline creation. WGSL has no `#include`: shared snippets (the
 //! traversal module, packing helpers) are concatenated in front of a pass's source.
 
+use super::layout::GroupLayout;
+
 /// A compute pipeline from WGSL `source` with an automatic layout (groups as the shader declares).
 pub(crate) fn compute_pipeline(
     device: &wgpu::Device,
@@ -49,33 +51,25 @@ pub(crate) fn compute_pipeline_with_layouts(
     pipeline_with_layouts(device, label, &module, entry_point, layouts)
 }
 
-/// A bind group layout and the binding numbers of its entries.
-pub(crate) struct GroupLayout<'a> {
-    /// The layout.
-    pub layout: &'a wgpu::BindGroupLayout,
-    /// The binding number of each of its entries.
-    pub bindings: &'a [u32],
-}
-
 /// A traversal pass's compute pipeline (explicit layouts, `layouts[i]` is group `i`) whose
 /// `uninitialized` private arrays are not zero-filled at the start of each invocation, where the
 /// device allows it (Vulkan with `Features::PASSTHROUGH_SHADERS`: see [`super::spirv`]); otherwise,
-/// or if that compilation fails, the same pipeline from WGSL. `checked`: naga's runtime checks
-/// as `ShaderRuntimeChecks::checked()` writes them, else as `unchecked()`. Also returns whether
-/// the pipeline came from our own SPIR-V (see [`spirv_accepted`]).
+/// or if that compilation fails, the same pipeline from WGSL; `checks` applies to either. Also
+/// returns whether the pipeline came from our own SPIR-V (see [`spirv_accepted`]).
 ///
 /// # Safety
 ///
-/// With `checked == false`, every array index in `source` must be in bounds and every loop must
-/// terminate for all data the SDK can bind to it. Either way, the shader must never read an
-/// element of an `uninitialized` variable before writing it.
+/// As for `Device::create_shader_module_trusted` with `checks`: without bounds checks every array
+/// index in `source` must be in bounds, without loop bounding every loop must terminate, for all
+/// data the SDK can bind to it. Either way, the shader must never read an element of an
+/// `uninitialized` variable before writing it.
 pub(crate) unsafe fn traversal_pipeline(
     device: &wgpu::Device,
     label: &str,
     source: &str,
     entry_point: &str,
     layouts: &[GroupLayout<'_>],
-    checked: bool,
+    checks: wgpu::ShaderRuntimeChecks,
     uninitialized: &[&str],
 ) -> (wgpu::ComputePipeline, bool) {
     let groups: Vec<&wgpu::BindGroupLayout> = layouts.iter().map(|g| g.layout).collect();
@@ -84,7 +78,7 @@ pub(crate) unsafe fn traversal_pipeline(
         let request = super::spirv::SpirvRequest {
             entry_point,
             layout_bindings: &bindings,
-            checked,
+            checks,
             uninitialized,
         };
         match super::spirv::compile_without_zero_init(source, &request) {
@@ -120,14 +114,8 @@ pub(crate) unsafe fn traversal_pipeline(
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     };
-    let module = if checked {
-        device.create_shader_module(descriptor)
-    } else {
-        // SAFETY: the caller guarantees the shader is in bounds and terminates (see above).
-        unsafe {
-            device.create_shader_module_trusted(descriptor, wgpu::ShaderRuntimeChecks::unchecked())
-        }
-    };
+    // SAFETY: the caller guarantees what `checks` leaves out (see above).
+    let module = unsafe { device.create_shader_module_trusted(descriptor, checks) };
     let pipeline = pipeline_with_layouts(device, label, &module, entry_point, &groups);
     (pipeline, false)
 }

@@ -38,9 +38,8 @@ pub(crate) struct SpirvRequest<'a> {
     /// by their position among the layout's entries sorted by binding number, so the shader must
     /// use the same numbers.
     pub layout_bindings: &'a [&'a [u32]],
-    /// naga's runtime checks (index clamps, loop bounding) as `ShaderRuntimeChecks::checked()`
-    /// writes them (true) or as `unchecked()` (false).
-    pub checked: bool,
+    /// naga's runtime checks, as wgpu-hal applies them to a module from WGSL.
+    pub checks: wgpu::ShaderRuntimeChecks,
     /// `var<private>` variables whose zero initializer is dropped. Each must exist in the module
     /// (a rename would otherwise silently bring the cost back), and the caller guarantees the
     /// shader never reads an element of one before writing it.
@@ -79,7 +78,7 @@ pub(crate) fn compile_without_zero_init(
         .find(|ep| ep.name == request.entry_point && ep.stage == naga::ShaderStage::Compute)
         .ok_or_else(|| format!("no compute entry point `{}`", request.entry_point))?;
     let workgroup_size = entry.workgroup_size;
-    let options = spv_options(request)?;
+    let options = spv_options(request);
     let pipeline = spv::PipelineOptions {
         shader_stage: naga::ShaderStage::Compute,
         entry_point: request.entry_point.to_string(),
@@ -94,7 +93,7 @@ pub(crate) fn compile_without_zero_init(
 }
 
 /// wgpu-hal's SPIR-V options for a compute pipeline, with `request`'s checks and bindings.
-fn spv_options(request: &SpirvRequest<'_>) -> Result<spv::Options<'static>, String> {
+fn spv_options(request: &SpirvRequest<'_>) -> spv::Options<'static> {
     let mut binding_map = spv::BindingMap::default();
     for (group, bindings) in request.layout_bindings.iter().enumerate() {
         let mut sorted = bindings.to_vec();
@@ -113,12 +112,13 @@ fn spv_options(request: &SpirvRequest<'_>) -> Result<spv::Options<'static>, Stri
             );
         }
     }
-    let policy = if request.checked {
+    let checks = &request.checks;
+    let policy = if checks.bounds_checks {
         naga::proc::BoundsCheckPolicy::Restrict
     } else {
         naga::proc::BoundsCheckPolicy::Unchecked
     };
-    Ok(spv::Options {
+    spv::Options {
         // SPIR-V 1.0: what every Vulkan driver accepts, as wgpu-hal writes for a Vulkan 1.0
         // device (it writes the newest the device's API version allows; the traversal passes use
         // nothing newer, and the driver's code is the same). wgpu does not tell us the device's
@@ -142,15 +142,15 @@ fn spv_options(request: &SpirvRequest<'_>) -> Result<spv::Options<'static>, Stri
             binding_array: naga::proc::BoundsCheckPolicy::Unchecked,
         },
         zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::Polyfill,
-        force_loop_bounding: request.checked,
-        ray_query_initialization_tracking: request.checked,
+        force_loop_bounding: checks.force_loop_bounding,
+        ray_query_initialization_tracking: checks.ray_query_initialization_tracking,
         trace_ray_argument_validation: true,
         use_storage_input_output_16: false,
         debug_info: None,
         task_dispatch_limits: None,
-        mesh_shader_primitive_indices_clamp: request.checked,
-        emit_int_div_checks: request.checked,
-    })
+        mesh_shader_primitive_indices_clamp: checks.mesh_shader_primitive_indices_clamp,
+        emit_int_div_checks: checks.int_div_checks,
+    }
 }
 
 /// Removes the initializer operand of each `OpVariable` in the Private storage class whose
@@ -250,7 +250,7 @@ mod tests {
         SpirvRequest {
             entry_point: "main",
             layout_bindings: bindings,
-            checked: false,
+            checks: wgpu::ShaderRuntimeChecks::unchecked(),
             uninitialized,
         }
     }

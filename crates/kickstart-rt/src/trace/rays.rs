@@ -1,8 +1,8 @@
 //! Ray batches: rays from a buffer are traced through the scene (closest or any hit) and their
 //! hits written to a buffer. Also holds the scene bindings every tracing pass shares.
 
-use crate::gpu::layout::{storage_entry, uniform_entry};
-use crate::gpu::shader::{assemble, traversal_pipeline, GroupLayout};
+use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
+use crate::gpu::shader::{assemble, traversal_pipeline};
 use crate::gpu::Recorder;
 use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
@@ -41,16 +41,11 @@ pub(crate) struct SceneBuffers<'a> {
 }
 
 impl SceneBuffers<'_> {
-    /// The binding numbers of the `@group(0)` scene bindings, in [`Self::layout`]'s order.
-    pub const BINDINGS: [u32; 5] = [0, 1, 2, 3, 4];
-
-    /// The explicit layout of the `@group(0)` scene bindings (five read-only storage buffers), for
-    /// pipelines built with explicit layouts.
-    pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("kickstart-rt scene"),
-            entries: &Self::BINDINGS.map(|b| storage_entry(b, true)),
-        })
+    /// The explicit layout of the `@group(0)` scene bindings (five read-only storage buffers,
+    /// bindings 0–4), for pipelines built with explicit layouts.
+    pub fn layout(device: &wgpu::Device) -> BoundLayout {
+        let entries = [0, 1, 2, 3, 4].map(|b| storage_entry(b, true));
+        BoundLayout::new(device, "kickstart-rt scene", &entries)
     }
 
     /// The `@group(0)` bind group of a pipeline that includes the traversal module.
@@ -78,19 +73,17 @@ impl SceneBuffers<'_> {
 /// passes that include the module may drop its zero fill ([`traversal_pipeline`]).
 pub(crate) const TRAVERSAL_STACK: &str = "rt_stack";
 
-/// Bindings of the ray batch's `@group(1)`: parameters, rays, hits.
-const IO_BINDINGS: [u32; 3] = [0, 1, 2];
-
-/// The layout of the ray batch's `@group(1)` ([`IO_BINDINGS`]).
-fn io_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("kickstart-rt trace rays io"),
-        entries: &[
-            uniform_entry(IO_BINDINGS[0]),
-            storage_entry(IO_BINDINGS[1], true),
-            storage_entry(IO_BINDINGS[2], false),
+/// The layout of the ray batch's `@group(1)`: parameters, rays, hits.
+fn io_layout(device: &wgpu::Device) -> BoundLayout {
+    BoundLayout::new(
+        device,
+        "kickstart-rt trace rays io",
+        &[
+            uniform_entry(0),
+            storage_entry(1, true),
+            storage_entry(2, false),
         ],
-    })
+    )
 }
 
 /// Uniform parameters of the ray batch shader (`TraceParams`).
@@ -118,16 +111,7 @@ impl RayTracer {
         let source = assemble(&[TRAVERSE_WGSL, TRACE_RAYS_WGSL]);
         let scene_layout = SceneBuffers::layout(device);
         let io_layout = io_layout(device);
-        let layouts = [
-            GroupLayout {
-                layout: &scene_layout,
-                bindings: &SceneBuffers::BINDINGS,
-            },
-            GroupLayout {
-                layout: &io_layout,
-                bindings: &IO_BINDINGS,
-            },
-        ];
+        let layouts = [scene_layout.group(), io_layout.group()];
         // SAFETY: the pass is bounded by construction, so naga's checks only cost time:
         // - the ray and hit bindings hold exactly `count` records and `main` returns for
         //   i >= count;
@@ -148,7 +132,7 @@ impl RayTracer {
                 &source,
                 "main",
                 &layouts,
-                false,
+                wgpu::ShaderRuntimeChecks::unchecked(),
                 &[TRAVERSAL_STACK],
             )
         };

@@ -13,8 +13,8 @@ use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
 use super::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use super::sampling::blue_noise_texture;
-use crate::gpu::layout::{float_texture_entry, uniform_entry};
-use crate::gpu::shader::{assemble, traversal_pipeline, GroupLayout};
+use crate::gpu::layout::{float_texture_entry, uniform_entry, BoundLayout, GroupLayout};
+use crate::gpu::shader::{assemble, traversal_pipeline};
 use crate::gpu::Recorder;
 use crate::tasks::*;
 use crate::{Error, InstanceInclusionMask, Result};
@@ -142,11 +142,11 @@ struct Job<'a> {
 
 /// The trace-task passes of one context.
 pub(crate) struct TracePasses {
-    scene_layout: wgpu::BindGroupLayout,
+    scene_layout: BoundLayout,
     gbuffer: GBufferBinder,
     blue_noise: wgpu::TextureView,
     placeholder: wgpu::TextureView,
-    cache_layout: wgpu::BindGroupLayout,
+    cache_layout: BoundLayout,
     /// The lighting cache's sampling module at group 3 (a stand-in in unit tests).
     cache_wgsl: String,
     pipelines: Vec<Pipeline>,
@@ -163,10 +163,11 @@ impl TracePasses {
             gbuffer,
             blue_noise: blue_noise_texture(device, queue),
             placeholder,
-            cache_layout: device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("kickstart-rt trace cache"),
-                entries: &crate::cache::DirectLightingCache::sample_layout_entries(),
-            }),
+            cache_layout: BoundLayout::new(
+                device,
+                "kickstart-rt trace cache",
+                &crate::cache::DirectLightingCache::sample_layout_entries(),
+            ),
             cache_wgsl: crate::cache::sample_wgsl(3, false),
             pipelines: Vec::new(),
         }
@@ -258,33 +259,17 @@ impl TracePasses {
             ""
         };
         let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
-        let io_entries = io_layout_entries(formats);
-        let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("kickstart-rt trace io"),
-            entries: &io_entries,
-        });
-        let io_bindings: Vec<u32> = io_entries.iter().map(|e| e.binding).collect();
-        let cache_bindings =
-            crate::cache::DirectLightingCache::sample_layout_entries().map(|e| e.binding);
+        let io = BoundLayout::new(device, "kickstart-rt trace io", &io_layout_entries(formats));
         let mut layouts = vec![
-            GroupLayout {
-                layout: &self.scene_layout,
-                bindings: &SceneBuffers::BINDINGS,
-            },
+            self.scene_layout.group(),
             GroupLayout {
                 layout: self.gbuffer.layout(),
                 bindings: &GBufferBinder::BINDINGS,
             },
-            GroupLayout {
-                layout: &io_layout,
-                bindings: &io_bindings,
-            },
+            io.group(),
         ];
         if kind.reads_cache() {
-            layouts.push(GroupLayout {
-                layout: &self.cache_layout,
-                bindings: &cache_bindings,
-            });
+            layouts.push(self.cache_layout.group());
         }
         // SAFETY: with naga's checks on, only the dropped zero fill needs an argument: the
         // traversal reads `rt_stack` only below its stack pointer, where it wrote first.
@@ -295,7 +280,7 @@ impl TracePasses {
                 &source,
                 entry,
                 &layouts,
-                true,
+                wgpu::ShaderRuntimeChecks::checked(),
                 &[TRAVERSAL_STACK],
             )
         };
@@ -303,7 +288,7 @@ impl TracePasses {
             kind,
             formats,
             pipeline,
-            io_layout,
+            io_layout: io.layout,
             own_spirv,
         });
         Ok(self.pipelines.len() - 1)
@@ -455,7 +440,7 @@ impl TracePasses {
         if job.kind.reads_cache() {
             cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("kickstart-rt trace cache"),
-                layout: &self.cache_layout,
+                layout: &self.cache_layout.layout,
                 entries: cache,
             });
             groups.push(&cache_group);
