@@ -27,9 +27,10 @@ fn main(
     let radius = tp.lengths.y;
     let t_max = min(radius, tp.lengths.x);
     let origin = tr_origin(s.position, s.normal, s.view_distance);
-    let hit = rt_closest_hit(RtRay(origin, tr_t_min(s.view_distance), dir, t_max), tp.misc.z);
+    // Only the distance: rt_find skips the barycentrics.
+    let hit = rt_find(RtRay(origin, tr_t_min(s.view_distance), dir, t_max), tp.misc.z, false);
     var v = 1.0;
-    if hit.hit != 0u {
+    if hit.instance != RT_NO_INDEX {
         v = clamp(hit.t / radius, 0.0, 1.0);
     }
     textureStore(out0, px.texel, vec4<f32>(v));

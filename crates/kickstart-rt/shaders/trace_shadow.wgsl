@@ -68,8 +68,8 @@ fn tr_light_hit(li: u32, s: GbSurface, origin: vec3<f32>, rng: ptr<function, TrR
         return 0.0;
     }
     let ray = RtRay(origin, tr_t_min(s.view_distance), r.dir, r.t_max);
-    let h = rt_trace(ray, tp.misc.z, tr_flag(TR_FLAG_FIRST_HIT));
-    if h.hit != 0u {
+    let h = rt_find(ray, tp.misc.z, tr_flag(TR_FLAG_FIRST_HIT));
+    if h.instance != RT_NO_INDEX {
         return h.t;
     }
     return -1.0;

@@ -161,14 +161,17 @@ struct RtBoxHit {
 // Slab test against [bmin, bmax] within [t_min, t_max]; empty boxes (min > max) are missed.
 fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32) -> RtBoxHit {
     if !sp.any_flat {
-        // No flat axis (nearly every ray): the entry plane of each axis is chosen by the
-        // direction's sign, so tn = min(t0, t1) and tf = max(t0, t1) of the general path below,
-        // bit for bit (rounding is monotonic), without its flat-axis and empty-box logic. Empty
-        // boxes are stored as (+1e30, -1e30) on every axis (docs/ray-tracing-core.md), so one
-        // comparison on x rejects them.
-        let neg = sp.inv_dir < vec3<f32>(0.0);
-        let tn = (select(bmin, bmax, neg) - sp.origin) * sp.inv_dir;
-        let tf = (select(bmax, bmin, neg) - sp.origin) * sp.inv_dir;
+        // No flat axis (nearly every ray): the general path below without its flat-axis and
+        // empty-box logic, the same distances bit for bit. Empty boxes are stored as (+1e30,
+        // -1e30) on every axis (docs/ray-tracing-core.md), so one comparison on x rejects them.
+        // min/max of both planes rather than picking the entry plane by the direction's sign:
+        // the same values (rounding is monotonic and no reciprocal is 0 here), six selects fewer
+        // a box (+1.6 % dragon, +2.2 % apartment peer workload on the H100, BENCHMARKS.md
+        // session 28).
+        let t0 = (bmin - sp.origin) * sp.inv_dir;
+        let t1 = (bmax - sp.origin) * sp.inv_dir;
+        let tn = min(t0, t1);
+        let tf = max(t0, t1);
         let near = max(t_min, max(tn.x, max(tn.y, tn.z)));
         let far = min(t_max, min(tf.x, min(tf.y, tf.z)));
         return RtBoxHit(near, near <= far * RT_FAR_WIDEN && bmin.x <= bmax.x);
@@ -270,31 +273,58 @@ fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, 
     return r;
 }
 
+// u, v of rt_triangle's hit, without its tests: after the loop the triangle is known to be hit,
+// and a test repeated in another place of the program could round differently where the compiler
+// fuses multiply-adds differently.
+fn rt_barycentrics(sp: RtSpace, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec2<f32> {
+    let pa = rt_shear(a, sp);
+    let pb = rt_shear(b, sp);
+    let pc = rt_shear(c, sp);
+    let u = rt_edge(pb.xy, pc.xy);
+    let v = rt_edge(pc.xy, pa.xy);
+    let w = rt_edge(pa.xy, pb.xy);
+    let inv = 1.0 / (u + v + w);
+    return vec2<f32>(v * inv, w * inv);
+}
+
 fn rt_miss() -> RtHit {
     return RtHit(-1.0, 0.0, 0.0, RT_NO_INDEX, RT_NO_INDEX, 0u);
+}
+
+// What the traversal loop keeps of the best hit: its distance, instance slot and triangle slot
+// (the triangle's index in rt_triangles, not its primitive index). A miss has instance
+// RT_NO_INDEX and t = -1. Barycentrics and the primitive index are derived after the loop
+// (rt_found_hit), only for callers that want them: two fewer values live through every
+// iteration (+2 % peer workload on both scenes on the H100, BENCHMARKS.md session 28).
+struct RtFound {
+    t: f32,
+    instance: u32,
+    slot: u32,
 }
 
 // Traverses TLAS and BLASes with one stack. Entries at stack index >= `blas_sp` belong to the
 // BLAS of the instance being traversed; popping an entry below it means that BLAS is done. Each
 // entry keeps the entry distance of its box, so subtrees behind a closer hit are skipped.
 // `any_hit` returns at the first hit found.
-fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
-    var best = rt_miss();
+fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
+    let miss = RtFound(-1.0, RT_NO_INDEX, 0u);
     if !rt_is_finite3(ray.origin) || !rt_is_finite3(ray.dir) || all(ray.dir == vec3<f32>(0.0)) {
-        return best;
+        return miss;
     }
     // NaN range: nothing is in it (as on the CPU, where every comparison with NaN fails).
     let tmin_bits = bitcast<u32>(ray.t_min) & 0x7fffffffu;
     let tmax_bits = bitcast<u32>(ray.t_max) & 0x7fffffffu;
     if tmin_bits > 0x7f800000u || tmax_bits > 0x7f800000u {
-        return best;
+        return miss;
     }
     // ±∞ become ±FLT_MAX: the same set of finite t.
     let t_min = clamp(ray.t_min, -RT_FLT_MAX, RT_FLT_MAX);
     var t_max = clamp(ray.t_max, -RT_FLT_MAX, RT_FLT_MAX);
     if ray.t_max < ray.t_min {
-        return best;
+        return miss;
     }
+    var best_inst = RT_NO_INDEX;
+    var best_slot = 0u;
     // The space of the level being traversed: the world's for the TLAS, the instance's for its
     // BLAS. The world space is not kept aside while a BLAS is traversed but recomputed (same
     // function, same bits) when the BLAS is left: less live state per iteration, +0.5 % dragon and
@@ -345,22 +375,28 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
                 sp += 1u;
             }
             if in_blas {
-                let slot = (tri_base + first) * 3u;
-                let v0 = rt_triangles[slot];
-                let v1 = rt_triangles[slot + 1u];
-                let v2 = rt_triangles[slot + 2u];
+                let slot = tri_base + first;
+                let v0 = rt_triangles[slot * 3u];
+                let v1 = rt_triangles[slot * 3u + 1u];
+                let v2 = rt_triangles[slot * 3u + 2u];
                 let h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
                 if h.hit {
-                    let prim = bitcast<u32>(v0.w);
-                    // Tie rule: equal t → lowest instance, then lowest primitive index.
-                    let better = best.hit == 0u || h.t < best.t
-                        || (h.t == best.t && (cur_inst < best.instance
-                            || (cur_inst == best.instance && prim < best.primitive)));
+                    // Once a hit is kept, t_max is its distance (the triangle test never
+                    // returns t > t_max). Tie rule: equal t → lowest instance, then lowest
+                    // primitive index (the kept triangle's read again: ties are rare).
+                    var better = best_inst == RT_NO_INDEX || h.t < t_max;
+                    if !better && h.t == t_max {
+                        let prim = bitcast<u32>(v0.w);
+                        let best_prim = bitcast<u32>(rt_triangles[best_slot * 3u].w);
+                        better = cur_inst < best_inst
+                            || (cur_inst == best_inst && prim < best_prim);
+                    }
                     if better {
-                        best = RtHit(h.t, h.u, h.v, cur_inst, prim, 1u);
+                        best_inst = cur_inst;
+                        best_slot = slot;
                         t_max = h.t;
                         if any_hit {
-                            return best;
+                            break;
                         }
                     }
                 }
@@ -441,20 +477,40 @@ fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
             sp += 1u;
         }
     }
-    return best;
+    if best_inst == RT_NO_INDEX {
+        return miss;
+    }
+    return RtFound(t_max, best_inst, best_slot);
 }
 
-// The closest hit of `ray` among visible instances ((instance.mask & mask) != 0, flags bit 0).
+// The whole hit of what rt_find found with `ray`: the triangle test runs again in the hit
+// instance's space, computed by the same functions from the same values as in the loop, for
+// the barycentrics; the distance is the loop's.
+fn rt_found_hit(ray: RtRay, f: RtFound) -> RtHit {
+    if f.instance == RT_NO_INDEX {
+        return rt_miss();
+    }
+    let m = rt_instances[f.instance].world_to_object;
+    let space = rt_space(rt_transform(m, ray.origin, 1.0), rt_transform(m, ray.dir, 0.0));
+    let v0 = rt_triangles[f.slot * 3u];
+    let v1 = rt_triangles[f.slot * 3u + 1u];
+    let v2 = rt_triangles[f.slot * 3u + 2u];
+    let uv = rt_barycentrics(space, v0.xyz, v1.xyz, v2.xyz);
+    return RtHit(f.t, uv.x, uv.y, f.instance, bitcast<u32>(v0.w), 1u);
+}
+
+// The hit of `ray` among visible instances ((instance.mask & mask) != 0, flags bit 0): the
+// closest one, or with `any_hit` the first found.
+fn rt_trace(ray: RtRay, mask: u32, any_hit: bool) -> RtHit {
+    return rt_found_hit(ray, rt_find(ray, mask, any_hit));
+}
+
+// The closest hit of `ray` among visible instances.
 fn rt_closest_hit(ray: RtRay, mask: u32) -> RtHit {
     return rt_trace(ray, mask, false);
 }
 
 // Whether anything visible is hit in [t_min, t_max].
 fn rt_any_hit(ray: RtRay, mask: u32) -> bool {
-    return rt_trace(ray, mask, true).hit != 0u;
-}
-
-// Any-hit query that also reports the occluder it found (not necessarily the closest).
-fn rt_any_hit_occluder(ray: RtRay, mask: u32) -> RtHit {
-    return rt_trace(ray, mask, true);
+    return rt_find(ray, mask, true).instance != RT_NO_INDEX;
 }
