@@ -821,7 +821,7 @@ impl GpuScene {
                     bounds_out: None,
                     key_bits: TLAS_KEY_BITS,
                     centroid_bounds,
-                    clustered: false,
+                    clustered: tlas_clustered(refs),
                     hierarchy_only: false,
                 },
             );
@@ -944,6 +944,19 @@ pub(crate) fn refs_per_instance(slots: u32) -> u32 {
         return 1;
     }
     (TLAS_REF_BUDGET / slots).clamp(1, MAX_REFS_PER_INSTANCE)
+}
+
+/// Most refs a TLAS build clusters (`hploc climb`, as the fast-trace BLAS) instead of taking
+/// the LBVH's Karras tree: the TLAS of opened instances (at most [`TLAS_REF_BUDGET`] refs).
+/// Measured on the H100 (BENCHMARKS.md session 28): the apartment's 536 refs clustered trace
+/// its peer workload +10 % and its four trace tasks 11 % faster; a build over 1000 refs takes
+/// 0.24 ms instead of 0.13. Above the budget (10k and 100k instances) clustering would double
+/// the build (0.20 → 0.37 ms, 0.29 → 0.57 ms), so those TLASes stay LBVHs.
+const TLAS_CLUSTERED_MAX_REFS: u32 = TLAS_REF_BUDGET;
+
+/// Whether a TLAS build over `refs` refs clusters them.
+fn tlas_clustered(refs: u32) -> bool {
+    refs <= TLAS_CLUSTERED_MAX_REFS
 }
 
 /// A TLAS node buffer holding one root with two empty children: before the first TLAS build,

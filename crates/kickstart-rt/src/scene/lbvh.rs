@@ -138,8 +138,8 @@ pub(crate) struct LbvhBuild<'a> {
     /// passes run; the buffer needs STORAGE usage.
     pub centroid_bounds: Option<(&'a wgpu::Buffer, u32)>,
     /// Cluster the Morton-ordered primitives by PLOC (`hploc climb`) instead of taking the
-    /// Karras tree as it is: a lower SAH cost for a slower build. Only with
-    /// [`LeafRefs::SortedPosition`] (ignored otherwise).
+    /// Karras tree as it is: a lower SAH cost for a slower build. With
+    /// [`LeafRefs::PrimitiveIndex`] (the TLAS) no leaf is collapsed, whatever `max_leaf` says.
     pub clustered: bool,
     /// Stop after the hierarchy: the caller writes the nodes and `bounds_out` itself with
     /// [`Lbvh::refit_triangles`] over this build's `order` and `topology` (a fast-build BLAS of
@@ -542,7 +542,8 @@ impl Lbvh {
             return;
         }
         // Below two primitives there is nothing to cluster: lbvh_climb writes the fixed root.
-        let clustered = b.clustered && b.leaf_refs == LeafRefs::SortedPosition && n >= 2;
+        // Primitive-index leaves (the TLAS's) cluster too; they are never collapsed.
+        let clustered = b.clustered && n >= 2;
         let device = rec.device;
         let words = if clustered {
             clustered_work_words(n)
@@ -1072,6 +1073,12 @@ mod tests {
     fn build_and_check_clustered(lbvh: &mut Lbvh, aabbs: &[Aabb], max_leaf: u32) -> (GpuTree, f64) {
         let refs = LeafRefs::SortedPosition;
         build_and_check_opts(lbvh, aabbs, refs, max_leaf, BLAS_KEY_BITS, true)
+    }
+
+    /// A clustered build with primitive-index leaves (the TLAS's), checked like every build.
+    fn build_and_check_clustered_refs(lbvh: &mut Lbvh, aabbs: &[Aabb]) -> (GpuTree, f64) {
+        let refs = LeafRefs::PrimitiveIndex;
+        build_and_check_opts(lbvh, aabbs, refs, 1, TLAS_KEY_BITS, true)
     }
 
     /// [`build_and_check_with`], clustered or not.
@@ -2007,6 +2014,45 @@ mod tests {
                 build_and_check_clustered(&mut lbvh, &aabbs, max_leaf);
             }
         }
+    }
+
+    #[test]
+    fn hploc_with_primitive_index_leaves_as_the_tlas_builds() {
+        // The TLAS's leaves name primitives, not sorted positions: every count from none to
+        // past two clusters' worth and across workgroups gives a valid tree over the same
+        // boxes, far-apart groups (instances in rooms) a lower SAH cost than the LBVH's, and a
+        // refit (instances moved) exact boxes with every ref kept.
+        let mut lbvh = Lbvh::new(&gpu().device);
+        let mut rng = Rng(19);
+        for n in (0..=40).chain([255, 256, 257, 1000, 1024]) {
+            let aabbs: Vec<Aabb> = (0..n).map(|_| random_box(&mut rng)).collect();
+            build_and_check_clustered_refs(&mut lbvh, &aabbs);
+        }
+        let centres: Vec<[f32; 3]> = (0..8).map(|_| rng.vec(-500.0, 500.0)).collect();
+        let mut rooms: Vec<Aabb> = clustered_boxes(1000, 20);
+        for (i, b) in rooms.iter_mut().enumerate() {
+            *b = shifted(b, centres[i % centres.len()]);
+        }
+        let (_, lbvh_sah) = build_and_check_with(
+            &mut lbvh,
+            &rooms,
+            LeafRefs::PrimitiveIndex,
+            1,
+            TLAS_KEY_BITS,
+        );
+        let (tree, ploc_sah) = build_and_check_clustered_refs(&mut lbvh, &rooms);
+        assert!(
+            ploc_sah < 0.9 * lbvh_sah,
+            "clustered TLAS SAH {ploc_sah} vs LBVH {lbvh_sah}"
+        );
+        let refs = |t: &GpuTree| -> Vec<u32> {
+            t.node_words.chunks(16).flat_map(|w| [w[3], w[7]]).collect()
+        };
+        let refs_before = refs(&tree);
+        let after = scatter_a_third(&rooms, 22);
+        refit_to(&mut lbvh, &tree, &after, 1);
+        let (tree, _) = check_read_back(tree, &after, false);
+        assert_eq!(refs(&tree), refs_before, "refit keeps every ref");
     }
 
     #[test]
