@@ -104,13 +104,14 @@ fn gather_triangles_boxes(
 }
 
 // ---- instance_refs -------------------------------------------------------------------------
-// The TLAS's primitives are instance *refs*: params.b >> 8 = K refs per instance slot (1..8),
+// The TLAS's primitives are instance *refs*: params.b >> 8 = K refs per instance slot (1..16),
 // ref i * K + j naming (slot i, an entry into its BLAS: an inner node index or a leaf reference).
 // With K = 1 the one ref is the BLAS root (node 0) and its box is the instance's world box.
 // With K > 1 the instance's BLAS is opened from the root, largest world-box area first, until K
 // refs (or only leaves) remain: a big instance whose box spans much of the scene is split into
 // subtrees with tighter world boxes, so rays enter fewer instances ("rebraiding", Benthin et al.
-// 2017; +24 % peer workload on the apartment at K = 8, BENCHMARKS.md session 22). Unused refs
+// 2017; +24 % peer workload on the apartment at K = 8, BENCHMARKS.md session 22; with the
+// clustered TLAS, K = 15 instead of 8 gains another 9 %, session 28). Unused refs
 // get the empty box. Each ref's world box goes to instance_boxes[2r..2r+1] and (slot, entry,
 // stamp) to the ref table in the TLAS node buffer (after its node slots: see `ref_table_base`).
 // The stamp is the BLAS build's (geometry flags bits 8-31): a ref whose stamp is no longer its
@@ -130,7 +131,7 @@ fn gather_triangles_boxes(
 // 256 rather than WG: a quarter of the device atomics on the six bounds words.
 const INSTANCE_WG: u32 = 256u;
 const MERGE_CENTROID_BOUNDS: u32 = 1u;
-const MAX_REFS: u32 = 8u;
+const MAX_REFS: u32 = 16u;
 const REF_LEAF_BIT: u32 = 0x80000000u;
 
 struct StoredBox {

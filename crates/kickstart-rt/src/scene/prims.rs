@@ -13,7 +13,7 @@ const INSTANCE_WORKGROUP: u32 = 256;
 /// `instance_refs` flag: merge the boxes' centroid bounds.
 const MERGE_CENTROID_BOUNDS: u32 = 1;
 /// Most refs one instance is opened into (the shader's `MAX_REFS`).
-pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 8;
+pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 16;
 
 /// The three pipelines (one module, one entry point each).
 pub(crate) struct Prims {
@@ -131,7 +131,7 @@ impl Prims {
         rec.dispatch(label, pipeline, &[&bind], count.div_ceil(WORKGROUP));
     }
 
-    /// The TLAS's primitives, `refs_per_instance` (1..=8) refs per instance slot `0..count`
+    /// The TLAS's primitives, `refs_per_instance` (1..=16) refs per instance slot `0..count`
     /// (`shaders/prims.wgsl`, `instance_refs`): ref `i * k + j` names slot `i` and an entry into
     /// its BLAS (the root when k = 1; with k > 1 the BLAS opened largest world box first). Each
     /// ref's world box goes to `aabbs` (the empty box for unused refs and hidden instances) and
