@@ -104,14 +104,14 @@ fn gather_triangles_boxes(
 }
 
 // ---- instance_refs -------------------------------------------------------------------------
-// The TLAS's primitives are instance *refs*: params.b >> 8 = K refs per instance slot (1..16),
+// The TLAS's primitives are instance *refs*: params.b >> 8 = K refs per instance slot (1..32),
 // ref i * K + j naming (slot i, an entry into its BLAS: an inner node index or a leaf reference).
 // With K = 1 the one ref is the BLAS root (node 0) and its box is the instance's world box.
 // With K > 1 the instance's BLAS is opened from the root, largest world-box area first, until K
 // refs (or only leaves) remain: a big instance whose box spans much of the scene is split into
 // subtrees with tighter world boxes, so rays enter fewer instances ("rebraiding", Benthin et al.
 // 2017; +24 % peer workload on the apartment at K = 8, BENCHMARKS.md session 22; with the
-// clustered TLAS, K = 15 instead of 8 gains another 9 %, session 28). Unused refs
+// clustered TLAS, K = 30 instead of 8 gains another 20 %, session 28). Unused refs
 // get the empty box. Each ref's world box goes to instance_boxes[2r..2r+1] and (slot, entry,
 // stamp) to the ref table in the TLAS node buffer (after its node slots: see `ref_table_base`).
 // The stamp is the BLAS build's (geometry flags bits 8-31): a ref whose stamp is no longer its
@@ -131,7 +131,7 @@ fn gather_triangles_boxes(
 // 256 rather than WG: a quarter of the device atomics on the six bounds words.
 const INSTANCE_WG: u32 = 256u;
 const MERGE_CENTROID_BOUNDS: u32 = 1u;
-const MAX_REFS: u32 = 16u;
+const MAX_REFS: u32 = 32u;
 const REF_LEAF_BIT: u32 = 0x80000000u;
 
 struct StoredBox {
@@ -197,71 +197,93 @@ fn box_area(b: StoredBox) -> f32 {
     return d.x * d.y + d.y * d.z + d.z * d.x;
 }
 
-// The refs of one instance (n of them, n <= K).
-var<private> r_entry: array<u32, MAX_REFS>;
-var<private> r_lo: array<vec4<f32>, MAX_REFS>;
-var<private> r_hi: array<vec4<f32>, MAX_REFS>;
-
-// Opens instance slot i (traced as `t`) into at most k refs; returns how many.
-fn open_instance(i: u32, t: Traced, k: u32) -> u32 {
-    if !t.visible {
-        return 0u;
-    }
-    let m = instances[i].object_to_world;
-    let root = world_box(m, t.g.bounds_min.xyz, t.g.bounds_max.xyz);
-    r_entry[0] = 0u;
-    r_lo[0] = root.lo;
-    r_hi[0] = root.hi;
-    var n = 1u;
-    // Each opening replaces one inner ref by its non-empty children (at most two). Bounded: a
-    // chain of one-child nodes (trees of one triangle) would otherwise not raise n.
-    for (var it = 0u; it < 4u * MAX_REFS && n < k; it++) {
-        var pick = MAX_REFS;
-        var best = -1.0;
-        for (var j = 0u; j < n; j++) {
-            if (r_entry[j] & REF_LEAF_BIT) == 0u {
-                let a = box_area(StoredBox(r_lo[j], r_hi[j]));
-                if a > best {
-                    best = a;
-                    pick = j;
+// Opens instance slot i (traced as `t`) into at most k refs and writes refs i * k .. i * k + k
+// (unused ones empty). The ref arrays are function variables: WGSL zero-fills every variable
+// and a module-scope private array is filled at the start of every invocation, 36 bytes of
+// local-memory stores per ref slot of MAX_REFS, also where k = 1 never opens anything (the TLAS
+// of 100k instances: about +0.04 ms at MAX_REFS = 32, BENCHMARKS.md session 28); here only
+// invocations that open pay it.
+fn open_instance(i: u32, t: Traced, k: u32, stamp: u32) {
+    var r_entry: array<u32, MAX_REFS>;
+    var r_lo: array<vec4<f32>, MAX_REFS>;
+    var r_hi: array<vec4<f32>, MAX_REFS>;
+    var n = 0u;
+    if t.visible {
+        let m = instances[i].object_to_world;
+        let root = world_box(m, t.g.bounds_min.xyz, t.g.bounds_max.xyz);
+        r_entry[0] = 0u;
+        r_lo[0] = root.lo;
+        r_hi[0] = root.hi;
+        n = 1u;
+        // Each opening replaces one inner ref by its non-empty children (at most two). Bounded:
+        // a chain of one-child nodes (trees of one triangle) would otherwise not raise n.
+        for (var it = 0u; it < 4u * MAX_REFS && n < k; it++) {
+            var pick = MAX_REFS;
+            var best = -1.0;
+            for (var j = 0u; j < n; j++) {
+                if (r_entry[j] & REF_LEAF_BIT) == 0u {
+                    let a = box_area(StoredBox(r_lo[j], r_hi[j]));
+                    if a > best {
+                        best = a;
+                        pick = j;
+                    }
                 }
             }
-        }
-        if pick == MAX_REFS {
-            break;
-        }
-        let at = 4u * (t.g.node_base + r_entry[pick]);
-        let n0 = ref_blas_nodes[at];
-        let n1 = ref_blas_nodes[at + 1u];
-        let n2 = ref_blas_nodes[at + 2u];
-        let n3 = ref_blas_nodes[at + 3u];
-        // Left child: box (n0.xyz, n1.xyz), ref n0.w; right: (n2.xyz, n3.xyz), ref n1.w. An
-        // empty child (min > max) is never entered and is dropped.
-        var kept = 0u;
-        if all(n0.xyz <= n1.xyz) {
-            let b = world_box(m, n0.xyz, n1.xyz);
-            r_entry[pick] = bitcast<u32>(n0.w);
-            r_lo[pick] = b.lo;
-            r_hi[pick] = b.hi;
-            kept = 1u;
-        }
-        if all(n2.xyz <= n3.xyz) {
-            let put = select(pick, n, kept == 1u);
-            let b = world_box(m, n2.xyz, n3.xyz);
-            r_entry[put] = bitcast<u32>(n1.w);
-            r_lo[put] = b.lo;
-            r_hi[put] = b.hi;
-            n += kept;
-            kept += 1u;
-        }
-        if kept == 0u {
-            n -= 1u;
-            r_entry[pick] = r_entry[n];
-            r_lo[pick] = r_lo[n];
-            r_hi[pick] = r_hi[n];
+            if pick == MAX_REFS {
+                break;
+            }
+            let at = 4u * (t.g.node_base + r_entry[pick]);
+            let n0 = ref_blas_nodes[at];
+            let n1 = ref_blas_nodes[at + 1u];
+            let n2 = ref_blas_nodes[at + 2u];
+            let n3 = ref_blas_nodes[at + 3u];
+            // Left child: box (n0.xyz, n1.xyz), ref n0.w; right: (n2.xyz, n3.xyz), ref n1.w. An
+            // empty child (min > max) is never entered and is dropped.
+            var kept = 0u;
+            if all(n0.xyz <= n1.xyz) {
+                let b = world_box(m, n0.xyz, n1.xyz);
+                r_entry[pick] = bitcast<u32>(n0.w);
+                r_lo[pick] = b.lo;
+                r_hi[pick] = b.hi;
+                kept = 1u;
+            }
+            if all(n2.xyz <= n3.xyz) {
+                let put = select(pick, n, kept == 1u);
+                let b = world_box(m, n2.xyz, n3.xyz);
+                r_entry[put] = bitcast<u32>(n1.w);
+                r_lo[put] = b.lo;
+                r_hi[put] = b.hi;
+                n += kept;
+                kept += 1u;
+            }
+            if kept == 0u {
+                n -= 1u;
+                r_entry[pick] = r_entry[n];
+                r_lo[pick] = r_lo[n];
+                r_hi[pick] = r_hi[n];
+            }
         }
     }
-    return n;
+    for (var j = 0u; j < k; j++) {
+        var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
+        var entry = 0u;
+        if j < n {
+            b = StoredBox(r_lo[j], r_hi[j]);
+            entry = r_entry[j];
+        }
+        write_ref(i * k + j, i, b, entry, stamp, j < n);
+    }
+}
+
+// Ref r of instance slot i: its world box and table entry; a used ref's box also joins the
+// centroid bounds (from the stored values, as the LBVH's own bounds pass would read them back).
+fn write_ref(r: u32, i: u32, b: StoredBox, entry: u32, stamp: u32, used: bool) {
+    instance_boxes[2u * r] = b.lo;
+    instance_boxes[2u * r + 1u] = b.hi;
+    ref_table[ref_table_base() + r] = vec4<u32>(i, entry, stamp, 0u);
+    if used {
+        wg_bounds_add(b.lo.xyz, b.hi.xyz);
+    }
 }
 
 @compute @workgroup_size(256)
@@ -277,25 +299,18 @@ fn instance_refs(
     // No early return: the barriers must be reached by the whole workgroup.
     if i < params.a {
         let t = traced(i);
-        let n = open_instance(i, t, k);
-        let table = ref_table_base();
         // The BLAS build the entries belong to (0 for a hidden instance: its refs are empty).
         let stamp = select(0u, t.g.flags >> 8u, t.visible);
-        for (var j = 0u; j < k; j++) {
-            let r = i * k + j;
+        if k == 1u {
+            // The instance as a whole: its BLAS root and world box.
             var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
-            var entry = 0u;
-            if j < n {
-                b = StoredBox(r_lo[j], r_hi[j]);
-                entry = r_entry[j];
+            if t.visible {
+                b = world_box(instances[i].object_to_world, t.g.bounds_min.xyz,
+                              t.g.bounds_max.xyz);
             }
-            instance_boxes[2u * r] = b.lo;
-            instance_boxes[2u * r + 1u] = b.hi;
-            ref_table[table + r] = vec4<u32>(i, entry, stamp, 0u);
-            // From the stored values, as the LBVH's own bounds pass would read them back.
-            if j < n {
-                wg_bounds_add(b.lo.xyz, b.hi.xyz);
-            }
+            write_ref(i, i, b, 0u, stamp, t.visible);
+        } else {
+            open_instance(i, t, k, stamp);
         }
     }
     workgroupBarrier();

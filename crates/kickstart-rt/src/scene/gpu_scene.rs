@@ -927,13 +927,16 @@ impl GpuScene {
 /// stamp, 0).
 const REF_BYTES: u64 = 16;
 
-/// Refs the TLAS's instances are opened into, at most, when an instance is opened at all: the
-/// one-workgroup sort's size (`SMALL_SORT_MAX`), so opening never adds sort dispatches.
-const TLAS_REF_BUDGET: u32 = 1024;
+/// Refs the TLAS's instances are opened into, at most, when an instance is opened at all.
+/// Measured on the H100 (BENCHMARKS.md session 28, the apartment's 67 instances, clustered
+/// TLAS): 1024 (15 refs an instance) peer workload 1514 Mrays/s, trace tasks 5.20 ms; 2048 (30)
+/// 1675 and 4.74 ms; 4096 (61) 1670 and 4.65 ms. 2048 costs a TLAS build over 1000 instances
+/// (2 refs each, past the one-workgroup sort) 0.32 ms instead of 0.24.
+const TLAS_REF_BUDGET: u32 = 2048;
 
 /// Refs each instance slot is opened into (`instance_refs` in `shaders/prims.wgsl`): up to
 /// [`MAX_REFS_PER_INSTANCE`] while the TLAS stays within [`TLAS_REF_BUDGET`] refs, then fewer,
-/// down to one (the instance as a whole) from 513 slots on, and one for a lone instance. Opening
+/// down to one (the instance as a whole) from 1025 slots on, and one for a lone instance. Opening
 /// lets rays skip the parts of big instances they do not pass near (the apartment's 67
 /// instances: BENCHMARKS.md session 22); a TLAS of many instances keeps its build cost.
 pub(crate) fn refs_per_instance(slots: u32) -> u32 {
@@ -950,7 +953,7 @@ pub(crate) fn refs_per_instance(slots: u32) -> u32 {
 /// the LBVH's Karras tree: the TLAS of opened instances (at most [`TLAS_REF_BUDGET`] refs).
 /// Measured on the H100 (BENCHMARKS.md session 28): the apartment's 536 refs (8 an instance)
 /// clustered trace its peer workload +10 % and its four trace tasks 11 % faster; a build over
-/// 1000 refs takes 0.24 ms instead of 0.13. Above the budget (10k and 100k instances) clustering would double
+/// 1000 refs takes 0.24 ms instead of 0.13. At 10k and 100k instances clustering would double
 /// the build (0.20 → 0.37 ms, 0.29 → 0.57 ms), so those TLASes stay LBVHs.
 const TLAS_CLUSTERED_MAX_REFS: u32 = TLAS_REF_BUDGET;
 
@@ -1041,22 +1044,22 @@ mod tests {
     use super::{continues, refs_per_instance, TLAS_REF_BUDGET};
 
     #[test]
-    fn instances_are_opened_into_at_most_sixteen_refs_within_the_budget() {
+    fn instances_are_opened_into_at_most_thirty_two_refs_within_the_budget() {
         // A lone instance (or none) is not opened.
         assert_eq!(refs_per_instance(0), 1);
         assert_eq!(refs_per_instance(1), 1);
-        assert_eq!(refs_per_instance(2), 16);
-        assert_eq!(refs_per_instance(64), 16);
-        assert_eq!(refs_per_instance(65), 15);
-        assert_eq!(refs_per_instance(67), 15);
-        assert_eq!(refs_per_instance(128), 8);
-        assert_eq!(refs_per_instance(129), 7);
-        assert_eq!(refs_per_instance(512), 2);
-        assert_eq!(refs_per_instance(513), 1);
+        assert_eq!(refs_per_instance(2), 32);
+        assert_eq!(refs_per_instance(64), 32);
+        assert_eq!(refs_per_instance(65), 31);
+        assert_eq!(refs_per_instance(67), 30);
+        assert_eq!(refs_per_instance(256), 8);
+        assert_eq!(refs_per_instance(257), 7);
+        assert_eq!(refs_per_instance(1024), 2);
+        assert_eq!(refs_per_instance(1025), 1);
         assert_eq!(refs_per_instance(100_000), 1);
-        for slots in 1..3000 {
+        for slots in 1..5000 {
             let k = refs_per_instance(slots);
-            assert!((1..=16).contains(&k));
+            assert!((1..=32).contains(&k));
             assert!(
                 k == 1 || slots * k <= TLAS_REF_BUDGET,
                 "{slots} slots: {k} refs each"

@@ -13,7 +13,7 @@ const INSTANCE_WORKGROUP: u32 = 256;
 /// `instance_refs` flag: merge the boxes' centroid bounds.
 const MERGE_CENTROID_BOUNDS: u32 = 1;
 /// Most refs one instance is opened into (the shader's `MAX_REFS`).
-pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 16;
+pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 32;
 
 /// The three pipelines (one module, one entry point each).
 pub(crate) struct Prims {
