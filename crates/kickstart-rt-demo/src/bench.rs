@@ -424,7 +424,7 @@ impl<'a> Bench<'a> {
         gpu::complete(ctx, self.device, task)?;
         let timings = timings?;
         let ms = glue::span_ms(&timings, span)?;
-        *self.last_passes.borrow_mut() = timings.passes;
+        *self.last_passes.borrow_mut() = prof::within(timings.passes, span);
         Ok(ms)
     }
 

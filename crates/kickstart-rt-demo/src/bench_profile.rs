@@ -40,6 +40,17 @@ pub fn profile(passes: &[ksrt::PassTiming]) -> Vec<PassProfile> {
     out
 }
 
+/// The passes a figure's span covers (labels starting with one of `span`, as
+/// [`ksrt::GpuTimings::span_ms`] picks them): the profile of a figure lists what it timed, not
+/// other work of the same task (the lighting cache's allocation passes that registering
+/// thousands of instances records beside a TLAS build).
+pub fn within(passes: Vec<ksrt::PassTiming>, span: &[&str]) -> Vec<ksrt::PassTiming> {
+    passes
+        .into_iter()
+        .filter(|p| span.iter().any(|s| p.label.starts_with(s)))
+        .collect()
+}
+
 /// One line: `pass ms (count)` for each entry, largest first.
 pub fn show(profile: &[PassProfile]) -> String {
     let mut sorted: Vec<&PassProfile> = profile.iter().collect();
@@ -78,5 +89,23 @@ mod tests {
             ("radix sort", 2, 0.75)
         );
         assert!(show(&p).starts_with("blas build/climb 1.000 ms (1×)"));
+    }
+
+    #[test]
+    fn a_profile_keeps_only_the_passes_of_its_span() {
+        let passes = vec![
+            pass("cache allocation", "cache write", 1.8),
+            pass("tlas build", "radix sort", 0.1),
+            pass("ingest", "ingest", 0.2),
+            pass("tlas build", "lbvh climb", 0.05),
+        ];
+        let kept = within(passes.clone(), &["tlas build"]);
+        assert_eq!(
+            kept.iter().map(|p| p.pass).collect::<Vec<_>>(),
+            ["radix sort", "lbvh climb"]
+        );
+        let kept = within(passes, &["ingest", "tlas"]);
+        assert_eq!(kept.len(), 3);
+        assert!(kept.iter().all(|p| p.label != "cache allocation"));
     }
 }
