@@ -239,6 +239,22 @@ struct RtTriHit {
     hit: bool,
 }
 
+// The triangle (a, b, c) in the ray's sheared frame: the edge functions u, v, w (of the edges
+// opposite a, b and c) and the vertices' scaled z. One function for the test and for the
+// barycentrics after the loop, so both evaluate the same expressions.
+struct RtEdges {
+    uvw: vec3<f32>,
+    z: vec3<f32>,
+}
+
+fn rt_edges(sp: RtSpace, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> RtEdges {
+    let pa = rt_shear(a, sp);
+    let pb = rt_shear(b, sp);
+    let pc = rt_shear(c, sp);
+    let uvw = vec3<f32>(rt_edge(pb.xy, pc.xy), rt_edge(pc.xy, pa.xy), rt_edge(pa.xy, pb.xy));
+    return RtEdges(uvw, vec3<f32>(pa.z, pb.z, pc.z));
+}
+
 // Watertight ray/triangle test (Woop, Benthin & Wald 2013), both windings, edge-inclusive,
 // t in [t_min, t_max] inclusive. u, v: weights of the second and third vertex.
 fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> RtTriHit {
@@ -247,12 +263,10 @@ fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, 
     r.t = 0.0;
     r.u = 0.0;
     r.v = 0.0;
-    let pa = rt_shear(a, sp);
-    let pb = rt_shear(b, sp);
-    let pc = rt_shear(c, sp);
-    let u = rt_edge(pb.xy, pc.xy);
-    let v = rt_edge(pc.xy, pa.xy);
-    let w = rt_edge(pa.xy, pb.xy);
+    let e = rt_edges(sp, a, b, c);
+    let u = e.uvw.x;
+    let v = e.uvw.y;
+    let w = e.uvw.z;
     if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
         return r;
     }
@@ -260,7 +274,7 @@ fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, 
     if det == 0.0 || !rt_is_finite(det) {
         return r;
     }
-    let t_scaled = u * pa.z + v * pb.z + w * pc.z;
+    let t_scaled = u * e.z.x + v * e.z.y + w * e.z.z;
     let inv = 1.0 / det;
     let t = t_scaled * inv;
     if !rt_is_finite(t) || t < t_min || t > t_max {
@@ -277,14 +291,9 @@ fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, 
 // and a test repeated in another place of the program could round differently where the compiler
 // fuses multiply-adds differently.
 fn rt_barycentrics(sp: RtSpace, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec2<f32> {
-    let pa = rt_shear(a, sp);
-    let pb = rt_shear(b, sp);
-    let pc = rt_shear(c, sp);
-    let u = rt_edge(pb.xy, pc.xy);
-    let v = rt_edge(pc.xy, pa.xy);
-    let w = rt_edge(pa.xy, pb.xy);
-    let inv = 1.0 / (u + v + w);
-    return vec2<f32>(v * inv, w * inv);
+    let e = rt_edges(sp, a, b, c).uvw;
+    let inv = 1.0 / (e.x + e.y + e.z);
+    return vec2<f32>(e.y * inv, e.z * inv);
 }
 
 fn rt_miss() -> RtHit {
