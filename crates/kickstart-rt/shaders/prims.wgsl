@@ -131,7 +131,8 @@ fn gather_triangles_boxes(
 // 256 rather than WG: a quarter of the device atomics on the six bounds words.
 const INSTANCE_WG: u32 = 256u;
 const MERGE_CENTROID_BOUNDS: u32 = 1u;
-const MAX_REFS: u32 = 32u;
+// MAX_REFS (most refs one instance is opened into, sizing the ref arrays below) is prepended by
+// src/scene/prims.rs from MAX_REFS_PER_INSTANCE, which also sizes the TLAS on the CPU side.
 const REF_LEAF_BIT: u32 = 0x80000000u;
 
 struct StoredBox {

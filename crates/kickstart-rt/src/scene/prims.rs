@@ -2,7 +2,7 @@
 //! BLAS builder, triangle gather into the builder's sorted order, and instance world AABBs for the
 //! TLAS. Layouts: `docs/ray-tracing-core.md`.
 
-use crate::gpu::shader::compute_pipeline;
+use crate::gpu::shader::{assemble, compute_pipeline};
 use crate::gpu::Recorder;
 
 /// Threads per workgroup of the triangle entry points of `prims.wgsl` (one primitive each).
@@ -12,7 +12,8 @@ const WORKGROUP: u32 = 64;
 const INSTANCE_WORKGROUP: u32 = 256;
 /// `instance_refs` flag: merge the boxes' centroid bounds.
 const MERGE_CENTROID_BOUNDS: u32 = 1;
-/// Most refs one instance is opened into (the shader's `MAX_REFS`).
+/// Most refs one instance is opened into: the shader's `MAX_REFS`, written into its source by
+/// [`Prims::new`] so the two cannot differ (the ref layout `i * k + j` depends on both).
 pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 32;
 
 /// The three pipelines (one module, one entry point each).
@@ -32,13 +33,15 @@ pub(crate) struct Prims {
 impl Prims {
     /// Creates the pipelines.
     pub fn new(device: &wgpu::Device) -> Self {
-        let source = concat!(
+        let max_refs = format!("const MAX_REFS: u32 = {MAX_REFS_PER_INSTANCE}u;\n");
+        let source = assemble(&[
             include_str!("../../shaders/scene_types.wgsl"),
             include_str!("../../shaders/centroid_bounds.wgsl"),
             include_str!("../../shaders/triangle_box.wgsl"),
-            include_str!("../../shaders/prims.wgsl")
-        );
-        let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", source, entry);
+            &max_refs,
+            include_str!("../../shaders/prims.wgsl"),
+        ]);
+        let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", &source, entry);
         Prims {
             triangle_aabbs: make("triangle_aabbs"),
             gather_triangles: make("gather_triangles"),
@@ -131,7 +134,7 @@ impl Prims {
         rec.dispatch(label, pipeline, &[&bind], count.div_ceil(WORKGROUP));
     }
 
-    /// The TLAS's primitives, `refs_per_instance` (1..=16) refs per instance slot `0..count`
+    /// The TLAS's primitives, `refs_per_instance` (1..=[`MAX_REFS_PER_INSTANCE`]) refs per instance slot `0..count`
     /// (`shaders/prims.wgsl`, `instance_refs`): ref `i * k + j` names slot `i` and an entry into
     /// its BLAS (the root when k = 1; with k > 1 the BLAS opened largest world box first). Each
     /// ref's world box goes to `aabbs` (the empty box for unused refs and hidden instances) and
