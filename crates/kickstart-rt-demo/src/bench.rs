@@ -149,6 +149,24 @@ pub struct WorkPerRay {
     pub nodes: f64,
     /// Ray/triangle tests per ray.
     pub triangles: f64,
+    /// Share of the lanes of a [`SUBGROUP_LANES`]-lane subgroup that have work in an iteration of
+    /// the traversal loop, when consecutive rays of the batch share a subgroup and it runs until
+    /// its longest ray is done (one loop iteration a node or a triangle test), from about 20 000
+    /// rays in whole groups; 1 means every ray of a subgroup takes as many steps as the longest.
+    pub subgroup_busy: f64,
+}
+
+/// Lanes of the subgroup that [`WorkPerRay::subgroup_busy`] models (NVIDIA's warp).
+const SUBGROUP_LANES: usize = 32;
+
+/// The CPU ray of `r` in the instance's object space.
+fn object_ray(r: &GpuRay, world_to_object: Affine3A) -> ksrt::cpu::Ray {
+    ksrt::cpu::Ray {
+        origin: world_to_object.transform_point3(Vec3::from(r.origin)),
+        dir: world_to_object.transform_vector3(Vec3::from(r.dir)),
+        t_min: r.t_min,
+        t_max: r.t_max,
+    }
 }
 
 /// [`WorkPerRay`] of about 20 000 of `rays`, traced through `blas` in the instance's object
@@ -163,20 +181,47 @@ fn work_per_ray(
     let mut total = ksrt::cpu::TraversalCounts::default();
     let mut sampled = 0u64;
     for r in rays.iter().step_by(step) {
-        let ray = ksrt::cpu::Ray {
-            origin: world_to_object.transform_point3(Vec3::from(r.origin)),
-            dir: world_to_object.transform_vector3(Vec3::from(r.dir)),
-            t_min: r.t_min,
-            t_max: r.t_max,
-        };
-        total += blas.trace(&ray, any).1;
+        total += blas.trace(&object_ray(r, world_to_object), any).1;
         sampled += 1;
     }
+    // Whole groups of consecutive rays, every n-th group: the loop iterations of each ray.
+    let groups = rays.len().div_ceil(SUBGROUP_LANES);
+    let group_step = (groups / (20_000 / SUBGROUP_LANES)).max(1);
+    let steps: Vec<Vec<u64>> = (0..groups)
+        .step_by(group_step)
+        .map(|g| {
+            rays.iter()
+                .skip(g * SUBGROUP_LANES)
+                .take(SUBGROUP_LANES)
+                .map(|r| {
+                    let c = blas.trace(&object_ray(r, world_to_object), any).1;
+                    c.nodes + c.triangles
+                })
+                .collect()
+        })
+        .collect();
     let per = |x: u64| x as f64 / sampled.max(1) as f64;
     WorkPerRay {
         sampled,
         nodes: per(total.nodes),
         triangles: per(total.triangles),
+        subgroup_busy: subgroup_busy(&steps, SUBGROUP_LANES),
+    }
+}
+
+/// Σ steps / Σ (lanes × the group's longest): the share of a subgroup's lane-iterations that do
+/// work when each group of rays runs on one `lanes`-lane subgroup until its longest ray is done
+/// (the lanes of a group shorter than `lanes` idle). 1 for no steps at all.
+fn subgroup_busy(groups: &[Vec<u64>], lanes: usize) -> f64 {
+    let work: u64 = groups.iter().flatten().sum();
+    let issued: u64 = groups
+        .iter()
+        .map(|g| g.iter().copied().max().unwrap_or(0) * lanes as u64)
+        .sum();
+    if issued == 0 {
+        1.0
+    } else {
+        work as f64 / issued as f64
     }
 }
 
@@ -1084,8 +1129,13 @@ fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
             let g_nodes_per_s = b.rays as f64 * w.nodes / (b.time.median_ms * 1e6);
             println!(
                 "      work     {:.1} BLAS nodes + {:.1} triangle tests per ray ({} sampled): \
-                 {:.1} G node fetches/s",
-                w.nodes, w.triangles, w.sampled, g_nodes_per_s
+                 {:.1} G node fetches/s; {}-lane subgroups {:.0} % busy",
+                w.nodes,
+                w.triangles,
+                w.sampled,
+                g_nodes_per_s,
+                SUBGROUP_LANES,
+                w.subgroup_busy * 100.0
             );
         }
     }
@@ -1550,6 +1600,20 @@ mod tests {
         let s = Stats::new(vec![3.0, 1.0, 2.0, 10.0]);
         assert_eq!((s.median_ms, s.min_ms, s.max_ms), (2.5, 1.0, 10.0));
         assert_eq!(Stats::new(vec![4.0, 1.0, 2.0]).median_ms, 2.0);
+    }
+
+    #[test]
+    fn subgroup_busy_is_work_over_lanes_times_each_groups_longest() {
+        // Equal rays keep every lane busy.
+        assert_eq!(subgroup_busy(&[vec![3, 3], vec![5, 5]], 2), 1.0);
+        // One long ray: its partner idles for 2 of 3 steps.
+        assert!((subgroup_busy(&[vec![1, 3]], 2) - 4.0 / 6.0).abs() < 1e-12);
+        // A short last group pays for its missing lanes too.
+        assert!((subgroup_busy(&[vec![2, 2], vec![2]], 2) - 6.0 / 8.0).abs() < 1e-12);
+        // Groups weigh by their length: (1 + 3 + 10 + 10) / (2×3 + 2×10).
+        assert!((subgroup_busy(&[vec![1, 3], vec![10, 10]], 2) - 24.0 / 26.0).abs() < 1e-12);
+        assert_eq!(subgroup_busy(&[], 32), 1.0);
+        assert_eq!(subgroup_busy(&[vec![0, 0]], 2), 1.0);
     }
 
     #[test]
