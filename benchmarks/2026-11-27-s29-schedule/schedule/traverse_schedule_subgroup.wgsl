@@ -1,8 +1,3 @@
-// Triangle scheduling for traverse.wgsl without subgroup operations: a pending leaf's next
-// triangle is tested in the same iteration.
-fn rt_test_pending(has_pending: bool, can_pop: bool) -> bool {
-    return has_pending;
-}
 // Triangle scheduling for traverse.wgsl with subgroup operations: an invocation with a pending
 // leaf waits (pops nothing) until no invocation of its subgroup can pop a node, or until at
 // least RT_POSTPONE_NUM / RT_POSTPONE_DEN of the subgroup's active invocations have a pending
