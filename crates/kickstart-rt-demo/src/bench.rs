@@ -185,14 +185,13 @@ fn work_per_ray(
         sampled += 1;
     }
     // Whole groups of consecutive rays, every n-th group: the loop iterations of each ray.
-    let groups = rays.len().div_ceil(SUBGROUP_LANES);
-    let group_step = (groups / (20_000 / SUBGROUP_LANES)).max(1);
-    let steps: Vec<Vec<u64>> = (0..groups)
+    let group_step = (rays.len().div_ceil(SUBGROUP_LANES) / (20_000 / SUBGROUP_LANES)).max(1);
+    let steps: Vec<Vec<u64>> = rays
+        .chunks(SUBGROUP_LANES)
         .step_by(group_step)
-        .map(|g| {
-            rays.iter()
-                .skip(g * SUBGROUP_LANES)
-                .take(SUBGROUP_LANES)
+        .map(|group| {
+            group
+                .iter()
                 .map(|r| {
                     let c = blas.trace(&object_ray(r, world_to_object), any).1;
                     c.nodes + c.triangles
