@@ -4,8 +4,8 @@
 //! Why: between two timed repetitions the CPU prepares the next task (for the TLAS bench,
 //! 100 000 instance updates) while the GPU idles, and the H100 lowers its clocks within that
 //! gap. Sub-millisecond tasks (a refit, a TLAS build) then measured up to 2× slower in some runs
-//! than in others with the same binary (BENCHMARKS.md, session 23). In a frame, these tasks run
-//! between the engine's other GPU work.
+//! than in others with the same binary (docs/decisions/busy-gpu-clocks.md). In a frame, these
+//! tasks run between the engine's other GPU work.
 
 /// A spin kernel: an LCG step chain per invocation, whose result invocation 0 stores (so the
 /// loop cannot be dropped, and a test can check that it ran).

@@ -18,10 +18,10 @@
 // Why 32 invocations: a merge needs at most 32 lanes, and the climbers of a workgroup step
 // through every merge's barriers together. In workgroups of 256 (eight merges side by side),
 // every merge waited for the other seven slices' rounds, and the upper levels, with one climber
-// left, held 256 lanes; with 32 the dragon's climb takes 1.40 ms instead of 2.10 on the H100
-// (BENCHMARKS.md, session 26). Two slices of 32 a workgroup measured 1.49 ms. Starting the
-// climbers at the merging nodes instead of the leaves (no exchange through device memory on
-// the levels of at most HP_KEEP leaves) took it to 1.15 ms.
+// left, held 256 lanes; with 32 the climb measured faster on the H100, and faster than two
+// slices of 32 a workgroup (docs/decisions/hploc-climb.md). Starting the climbers at the
+// merging nodes instead of the leaves (no exchange through device memory on the levels of at
+// most HP_KEEP leaves) saves more.
 //
 // Why clusters: a Karras node splits at the highest differing Morton bit, wherever the geometry
 // is; PLOC pairs each cluster with the one whose union box is smallest among its neighbours in
@@ -62,12 +62,10 @@ const HP_WG: u32 = 32u;
 // Clusters kept by a node that covers more leaves than this.
 const HP_KEEP: u32 = 16u;
 // Neighbour search radius in cluster order (about the Morton order of the clusters' leaves).
-// Measured on the H100 (BENCHMARKS.md, session 21, workgroups of 256), dragon climb / SAH ratio,
-// apartment's largest mesh SAH ratio: the whole slice (32) 2.11 ms / 1.113 / 1.093; 16: 2.11 /
-// 1.103 / 0.999; 8: 1.80 / 1.110 / 1.061; 4: 1.32 / 1.108 / 1.062. The apartment baked into one
-// mesh traces 6 % slower at 8 than at 32 (peer workload 1481 against 1571 Mrays/s): a
-// fast-trace build spends the time. In workgroups of 32 (session 26) radius 8 saves almost
-// nothing (dragon build 2.025 against 2.04 ms).
+// A smaller radius builds faster in workgroups of 256 but leaves a worse tree (the apartment
+// baked into one mesh traced measurably slower at 8 than at 32); a fast-trace build spends the
+// time. In workgroups of 32 a smaller radius saves almost nothing (measured on the H100; see
+// docs/decisions/hploc-climb.md).
 const HP_RADIUS: u32 = 16u;
 const HP_NONE: u32 = 0xFFFFFFFFu;
 

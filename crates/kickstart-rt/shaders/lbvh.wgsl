@@ -803,7 +803,7 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
 //                      the upper levels and the gathered triangles (leaf boxes), one
 //                      invocation a node walking its two children side by side (range_boxes;
 //                      spreading a node's levels over invocations joined through workgroup
-//                      memory was 1.8-2.3x slower on the H100: BENCHMARKS.md, session 25)
+//                      memory measured slower on the H100: docs/decisions/range-refit.md)
 //   lbvh_refit_ingest  lbvh_refit_gather decoding each triangle from the application's bytes
 //                      (the ingestion fused into the refit)
 // The boxes are the same unions of the same leaf boxes as the climb's, so the nodes are
@@ -1174,9 +1174,9 @@ fn walks_live(w0: Walk, w1: Walk) -> bool {
 // The unions of leaf boxes [a0, b0] and [a1, b1] (a node's two children), walked side by side
 // so that each level's up to four box loads are in flight together: one node's walk was a
 // chain of dependent loads, about 40 for the root's children, and the longest chain was what
-// lbvh range refit took (BENCHMARKS.md, session 25). Level 0 comes from the gathered
+// lbvh range refit took (docs/decisions/range-refit.md). Level 0 comes from the gathered
 // triangles, the blocks' levels from `pyramid`, the levels above from `work_read`; a loop each
-// (one loop choosing the source per box made the pass 40 % slower, session 24).
+// (one loop choosing the source per box measured slower on the H100).
 fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
     var w0 = Walk(a0, b0 + 1u, empty_box());
     var w1 = Walk(a1, b1 + 1u, empty_box());

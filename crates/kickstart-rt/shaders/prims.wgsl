@@ -110,8 +110,8 @@ fn gather_triangles_boxes(
 // With K > 1 the instance's BLAS is opened from the root, largest world-box area first, until K
 // refs (or only leaves) remain: a big instance whose box spans much of the scene is split into
 // subtrees with tighter world boxes, so rays enter fewer instances ("rebraiding", Benthin et al.
-// 2017; +24 % peer workload on the apartment at K = 8, BENCHMARKS.md session 22; with the
-// clustered TLAS, K = 30 instead of 8 gains another 20 %, session 28). Unused refs
+// 2017; measured faster on the H100 for the apartment's few big instances, more so with more
+// refs over the clustered TLAS: docs/decisions/instance-refs.md). Unused refs
 // get the empty box. Each ref's world box goes to instance_boxes[2r..2r+1] and (slot, entry,
 // stamp) to the ref table in the TLAS node buffer (after its node slots: see `ref_table_base`).
 // The stamp is the BLAS build's (geometry flags bits 8-31): a ref whose stamp is no longer its
@@ -202,7 +202,7 @@ fn box_area(b: StoredBox) -> f32 {
 // (unused ones empty). The ref arrays are function variables: WGSL zero-fills every variable
 // and a module-scope private array is filled at the start of every invocation, 36 bytes of
 // local-memory stores per ref slot of MAX_REFS, also where k = 1 never opens anything (the TLAS
-// of 100k instances: about +0.04 ms at MAX_REFS = 32, BENCHMARKS.md session 28); here only
+// of 100k instances measured slower on the H100: docs/decisions/instance-refs.md); here only
 // invocations that open pay it.
 fn open_instance(i: u32, t: Traced, k: u32, stamp: u32) {
     var r_entry: array<u32, MAX_REFS>;

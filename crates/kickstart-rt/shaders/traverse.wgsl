@@ -49,11 +49,11 @@ const RT_FAR_WIDEN: f32 = 1.0000004;
 // Traversal stack: one private array per invocation (node reference and entry distance), 64
 // entries for both levels.
 //
-// Measured on the H100 (BENCHMARKS.md, 2026-11-23): moving the shallow part of the stack into
-// workgroup memory (per-lane slices of 16–24 entries) made incoherent rays 1.5–2.3× *slower*
-// than this private stack; the workgroup carve-out costs occupancy and L1 for node fetches more
-// than local-memory stack traffic costs. Keep the stack private unless a measurement says
-// otherwise.
+// Measured on the H100 (docs/decisions/stack-in-workgroup-memory.md): moving the shallow part
+// of the stack into workgroup memory (per-lane slices of 16–24 entries) made incoherent rays
+// much *slower* than this private stack; the workgroup carve-out costs occupancy and L1 for
+// node fetches more than local-memory stack traffic costs. Keep the stack private unless a
+// measurement says otherwise.
 //
 // Passes that include this module dispatch RT_WORKGROUP_SIZE invocations per workgroup.
 const RT_WORKGROUP_SIZE: u32 = 64u;
@@ -166,8 +166,7 @@ fn rt_box(bmin: vec3<f32>, bmax: vec3<f32>, sp: RtSpace, t_min: f32, t_max: f32)
         // -1e30) on every axis (docs/ray-tracing-core.md), so one comparison on x rejects them.
         // min/max of both planes rather than picking the entry plane by the direction's sign:
         // the same values (rounding is monotonic and no reciprocal is 0 here), six selects fewer
-        // a box (+1.6 % dragon, +2.2 % apartment peer workload on the H100, BENCHMARKS.md
-        // session 28).
+        // a box (measured faster on the H100; see docs/decisions/slab-test.md).
         let t0 = (bmin - sp.origin) * sp.inv_dir;
         let t1 = (bmax - sp.origin) * sp.inv_dir;
         let tn = min(t0, t1);
@@ -304,7 +303,7 @@ fn rt_miss() -> RtHit {
 // (the triangle's index in rt_triangles, not its primitive index). A miss has instance
 // RT_NO_INDEX and t = -1. Barycentrics and the primitive index are derived after the loop
 // (rt_found_hit), only for callers that want them: two fewer values live through every
-// iteration (+2 % peer workload on both scenes on the H100, BENCHMARKS.md session 28).
+// iteration (measured faster on the H100; see docs/decisions/traversal-loop-state.md).
 struct RtFound {
     t: f32,
     instance: u32,
@@ -336,8 +335,8 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
     var best_slot = 0u;
     // The space of the level being traversed: the world's for the TLAS, the instance's for its
     // BLAS. The world space is not kept aside while a BLAS is traversed but recomputed (same
-    // function, same bits) when the BLAS is left: less live state per iteration, +0.5 % dragon and
-    // +1.6 % apartment peer workload on the H100 (BENCHMARKS.md, session 19).
+    // function, same bits) when the BLAS is left: less live state per iteration (measured faster
+    // on the H100; see docs/decisions/traversal-loop-state.md).
     var space = rt_space(ray.origin, ray.dir);
     // TLAS leaves name instance refs; their table follows the node slots (C node slots of 4
     // vec4, then C entries of 1: see instance_refs in prims.wgsl).
@@ -372,9 +371,9 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
             // - BLAS leaf: one triangle now, the rest popped next. When the invocations of a
             //   subgroup diverge between leaves and inner nodes, each iteration then costs one
             //   node step plus one triangle test, not a node step plus the longest leaf's
-            //   triangles (measured on the H100, BENCHMARKS.md 2026-11-23 session 18: +5 %
-            //   dragon, +3 % apartment). The rest is pushed with t_min, so it is never culled:
-            //   every triangle of a leaf is tested, as before.
+            //   triangles (measured faster on the H100; see
+            //   docs/decisions/leaf-triangles.md). The rest is pushed with t_min, so it is never
+            //   culled: every triangle of a leaf is tested, as before.
             // - TLAS leaf of several instance refs: the first is entered now; the rest lies below
             //   that BLAS's entries, so it comes after this BLAS is done, culled by the leaf's
             //   entry distance like any other entry.

@@ -42,10 +42,10 @@ const RADIX: u32 = 1 << DIGIT_BITS;
 const BLOCK: u32 = 1024;
 /// Most blocks a pass sorts with two dispatches (`histogram`, `scatter_summing`: each block
 /// sums the histogram rows itself) instead of three. Must match the shader's
-/// `SUMMING_MAX_BLOCKS`. Measured on the H100 (BENCHMARKS.md, session 23): the dispatch saved
-/// (`scan_rows` and its gap) is worth about 15 µs a pass, and the summing costs about as much at
-/// 98 blocks (TLAS of 100 000 instances: 0.300 ms either way) and little at 10 (10 000
-/// instances: 0.214 against 0.256 ms), so the limit sits below the break-even.
+/// `SUMMING_MAX_BLOCKS`. The dispatch saved (`scan_rows` and the gap before the next one) is
+/// worth a fixed time a pass, while each block summing the rows costs more the more blocks
+/// there are; on the H100 the two broke even near 100 blocks, so the limit sits below that
+/// (see docs/decisions/tlas-build.md).
 pub(crate) const SUMMING_MAX_BLOCKS: u32 = 64;
 
 /// Per-dispatch parameters; layout of `Params` in the shader.

@@ -136,7 +136,7 @@ fn spv_options(request: &SpirvRequest<'_>) -> spv::Options<'static> {
             // robustBufferAccess2 (desktop drivers): the device's robust buffer access already
             // keeps every access inside its binding (robustBufferAccess, which every Vulkan
             // device has and wgpu-hal enables, is memory-safe too). Clamping them here as well
-            // cost the H100 4–6 % on 32-light multi-shadow (session 27, call 2).
+            // measured slower on the H100 (docs/decisions/buffer-bounds-checks.md).
             buffer: naga::proc::BoundsCheckPolicy::Unchecked,
             image_load: policy,
             binding_array: naga::proc::BoundsCheckPolicy::Unchecked,

@@ -529,8 +529,8 @@ impl GpuScene {
         };
         // A fast-build tree (the Karras tree, one triangle a leaf) gets its nodes and sorted
         // triangles from the range refit's two passes instead of the climb and the gather: the
-        // same nodes, without the climb's chains of device-scope round trips (dragon on the
-        // H100, BENCHMARKS.md session 26).
+        // same nodes, without the climb's chains of device-scope round trips (measured faster on
+        // the H100; see docs/decisions/range-refit.md).
         let by_ranges = max_leaf == 1 && n >= 2;
         let scratch_topology = (by_ranges && refit.is_none()).then(|| {
             self.scratch_topology.get(
@@ -928,22 +928,23 @@ impl GpuScene {
 const REF_BYTES: u64 = 16;
 
 /// Refs the TLAS's instances are opened into, at most, when an instance is opened at all.
-/// Measured on the H100 (BENCHMARKS.md session 28, the apartment's 67 instances, clustered
-/// TLAS): 1024 (15 refs an instance) peer workload 1514 Mrays/s, trace tasks 5.20 ms; 2048 (30)
-/// 1675 and 4.74 ms; 4096 (61) 1670 and 4.65 ms. 2048 costs a TLAS build over 1000 instances
-/// (2 refs each, past the one-workgroup sort) 0.32 ms instead of 0.24.
+/// Opening more refs lets rays skip more of big instances, up to a point where the traces stop
+/// gaining while the TLAS builds over many instances keep paying (more refs each, past the
+/// one-workgroup sort); 2048 is where the apartment's traces stopped gaining on the H100 (see
+/// docs/decisions/instance-refs.md).
 const TLAS_REF_BUDGET: u32 = 2048;
 
 /// Refs each instance slot is opened into (`instance_refs` in `shaders/prims.wgsl`): up to
 /// [`MAX_REFS_PER_INSTANCE`] while the TLAS stays within [`TLAS_REF_BUDGET`] refs, then fewer,
 /// down to one (the instance as a whole) from 1025 slots on, and one for a lone instance. Opening
-/// lets rays skip the parts of big instances they do not pass near (the apartment's 67
-/// instances: BENCHMARKS.md session 22); a TLAS of many instances keeps its build cost.
+/// lets rays skip the parts of big instances they do not pass near (a scene of a few big
+/// instances, such as the apartment: docs/decisions/instance-refs.md); a TLAS of many instances
+/// keeps its build cost.
 pub(crate) fn refs_per_instance(slots: u32) -> u32 {
     if slots <= 1 {
         // Nothing to be entered instead: a lone instance is the whole scene, and opening it
-        // only adds TLAS levels above its BLAS's (the dragon: -2 % peer workload at 8 refs,
-        // BENCHMARKS.md session 22).
+        // only adds TLAS levels above its BLAS's (measured slower on the dragon; see
+        // docs/decisions/instance-refs.md).
         return 1;
     }
     (TLAS_REF_BUDGET / slots).clamp(1, MAX_REFS_PER_INSTANCE)
@@ -951,10 +952,9 @@ pub(crate) fn refs_per_instance(slots: u32) -> u32 {
 
 /// Most refs a TLAS build clusters (`hploc climb`, as the fast-trace BLAS) instead of taking
 /// the LBVH's Karras tree: the TLAS of opened instances (at most [`TLAS_REF_BUDGET`] refs).
-/// Measured on the H100 (BENCHMARKS.md session 28): the apartment's 536 refs (8 an instance)
-/// clustered trace its peer workload +10 % and its four trace tasks 11 % faster; a build over
-/// 1000 refs takes 0.24 ms instead of 0.13. At 10k and 100k instances clustering would double
-/// the build (0.20 → 0.37 ms, 0.29 → 0.57 ms), so those TLASes stay LBVHs.
+/// Clustering a TLAS of a few big instances' refs makes its rays faster for a small build cost;
+/// at 10k and 100k instances it would about double the build, so those TLASes stay LBVHs
+/// (measured on the H100; see docs/decisions/tlas-build.md).
 const TLAS_CLUSTERED_MAX_REFS: u32 = TLAS_REF_BUDGET;
 
 /// Whether a TLAS build over `refs` refs clusters them.

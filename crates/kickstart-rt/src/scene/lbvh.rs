@@ -44,7 +44,7 @@
 //! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
 //! listed nodes, which straddle blocks, walking each node's two children side by side. Two
 //! passes, no arrival counters, fences or waiting, no chains of device-scope round trips from the
-//! leaves to the root (what bounds the climb: BENCHMARKS.md, session 23); the nodes are
+//! leaves to the root (what bounds the climb: docs/decisions/range-refit.md); the nodes are
 //! bit-identical to the climb's. With [`RefitSource::Raw`], `lbvh refit ingest` takes the
 //! gather's place and decodes the triangles from the application's bytes itself: the ingestion
 //! fused into the refit.

@@ -121,14 +121,14 @@ pub enum SurfelType {
 /// geometry more closely (lower SAH cost, fewer node visits per ray; most on scenes of separate
 /// parts such as buildings), and turns every subtree of up to
 /// [`BuildHint::FAST_TRACE_MAX_LEAF`] triangles that is cheaper by the surface area heuristic
-/// into one leaf. For the dragon's 871k triangles on the H100 (BENCHMARKS.md session 26) the
-/// fast-build build takes 0.69 ms and the fast-trace build 1.75 ms (SAH cost 1.10× a CPU
-/// binned-SAH build's). Either can be refit (`allow_update`). A fast-build tree is refit from its
-/// nodes' leaf ranges, straight from the re-ingested triangles (the range refit: 0.167 ms with
-/// ingestion, fused into the refit when both run in one task, for the dragon's 871k triangles
-/// on the H100, BENCHMARKS.md session 25). A
-/// fast-trace tree's nodes are not ranges: its refit climbs the tree bottom-up through
-/// device-scope round trips and re-decides its leaves (0.56 ms, session 21).
+/// into one leaf: the fast-trace build takes over twice as long as the fast-build one, for a
+/// SAH cost close to a CPU binned-SAH build's (current figures: BENCHMARKS.md, "Builds").
+/// Either can be refit (`allow_update`). A fast-build tree is refit from its nodes' leaf
+/// ranges, straight from the re-ingested triangles (the range refit, with the ingestion fused
+/// into it when both run in one task: no chains of device-scope round trips; see
+/// docs/decisions/range-refit.md). A fast-trace tree's nodes are not ranges: its refit climbs
+/// the tree bottom-up through device-scope round trips and re-decides its leaves, which is
+/// slower.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum BuildHint {
     /// Fast-build when `allow_update` is set, fast-trace otherwise.

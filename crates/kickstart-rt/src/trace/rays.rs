@@ -225,7 +225,7 @@ mod tests {
     #[test]
     fn the_pass_comes_from_own_spirv_where_the_device_takes_it() {
         // A pass that silently fell back to WGSL would zero-fill its stack per invocation again
-        // (+45 % primary rays/s on the H100 without it, BENCHMARKS.md session 27).
+        // (measured much slower on the H100; see docs/decisions/stack-zero-fill.md).
         let g = crate::gpu::testing::gpu();
         let tracer = RayTracer::new(&g.device);
         assert_eq!(
