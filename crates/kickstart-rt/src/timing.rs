@@ -89,7 +89,7 @@ impl TimingReadback {
 
     /// Waits for the values and converts ticks (`period_ns` each) to milliseconds.
     pub fn wait(self, device: &wgpu::Device, period_ns: f32) -> Result<GpuTimings> {
-        let bytes = crate::scene::gpu_scene::map_and_wait(device, &self.buffer)?;
+        let bytes = crate::gpu::buffers::map_and_wait(device, &self.buffer)?;
         let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
         let to_ms = |t: u64| t as f64 * period_ns as f64 * 1e-6;
         let origin = ticks.first().copied().unwrap_or(0);

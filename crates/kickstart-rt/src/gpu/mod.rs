@@ -1,6 +1,7 @@
-//! Small wgpu helpers shared by every pass: recording dispatches (with optional timestamps),
-//! shader assembly and pipeline creation, and the GPU radix sort.
+//! Small wgpu helpers shared by every pass: buffers and read-backs, recording dispatches (with
+//! optional timestamps), shader assembly and pipeline creation, and the GPU radix sort.
 
+pub(crate) mod buffers;
 pub(crate) mod layout;
 pub(crate) mod radix_sort;
 pub(crate) mod recorder;

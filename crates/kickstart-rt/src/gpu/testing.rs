@@ -46,7 +46,7 @@ pub(crate) fn gpu() -> &'static TestGpu {
 /// Reads `size` bytes of `buffer` from `offset` back to the CPU (waits; tests only).
 pub(crate) fn read_back(buffer: &wgpu::Buffer, offset: u64, size: u64) -> Vec<u8> {
     let g = gpu();
-    crate::scene::gpu_scene::read_back(&g.device, &g.queue, buffer, offset, size)
+    crate::gpu::buffers::read_back(&g.device, &g.queue, buffer, offset, size)
         .expect("read-back")
 }
 

@@ -3,6 +3,9 @@
 //! `docs/ray-tracing-core.md`. The context decides *what* to do each task; this module records it.
 
 use crate::error::{Error, Result};
+// Generic buffer helpers live in the gpu layer; re-exported here for the modules that still
+// import them from the scene.
+pub(crate) use crate::gpu::buffers::{read_back, storage};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
@@ -982,62 +985,6 @@ fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
 
 /// A BLAS as read back: raw nodes (16 floats each) and triangles (12 floats each).
 pub(crate) type RawBlas = (Vec<[f32; 16]>, Vec<[f32; 12]>);
-
-/// A STORAGE | COPY_SRC | COPY_DST buffer (at least 256 bytes, zeroed by wgpu).
-pub(crate) fn storage(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(256).div_ceil(4) * 4,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
-}
-
-/// Copies `size` bytes of `buffer` to the CPU, waiting for the device.
-pub(crate) fn read_back(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    buffer: &wgpu::Buffer,
-    offset: u64,
-    size: u64,
-) -> Result<Vec<u8>> {
-    if size == 0 {
-        return Ok(Vec::new());
-    }
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("kickstart-rt read-back"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut enc = device.create_command_encoder(&Default::default());
-    enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
-    queue.submit([enc.finish()]);
-    map_and_wait(device, &staging)
-}
-
-/// Maps a `MAP_READ` buffer, waits for the device, and copies its bytes out (tools and tests
-/// only: this blocks).
-pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| Error::ReadBack(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| Error::ReadBack(e.to_string()))?
-        .map_err(|e| Error::ReadBack(e.to_string()))?;
-    let data = buffer
-        .slice(..)
-        .get_mapped_range()
-        .map_err(|e| Error::ReadBack(e.to_string()))?
-        .to_vec();
-    Ok(data)
-}
 
 #[cfg(test)]
 mod tests {

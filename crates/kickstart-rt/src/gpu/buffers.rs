@@ -1,0 +1,59 @@
+//! Generic buffer helpers: storage buffers, and blocking read-backs for tools and tests.
+
+use crate::error::{Error, Result};
+
+/// A STORAGE | COPY_SRC | COPY_DST buffer (at least 256 bytes, zeroed by wgpu).
+pub(crate) fn storage(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(256).div_ceil(4) * 4,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// Copies `size` bytes of `buffer` to the CPU, waiting for the device.
+pub(crate) fn read_back(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> Result<Vec<u8>> {
+    if size == 0 {
+        return Ok(Vec::new());
+    }
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("kickstart-rt read-back"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
+    queue.submit([enc.finish()]);
+    map_and_wait(device, &staging)
+}
+
+/// Maps a `MAP_READ` buffer, waits for the device, and copies its bytes out (tools and tests
+/// only: this blocks).
+pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| Error::ReadBack(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| Error::ReadBack(e.to_string()))?
+        .map_err(|e| Error::ReadBack(e.to_string()))?;
+    let data = buffer
+        .slice(..)
+        .get_mapped_range()
+        .map_err(|e| Error::ReadBack(e.to_string()))?
+        .to_vec();
+    Ok(data)
+}
