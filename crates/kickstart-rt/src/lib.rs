@@ -138,6 +138,7 @@
 
 mod allocations;
 mod cache;
+mod camera;
 mod container;
 mod context;
 pub mod cpu;
@@ -152,15 +153,13 @@ mod staging;
 mod tasks;
 mod timing;
 mod trace;
-mod validate;
 mod version;
 
 pub use allocations::ResourceAllocations;
 pub use cache::{CacheAllocation, CacheLevel};
 pub use container::TaskContainer;
 pub use context::{
-    DenoisingContextInput, DenoisingMethod, DroppedTriangles, ExecuteContext, InitSettings,
-    RecordedTaskCounts, SignalType, INSTANCE_RECORD_SIZE,
+    DroppedTriangles, ExecuteContext, InitSettings, RecordedTaskCounts, INSTANCE_RECORD_SIZE,
 };
 pub use device::{
     optional_features, optional_features_supported, required_features, required_limits,
@@ -172,5 +171,4 @@ pub use handles::{
 pub use logging::{LogCallback, Severity};
 pub use tasks::*;
 pub use timing::{GpuTimings, PassTiming};
-pub use validate::WRITABLE_OUTPUT_FORMATS;
 pub use version::{Version, VERSION};

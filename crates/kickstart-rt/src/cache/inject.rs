@@ -17,7 +17,7 @@ use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
 use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline};
 use crate::gpu::Recorder;
 use crate::scene::gpu_scene::storage;
-use crate::trace::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
+use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use crate::{DepthType, DirectLightingInjectionTask};
 
 const INJECT_WGSL: &str = include_str!("../../shaders/cache_inject.wgsl");
@@ -133,7 +133,7 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
 }
 
 /// Whether a texture format reads as floats in WGSL (`Some(true)` for depth formats).
-fn float_kind(format: wgpu::TextureFormat) -> Option<bool> {
+pub(crate) fn float_kind(format: wgpu::TextureFormat) -> Option<bool> {
     if format.has_depth_aspect() {
         return (!format.has_stencil_aspect()).then_some(true);
     }
@@ -141,6 +141,20 @@ fn float_kind(format: wgpu::TextureFormat) -> Option<bool> {
         Some(wgpu::TextureSampleType::Float { .. }) => Some(false),
         _ => None,
     }
+}
+
+/// The injection's viewport, its stride, and the number of injected grid slots.
+fn grid(task: &DirectLightingInjectionTask) -> (crate::Viewport, u32, u64) {
+    let size = task.direct_lighting.texture().size();
+    let vp = task.viewport.unwrap_or(crate::Viewport {
+        x: 0,
+        y: 0,
+        width: size.width,
+        height: size.height,
+    });
+    let stride = task.injection_resolution_stride.clamp(1, 8);
+    let slots = vp.width.div_ceil(stride) as u64 * vp.height.div_ceil(stride) as u64;
+    (vp, stride, slots)
 }
 
 /// A PCG hash (per-task block offsets).
@@ -177,63 +191,41 @@ impl Injector {
         self.accum.as_ref().map_or(0, |a| a.0.size())
     }
 
-    /// Records one injection task. `meta`/`surfels` are the cache's buffers, `capacity` its
-    /// surfel count.
-    pub fn record(
-        &mut self,
-        rec: &mut Recorder<'_>,
-        scene: &SceneBuffers<'_>,
-        (meta, surfels, capacity): (&wgpu::Buffer, &wgpu::Buffer, u32),
+    /// Refuses an injection whose accumulation would not fit one storage binding beside a cache
+    /// of `capacity` surfels (the capacity the cache will have when the task records).
+    pub fn check_fits(
         task: &DirectLightingInjectionTask,
+        capacity: u32,
+        limits: &wgpu::Limits,
     ) -> Result<()> {
-        let device = rec.device;
-        let depth_format = task.depth.texture.texture().format();
-        let Some(depth_is_depth) = float_kind(depth_format) else {
-            return Err(Error::input(
-                TASK,
-                "depth.texture",
-                depth_format,
-                "must be a depth format or a float colour format",
-            ));
-        };
-        let light_format = task.direct_lighting.texture().format();
-        if float_kind(light_format) != Some(false) {
-            return Err(Error::input(
-                TASK,
-                "direct_lighting",
-                light_format,
-                "must be a float colour format",
-            ));
-        }
-        if task.depth.depth_type == DepthType::RgbWorldSpace && depth_is_depth {
-            return Err(Error::input(
-                TASK,
-                "depth.depth_type",
-                task.depth.depth_type,
-                "RgbWorldSpace needs a float colour texture holding positions",
-            ));
-        }
-        let size = task.direct_lighting.texture().size();
-        let vp = task.viewport.unwrap_or(crate::Viewport {
-            x: 0,
-            y: 0,
-            width: size.width,
-            height: size.height,
-        });
-        let stride = task.injection_resolution_stride.clamp(1, 8);
-        let (gw, gh) = (vp.width.div_ceil(stride), vp.height.div_ceil(stride));
-        let slots = gw as u64 * gh as u64;
-        if slots == 0 {
-            return Ok(());
-        }
-        let words = capacity as u64 + 8 * slots;
-        if words * 4 > device.limits().max_storage_buffer_binding_size {
+        let (_, stride, slots) = grid(task);
+        if (capacity as u64 + 8 * slots) * 4 > limits.max_storage_buffer_binding_size {
             return Err(Error::input(
                 TASK,
                 "injection_resolution_stride",
                 stride,
                 "too many injected pixels for one storage binding with this cache size: raise the stride",
             ));
+        }
+        Ok(())
+    }
+
+    /// Records one injection task, planned and checked with [`Self::check_fits`]. `meta`/`surfels`
+    /// are the cache's buffers, `capacity` its surfel count.
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        scene: &SceneBuffers<'_>,
+        (meta, surfels, capacity): (&wgpu::Buffer, &wgpu::Buffer, u32),
+        task: &DirectLightingInjectionTask,
+    ) {
+        let device = rec.device;
+        // The formats were checked when the task was planned (`context::validate`).
+        let depth_is_depth = float_kind(task.depth.texture.texture().format()) == Some(true);
+        let (vp, stride, slots) = grid(task);
+        let (gw, gh) = (vp.width.div_ceil(stride), vp.height.div_ceil(stride));
+        if slots == 0 {
+            return;
         }
         let slots = slots as u32;
         let fits = matches!(&self.accum, Some((_, c, s)) if *c == capacity && *s >= slots);
@@ -247,11 +239,11 @@ impl Injector {
             self.accum = Some((buffer, capacity, keep));
         }
         let Some((accum, _, _)) = self.accum.clone() else {
-            return Ok(());
+            return;
         };
         self.tasks = self.tasks.wrapping_add(1);
         let seed = hash(self.tasks);
-        let (clip_to_world, eye, ortho, z_origin, _) = crate::trace::debug_view::camera(&task.view);
+        let (clip_to_world, eye, ortho, z_origin, _) = crate::camera::camera(&task.view);
         let params = rec.uniform(
             "kickstart-rt injection params",
             &InjectParams {
@@ -350,6 +342,5 @@ impl Injector {
             ],
         );
         rec.dispatch("cache resolve", &resolve, &[&group], slots.div_ceil(64));
-        Ok(())
     }
 }

@@ -13,10 +13,10 @@ use crate::scene::lbvh::{
     BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
+use crate::scene::strategy::BuildStrategy;
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
 use crate::staging::{StagingBuffer, StagingPool};
-use crate::trace::debug_view::DebugViewPass;
-use crate::trace::rays::{RayTracer, SceneBuffers};
+use crate::scene::traversal::SceneBuffers;
 
 /// Bytes of one triangle of the soup (three `vec4<f32>`).
 pub(crate) const TRIANGLE_BYTES: u64 = 48;
@@ -43,8 +43,8 @@ pub(crate) enum PendingBvh {
 pub(crate) struct BlasRanges {
     pub tris: Range,
     pub nodes: Range,
-    /// Leaf collapsing of the build (refits make their decisions with the same limit).
-    pub max_leaf: u32,
+    /// The tree the build made (refits make their decisions with the same leaves).
+    pub strategy: BuildStrategy,
     /// Sort order (`n` words; `orders` pool) and refit topology (`topologies` pool), kept for
     /// `allow_update` geometry only. Separate pools: the builder binds them in one dispatch.
     pub refit: Option<(Range, Range)>,
@@ -202,8 +202,6 @@ struct Passes {
     ingest: Option<Ingest>,
     prims: Option<Prims>,
     lbvh: Option<Lbvh>,
-    rays: Option<RayTracer>,
-    debug_view: Option<DebugViewPass>,
 }
 
 impl Passes {
@@ -216,18 +214,6 @@ impl Passes {
         let prims = self.prims.get_or_insert_with(|| Prims::new(d));
         let lbvh = self.lbvh.get_or_insert_with(|| Lbvh::new(d));
         (prims, lbvh)
-    }
-
-    fn rays(&mut self, d: &wgpu::Device) -> &RayTracer {
-        self.rays.get_or_insert_with(|| RayTracer::new(d))
-    }
-
-    fn debug_view(&mut self, d: &wgpu::Device) -> &mut DebugViewPass {
-        self.debug_view.get_or_insert_with(|| {
-            let mut p = DebugViewPass::new();
-            p.prepare(d);
-            p
-        })
     }
 }
 
@@ -322,8 +308,6 @@ impl GpuScene {
         let d = &self.device;
         self.passes.ingest(d);
         self.passes.build(d);
-        self.passes.rays(d);
-        self.passes.debug_view(d);
     }
 
     /// Bytes of build scratch held.
@@ -464,10 +448,11 @@ impl GpuScene {
         slot: u32,
         g: &mut GeometryGpu,
         keep_for_refit: bool,
-        max_leaf: u32,
+        strategy: BuildStrategy,
         name: &str,
     ) -> Result<[u32; 4]> {
         let n = g.triangles;
+        let max_leaf = strategy.max_leaf();
         let Some(staged) = g.staged else {
             return Err(Error::ReadBack(format!(
                 "geometry `{name}` has no staged triangles to build from"
@@ -534,7 +519,7 @@ impl GpuScene {
         // triangles from the range refit's two passes instead of the climb and the gather: the
         // same nodes, without the climb's chains of device-scope round trips (measured faster on
         // the H100; see docs/decisions/range-refit.md).
-        let by_ranges = max_leaf == 1 && n >= 2;
+        let by_ranges = strategy == BuildStrategy::FastBuild && n >= 2;
         let scratch_topology = (by_ranges && refit.is_none()).then(|| {
             self.scratch_topology.get(
                 &self.device,
@@ -565,7 +550,7 @@ impl GpuScene {
                 centroid_bounds: None,
                 // Fast-trace (leaves collapsed) is also the clustered build: the two together
                 // are what `BuildHint::PreferFastTrace` promises.
-                clustered: max_leaf > 1,
+                clustered: strategy == BuildStrategy::FastTrace,
                 hierarchy_only: by_ranges,
             },
         );
@@ -603,7 +588,7 @@ impl GpuScene {
         g.blas = Some(BlasRanges {
             tris,
             nodes,
-            max_leaf,
+            strategy,
             refit,
         });
         // The build's stamp (flags bits 8-31): the TLAS's refs name nodes of one build of this
@@ -625,7 +610,7 @@ impl GpuScene {
         matches!(
             g.blas,
             Some(BlasRanges {
-                max_leaf: 1,
+                strategy: BuildStrategy::FastBuild,
                 refit: Some(_),
                 ..
             })
@@ -655,18 +640,19 @@ impl GpuScene {
             Some(BlasRanges {
                 tris,
                 nodes,
-                max_leaf,
+                strategy,
                 refit: Some((order, topology)),
             }),
         ) = (g.staged, g.blas)
         else {
             return;
         };
+        let max_leaf = strategy.max_leaf();
         let n = g.triangles;
         rec.scope = "blas refit";
         // A fast-build tree (the Karras tree, one triangle a leaf) is refit from its nodes' leaf
         // ranges, straight from the re-ingested triangles.
-        if max_leaf == 1 && n >= 2 {
+        if strategy == BuildStrategy::FastBuild && n >= 2 {
             let source = match fused {
                 Some(d) => RefitSource::Raw(RawTriangles {
                     raw: &d.raw,
@@ -835,7 +821,7 @@ impl GpuScene {
         Ok(())
     }
 
-    /// The scene bindings of a tracing pass (the lighting cache's injection).
+    /// The scene as every tracing pass binds it.
     pub fn scene_buffers(&self) -> SceneBuffers<'_> {
         SceneBuffers {
             tlas_nodes: &self.tlas.nodes,
@@ -844,58 +830,6 @@ impl GpuScene {
             blas_nodes: self.nodes.buffer(),
             triangles: self.triangles.buffer(),
         }
-    }
-
-    /// The pipelines, the device and the scene bindings, borrowed together (disjoint fields) for
-    /// a tracing pass.
-    fn tracing(&mut self) -> (&mut Passes, &wgpu::Device, SceneBuffers<'_>) {
-        let scene = SceneBuffers {
-            tlas_nodes: &self.tlas.nodes,
-            instances: &self.instance_table.buffer,
-            geometries: &self.geometry_table.buffer,
-            blas_nodes: self.nodes.buffer(),
-            triangles: self.triangles.buffer(),
-        };
-        (&mut self.passes, &self.device, scene)
-    }
-
-    /// Records a batch of rays.
-    pub fn trace_rays(&mut self, rec: &mut Recorder<'_>, t: &crate::tasks::TraceRaysTask) {
-        let (passes, device, scene) = self.tracing();
-        rec.scope = "trace rays";
-        passes.rays(device).record(
-            rec,
-            &scene,
-            (&t.rays, t.ray_offset),
-            (&t.hits, t.hit_offset),
-            t.ray_count,
-            t.query,
-            t.instance_mask.0,
-        );
-    }
-
-    /// Records a primary-ray debug view.
-    pub fn debug_view_pass(
-        &mut self,
-        rec: &mut Recorder<'_>,
-        output: &wgpu::TextureView,
-        viewport: (u32, u32, u32, u32),
-        view: &crate::tasks::ViewInfo,
-        kind: crate::tasks::DebugOutputType,
-        cache: (&crate::cache::DirectLightingCache, bool),
-    ) -> Result<()> {
-        let (passes, device, scene) = self.tracing();
-        rec.scope = "debug view";
-        passes.debug_view(device).record(
-            rec,
-            &scene,
-            output,
-            output.texture().format(),
-            viewport,
-            view,
-            kind,
-            cache,
-        )
     }
 
     /// Reads back a BLAS (blocks on the device; tools and tests only).

@@ -6,3 +6,5 @@ pub(crate) mod ingest;
 pub(crate) mod lbvh;
 pub(crate) mod pool;
 pub(crate) mod prims;
+pub(crate) mod strategy;
+pub(crate) mod traversal;

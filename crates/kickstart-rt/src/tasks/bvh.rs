@@ -143,16 +143,6 @@ pub enum BuildHint {
 impl BuildHint {
     /// Largest leaf of a fast-trace BLAS, in triangles.
     pub const FAST_TRACE_MAX_LEAF: u32 = 4;
-
-    /// Largest leaf the build may make, in triangles, for a geometry with `allow_update`.
-    pub fn max_leaf(self, allow_update: bool) -> u32 {
-        match self {
-            BuildHint::PreferFastTrace => Self::FAST_TRACE_MAX_LEAF,
-            BuildHint::PreferFastBuild => 1,
-            BuildHint::Auto if allow_update => 1,
-            BuildHint::Auto => Self::FAST_TRACE_MAX_LEAF,
-        }
-    }
 }
 
 /// Everything the SDK needs to build one BLAS and its lighting cache layout.

@@ -1,7 +1,9 @@
 //! Every task an application schedules into a [`crate::TaskContainer`].
 
 mod bvh;
+mod denoising;
 mod render;
 
 pub use bvh::*;
+pub use denoising::*;
 pub use render::*;

@@ -741,3 +741,11 @@ impl RenderTask {
         }
     }
 }
+
+/// Output formats the trace and denoise tasks can write.
+pub const WRITABLE_OUTPUT_FORMATS: [wgpu::TextureFormat; 4] = [
+    wgpu::TextureFormat::Rgba16Float,
+    wgpu::TextureFormat::Rgba32Float,
+    wgpu::TextureFormat::R32Float,
+    wgpu::TextureFormat::Rg32Float,
+];

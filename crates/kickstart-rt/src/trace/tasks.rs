@@ -11,7 +11,7 @@
 
 use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
-use super::rays::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
+use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use super::sampling::blue_noise_texture;
 use crate::gpu::layout::{float_texture_entry, uniform_entry, BoundLayout, GroupLayout};
 use crate::gpu::shader::{assemble, traversal_pipeline};

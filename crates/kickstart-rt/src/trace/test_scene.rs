@@ -3,7 +3,7 @@
 //! GPU builder; and the CPU oracle over instances (brute force with `cpu::intersect_triangle`
 //! and the documented tie rule).
 
-use super::rays::SceneBuffers;
+use crate::scene::traversal::SceneBuffers;
 use crate::cpu::{intersect_triangle, CpuBvh, Ray, TriangleHit};
 use crate::gpu::testing;
 use bytemuck::{Pod, Zeroable};

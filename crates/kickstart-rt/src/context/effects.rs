@@ -1,0 +1,153 @@
+//! The render effects the context owns, one module each (ray batches, debug views, the trace
+//! tasks, the denoisers; the lighting cache owns its injection and transfer), and the one
+//! `match` that sends a planned render task to its effect.
+
+use super::plan::Route;
+use crate::cache::DirectLightingCache;
+use crate::denoise::Denoisers;
+use crate::error::Result;
+use crate::gpu::Recorder;
+use crate::handles::InstanceHandle;
+use crate::scene::traversal::SceneBuffers;
+use crate::tasks::*;
+use crate::trace::debug_view::DebugViewPass;
+use crate::trace::rays::RayTracer;
+use crate::trace::tasks::TracePasses;
+
+/// The effects' pipelines and history. Pipelines are created on first use, so a context that
+/// never traces never compiles the trace shaders.
+pub(super) struct Effects {
+    rays: Option<RayTracer>,
+    debug_views: Option<DebugViewPass>,
+    /// Created on first use: they generate the blue-noise tile.
+    traces: Option<TracePasses>,
+    /// The denoisers' history per denoising context, and their passes.
+    pub(super) denoisers: Denoisers,
+}
+
+/// What a render task reads besides its own inputs.
+pub(super) struct Inputs<'a> {
+    /// The scene as the traversal binds it.
+    pub scene: SceneBuffers<'a>,
+    /// The direct lighting cache.
+    pub cache: &'a mut DirectLightingCache,
+    /// Triangles of each instance's geometry, as the context knows them now.
+    pub instance_triangles: &'a dyn Fn(InstanceHandle) -> u32,
+    /// The task's serial number.
+    pub serial: u64,
+}
+
+impl Inputs<'_> {
+    fn instance_triangles(&self, h: InstanceHandle) -> u32 {
+        (self.instance_triangles)(h)
+    }
+}
+
+impl Effects {
+    /// No pipelines yet.
+    pub fn new(device: &wgpu::Device) -> Self {
+        Effects {
+            rays: None,
+            debug_views: None,
+            traces: None,
+            denoisers: Denoisers::new(device),
+        }
+    }
+
+    /// Creates every effect's pipelines now.
+    pub fn prepare_pipelines(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        self.rays.get_or_insert_with(|| RayTracer::new(device));
+        self.debug_views(device);
+        self.traces(device, queue).prepare(device);
+        self.denoisers.prepare_pipelines();
+    }
+
+    fn debug_views(&mut self, device: &wgpu::Device) -> &mut DebugViewPass {
+        self.debug_views.get_or_insert_with(|| {
+            let mut p = DebugViewPass::new();
+            p.prepare(device);
+            p
+        })
+    }
+
+    fn traces(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> &mut TracePasses {
+        self.traces
+            .get_or_insert_with(|| TracePasses::new(device, queue))
+    }
+
+    /// Records one render task on the effect its plan routed it to.
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        queue: &wgpu::Queue,
+        inputs: Inputs<'_>,
+        route: Route<'_>,
+    ) -> Result<()> {
+        let device = rec.device;
+        match route {
+            Route::RayBatch(t) => {
+                rec.scope = "trace rays";
+                let rays = self.rays.get_or_insert_with(|| RayTracer::new(device));
+                rays.record(
+                    rec,
+                    &inputs.scene,
+                    (&t.rays, t.ray_offset),
+                    (&t.hits, t.hit_offset),
+                    t.ray_count,
+                    t.query,
+                    t.instance_mask.0,
+                );
+            }
+            Route::Injection(t) => {
+                let cache = inputs.cache;
+                let meta = cache.meta_buffer().clone();
+                let surfels = cache.surfel_buffer().clone();
+                let capacity = cache.capacity();
+                cache
+                    .injector
+                    .record(rec, &inputs.scene, (&meta, &surfels, capacity), t);
+            }
+            Route::Transfer(t) => {
+                let triangles = inputs.instance_triangles(t.target);
+                let cache = inputs.cache;
+                let meta = cache.meta_buffer().clone();
+                let surfels = cache.surfel_buffer().clone();
+                cache.transferer.record(
+                    rec,
+                    (&meta, &surfels),
+                    t.source.index,
+                    t.target.index,
+                    triangles,
+                );
+            }
+            Route::Trace(task) => {
+                rec.scope = "trace";
+                let cache = inputs.cache.sample_bind_group_entries();
+                self.traces(device, queue)
+                    .record(rec, &inputs.scene, &cache, task)?;
+            }
+            Route::DebugView { common, output } => {
+                let size = output.texture().size();
+                let vp = common.viewport.unwrap_or(Viewport {
+                    x: 0,
+                    y: 0,
+                    width: size.width,
+                    height: size.height,
+                });
+                rec.scope = "debug view";
+                self.debug_views(device).record(
+                    rec,
+                    &inputs.scene,
+                    output,
+                    output.texture().format(),
+                    (vp.x, vp.y, vp.width, vp.height),
+                    &common.view,
+                    common.debug_parameters.debug_output_type,
+                    (inputs.cache, common.use_bilinear_sampling),
+                )?;
+            }
+            Route::Denoise(task) => self.denoisers.record(rec, task, inputs.serial),
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,266 @@
+//! The plan phase of `build_gpu_task`: every check a container must pass, run against the
+//! context's state without changing it, producing the [`FramePlan`] the record phase carries
+//! out. A container refused here leaves the context exactly as it was.
+
+use std::collections::HashSet;
+
+use super::state::{GeometryData, GeometrySlot, State};
+use super::validate::{self, ComponentExtent};
+use crate::cache::inject::Injector;
+use crate::container::TaskContainer;
+use crate::denoise;
+use crate::error::{Error, Result};
+use crate::handles::*;
+use crate::tasks::*;
+use crate::trace::tasks::TracePasses;
+
+/// Where a render task is recorded: the effect that records it, with what the plan learned.
+#[derive(Clone, Copy)]
+pub(super) enum Route<'c> {
+    /// A batch of rays from a buffer.
+    RayBatch(&'c TraceRaysTask),
+    /// Direct lighting injected into the lighting cache.
+    Injection(&'c DirectLightingInjectionTask),
+    /// The lighting cache copied from one instance to another.
+    Transfer(&'c DirectLightTransferTask),
+    /// A trace task writing its normal output.
+    Trace(&'c RenderTask),
+    /// A trace task writing a primary-ray debug view instead.
+    DebugView {
+        common: &'c TraceTaskCommon,
+        output: &'c TextureInput,
+    },
+    /// A denoise task.
+    Denoise(&'c RenderTask),
+}
+
+/// What one container asks for, checked: the record phase carries it out in this order.
+pub(super) struct FramePlan<'c> {
+    /// Geometry registrations and updates, with each component's byte extents.
+    pub geometries: Vec<(&'c GeometryTask, Vec<ComponentExtent>)>,
+    /// Instance registrations and updates.
+    pub instances: Vec<&'c InstanceTask>,
+    /// The last BVH build task of the container (it decides).
+    pub build: Option<BvhBuildTask>,
+    /// The render tasks in the order scheduled.
+    pub render: Vec<Route<'c>>,
+}
+
+/// Checks every task of `c` against the context's state `s` and the device's `limits`.
+pub(super) fn plan<'c>(
+    s: &State,
+    c: &'c TaskContainer,
+    limits: &wgpu::Limits,
+) -> Result<FramePlan<'c>> {
+    let mut plan = FramePlan {
+        geometries: Vec::new(),
+        instances: Vec::new(),
+        build: None,
+        render: Vec::new(),
+    };
+    let mut geometries_here = HashSet::new();
+    let mut instances_here = HashSet::new();
+    for task in &c.bvh_tasks {
+        match task {
+            BvhTask::Geometry(t) => {
+                let extents = geometry_task(s, t, &geometries_here)?;
+                geometries_here.insert(t.handle);
+                plan.geometries.push((t, extents));
+            }
+            BvhTask::Instance(t) => {
+                instance_task(s, t, &instances_here, &geometries_here)?;
+                instances_here.insert(t.handle);
+                plan.instances.push(t);
+            }
+            BvhTask::Build(t) => {
+                validate::bvh_build(t)?;
+                plan.build = Some(*t);
+            }
+        }
+    }
+    let mut unsupported = None;
+    for task in &c.render_tasks {
+        validate::render_task(task, limits)?;
+        match route(s, task, limits)? {
+            Some(r) => plan.render.push(r),
+            None => {
+                unsupported.get_or_insert(task.name());
+            }
+        }
+    }
+    match unsupported {
+        Some(task) => Err(Error::Unsupported { task }),
+        None => Ok(plan),
+    }
+}
+
+/// Checks a geometry task's handle, operation and input; returns its component extents.
+fn geometry_task(
+    s: &State,
+    t: &GeometryTask,
+    registered_here: &HashSet<GeometryHandle>,
+) -> Result<Vec<ComponentExtent>> {
+    const TASK: &str = "GeometryTask";
+    let slot: &GeometrySlot = s.geometries.get(t.handle)?;
+    let extents = validate::geometry_input(&t.input)?;
+    let refuse = |why: String| Err(Error::input(TASK, "operation", t.operation, why));
+    match (t.operation, &slot.data) {
+        (TaskOperation::Register, data)
+            if data.is_some() || registered_here.contains(&t.handle) =>
+        {
+            refuse("this geometry is already registered; use TaskOperation::Update".into())
+        }
+        (TaskOperation::Update, None) => refuse("the geometry was never registered".into()),
+        (TaskOperation::Update, Some(d)) if !d.allow_update => refuse(format!(
+            "geometry `{}` was registered without allow_update",
+            d.name
+        )),
+        (TaskOperation::Update, Some(d)) => {
+            let n: u32 = extents.iter().map(|e| e.triangles).sum();
+            if n != d.triangles {
+                return Err(Error::input(
+                    TASK,
+                    "input.components",
+                    format!("{n} triangles"),
+                    format!(
+                        "an Update of geometry `{}` must keep its {} triangles (its BVH is refitted); register a new geometry to change the topology",
+                        d.name, d.triangles
+                    ),
+                ));
+            }
+            Ok(extents)
+        }
+        _ => Ok(extents),
+    }
+}
+
+/// Checks an instance task's handles, operation and input.
+fn instance_task(
+    s: &State,
+    t: &InstanceTask,
+    instances_here: &HashSet<InstanceHandle>,
+    geometries_here: &HashSet<GeometryHandle>,
+) -> Result<()> {
+    const TASK: &str = "InstanceTask";
+    let slot = s.instances.get(t.handle)?;
+    let known = slot.input.is_some() || instances_here.contains(&t.handle);
+    match t.operation {
+        TaskOperation::Register if known => {
+            return Err(Error::input(
+                TASK,
+                "operation",
+                t.operation,
+                "this instance is already registered; use TaskOperation::Update",
+            ));
+        }
+        TaskOperation::Update if !known => {
+            return Err(Error::input(
+                TASK,
+                "operation",
+                t.operation,
+                "the instance was never registered",
+            ));
+        }
+        _ => {}
+    }
+    let g = s.geometries.get(t.input.geometry)?;
+    if g.data.is_none() && !geometries_here.contains(&t.input.geometry) {
+        return Err(Error::input(
+            TASK,
+            "input.geometry",
+            t.input.geometry,
+            "the geometry has no registered mesh: schedule its GeometryTask first",
+        ));
+    }
+    validate::instance_input(&t.input)
+}
+
+/// The effect that records `task`, after the checks that need the context's state; `None` for a
+/// task this version does not support (it was fully validated, and is refused as unsupported).
+fn route<'c>(s: &State, task: &'c RenderTask, limits: &wgpu::Limits) -> Result<Option<Route<'c>>> {
+    let route = match task {
+        RenderTask::TraceRays(t) => Route::RayBatch(t),
+        RenderTask::DirectLightingInjection(t) => {
+            Injector::check_fits(t, s.cache.planned_capacity(), limits)?;
+            Route::Injection(t)
+        }
+        RenderTask::DirectLightTransfer(t) => {
+            check_transfer(s, t)?;
+            Route::Transfer(t)
+        }
+        t if t.denoise_common().is_some() => {
+            if let Some(c) = t.denoise_common() {
+                denoise::check_task(t, &s.denoisers.get(c.context)?.input)?;
+            }
+            Route::Denoise(t)
+        }
+        t => match t.trace_common() {
+            Some((common, output)) => match common.debug_parameters.debug_output_type {
+                DebugOutputType::Default if TracePasses::handles(t) => Route::Trace(t),
+                DebugOutputType::HitT
+                | DebugOutputType::Barycentrics
+                | DebugOutputType::RandomMeshColor
+                | DebugOutputType::RandomTileColor
+                | DebugOutputType::DirectLightingCache => Route::DebugView { common, output },
+                _ => return Ok(None),
+            },
+            None => return Ok(None),
+        },
+    };
+    Ok(Some(route))
+}
+
+/// Checks a transfer: both instances registered (in an earlier task), distinct, the target's
+/// geometry allows transfer, and both geometries have the same triangle count.
+fn check_transfer(s: &State, t: &DirectLightTransferTask) -> Result<()> {
+    const TASK: &str = "DirectLightTransferTask";
+    let geometry = |h: InstanceHandle, field: &'static str| -> Result<&GeometryData> {
+        s.instances
+            .get(h)?
+            .input
+            .as_ref()
+            .and_then(|i| s.geometries.get(i.geometry).ok())
+            .and_then(|g| g.data.as_ref())
+            .ok_or_else(|| {
+                Error::input(
+                    TASK,
+                    field,
+                    h,
+                    "the instance must be registered by an earlier GPU task",
+                )
+            })
+    };
+    let src = geometry(t.source, "source")?;
+    let dst = geometry(t.target, "target")?;
+    if t.source == t.target {
+        return Err(Error::input(
+            TASK,
+            "target",
+            t.target,
+            "must differ from the source",
+        ));
+    }
+    if !dst.allow_light_transfer_target {
+        return Err(Error::input(
+            TASK,
+            "target",
+            t.target,
+            format!(
+                "geometry `{}` was registered without allow_light_transfer_target",
+                dst.name
+            ),
+        ));
+    }
+    if src.triangles != dst.triangles {
+        return Err(Error::input(
+            TASK,
+            "target",
+            t.target,
+            format!(
+                "the target's geometry has {} triangles, the source's {}: transfer maps primitive i to primitive i, so both need the same triangles in the same order",
+                dst.triangles, src.triangles
+            ),
+        ));
+    }
+    Ok(())
+}

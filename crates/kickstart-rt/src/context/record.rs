@@ -1,0 +1,564 @@
+//! The record phase of `build_gpu_task`: carries out a checked [`FramePlan`] into the engine's
+//! encoder, one function per step of the data flow (`../shared/DESIGN.md`, "Data flow of one
+//! `build_gpu_task`"). Every input was checked by the plan; what can still fail here is the
+//! device running out of memory while a pool grows ([`crate::Error::OutOfDeviceMemory`]).
+
+use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use super::effects::Inputs;
+use super::plan::FramePlan;
+use super::settings::INSTANCE_RECORD_SIZE;
+use super::state::{instance_record, DroppedReadback, GeometryData, State, WorkingSet};
+use super::validate::ComponentExtent;
+use crate::error::Result;
+use crate::gpu::buffers::storage;
+use crate::gpu::recorder::Timestamps;
+use crate::gpu::Recorder;
+use crate::handles::*;
+use crate::scene::gpu_scene::{
+    DeferredIngest, GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE,
+};
+use crate::scene::ingest::{component_rows, ComponentIngest};
+use crate::scene::pool::Range;
+use crate::scene::strategy::BuildStrategy;
+use crate::tasks::*;
+
+/// The encoder and what one GPU task's recording carries from step to step.
+pub(super) struct Frame<'a> {
+    pub device: &'a wgpu::Device,
+    pub queue: &'a wgpu::Queue,
+    pub encoder: &'a mut wgpu::CommandEncoder,
+    /// Timestamp queries around every pass, when GPU timing is on.
+    pub timestamps: Option<Timestamps>,
+    /// What the task holds until it is marked complete.
+    pub ws: WorkingSet,
+    pub serial: u64,
+}
+
+impl Frame<'_> {
+    /// A recorder for the passes of `scope`.
+    fn recorder(&mut self, scope: &'static str) -> Recorder<'_> {
+        Recorder {
+            device: self.device,
+            encoder: self.encoder,
+            timestamps: self.timestamps.as_mut(),
+            scope,
+            dispatches: 0,
+        }
+    }
+
+    /// Records the copies of `uploads` through the staging pool; the working set keeps them.
+    fn flush(&mut self, s: &mut State, uploads: Uploads) {
+        let staged = uploads.flush(self.device, &mut s.staging, self.encoder);
+        self.ws.staging.extend(staged);
+    }
+}
+
+/// One geometry task's ingestion: the task, its extents, its staged range and triangle count.
+type Ingestion<'c> = (&'c GeometryTask, &'c [ComponentExtent], Range, u32);
+
+/// Records `plan`, in the order of the data flow.
+pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) -> Result<()> {
+    release_completed(s);
+    s.scene.ensure_tables(
+        frame.encoder,
+        s.geometries.slot_count(),
+        s.instances.slot_count(),
+    )?;
+    let ingestions = allocate_staged(frame, s, plan)?;
+    let mut uploads = Uploads::default();
+    clear_dead_slots(s, &mut uploads, frame.serial);
+    for (task, ..) in &ingestions {
+        if task.operation == TaskOperation::Register {
+            uploads.push(
+                &s.scene.geometry_table.buffer,
+                task.handle.index as u64 * GEOMETRY_RECORD_SIZE,
+                bytemuck::bytes_of(&[0u32; 4]),
+            );
+        }
+    }
+    queue_instance_records(s, &plan.instances);
+    frame.flush(s, uploads);
+    let deferred = ingest(frame, s, plan, &ingestions);
+    register_geometries(s, &ingestions, frame.serial);
+    let deferred = build_blases(frame, s, plan.build, deferred)?;
+    record_deferred_ingestions(frame, s, deferred);
+    if let Some(dropped) = &frame.ws.dropped {
+        // The dropped-triangle counts, after every pass that counts them.
+        let size = dropped.buffer.size();
+        frame
+            .encoder
+            .copy_buffer_to_buffer(&s.scene.counters, 0, &dropped.buffer, 0, size);
+    }
+    update_tlas(frame, s, plan.build)?;
+    register_instances(s, &plan.instances, frame.serial);
+    allocate_caches(frame, s)?;
+    for route in &plan.render {
+        record_render_task(frame, s, route)?;
+    }
+    Ok(())
+}
+
+/// Step 1, deferred destruction: releases what no in-flight task can still read; creates the
+/// history of new denoising contexts and retires that of destroyed ones.
+fn release_completed(s: &mut State) {
+    let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
+    s.scene.collect(oldest);
+    s.cache.collect(oldest);
+    let live: Vec<_> = s
+        .denoisers
+        .handles()
+        .into_iter()
+        .filter_map(|h| s.denoisers.get(h).ok().map(|d| (h, d.input)))
+        .collect();
+    s.effects.denoisers.sync(&live);
+    s.effects.denoisers.collect(oldest);
+}
+
+/// Staged-triangle space for every geometry task: updates reuse their range.
+fn allocate_staged<'c>(
+    frame: &mut Frame<'_>,
+    s: &mut State,
+    plan: &'c FramePlan<'_>,
+) -> Result<Vec<Ingestion<'c>>> {
+    let mut ingestions = Vec::new();
+    for (task, extents) in &plan.geometries {
+        let triangles: u32 = extents.iter().map(|e| e.triangles).sum();
+        let Ok(slot) = s.geometries.get_mut(task.handle) else {
+            continue;
+        };
+        let staged = match (&mut slot.data, task.operation) {
+            (Some(d), TaskOperation::Update) => d.gpu.staged,
+            _ => None,
+        };
+        let staged = match staged {
+            Some(r) => r,
+            None => s
+                .scene
+                .alloc_staged(frame.encoder, triangles, &task.input.name)?,
+        };
+        ingestions.push((*task, extents.as_slice(), staged, triangles));
+    }
+    Ok(ingestions)
+}
+
+/// Step 2: destroyed objects leave the tables.
+fn clear_dead_slots(s: &mut State, uploads: &mut Uploads, serial: u64) {
+    if !s.dead_geometry_slots.is_empty() {
+        for slot in std::mem::take(&mut s.dead_geometry_slots) {
+            uploads.push(
+                &s.scene.geometry_table.buffer,
+                slot as u64 * GEOMETRY_RECORD_SIZE,
+                bytemuck::bytes_of(&[0u32; 4]),
+            );
+        }
+        // Instances of destroyed geometry must not trace a geometry that reuses its slot.
+        let dead: Vec<u32> = s
+            .instances
+            .handles()
+            .into_iter()
+            .filter(|h| {
+                s.instances
+                    .get(*h)
+                    .ok()
+                    .and_then(|i| i.input.as_ref())
+                    .is_some_and(|i| s.geometries.get(i.geometry).is_err())
+            })
+            .map(|h| h.index)
+            .collect();
+        s.dead_instance_slots.extend(dead);
+    }
+    if !s.dead_instance_slots.is_empty() {
+        for slot in std::mem::take(&mut s.dead_instance_slots) {
+            s.cache.release(slot, serial);
+            s.pending_records
+                .insert(slot, [0u8; INSTANCE_RECORD_SIZE as usize]);
+        }
+        s.tlas_rebuild = true;
+    }
+}
+
+/// Step 3: instance records, at the instance's slot index (the invariant of the instance-id
+/// bug report: the index a hit reports is the index of the instance's data).
+fn queue_instance_records(s: &mut State, instances: &[&InstanceTask]) {
+    for t in instances {
+        // Only a move keeps the TLAS's leaves; compared in place (this runs for every
+        // instance update of every frame).
+        let moved_only = s
+            .instances
+            .get(t.handle)
+            .ok()
+            .and_then(|i| i.input.as_ref())
+            .is_some_and(|o| {
+                o.geometry == t.input.geometry
+                    && o.participating_in_tlas == t.input.participating_in_tlas
+            });
+        if moved_only {
+            s.tlas_refit = true;
+        } else {
+            s.tlas_rebuild = true;
+        }
+        s.pending_records
+            .insert(t.handle.index, instance_record(&t.input));
+    }
+}
+
+/// Step 4, geometry ingestion: copies the application's bytes (inside its encoder), then
+/// decodes them into the shared staged-triangle pool. Returns the ingestions fused into this
+/// task's refits (recorded by them, or after them if the refit waits).
+fn ingest(
+    frame: &mut Frame<'_>,
+    s: &mut State,
+    plan: &FramePlan<'_>,
+    ingestions: &[Ingestion<'_>],
+) -> HashMap<GeometryHandle, DeferredIngest> {
+    let mut deferred = HashMap::new();
+    if ingestions.is_empty() {
+        return deferred;
+    }
+    let (raw, components) = copy_raw_geometry(frame, ingestions);
+    s.scene
+        .reset_counters(frame.encoder, ingestions.len() as u32);
+    // Geometries ingested once in this task (a second ingestion must follow the first).
+    let mut ingested: HashMap<GeometryHandle, u32> = HashMap::new();
+    for (t, ..) in ingestions {
+        *ingested.entry(t.handle).or_default() += 1;
+    }
+    let mut rec = frame.recorder("ingest");
+    for (i, ((task, _, staged, triangles), comps)) in ingestions.iter().zip(components).enumerate()
+    {
+        // An update refit in this task decodes its own triangles (the ingestion fused into
+        // the refit): deferred to step 5, and recorded after it if the refit waits for a
+        // later task (max_blas_build_count).
+        let candidate = plan.build.is_some()
+            && task.operation == TaskOperation::Update
+            && ingested.get(&task.handle) == Some(&1);
+        let rows = candidate
+            .then(|| component_rows(&comps, staged.start))
+            .flatten()
+            .filter(|rows| {
+                s.geometries.get(task.handle).is_ok_and(|slot| {
+                    slot.data.as_ref().is_some_and(|d| {
+                        d.gpu.pending != Some(PendingBvh::Build)
+                            && GpuScene::can_refit_from_raw(&d.gpu, *triangles, rows)
+                    })
+                })
+            });
+        match rows {
+            Some(rows) => {
+                let d = DeferredIngest {
+                    raw: raw.clone(),
+                    components: comps,
+                    rows,
+                    staged: *staged,
+                    ingestion: i as u32,
+                };
+                deferred.insert(task.handle, d);
+            }
+            None => s
+                .scene
+                .record_ingest(&mut rec, &raw, &comps, *staged, i as u32),
+        }
+    }
+    frame.ws._inputs.push(raw);
+    frame.ws.dropped = Some(dropped_readback(frame.device, ingestions));
+    deferred
+}
+
+/// Copies every ingested component's bytes into one raw buffer; returns it and each
+/// ingestion's components as the decoder reads them there.
+fn copy_raw_geometry(
+    frame: &mut Frame<'_>,
+    ingestions: &[Ingestion<'_>],
+) -> (wgpu::Buffer, Vec<Vec<ComponentIngest>>) {
+    let raw_bytes: u64 = ingestions
+        .iter()
+        .flat_map(|(_, e, ..)| e.iter())
+        .map(|e| (e.vertex_bytes.1 - e.vertex_bytes.0) + e.index_bytes.map_or(0, |(a, b)| b - a))
+        .sum();
+    let raw = storage(frame.device, "kickstart-rt raw geometry copy", raw_bytes);
+    let mut cursor = 0u64;
+    let mut plans = Vec::new();
+    for (task, extents, ..) in ingestions {
+        let mut comps = Vec::new();
+        let mut prim_base = 0u32;
+        for (c, e) in task.input.components.iter().zip(extents.iter()) {
+            let vb = &c.vertex_buffer;
+            let (vs, ve) = e.vertex_bytes;
+            frame
+                .encoder
+                .copy_buffer_to_buffer(&vb.buffer, vs, &raw, cursor, ve - vs);
+            frame.ws._inputs.push(vb.buffer.clone());
+            let vertex_byte_offset = cursor + (vb.offset - vs);
+            cursor += ve - vs;
+            let index = match (&c.index_buffer, e.index_bytes) {
+                (Some(ib), Some((is, ie))) => {
+                    frame
+                        .encoder
+                        .copy_buffer_to_buffer(&ib.buffer, is, &raw, cursor, ie - is);
+                    frame.ws._inputs.push(ib.buffer.clone());
+                    let off = cursor + (ib.offset - is);
+                    cursor += ie - is;
+                    Some((off, ib.format))
+                }
+                _ => None,
+            };
+            comps.push(ComponentIngest {
+                vertex_byte_offset,
+                vertex_stride: vb.stride,
+                vertex_format: vb.format,
+                vertex_count: vb.count,
+                index,
+                first_index: c.index_range.map_or(0, |(first, _)| first),
+                triangle_count: e.triangles,
+                transform: c.transform,
+                primitive_base: prim_base,
+            });
+            prim_base += e.triangles;
+        }
+        plans.push(comps);
+    }
+    (raw, plans)
+}
+
+/// The read-back of the ingestions' dropped-triangle counters (two words each).
+fn dropped_readback(device: &wgpu::Device, ingestions: &[Ingestion<'_>]) -> DroppedReadback {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("kickstart-rt ingestion counters read-back"),
+        size: ingestions.len() as u64 * 8,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    DroppedReadback {
+        buffer,
+        mapped: Arc::new(AtomicBool::new(false)),
+        geometries: ingestions
+            .iter()
+            .map(|(t, ..)| (t.handle, t.input.name.clone()))
+            .collect(),
+    }
+}
+
+/// The geometries' bookkeeping after their ingestion: new ones registered, and each queued for
+/// a BLAS build or refit.
+fn register_geometries(s: &mut State, ingestions: &[Ingestion<'_>], serial: u64) {
+    for &(task, _, staged, triangles) in ingestions {
+        let Ok(slot) = s.geometries.get_mut(task.handle) else {
+            continue;
+        };
+        slot.last_used = serial;
+        let pending = match (&slot.data, task.operation) {
+            (Some(d), TaskOperation::Update) if d.gpu.blas.is_some() => PendingBvh::Refit,
+            _ => PendingBvh::Build,
+        };
+        let data = slot.data.get_or_insert_with(|| GeometryData {
+            name: task.input.name.clone(),
+            allow_update: task.input.allow_update,
+            strategy: BuildStrategy::of(task.input.build_hint, task.input.allow_update),
+            triangles,
+            gpu: GeometryGpu::default(),
+            dropped: None,
+            cache: crate::cache::CacheParams::of(&task.input),
+            allow_light_transfer_target: task.input.allow_light_transfer_target,
+        });
+        data.gpu.triangles = triangles;
+        data.gpu.staged = Some(staged);
+        if data.gpu.pending.is_none() {
+            s.blas_queue.push_back(task.handle);
+        }
+        // A queued build stays a build (the refit needs a built tree).
+        if data.gpu.pending != Some(PendingBvh::Build) {
+            data.gpu.pending = Some(pending);
+        }
+        s.counts.geometry_tasks += 1;
+    }
+}
+
+/// Step 5: BLAS builds and refits, at most `max_blas_build_count`, in queue order. Returns the
+/// fused ingestions whose refit waits for a later task.
+fn build_blases(
+    frame: &mut Frame<'_>,
+    s: &mut State,
+    build: Option<BvhBuildTask>,
+    mut deferred: HashMap<GeometryHandle, DeferredIngest>,
+) -> Result<HashMap<GeometryHandle, DeferredIngest>> {
+    let Some(build) = build else {
+        return Ok(deferred);
+    };
+    let serial = frame.serial;
+    let mut headers = Uploads::default();
+    let mut rec = frame.recorder("blas build");
+    let mut done = 0;
+    while done < build.max_blas_build_count {
+        let Some(h) = s.blas_queue.pop_front() else {
+            break;
+        };
+        let Ok(slot) = s.geometries.get_mut(h) else {
+            continue; // destroyed while queued
+        };
+        let Some(d) = slot.data.as_mut() else {
+            continue;
+        };
+        slot.last_used = serial;
+        match d.gpu.pending.take() {
+            Some(PendingBvh::Build) => {
+                if let Some(old) = d.gpu.blas.take() {
+                    let mut previous = GeometryGpu {
+                        blas: Some(old),
+                        ..Default::default()
+                    };
+                    previous.free_after(&mut s.scene, serial);
+                }
+                let header =
+                    s.scene
+                        .build_blas(&mut rec, h.index, &mut d.gpu, d.allow_update, d.strategy, &d.name)?;
+                headers.push(
+                    &s.scene.geometry_table.buffer,
+                    h.index as u64 * GEOMETRY_RECORD_SIZE,
+                    bytemuck::bytes_of(&header),
+                );
+                if !d.allow_update {
+                    // Static geometry: its staged copy is not needed after the build.
+                    if let Some(r) = d.gpu.staged.take() {
+                        s.scene.staged.free_after(r, serial);
+                    }
+                }
+                s.tlas_rebuild = true;
+            }
+            Some(PendingBvh::Refit) => {
+                let fused = deferred.remove(&h);
+                s.scene
+                    .refit_blas(&mut rec, h.index, &d.gpu, fused.as_ref());
+                s.tlas_refit = true;
+            }
+            None => continue,
+        }
+        done += 1;
+    }
+    frame.flush(s, headers);
+    Ok(deferred)
+}
+
+/// Ingestions deferred for refits that step 5 left to a later task, in ingestion order (as
+/// step 4 would have recorded them).
+fn record_deferred_ingestions(
+    frame: &mut Frame<'_>,
+    s: &mut State,
+    deferred: HashMap<GeometryHandle, DeferredIngest>,
+) {
+    if deferred.is_empty() {
+        return;
+    }
+    let mut rec = frame.recorder("ingest");
+    let mut rest: Vec<DeferredIngest> = deferred.into_values().collect();
+    rest.sort_by_key(|d| d.ingestion);
+    for d in rest {
+        s.scene
+            .record_ingest(&mut rec, &d.raw, &d.components, d.staged, d.ingestion);
+    }
+}
+
+/// Step 6: the TLAS over every instance slot, in every task that changed something it depends
+/// on, unless a BvhBuildTask opts out with `build_tlas: false`.
+fn update_tlas(frame: &mut Frame<'_>, s: &mut State, build: Option<BvhBuildTask>) -> Result<()> {
+    let tlas_update = build.map_or(Some(TlasUpdate::Auto), |b| {
+        b.build_tlas.then_some(b.tlas_update)
+    });
+    let Some(mode) = tlas_update.filter(|_| s.tlas_rebuild || s.tlas_refit) else {
+        return Ok(());
+    };
+    let slots = s.instances.slot_count();
+    let refit = !s.tlas_rebuild
+        && match mode {
+            TlasUpdate::Rebuild => false,
+            TlasUpdate::Refit => true,
+            TlasUpdate::Auto => {
+                s.scene.tlas_refits_since_rebuild() < TlasUpdate::AUTO_REBUILD_AFTER_REFITS
+            }
+        };
+    let mut records = Uploads::default();
+    for (slot, bytes) in std::mem::take(&mut s.pending_records) {
+        records.push(
+            &s.scene.instance_table.buffer,
+            slot as u64 * INSTANCE_RECORD_SIZE,
+            &bytes,
+        );
+    }
+    frame.flush(s, records);
+    let mut rec = frame.recorder("tlas build");
+    s.scene.update_tlas(&mut rec, slots, refit)?;
+    s.tlas_rebuild = false;
+    s.tlas_refit = false;
+    Ok(())
+}
+
+/// Instance bookkeeping (after the records are recorded): a new instance, or one given another
+/// geometry, gets a new lighting cache (a move keeps it).
+fn register_instances(s: &mut State, instances: &[&InstanceTask], serial: u64) {
+    for t in instances {
+        if let Ok(g) = s.geometries.get_mut(t.input.geometry) {
+            g.last_used = serial;
+        }
+        if let Ok(slot) = s.instances.get_mut(t.handle) {
+            let new_cache = slot
+                .input
+                .as_ref()
+                .is_none_or(|o| o.geometry != t.input.geometry);
+            slot.input = Some(t.input.clone());
+            slot.last_used = serial;
+            if new_cache {
+                s.cache.register(t.handle.index, serial);
+            }
+        }
+        s.any_instance = true;
+        s.counts.instance_tasks += 1;
+    }
+}
+
+/// The direct lighting cache: grows what a read-back asked for, and allocates the waiting
+/// instances whose BLAS is built.
+fn allocate_caches(frame: &mut Frame<'_>, s: &mut State) -> Result<()> {
+    s.cache
+        .prepare_task(frame.encoder, s.instances.slot_count(), frame.serial)?;
+    let jobs = s.cache_jobs();
+    if jobs.is_empty() {
+        return Ok(());
+    }
+    let serial = frame.serial;
+    let mut rec = frame.recorder("cache allocation");
+    s.cache
+        .record_allocations(&mut rec, s.scene.triangles.buffer(), &jobs, serial)
+}
+
+/// Step 7: one render task, on its effect.
+fn record_render_task(
+    frame: &mut Frame<'_>,
+    s: &mut State,
+    route: &super::plan::Route<'_>,
+) -> Result<()> {
+    if let super::plan::Route::RayBatch(t) = route {
+        frame.ws._inputs.push(t.rays.clone());
+        frame.ws._inputs.push(t.hits.clone());
+    }
+    let (instances, geometries) = (&s.instances, &s.geometries);
+    let instance_triangles = |h: InstanceHandle| {
+        instances
+            .get(h)
+            .ok()
+            .and_then(|i| i.input.as_ref())
+            .and_then(|i| geometries.get(i.geometry).ok())
+            .and_then(|g| g.data.as_ref())
+            .map_or(0, |d| d.triangles)
+    };
+    let inputs = Inputs {
+        scene: s.scene.scene_buffers(),
+        cache: &mut s.cache,
+        instance_triangles: &instance_triangles,
+        serial: frame.serial,
+    };
+    let queue = frame.queue;
+    let mut rec = frame.recorder("");
+    s.effects.record(&mut rec, queue, inputs, *route)
+}

@@ -1,0 +1,212 @@
+//! What the context keeps between GPU tasks: the handle slots, the working sets in flight, the
+//! scene, the lighting cache, the effects and the bookkeeping that decides what the next task
+//! records.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use super::effects::Effects;
+use super::settings::{DroppedTriangles, RecordedTaskCounts, INSTANCE_RECORD_SIZE};
+use crate::handles::*;
+use crate::logging::{Logger, Severity};
+use crate::scene::gpu_scene::{GeometryGpu, GpuScene, PendingBvh};
+use crate::scene::strategy::BuildStrategy;
+use crate::staging::{StagingBuffer, StagingPool};
+use crate::tasks::*;
+use crate::timing::TimingReadback;
+
+pub(super) struct GeometryData {
+    pub(super) name: String,
+    pub(super) allow_update: bool,
+    /// How its BLAS is built, resolved from `build_hint` at registration.
+    pub(super) strategy: BuildStrategy,
+    pub(super) triangles: u32,
+    pub(super) gpu: GeometryGpu,
+    pub(super) dropped: Option<DroppedTriangles>,
+    pub(super) cache: crate::cache::CacheParams,
+    pub(super) allow_light_transfer_target: bool,
+}
+
+/// Dropped-triangle counters of one task's ingestions, read back after it completes.
+pub(super) struct DroppedReadback {
+    pub(super) buffer: wgpu::Buffer,
+    pub(super) mapped: Arc<AtomicBool>,
+    pub(super) geometries: Vec<(GeometryHandle, String)>,
+}
+
+#[derive(Default)]
+pub(super) struct GeometrySlot {
+    pub(super) data: Option<GeometryData>,
+    pub(super) last_used: u64,
+}
+
+#[derive(Default)]
+pub(super) struct InstanceSlot {
+    pub(super) input: Option<InstanceInput>,
+    pub(super) last_used: u64,
+}
+
+pub(super) struct DenoisingSlot {
+    pub(super) input: DenoisingContextInput,
+}
+
+/// Resources one in-flight GPU task holds until it is marked complete.
+pub(super) struct WorkingSet {
+    pub(super) staging: Vec<StagingBuffer>,
+    /// Inputs the task reads and the raw copies it made, kept alive while the GPU may read them.
+    pub(super) _inputs: Vec<wgpu::Buffer>,
+    pub(super) dropped: Option<DroppedReadback>,
+}
+
+pub(super) struct State {
+    pub(super) geometries: HandlePool<GeometryHandle, GeometrySlot>,
+    pub(super) instances: HandlePool<InstanceHandle, InstanceSlot>,
+    pub(super) denoisers: HandlePool<DenoisingContextHandle, DenoisingSlot>,
+    pub(super) in_flight: BTreeMap<u64, WorkingSet>,
+    pub(super) invoked: Vec<(u64, Arc<AtomicBool>)>,
+    pub(super) staging: StagingPool,
+    pub(super) scene: GpuScene,
+    /// Every render effect's pipelines and history (ray batches, debug views, trace tasks,
+    /// denoisers); the lighting cache owns its injection and transfer.
+    pub(super) effects: Effects,
+    /// Geometries waiting for a BLAS build or refit, in the order they were scheduled.
+    pub(super) blas_queue: VecDeque<GeometryHandle>,
+    /// Instance slots whose records must be rewritten as dead (destroyed instances, instances of
+    /// destroyed geometry).
+    pub(super) dead_instance_slots: Vec<u32>,
+    /// Geometry slots whose table record must be cleared (destroyed geometry).
+    pub(super) dead_geometry_slots: Vec<u32>,
+    /// Instance records to write when the TLAS is next updated: rays always see the instance
+    /// table that matches the TLAS, also while a BvhBuildTask defers the TLAS.
+    pub(super) pending_records: BTreeMap<u32, [u8; INSTANCE_RECORD_SIZE as usize]>,
+    /// The set of TLAS leaves changed (instances added/removed, participation, a BLAS built).
+    pub(super) tlas_rebuild: bool,
+    /// Only instance transforms (or refitted BLASes) changed since the last TLAS update.
+    pub(super) tlas_refit: bool,
+    pub(super) any_instance: bool,
+    pub(super) dropped_readbacks: Vec<DroppedReadback>,
+    pub(super) timings: BTreeMap<u64, TimingReadback>,
+    pub(super) next_serial: u64,
+    pub(super) counts: RecordedTaskCounts,
+    /// The direct lighting cache (sampling contract in `crate::cache`).
+    pub(super) cache: crate::cache::DirectLightingCache,
+}
+
+impl State {
+    /// Returns a completed task's staging to the pool and starts reading back its counters.
+    pub(super) fn retire(&mut self, serial: u64, ws: WorkingSet) {
+        self.cache.task_completed(serial);
+        for b in ws.staging {
+            self.staging.release(b);
+        }
+        if let Some(r) = ws.dropped {
+            let flag = r.mapped.clone();
+            r.buffer.map_async(wgpu::MapMode::Read, .., move |res| {
+                if res.is_ok() {
+                    flag.store(true, Ordering::Release);
+                }
+            });
+            self.dropped_readbacks.push(r);
+        }
+    }
+
+    /// Logs and records the dropped-triangle counts whose read-back has arrived.
+    pub(super) fn collect_dropped(&mut self, logger: &Logger) {
+        let mut i = 0;
+        while i < self.dropped_readbacks.len() {
+            if !self.dropped_readbacks[i].mapped.load(Ordering::Acquire) {
+                i += 1;
+                continue;
+            }
+            let r = self.dropped_readbacks.swap_remove(i);
+            let words: Vec<u32> = match r.buffer.slice(..).get_mapped_range() {
+                Ok(view) => bytemuck::pod_collect_to_vec(&view),
+                Err(_) => continue,
+            };
+            for (k, (handle, name)) in r.geometries.iter().enumerate() {
+                let d = DroppedTriangles {
+                    out_of_range_indices: words.get(2 * k).copied().unwrap_or(0),
+                    non_finite_positions: words.get(2 * k + 1).copied().unwrap_or(0),
+                };
+                if d != DroppedTriangles::default() {
+                    logger.message(
+                        Severity::Warning,
+                        &format!(
+                            "GeometryTask: geometry `{name}` ({handle:?}): dropped {} triangle(s) with out-of-range indices and {} with NaN/infinite positions; they are never hit",
+                            d.out_of_range_indices, d.non_finite_positions
+                        ),
+                    );
+                }
+                if let Ok(GeometrySlot { data: Some(g), .. }) = self.geometries.get_mut(*handle) {
+                    g.dropped = Some(d);
+                }
+            }
+        }
+    }
+
+    /// Allocation jobs of the instances waiting for a cache whose geometry's BLAS is built.
+    pub(super) fn cache_jobs(&self) -> Vec<crate::cache::AllocJob> {
+        if self.cache.waiting().is_empty() {
+            return Vec::new();
+        }
+        let mut jobs = Vec::new();
+        for h in self.instances.handles() {
+            if !self.cache.waiting().contains(&h.index) {
+                continue;
+            }
+            let Some(input) = self.instances.get(h).ok().and_then(|i| i.input.as_ref()) else {
+                continue;
+            };
+            let Some(d) = self
+                .geometries
+                .get(input.geometry)
+                .ok()
+                .and_then(|g| g.data.as_ref())
+            else {
+                continue;
+            };
+            let Some(blas) = d
+                .gpu
+                .blas
+                .filter(|_| d.gpu.pending != Some(PendingBvh::Build))
+            else {
+                continue;
+            };
+            jobs.push(crate::cache::AllocJob {
+                slot: h.index,
+                tri_base: blas.tris.start,
+                tri_count: d.triangles,
+                params: d.cache,
+                transform: input.transform,
+                initial: input.initial_tile_color,
+            });
+            // One task allocates at most this many (the rest wait for the next tasks): with a
+            // million instances waiting, collecting them all every task would dominate it.
+            if jobs.len() == crate::cache::alloc::MAX_ALLOCS_PER_TASK {
+                break;
+            }
+        }
+        jobs
+    }
+}
+
+/// The instance's record (layout at [`INSTANCE_RECORD_SIZE`]).
+pub(super) fn instance_record(input: &InstanceInput) -> [u8; INSTANCE_RECORD_SIZE as usize] {
+    // Rows of the 3×4 affine: transposing the 4×4 turns its columns into rows.
+    let rows = glam::Mat4::from(input.transform)
+        .transpose()
+        .to_cols_array();
+    let inv = glam::Mat4::from(input.transform.inverse())
+        .transpose()
+        .to_cols_array();
+    let mut words = [0u32; 32];
+    for i in 0..12 {
+        words[i] = rows[i].to_bits();
+        words[12 + i] = inv[i].to_bits();
+    }
+    words[24] = input.geometry.index;
+    words[25] = input.inclusion_mask.0;
+    words[26] = input.participating_in_tlas as u32;
+    bytemuck::cast(words)
+}
