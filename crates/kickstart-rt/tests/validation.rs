@@ -799,3 +799,161 @@ fn row_instance_operation() {
     }
     expect_field(&ctx, c, "InstanceTask", "operation");
 }
+
+/// What a context shows of its state: enough to tell whether a refused task changed anything
+/// (registrations, queued builds, instance records, the task serial, memory).
+#[derive(Debug, PartialEq)]
+struct Observed {
+    counts: RecordedTaskCounts,
+    in_flight: usize,
+    geometries: Vec<(Option<u32>, bool)>,
+    has_instance_table: bool,
+    allocations: ResourceAllocations,
+}
+
+fn observe(ctx: &ExecuteContext, geometries: &[GeometryHandle]) -> Observed {
+    Observed {
+        counts: ctx.recorded_task_counts(),
+        in_flight: ctx.in_flight_task_count(),
+        geometries: geometries
+            .iter()
+            .map(|g| {
+                (
+                    ctx.geometry_triangle_count(*g).unwrap(),
+                    ctx.geometry_is_built(*g).unwrap(),
+                )
+            })
+            .collect(),
+        has_instance_table: ctx.instance_table().is_some(),
+        allocations: ctx.resource_allocations(),
+    }
+}
+
+/// A container that registers a geometry and an instance of it, builds, and then asks for
+/// `bad`: refused with an error `expected` accepts, it must leave the context exactly as it
+/// was (no registration half-applied, no serial taken, no memory grown); the same container
+/// without `bad` is then accepted, and its task takes the next serial.
+fn refused_task_changes_nothing(
+    working_sets: u32,
+    bad: impl FnOnce(&ExecuteContext) -> RenderTask,
+    expected: impl FnOnce(&Error) -> bool,
+) {
+    let ctx = context(working_sets);
+    // An earlier task the refused one must not disturb.
+    let first = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, first, 1.0);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    let mut e = encoder();
+    let earlier = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    if working_sets > 1 {
+        ctx.mark_gpu_task_completed(earlier).unwrap();
+    }
+    let (geometry, instance) = (ctx.create_geometry_handle(), ctx.create_instance_handle());
+    let schedule = |c: &mut TaskContainer| {
+        register_geometry(c, geometry, 2.0);
+        register_instance(c, instance, geometry, Affine3A::IDENTITY);
+        c.schedule_bvh_task(BvhBuildTask::default());
+    };
+    let before = observe(&ctx, &[first, geometry]);
+    let mut c = ctx.create_task_container();
+    schedule(&mut c);
+    c.schedule_render_task(bad(&ctx));
+    let mut e = encoder();
+    match ctx.build_gpu_task(c, &mut e) {
+        Err(err) => assert!(expected(&err), "unexpected error {err:?}"),
+        Ok(t) => panic!("task {} accepted", t.serial()),
+    }
+    submit(e);
+    assert_eq!(observe(&ctx, &[first, geometry]), before);
+    if working_sets == 1 {
+        ctx.mark_gpu_task_completed(earlier).unwrap();
+    }
+    let mut c = ctx.create_task_container();
+    schedule(&mut c);
+    let mut e = encoder();
+    let t = ctx
+        .build_gpu_task(c, &mut e)
+        .expect("the same work without the bad task");
+    submit(e);
+    assert_eq!(t.serial(), earlier.serial() + 1);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    assert_eq!(ctx.geometry_triangle_count(geometry).unwrap(), Some(2));
+}
+
+fn invalid(field: &'static str) -> impl FnOnce(&Error) -> bool {
+    move |e| matches!(e, Error::InvalidInput { field: f, .. } if f == field)
+}
+
+#[test]
+fn injection_of_world_positions_in_a_depth_format_is_refused_before_anything_changes() {
+    refused_task_changes_nothing(
+        2,
+        |_| {
+            let mut t = injection();
+            t.depth = DepthInput {
+                texture: texture(F::Depth32Float, 16, 16, U::TEXTURE_BINDING),
+                depth_type: DepthType::RgbWorldSpace,
+            };
+            RenderTask::DirectLightingInjection(t)
+        },
+        invalid("depth.depth_type"),
+    );
+}
+
+#[test]
+fn refused_for_any_reason_the_context_is_unchanged() {
+    // A field rule of a render task.
+    refused_task_changes_nothing(
+        2,
+        |_| {
+            let mut t = ao_task();
+            t.ao_radius = f32::NAN;
+            RenderTask::TraceAmbientOcclusion(t)
+        },
+        invalid("ao_radius"),
+    );
+    // A debug view this version does not write.
+    refused_task_changes_nothing(
+        2,
+        |_| {
+            let mut t = ao_task();
+            t.common.debug_parameters.debug_output_type = DebugOutputType::Normal;
+            RenderTask::TraceAmbientOcclusion(t)
+        },
+        |e| matches!(e, Error::Unsupported { .. }),
+    );
+    // A destroyed denoising context.
+    refused_task_changes_nothing(
+        2,
+        |ctx| {
+            let common = denoise_common(ctx);
+            ctx.destroy_denoising_context_handle(common.context)
+                .unwrap();
+            RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+                common,
+                input: texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING),
+                output: output(16, 16),
+            })
+        },
+        |e| matches!(e, Error::InvalidHandle { .. }),
+    );
+    // A transfer between instances no earlier task registered.
+    refused_task_changes_nothing(
+        2,
+        |ctx| {
+            RenderTask::DirectLightTransfer(DirectLightTransferTask {
+                source: ctx.create_instance_handle(),
+                target: ctx.create_instance_handle(),
+            })
+        },
+        invalid("source"),
+    );
+    // Every working set in flight.
+    refused_task_changes_nothing(
+        1,
+        |_| RenderTask::TraceAmbientOcclusion(ao_task()),
+        |e| matches!(e, Error::WorkingSetsExhausted { supported: 1 }),
+    );
+}

@@ -411,9 +411,14 @@ fn build_blases(
                     };
                     previous.free_after(&mut s.scene, serial);
                 }
-                let header =
-                    s.scene
-                        .build_blas(&mut rec, h.index, &mut d.gpu, d.allow_update, d.strategy, &d.name)?;
+                let header = s.scene.build_blas(
+                    &mut rec,
+                    h.index,
+                    &mut d.gpu,
+                    d.allow_update,
+                    d.strategy,
+                    &d.name,
+                )?;
                 headers.push(
                     &s.scene.geometry_table.buffer,
                     h.index as u64 * GEOMETRY_RECORD_SIZE,

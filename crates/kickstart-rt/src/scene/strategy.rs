@@ -46,8 +46,14 @@ mod tests {
         assert_eq!(BuildStrategy::of(BuildHint::Auto, false), FastTrace);
         assert_eq!(BuildStrategy::of(BuildHint::Auto, true), FastBuild);
         for update in [false, true] {
-            assert_eq!(BuildStrategy::of(BuildHint::PreferFastTrace, update), FastTrace);
-            assert_eq!(BuildStrategy::of(BuildHint::PreferFastBuild, update), FastBuild);
+            assert_eq!(
+                BuildStrategy::of(BuildHint::PreferFastTrace, update),
+                FastTrace
+            );
+            assert_eq!(
+                BuildStrategy::of(BuildHint::PreferFastBuild, update),
+                FastBuild
+            );
         }
         assert_eq!(FastTrace.max_leaf(), BuildHint::FAST_TRACE_MAX_LEAF);
         assert_eq!(FastBuild.max_leaf(), 1);

@@ -59,4 +59,3 @@ impl SceneBuffers<'_> {
 /// The traversal module's stack (`var<private> rt_stack`): written before it is read, so the
 /// passes that include the module may drop its zero fill ([`traversal_pipeline`]).
 pub(crate) const TRAVERSAL_STACK: &str = "rt_stack";
-
