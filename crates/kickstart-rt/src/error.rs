@@ -1,7 +1,5 @@
 //! The one error type of the SDK.
 
-use crate::handles::HandleKind;
-
 /// Everything a public call of kickstart-rt can fail with.
 ///
 /// Every variant names what was wrong closely enough to find it in the caller's code: the task,
@@ -110,4 +108,15 @@ impl Error {
             reason: reason.into(),
         }
     }
+}
+
+/// The kinds of handle an [`crate::ExecuteContext`] hands out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum HandleKind {
+    /// [`crate::GeometryHandle`].
+    Geometry,
+    /// [`crate::InstanceHandle`].
+    Instance,
+    /// [`crate::DenoisingContextHandle`].
+    DenoisingContext,
 }

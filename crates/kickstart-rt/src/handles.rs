@@ -3,18 +3,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use crate::error::{Error, Result};
-
-/// The kinds of handle an [`crate::ExecuteContext`] hands out.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum HandleKind {
-    /// [`GeometryHandle`].
-    Geometry,
-    /// [`InstanceHandle`].
-    Instance,
-    /// [`DenoisingContextHandle`].
-    DenoisingContext,
-}
+use crate::error::{Error, HandleKind, Result};
 
 macro_rules! handle_type {
     ($(#[$doc:meta])* $name:ident, $kind:expr) => {

@@ -136,6 +136,22 @@
 
 #![warn(missing_docs)]
 
+// The SDK's layers, lowest first; a module imports only from its own layer and those before it,
+// and no two files or folders import each other (checked by `layering.rs`'s tests):
+//
+// 1. foundation: `error`, `version`, `handles`, `tasks` (every public task and input type),
+//    `logging`, `allocations`, `container`, `camera`
+// 2. GPU helpers: `gpu` (layouts, recorder, buffers, shaders), `staging`, `timing`, `device`
+// 3. `cpu`: the CPU reference BVH (the tests' oracle)
+// 4. `scene`: geometry ingestion, pools, BLAS/TLAS builds, and `scene::traversal`, the one
+//    seam every tracing pass binds
+// 5. `cache`: the direct lighting cache (allocation, injection, transfer, sampling)
+// 6. `trace`: ray batches, debug views, the trace tasks
+// 7. `denoise`: the denoisers and their history
+// 8. `context`: the public calls; plans a container (every check) and records it
+//
+// docs/architecture.md is the map of these modules and of one task's data flow.
+
 mod allocations;
 mod cache;
 mod camera;
@@ -147,6 +163,8 @@ mod device;
 mod error;
 mod gpu;
 mod handles;
+#[cfg(test)]
+mod layering;
 mod logging;
 mod scene;
 mod staging;
@@ -164,10 +182,8 @@ pub use context::{
 pub use device::{
     optional_features, optional_features_supported, required_features, required_limits,
 };
-pub use error::{Error, Result};
-pub use handles::{
-    DenoisingContextHandle, GeometryHandle, GpuTaskHandle, HandleKind, InstanceHandle,
-};
+pub use error::{Error, HandleKind, Result};
+pub use handles::{DenoisingContextHandle, GeometryHandle, GpuTaskHandle, InstanceHandle};
 pub use logging::{LogCallback, Severity};
 pub use tasks::*;
 pub use timing::{GpuTimings, PassTiming};

@@ -2,7 +2,6 @@
 //! tasks, the denoisers; the lighting cache owns its injection and transfer), and the one
 //! `match` that sends a planned render task to its effect.
 
-use super::plan::Route;
 use crate::cache::DirectLightingCache;
 use crate::denoise::Denoisers;
 use crate::error::Result;
@@ -13,6 +12,26 @@ use crate::tasks::*;
 use crate::trace::debug_view::DebugViewPass;
 use crate::trace::rays::RayTracer;
 use crate::trace::tasks::TracePasses;
+
+/// Where a render task is recorded: the effect that records it, with what the plan learned.
+#[derive(Clone, Copy)]
+pub(super) enum Route<'c> {
+    /// A batch of rays from a buffer.
+    RayBatch(&'c TraceRaysTask),
+    /// Direct lighting injected into the lighting cache.
+    Injection(&'c DirectLightingInjectionTask),
+    /// The lighting cache copied from one instance to another.
+    Transfer(&'c DirectLightTransferTask),
+    /// A trace task writing its normal output.
+    Trace(&'c RenderTask),
+    /// A trace task writing a primary-ray debug view instead.
+    DebugView {
+        common: &'c TraceTaskCommon,
+        output: &'c TextureInput,
+    },
+    /// A denoise task.
+    Denoise(&'c RenderTask),
+}
 
 /// The effects' pipelines and history. Pipelines are created on first use, so a context that
 /// never traces never compiles the trace shaders.

@@ -4,6 +4,7 @@
 
 use std::collections::HashSet;
 
+use super::effects::Route;
 use super::state::{GeometryData, GeometrySlot, State};
 use super::validate::{self, ComponentExtent};
 use crate::cache::inject::Injector;
@@ -13,26 +14,6 @@ use crate::error::{Error, Result};
 use crate::handles::*;
 use crate::tasks::*;
 use crate::trace::tasks::TracePasses;
-
-/// Where a render task is recorded: the effect that records it, with what the plan learned.
-#[derive(Clone, Copy)]
-pub(super) enum Route<'c> {
-    /// A batch of rays from a buffer.
-    RayBatch(&'c TraceRaysTask),
-    /// Direct lighting injected into the lighting cache.
-    Injection(&'c DirectLightingInjectionTask),
-    /// The lighting cache copied from one instance to another.
-    Transfer(&'c DirectLightTransferTask),
-    /// A trace task writing its normal output.
-    Trace(&'c RenderTask),
-    /// A trace task writing a primary-ray debug view instead.
-    DebugView {
-        common: &'c TraceTaskCommon,
-        output: &'c TextureInput,
-    },
-    /// A denoise task.
-    Denoise(&'c RenderTask),
-}
 
 /// What one container asks for, checked: the record phase carries it out in this order.
 pub(super) struct FramePlan<'c> {

@@ -541,9 +541,9 @@ fn allocate_caches(frame: &mut Frame<'_>, s: &mut State) -> Result<()> {
 fn record_render_task(
     frame: &mut Frame<'_>,
     s: &mut State,
-    route: &super::plan::Route<'_>,
+    route: &super::effects::Route<'_>,
 ) -> Result<()> {
-    if let super::plan::Route::RayBatch(t) = route {
+    if let super::effects::Route::RayBatch(t) = route {
         frame.ws._inputs.push(t.rays.clone());
         frame.ws._inputs.push(t.hits.clone());
     }
