@@ -4,8 +4,10 @@
 //! `shaders/denoise_common.wgsl` and the record files); a signal's buffers are separate so that
 //! each binding stays under WebGPU's default 128 MiB binding limit up to 4K.
 
-use crate::context::{DenoisingContextInput, SignalType};
-use crate::tasks::Viewport;
+use std::collections::HashMap;
+
+use crate::handles::DenoisingContextHandle;
+use crate::tasks::{DenoisingContextInput, SignalType, Viewport};
 
 /// Bytes of the largest per-pixel record (a guide, a radiance signal).
 pub(crate) const RECORD_BYTES: u64 = 16;
@@ -102,5 +104,59 @@ impl History {
     pub fn bytes(&self) -> u64 {
         let n = signal_count(self.input.signal_type) as u64;
         buffer_bytes(&self.input) * 2 + signal_buffer_bytes(&self.input) * 4 * n
+    }
+}
+
+/// The histories of the contexts one denoiser serves: live ones by handle, and those of destroyed
+/// contexts until no in-flight task can use them.
+#[derive(Default)]
+pub(crate) struct Histories {
+    live: HashMap<DenoisingContextHandle, History>,
+    retired: Vec<History>,
+}
+
+impl Histories {
+    /// Follows the live contexts (those this denoiser serves): creates the history of new ones,
+    /// retires destroyed ones.
+    pub fn sync<'a>(
+        &mut self,
+        device: &wgpu::Device,
+        live: impl Iterator<Item = &'a (DenoisingContextHandle, DenoisingContextInput)> + Clone,
+    ) {
+        let dead: Vec<DenoisingContextHandle> = self
+            .live
+            .keys()
+            .filter(|h| !live.clone().any(|(l, _)| l == *h))
+            .copied()
+            .collect();
+        for h in dead {
+            if let Some(history) = self.live.remove(&h) {
+                self.retired.push(history);
+            }
+        }
+        for (h, input) in live {
+            if !self.live.contains_key(h) {
+                self.live.insert(*h, History::new(device, *input));
+            }
+        }
+    }
+
+    /// The history of a live context.
+    pub fn get_mut(&mut self, context: &DenoisingContextHandle) -> Option<&mut History> {
+        self.live.get_mut(context)
+    }
+
+    /// Releases retired histories whose last task is older than `oldest_in_flight`.
+    pub fn collect(&mut self, oldest_in_flight: u64) {
+        self.retired.retain(|h| h.last_used >= oldest_in_flight);
+    }
+
+    /// GPU bytes held (live and not yet released).
+    pub fn bytes(&self) -> u64 {
+        self.live
+            .values()
+            .chain(self.retired.iter())
+            .map(History::bytes)
+            .sum()
     }
 }

@@ -1,0 +1,704 @@
+//! The spatio-temporal filter every denoiser runs (SVGF-like, written here in WGSL; NRD is not
+//! used), per frame of a context:
+//! 1. **temporal** (`shaders/denoise_temporal.wgsl`): G-buffer decode into a compact guide,
+//!    checkerboard resolve, reprojection (motion vectors of either type with their scale, or the
+//!    previous matrices when there are none; camera jitter compensated), disocclusion from plane
+//!    distance and normal, per-pixel history length, history clamping against ghosting, firefly
+//!    clamping, accumulation of the raw signal and of its luminance's second moment;
+//! 2. **à-trous** (`shaders/denoise_atrous.wgsl`), 3 (Fast) or 5 (HighQuality) iterations of
+//!    an edge-stopping wavelet filter guided by normal, plane distance and the estimated noise,
+//!    with a radius that follows roughness, hit distance, the occluder distance of a shadow (its
+//!    penumbra width) and the history length; one chain of dispatches per signal, whose last
+//!    iteration writes the signal's output texture.
+//!
+//! [`Shared`] holds what every denoiser binds the same way (layouts, placeholders); a
+//! [`Filter`] is one denoiser's pipelines and histories.
+
+use std::collections::HashMap;
+
+use bytemuck::{Pod, Zeroable};
+
+use super::history::{self, Histories, History};
+use super::signal::{wgsl_format, Kind, SignalSet};
+use crate::gpu::layout::{float_texture_entry, storage_entry, uniform_entry};
+use crate::gpu::shader::{assemble, compute_pipeline_with_layouts};
+use crate::gpu::Recorder;
+use crate::handles::DenoisingContextHandle;
+use crate::tasks::{
+    DenoiseMode, DenoiseTaskCommon, DenoisingContextInput, DenoisingMethod, HalfResolutionMode,
+    MotionType, SignalType, TextureInput, Viewport,
+};
+use crate::trace::gbuffer::{
+    gbuffer_wgsl, resolve_viewport, CameraFrame, GBufferBinder, GBufferInputs,
+};
+
+const COMMON_WGSL: &str = include_str!("../../shaders/denoise_common.wgsl");
+const TEMPORAL_WGSL: &str = include_str!("../../shaders/denoise_temporal.wgsl");
+const ATROUS_WGSL: &str = include_str!("../../shaders/denoise_atrous.wgsl");
+
+/// Invocations per workgroup side of every denoise pass (`@workgroup_size(8, 8)`).
+const TILE: u32 = 8;
+
+/// What one denoising method does.
+#[derive(Debug, Clone, Copy)]
+struct MethodSettings {
+    /// Longest history, frames.
+    max_history: f32,
+    /// À-trous iterations (steps 1, 2, 4, …).
+    iterations: u32,
+    /// Radius of the spatial falloff before the signal-specific scaling, pixels.
+    base_radius: f32,
+}
+
+fn method_settings(method: DenoisingMethod) -> MethodSettings {
+    match method {
+        DenoisingMethod::Fast => MethodSettings {
+            max_history: 16.0,
+            iterations: 3,
+            base_radius: 8.0,
+        },
+        DenoisingMethod::HighQuality => MethodSettings {
+            max_history: 32.0,
+            iterations: 5,
+            base_radius: 12.0,
+        },
+    }
+}
+
+/// The uniform of `shaders/denoise_common.wgsl` (`DenoiseParams`).
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy, Debug)]
+struct DenoiseParams {
+    viewport: [u32; 4],
+    eye: [f32; 4],
+    forward: [f32; 4],
+    prev_eye: [f32; 4],
+    prev_forward: [f32; 4],
+    jitter: [f32; 4],
+    motion_scale: [f32; 4],
+    kind0: u32,
+    kind1: u32,
+    signal_count: u32,
+    motion_type: u32,
+    max_history: f32,
+    discard_history: u32,
+    checkerboard: u32,
+    base_radius: f32,
+}
+
+#[repr(C)]
+#[derive(Pod, Zeroable, Clone, Copy, Debug)]
+struct StepParams {
+    value: u32,
+    first: u32,
+    pad: [u32; 2],
+}
+
+/// A denoise task's signals: inputs, outputs and kinds (one or two).
+pub(super) struct Job<'a> {
+    /// The signal type the task needs its context to have.
+    pub signal_type: SignalType,
+    pub common: &'a DenoiseTaskCommon,
+    pub inputs: Vec<&'a TextureInput>,
+    pub outputs: Vec<&'a TextureInput>,
+    kinds: Vec<Kind>,
+}
+
+impl<'a> Job<'a> {
+    /// A task of one signal.
+    pub fn one(
+        signal_type: SignalType,
+        common: &'a DenoiseTaskCommon,
+        input: &'a TextureInput,
+        output: &'a TextureInput,
+        kind: Kind,
+    ) -> Self {
+        Job {
+            signal_type,
+            common,
+            inputs: vec![input],
+            outputs: vec![output],
+            kinds: vec![kind],
+        }
+    }
+
+    /// A task of two signals.
+    pub fn two(
+        signal_type: SignalType,
+        common: &'a DenoiseTaskCommon,
+        inputs: [&'a TextureInput; 2],
+        outputs: [&'a TextureInput; 2],
+        kinds: [Kind; 2],
+    ) -> Self {
+        Job {
+            signal_type,
+            common,
+            inputs: inputs.to_vec(),
+            outputs: outputs.to_vec(),
+            kinds: kinds.to_vec(),
+        }
+    }
+}
+
+fn layout(
+    device: &wgpu::Device,
+    label: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries,
+    })
+}
+
+fn bind(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    resources: &[wgpu::BindingResource<'_>],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
+        .iter()
+        .enumerate()
+        .map(|(i, r)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: r.clone(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// What every denoiser binds the same way: the bind group layouts of the passes and the
+/// placeholders bound where a pass has nothing (created on first use).
+pub(super) struct Shared {
+    gbuffer: GBufferBinder,
+    temporal_inputs: wgpu::BindGroupLayout,
+    temporal_buffers: wgpu::BindGroupLayout,
+    atrous_params: wgpu::BindGroupLayout,
+    atrous_buffers: wgpu::BindGroupLayout,
+    /// Bound where a pass has no texture (no motion vectors, one signal).
+    placeholder_texture: wgpu::TextureView,
+    /// Bound where a pass has no second signal: one to read, one to write (a dispatch may not
+    /// use one buffer both ways).
+    placeholder_buffers: [wgpu::Buffer; 2],
+}
+
+impl Shared {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let gbuffer = GBufferBinder::new(device);
+        let temporal_inputs = layout(
+            device,
+            "kickstart-rt denoise temporal inputs",
+            &[
+                uniform_entry(0),
+                float_texture_entry(1),
+                float_texture_entry(2),
+                float_texture_entry(3),
+            ],
+        );
+        let temporal_buffers = layout(
+            device,
+            "kickstart-rt denoise temporal buffers",
+            &[
+                storage_entry(0, true),
+                storage_entry(1, false),
+                storage_entry(2, true),
+                storage_entry(3, true),
+                storage_entry(4, false),
+                storage_entry(5, false),
+            ],
+        );
+        let atrous_params = layout(
+            device,
+            "kickstart-rt denoise a-trous params",
+            &[uniform_entry(0), uniform_entry(1)],
+        );
+        let atrous_buffers = layout(
+            device,
+            "kickstart-rt denoise a-trous buffers",
+            &[
+                storage_entry(0, true),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, false),
+                storage_entry(4, false),
+            ],
+        );
+        let placeholder_texture = device
+            .create_texture(&wgpu::TextureDescriptor {
+                label: Some("kickstart-rt denoise placeholder"),
+                size: wgpu::Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+            .create_view(&Default::default());
+        let placeholder_buffer = || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("kickstart-rt denoise placeholder"),
+                size: history::RECORD_BYTES,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
+        Shared {
+            gbuffer,
+            temporal_inputs,
+            temporal_buffers,
+            atrous_params,
+            atrous_buffers,
+            placeholder_texture,
+            placeholder_buffers: [placeholder_buffer(), placeholder_buffer()],
+        }
+    }
+}
+
+/// The pipelines of one signal set.
+struct SetPipelines {
+    temporal: wgpu::ComputePipeline,
+    atrous: wgpu::ComputePipeline,
+    /// The last à-trous iteration per output formats (one per signal): the output textures'
+    /// layout (group 2) and the pipeline.
+    last: Vec<(
+        Vec<wgpu::TextureFormat>,
+        wgpu::BindGroupLayout,
+        wgpu::ComputePipeline,
+    )>,
+}
+
+/// The à-trous chain of one signal: its pipelines (a single-signal set; see
+/// `SignalSet::atrous_chains`), the last iteration's output layout and pipeline.
+struct Chain {
+    signal: usize,
+    atrous: wgpu::ComputePipeline,
+    out_layout: wgpu::BindGroupLayout,
+    last: wgpu::ComputePipeline,
+}
+
+/// The pipelines of the signal sets a denoiser has used (created on first use).
+#[derive(Default)]
+struct Pipelines {
+    sets: HashMap<SignalSet, SetPipelines>,
+}
+
+impl Pipelines {
+    /// The temporal and à-trous pipelines of `set`.
+    fn set(&mut self, device: &wgpu::Device, shared: &Shared, set: SignalSet) -> &mut SetPipelines {
+        self.sets.entry(set).or_insert_with(|| {
+            let prelude = set.prelude(None);
+            SetPipelines {
+                temporal: compute_pipeline_with_layouts(
+                    device,
+                    "kickstart-rt denoise temporal",
+                    &assemble(&[&gbuffer_wgsl(0), &prelude, COMMON_WGSL, TEMPORAL_WGSL]),
+                    "main",
+                    &[
+                        shared.gbuffer.layout(),
+                        &shared.temporal_inputs,
+                        &shared.temporal_buffers,
+                    ],
+                ),
+                atrous: compute_pipeline_with_layouts(
+                    device,
+                    "kickstart-rt denoise a-trous",
+                    &assemble(&[&prelude, COMMON_WGSL, ATROUS_WGSL]),
+                    "main",
+                    &[&shared.atrous_params, &shared.atrous_buffers],
+                ),
+                last: Vec::new(),
+            }
+        })
+    }
+
+    /// The last à-trous iteration of `set` writing textures of `formats` (one per signal; each
+    /// one of the writable output formats): its output layout and pipeline.
+    fn last(
+        &mut self,
+        device: &wgpu::Device,
+        shared: &Shared,
+        set: SignalSet,
+        formats: &[wgpu::TextureFormat],
+    ) -> Option<(wgpu::BindGroupLayout, wgpu::ComputePipeline)> {
+        if formats.iter().any(|f| wgsl_format(*f).is_none()) {
+            return None;
+        }
+        let sp = self.set(device, shared, set);
+        if let Some((_, l, p)) = sp.last.iter().find(|(f, _, _)| f == formats) {
+            return Some((l.clone(), p.clone()));
+        }
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = formats
+            .iter()
+            .enumerate()
+            .map(|(k, format)| wgpu::BindGroupLayoutEntry {
+                binding: k as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: *format,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+                count: None,
+            })
+            .collect();
+        let out_layout = layout(device, "kickstart-rt denoise output", &entries);
+        let pipeline = compute_pipeline_with_layouts(
+            device,
+            "kickstart-rt denoise a-trous (last, output)",
+            &assemble(&[&set.prelude(Some(formats)), COMMON_WGSL, ATROUS_WGSL]),
+            "main",
+            &[&shared.atrous_params, &shared.atrous_buffers, &out_layout],
+        );
+        sp.last
+            .push((formats.to_vec(), out_layout.clone(), pipeline.clone()));
+        Some((out_layout, pipeline))
+    }
+
+    /// The à-trous chain of each signal of `set` writing `job`'s outputs;
+    /// `None` where an output format has no pipeline (validation admits writable formats only).
+    fn chains(
+        &mut self,
+        device: &wgpu::Device,
+        shared: &Shared,
+        set: SignalSet,
+        job: &Job<'_>,
+    ) -> Option<Vec<Chain>> {
+        let mut chains = Vec::new();
+        for (s, chain_set) in set.atrous_chains() {
+            let format = job.outputs[s].texture().format();
+            let (out_layout, last) = self.last(device, shared, chain_set, &[format])?;
+            let atrous = self.set(device, shared, chain_set).atrous.clone();
+            chains.push(Chain {
+                signal: s,
+                atrous,
+                out_layout,
+                last,
+            });
+        }
+        Some(chains)
+    }
+}
+
+/// One denoiser: the pipelines of the signal sets it has used and the histories of the
+/// contexts it serves.
+pub(super) struct Filter {
+    /// The signal types of the contexts it serves.
+    signal_types: &'static [SignalType],
+    pipelines: Pipelines,
+    histories: Histories,
+}
+
+impl Filter {
+    /// A denoiser of contexts of `signal_types`, with no pipelines and no history yet.
+    pub fn new(signal_types: &'static [SignalType]) -> Self {
+        Filter {
+            signal_types,
+            pipelines: Pipelines::default(),
+            histories: Histories::default(),
+        }
+    }
+
+    /// Follows the live contexts: creates the history of new ones it serves, retires destroyed
+    /// ones.
+    pub fn sync(
+        &mut self,
+        device: &wgpu::Device,
+        live: &[(DenoisingContextHandle, DenoisingContextInput)],
+    ) {
+        let served = self.signal_types;
+        let live = live
+            .iter()
+            .filter(move |(_, input)| served.contains(&input.signal_type));
+        self.histories.sync(device, live);
+    }
+
+    /// Releases retired histories whose last task is older than `oldest_in_flight`.
+    pub fn collect(&mut self, oldest_in_flight: u64) {
+        self.histories.collect(oldest_in_flight);
+    }
+
+    /// GPU bytes of its histories (live and not yet released).
+    pub fn bytes(&self) -> u64 {
+        self.histories.bytes()
+    }
+
+    /// Creates every pipeline of its signal types now, for every writable output format.
+    pub fn prepare(&mut self, device: &wgpu::Device, shared: &Shared) {
+        for &signal_type in self.signal_types {
+            let set = SignalSet::of(signal_type);
+            let _ = self.pipelines.set(device, shared, set);
+            for (_, chain) in set.atrous_chains() {
+                for f in crate::WRITABLE_OUTPUT_FORMATS {
+                    let _ = self.pipelines.last(device, shared, chain, &[f]);
+                }
+            }
+        }
+    }
+
+    /// Records one frame of a validated denoise task of this denoiser (its context has a
+    /// history after `sync`; a context without one records nothing).
+    pub fn record(&mut self, rec: &mut Recorder<'_>, shared: &Shared, job: &Job<'_>, serial: u64) {
+        let Some(h) = self.histories.get_mut(&job.common.context) else {
+            return;
+        };
+        let device = rec.device;
+        let set = SignalSet::of(h.input.signal_type);
+        let temporal = self.pipelines.set(device, shared, set).temporal.clone();
+        let Some(chains) = self.pipelines.chains(device, shared, set, job) else {
+            return; // unreachable: validation admits writable formats only
+        };
+        record_frame(rec, shared, h, job, &temporal, &chains, serial);
+    }
+}
+
+/// Records one frame of `job` on its context's history `h`: the temporal pass, then each
+/// signal's à-trous chain; then advances the history.
+fn record_frame(
+    rec: &mut Recorder<'_>,
+    shared: &Shared,
+    h: &mut History,
+    job: &Job<'_>,
+    temporal: &wgpu::ComputePipeline,
+    chains: &[Chain],
+    serial: u64,
+) {
+    let c = job.common;
+    let settings = method_settings(h.input.method);
+    let mut inputs = GBufferInputs::of_denoise(c, job.inputs[0]);
+    inputs.viewport = resolve_viewport(c.viewport, job.inputs[0].texture().size());
+    let vp = inputs.viewport;
+    let (params, motion_texture) = frame_params(shared, h, job, vp, settings);
+    let params = rec.uniform("kickstart-rt denoise params", &params);
+    let gb_params = rec.uniform("kickstart-rt denoise g-buffer", &inputs.params());
+    let frame = Frame {
+        params: &params,
+        groups: (vp.width.div_ceil(TILE), vp.height.div_ceil(TILE)),
+        cur: (h.frame % 2) as usize,
+    };
+
+    let previous_scope = rec.scope;
+    rec.scope = "denoise";
+    // 1. Temporal accumulation.
+    let temporal_inputs = TemporalInputs {
+        gbuffer: &inputs,
+        gbuffer_params: &gb_params,
+        motion: &motion_texture,
+    };
+    record_temporal(rec, shared, h, job, &frame, &temporal_inputs, temporal);
+    // 2. À-trous iterations, per signal: history → temp[0] → temp[1] → … → the output texture
+    // (the last iteration writes it).
+    for chain in chains {
+        record_atrous(rec, shared, h, job, &frame, chain, settings.iterations);
+    }
+    rec.scope = previous_scope;
+
+    h.frame += 1;
+    h.last_viewport = Some(vp);
+    h.prev_jitter = c.view.jitter;
+    h.last_used = serial;
+}
+
+/// What every pass of one frame shares.
+struct Frame<'a> {
+    /// The frame's `DenoiseParams` uniform.
+    params: &'a wgpu::Buffer,
+    /// Workgroups of every dispatch.
+    groups: (u32, u32),
+    /// The current frame's buffers (by frame parity); `1 - cur` are the previous frame's.
+    cur: usize,
+}
+
+/// What the temporal pass reads besides the signal: the G-buffer and the motion vectors (or a
+/// placeholder).
+struct TemporalInputs<'a> {
+    gbuffer: &'a GBufferInputs<'a>,
+    gbuffer_params: &'a wgpu::Buffer,
+    motion: &'a TextureInput,
+}
+
+/// The frame's `DenoiseParams` and the motion texture to bind (a placeholder without motion
+/// vectors). The history starts over on `DenoiseMode::DiscardHistory`, on the context's first
+/// frame and when the viewport changes size.
+fn frame_params(
+    shared: &Shared,
+    h: &History,
+    job: &Job<'_>,
+    vp: Viewport,
+    settings: MethodSettings,
+) -> (DenoiseParams, TextureInput) {
+    let c = job.common;
+    let resized = h
+        .last_viewport
+        .is_some_and(|l| l.width != vp.width || l.height != vp.height);
+    let discard = c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized;
+
+    let cam = CameraFrame::new(c.view.world_to_view, c.view.view_to_clip);
+    let prev = CameraFrame::new(c.view.prev_world_to_view, c.view.prev_view_to_clip);
+    let v4 = |v: glam::DVec3, w: f32| v.as_vec3().extend(w).to_array();
+    let (motion_type, motion_scale, motion_texture) = match &c.motion {
+        None => (0, glam::Vec3::ZERO, shared.placeholder_texture.clone()),
+        Some(m) => (
+            match m.motion_type {
+                MotionType::RgViewSpace => 1,
+                MotionType::RgbWorldSpace => 2,
+            },
+            m.scale,
+            m.texture.clone(),
+        ),
+    };
+    let params = DenoiseParams {
+        viewport: [vp.x, vp.y, vp.width, vp.height],
+        eye: v4(cam.eye, if cam.perspective { 1.0 } else { 0.0 }),
+        forward: v4(cam.forward, 0.0),
+        prev_eye: v4(prev.eye, if prev.perspective { 1.0 } else { 0.0 }),
+        prev_forward: v4(prev.forward, 0.0),
+        jitter: [
+            c.view.jitter.x,
+            c.view.jitter.y,
+            h.prev_jitter.x,
+            h.prev_jitter.y,
+        ],
+        motion_scale: motion_scale.extend(0.0).to_array(),
+        kind0: job.kinds[0] as u32,
+        kind1: job.kinds.get(1).copied().unwrap_or(job.kinds[0]) as u32,
+        signal_count: job.kinds.len() as u32,
+        motion_type,
+        max_history: settings.max_history,
+        discard_history: discard as u32,
+        checkerboard: match c.half_resolution_mode {
+            HalfResolutionMode::Off => 0,
+            HalfResolutionMode::Checkerboard => 1,
+            HalfResolutionMode::CheckerboardInverted => 2,
+        },
+        base_radius: settings.base_radius,
+    };
+    (params, motion_texture)
+}
+
+/// The temporal pass: decodes the G-buffer into this frame's guide and accumulates each signal
+/// into this frame's history from the previous frame's.
+fn record_temporal(
+    rec: &mut Recorder<'_>,
+    shared: &Shared,
+    h: &History,
+    job: &Job<'_>,
+    frame: &Frame<'_>,
+    inputs: &TemporalInputs<'_>,
+    temporal: &wgpu::ComputePipeline,
+) {
+    let device = rec.device;
+    let (cur, prv) = (frame.cur, 1 - frame.cur);
+    // The second signal's buffer, or a placeholder (`written`: the one bound for writing).
+    let second = |set: &Vec<wgpu::Buffer>, written: bool| -> wgpu::Buffer {
+        set.get(1)
+            .cloned()
+            .unwrap_or_else(|| shared.placeholder_buffers[written as usize].clone())
+    };
+    let input1 = job
+        .inputs
+        .get(1)
+        .map_or_else(|| shared.placeholder_texture.clone(), |t| (*t).clone());
+    let g0 = shared
+        .gbuffer
+        .bind_group(device, inputs.gbuffer_params, inputs.gbuffer);
+    let g1 = bind(
+        device,
+        "kickstart-rt denoise temporal inputs",
+        &shared.temporal_inputs,
+        &[
+            frame.params.as_entire_binding(),
+            wgpu::BindingResource::TextureView(inputs.motion),
+            wgpu::BindingResource::TextureView(job.inputs[0]),
+            wgpu::BindingResource::TextureView(&input1),
+        ],
+    );
+    let hist_prev1 = second(&h.history[prv], false);
+    let hist_cur1 = second(&h.history[cur], true);
+    let g2 = bind(
+        device,
+        "kickstart-rt denoise temporal buffers",
+        &shared.temporal_buffers,
+        &[
+            h.guides[prv].as_entire_binding(),
+            h.guides[cur].as_entire_binding(),
+            h.history[prv][0].as_entire_binding(),
+            hist_prev1.as_entire_binding(),
+            h.history[cur][0].as_entire_binding(),
+            hist_cur1.as_entire_binding(),
+        ],
+    );
+    rec.dispatch_2d("denoise temporal", temporal, &[&g0, &g1, &g2], frame.groups);
+}
+
+/// The à-trous chain of one signal: `iterations` dispatches from this frame's history through
+/// the ping-pong buffers, the last writing the signal's output texture.
+fn record_atrous(
+    rec: &mut Recorder<'_>,
+    shared: &Shared,
+    h: &History,
+    job: &Job<'_>,
+    frame: &Frame<'_>,
+    chain: &Chain,
+    iterations: u32,
+) {
+    let device = rec.device;
+    let s = chain.signal;
+    let [read_placeholder, write_placeholder] = &shared.placeholder_buffers;
+    let outputs = bind(
+        device,
+        "kickstart-rt denoise output",
+        &chain.out_layout,
+        &[wgpu::BindingResource::TextureView(job.outputs[s])],
+    );
+    let mut src = h.history[frame.cur][s].clone();
+    for it in 0..iterations {
+        let dst = h.temp[(it % 2) as usize][s].clone();
+        let step = rec.uniform(
+            "kickstart-rt denoise a-trous step",
+            &StepParams {
+                value: 1 << it,
+                first: (it == 0) as u32,
+                pad: [0; 2],
+            },
+        );
+        let a0 = bind(
+            device,
+            "kickstart-rt denoise a-trous params",
+            &shared.atrous_params,
+            &[frame.params.as_entire_binding(), step.as_entire_binding()],
+        );
+        let a1 = bind(
+            device,
+            "kickstart-rt denoise a-trous buffers",
+            &shared.atrous_buffers,
+            &[
+                h.guides[frame.cur].as_entire_binding(),
+                src.as_entire_binding(),
+                read_placeholder.as_entire_binding(),
+                dst.as_entire_binding(),
+                write_placeholder.as_entire_binding(),
+            ],
+        );
+        if it + 1 == iterations {
+            rec.dispatch_2d(
+                "denoise a-trous + output",
+                &chain.last,
+                &[&a0, &a1, &outputs],
+                frame.groups,
+            );
+        } else {
+            rec.dispatch_2d("denoise a-trous", &chain.atrous, &[&a0, &a1], frame.groups);
+        }
+        src = dst;
+    }
+}
