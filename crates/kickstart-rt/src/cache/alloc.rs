@@ -212,6 +212,12 @@ impl DirectLightingCache {
         self.capacity
     }
 
+    /// The surfel capacity the next task records with: today's, or the growth a read-back asked
+    /// for, which that task's preparation applies first.
+    pub(crate) fn planned_capacity(&self) -> u32 {
+        self.grow_to.unwrap_or(self.capacity)
+    }
+
     /// GPU bytes of the cache (meta, surfel pool, allocation and injection buffers).
     pub fn bytes(&self) -> u64 {
         self.meta.buffer().size()
@@ -487,21 +493,7 @@ impl DirectLightingCache {
             return Ok(());
         }
         // Triangle records (CPU-allocated) and scratch big enough for the largest job.
-        let mut fitted = Vec::with_capacity(jobs.len());
-        let mut records = Vec::with_capacity(jobs.len());
-        for j in jobs {
-            let words = j.tri_count.max(1) * RECORD_WORDS;
-            match self
-                .meta
-                .alloc(&self.device, rec.encoder, words, self.max_binding)
-            {
-                Some(r) => {
-                    fitted.push(j.clone());
-                    records.push(r);
-                }
-                None => self.no_room_for_records(j.slot, words),
-            }
-        }
+        let (fitted, records) = self.allocate_records(rec, jobs);
         let jobs = &fitted[..];
         if jobs.is_empty() {
             return Ok(());
@@ -523,19 +515,7 @@ impl DirectLightingCache {
                 scratch_words * 4,
             );
         }
-        // Free blocks for this task (the largest first); what the GPU leaves comes back with the
-        // read-back.
-        let mut blocks: Vec<(u32, u32)> = self.free.iter().map(|(s, l)| (*s, *l)).collect();
-        blocks.sort_by_key(|b| std::cmp::Reverse(b.1));
-        blocks.truncate(MAX_FREE_BLOCKS);
-        for (s, _) in &blocks {
-            self.free.remove(s);
-        }
-        let mut head = vec![blocks.len() as u32, 0];
-        for (s, l) in &blocks {
-            head.extend([*s, *l]);
-        }
-        upload(&self.device, rec.encoder, &self.state, 8, &head);
+        self.hand_free_blocks_to_gpu(rec);
 
         let headers_start = self.headers.start;
         let meta = self.meta.buffer().clone();
@@ -602,7 +582,55 @@ impl DirectLightingCache {
             );
             self.waiting.remove(&j.slot);
         }
-        let bytes = (ST_LOG + 4 * jobs.len() as u64) * 4;
+        self.read_back_allocations(rec, slots, serial);
+        Ok(())
+    }
+
+    /// Allocates the triangle records of each job in the meta pool: the jobs that fit and their
+    /// records (a job that does not fit gets no cache; see `no_room_for_records`).
+    fn allocate_records(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        jobs: &[AllocJob],
+    ) -> (Vec<AllocJob>, Vec<Range>) {
+        let mut fitted = Vec::with_capacity(jobs.len());
+        let mut records = Vec::with_capacity(jobs.len());
+        for j in jobs {
+            let words = j.tri_count.max(1) * RECORD_WORDS;
+            match self
+                .meta
+                .alloc(&self.device, rec.encoder, words, self.max_binding)
+            {
+                Some(r) => {
+                    fitted.push(j.clone());
+                    records.push(r);
+                }
+                None => self.no_room_for_records(j.slot, words),
+            }
+        }
+        (fitted, records)
+    }
+
+    /// Hands the free blocks to this task's allocation passes (the largest first); what the GPU
+    /// leaves comes back with the read-back.
+    fn hand_free_blocks_to_gpu(&mut self, rec: &mut Recorder<'_>) {
+        let mut blocks: Vec<(u32, u32)> = self.free.iter().map(|(s, l)| (*s, *l)).collect();
+        blocks.sort_by_key(|b| std::cmp::Reverse(b.1));
+        blocks.truncate(MAX_FREE_BLOCKS);
+        for (s, _) in &blocks {
+            self.free.remove(s);
+        }
+        let mut head = vec![blocks.len() as u32, 0];
+        for (s, l) in &blocks {
+            head.extend([*s, *l]);
+        }
+        upload(&self.device, rec.encoder, &self.state, 8, &head);
+    }
+
+    /// Copies the allocation state and log of `slots` (this task's jobs, in order) to a
+    /// read-back buffer, read once task `serial` completes.
+    fn read_back_allocations(&mut self, rec: &mut Recorder<'_>, slots: Vec<u32>, serial: u64) {
+        let bytes = (ST_LOG + 4 * slots.len() as u64) * 4;
         let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("kickstart-rt cache allocation read-back"),
             size: bytes,
@@ -618,7 +646,6 @@ impl DirectLightingCache {
             slots,
             started: false,
         });
-        Ok(())
     }
 
     /// An instance whose triangle records do not fit the cache's meta binding gets no cache
