@@ -65,6 +65,57 @@ impl Bounds {
     }
 }
 
+/// The cheapest binned-SAH split of `prims` (bounds `bb`, centroid bounds `cb`) over every
+/// axis: (cost, axis, last bin of the left side), or `None` where no axis has extent.
+fn best_split(
+    prims: &[u32],
+    boxes: &[Bounds],
+    centroid: &impl Fn(u32) -> Vec3,
+    bb: &Bounds,
+    cb: &Bounds,
+) -> Option<(f32, usize, usize)> {
+    let extent = cb.max - cb.min;
+    let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, split bin)
+    for axis in 0..3 {
+        if extent[axis] <= 0.0 {
+            continue;
+        }
+        let scale = BINS as f32 / extent[axis];
+        let bin_of = |p: u32| (((centroid(p)[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1);
+        let mut bins = [(Bounds::EMPTY, 0usize); BINS];
+        for &p in prims {
+            let b = &mut bins[bin_of(p)];
+            b.0.merge(&boxes[p as usize]);
+            b.1 += 1;
+        }
+        let mut right = [(0.0f32, 0usize); BINS];
+        let mut acc = Bounds::EMPTY;
+        let mut cnt = 0;
+        for i in (1..BINS).rev() {
+            acc.merge(&bins[i].0);
+            cnt += bins[i].1;
+            right[i] = (acc.area(), cnt);
+        }
+        let mut acc = Bounds::EMPTY;
+        let mut cnt = 0;
+        for i in 0..BINS - 1 {
+            acc.merge(&bins[i].0);
+            cnt += bins[i].1;
+            let (ra, rc) = right[i + 1];
+            if cnt == 0 || rc == 0 {
+                continue;
+            }
+            let cost = SAH_TRAVERSAL_COST
+                + SAH_INTERSECTION_COST * (acc.area() * cnt as f32 + ra * rc as f32)
+                    / bb.area().max(f32::MIN_POSITIVE);
+            if best.is_none_or(|b| cost < b.0) {
+                best = Some((cost, axis, i));
+            }
+        }
+    }
+    best
+}
+
 impl CpuBvh {
     /// Builds over `triangles`. Triangles with a non-finite vertex are left out (they can never be
     /// hit); degenerate ones are kept and never reported as hits.
@@ -113,45 +164,7 @@ impl CpuBvh {
             };
             let leaf_cost = n as f32 * SAH_INTERSECTION_COST;
             let extent = cb.max - cb.min;
-            let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, split bin)
-            for axis in 0..3 {
-                if extent[axis] <= 0.0 {
-                    continue;
-                }
-                let scale = BINS as f32 / extent[axis];
-                let bin_of =
-                    |p: u32| (((centroid(p)[axis] - cb.min[axis]) * scale) as usize).min(BINS - 1);
-                let mut bins = [(Bounds::EMPTY, 0usize); BINS];
-                for &p in &prims[start..end] {
-                    let b = &mut bins[bin_of(p)];
-                    b.0.merge(&boxes[p as usize]);
-                    b.1 += 1;
-                }
-                let mut right = [(0.0f32, 0usize); BINS];
-                let mut acc = Bounds::EMPTY;
-                let mut cnt = 0;
-                for i in (1..BINS).rev() {
-                    acc.merge(&bins[i].0);
-                    cnt += bins[i].1;
-                    right[i] = (acc.area(), cnt);
-                }
-                let mut acc = Bounds::EMPTY;
-                let mut cnt = 0;
-                for i in 0..BINS - 1 {
-                    acc.merge(&bins[i].0);
-                    cnt += bins[i].1;
-                    let (ra, rc) = right[i + 1];
-                    if cnt == 0 || rc == 0 {
-                        continue;
-                    }
-                    let cost = SAH_TRAVERSAL_COST
-                        + SAH_INTERSECTION_COST * (acc.area() * cnt as f32 + ra * rc as f32)
-                            / bb.area().max(f32::MIN_POSITIVE);
-                    if best.is_none_or(|b| cost < b.0) {
-                        best = Some((cost, axis, i));
-                    }
-                }
-            }
+            let best = best_split(&prims[start..end], &boxes, &centroid, &bb, &cb);
             let mid = match best {
                 Some((cost, axis, split)) if cost < leaf_cost || n > MAX_LEAF => {
                     let scale = BINS as f32 / extent[axis];
