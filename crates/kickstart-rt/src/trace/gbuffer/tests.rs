@@ -227,6 +227,64 @@ fn close(a: f32, b: f64, tol: f64, what: &str) {
     );
 }
 
+/// Checks the probe's output `out` against the analytic surfaces `surf` (and their `normals`)
+/// seen by `cam`: position, normal, direction to the eye, view distance, the defaults and the
+/// projection back to the pixel.
+fn check_decoded(
+    out: &[f32],
+    surf: &[Option<DVec3>],
+    normals: &[DVec3],
+    cam: &CameraFrame,
+    what: &str,
+) {
+    for (i, expected) in surf.iter().enumerate() {
+        let o = &out[i * STRIDE..(i + 1) * STRIDE];
+        let Some(p) = expected else {
+            assert_eq!(o[0], 0.0, "{what}: pixel {i} has no surface");
+            continue;
+        };
+        assert_eq!(o[0], 1.0, "{what}: pixel {i} has a surface");
+        let scale = 1e-4 * (1.0 + (p - cam.eye).length());
+        for k in 0..3 {
+            close(
+                o[1 + k],
+                p[k],
+                scale,
+                &format!("{what}: pixel {i} position"),
+            );
+            close(
+                o[4 + k],
+                normals[i][k],
+                2e-5,
+                &format!("{what}: pixel {i} normal"),
+            );
+        }
+        let to_eye = if cam.perspective {
+            (cam.eye - *p).normalize()
+        } else {
+            -cam.forward
+        };
+        for k in 0..3 {
+            close(o[7 + k], to_eye[k], 1e-4, &format!("{what}: to_eye"));
+        }
+        let dist = if cam.perspective {
+            (cam.eye - *p).length()
+        } else {
+            (*p - cam.eye).dot(cam.forward).abs()
+        };
+        close(o[10], dist, scale, &format!("{what}: view distance"));
+        // Defaults: roughness 0.3, metalness 1, no mask.
+        close(o[11], 0.3, 1e-6, what);
+        close(o[12], 1.0, 0.0, what);
+        close(o[16], 1.0, 0.0, what);
+        // gb_project takes the surface back to its pixel centre.
+        let px = (i as u32 % VP.width) as f64 + 0.5;
+        let py = (i as u32 / VP.width) as f64 + 0.5;
+        close(o[17], px, 2e-3, &format!("{what}: projected x"));
+        close(o[18], py, 2e-3, &format!("{what}: projected y"));
+    }
+}
+
 /// Both depth types and all six normal types decode the same surfaces, for every camera, and
 /// the projection helper maps each surface back to its pixel.
 #[test]
@@ -305,52 +363,7 @@ fn every_depth_and_normal_type_decodes_the_same_scene() {
                 };
                 let out = probe(&inputs);
                 let what = format!("{name}, {depth_type:?}, {ty:?}");
-                for (i, expected) in surf.iter().enumerate() {
-                    let o = &out[i * STRIDE..(i + 1) * STRIDE];
-                    let Some(p) = expected else {
-                        assert_eq!(o[0], 0.0, "{what}: pixel {i} has no surface");
-                        continue;
-                    };
-                    assert_eq!(o[0], 1.0, "{what}: pixel {i} has a surface");
-                    let scale = 1e-4 * (1.0 + (p - cam.eye).length());
-                    for k in 0..3 {
-                        close(
-                            o[1 + k],
-                            p[k],
-                            scale,
-                            &format!("{what}: pixel {i} position"),
-                        );
-                        close(
-                            o[4 + k],
-                            normals[i][k],
-                            2e-5,
-                            &format!("{what}: pixel {i} normal"),
-                        );
-                    }
-                    let to_eye = if cam.perspective {
-                        (cam.eye - *p).normalize()
-                    } else {
-                        -cam.forward
-                    };
-                    for k in 0..3 {
-                        close(o[7 + k], to_eye[k], 1e-4, &format!("{what}: to_eye"));
-                    }
-                    let dist = if cam.perspective {
-                        (cam.eye - *p).length()
-                    } else {
-                        (*p - cam.eye).dot(cam.forward).abs()
-                    };
-                    close(o[10], dist, scale, &format!("{what}: view distance"));
-                    // Defaults: roughness 0.3, metalness 1, no mask.
-                    close(o[11], 0.3, 1e-6, &what);
-                    close(o[12], 1.0, 0.0, &what);
-                    close(o[16], 1.0, 0.0, &what);
-                    // gb_project takes the surface back to its pixel centre.
-                    let px = (i as u32 % VP.width) as f64 + 0.5;
-                    let py = (i as u32 / VP.width) as f64 + 0.5;
-                    close(o[17], px, 2e-3, &format!("{what}: projected x"));
-                    close(o[18], py, 2e-3, &format!("{what}: projected y"));
-                }
+                check_decoded(&out, &surf, &normals, &cam, &what);
             }
         }
     }
