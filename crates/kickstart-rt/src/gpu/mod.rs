@@ -5,6 +5,7 @@ pub(crate) mod buffers;
 pub(crate) mod layout;
 pub(crate) mod radix_sort;
 pub(crate) mod recorder;
+pub(crate) mod reflect;
 pub(crate) mod shader;
 pub(crate) mod spirv;
 #[cfg(test)]

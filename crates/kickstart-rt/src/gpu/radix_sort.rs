@@ -20,7 +20,7 @@
 //! bound by dispatch count. An odd number of digit passes ends in the scratch buffers, which
 //! [`RadixSort::record`] returns to the caller instead of copying them back (a dispatch saved).
 
-use super::shader::compute_pipeline;
+use super::reflect::{ReflectedPipeline, ShaderReflection};
 use super::Recorder;
 
 /// WGSL source of every kernel of the sort (after the digit counting it shares with the LBVH's
@@ -66,13 +66,13 @@ fn hist_len(nblocks: u32) -> u32 {
 
 /// Stable GPU LSD radix sort of (u32 key, u32 value) pairs.
 pub(crate) struct RadixSort {
-    histogram: wgpu::ComputePipeline,
-    scan_rows: wgpu::ComputePipeline,
-    scatter: wgpu::ComputePipeline,
+    histogram: ReflectedPipeline,
+    scan_rows: ReflectedPipeline,
+    scatter: ReflectedPipeline,
     /// `scan_rows` and `scatter` in one, for at most [`SUMMING_MAX_BLOCKS`] blocks.
-    scatter_summing: wgpu::ComputePipeline,
+    scatter_summing: ReflectedPipeline,
     /// The one-workgroup path for counts up to [`SMALL_SORT_MAX`].
-    small: wgpu::ComputePipeline,
+    small: ReflectedPipeline,
     /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
     /// its row totals; created on first use, grown when a sort needs more.
     keys_tmp: Option<wgpu::Buffer>,
@@ -83,13 +83,22 @@ pub(crate) struct RadixSort {
 impl RadixSort {
     /// Compiles the sort's pipelines; scratch buffers are created by the first [`Self::record`].
     pub fn new(device: &wgpu::Device) -> Self {
-        let pipeline = |entry| compute_pipeline(device, "radix sort", SOURCE, entry);
+        let shader = ShaderReflection::new(SOURCE).expect("shaders/radix_sort.wgsl is valid WGSL");
+        let pipeline = |entry| ReflectedPipeline::new(device, "radix sort", SOURCE, &shader, entry);
+        let small = ShaderReflection::new(SMALL_SOURCE)
+            .expect("shaders/radix_sort_small.wgsl is valid WGSL");
         RadixSort {
             histogram: pipeline("histogram"),
             scan_rows: pipeline("scan_rows"),
             scatter: pipeline("scatter"),
             scatter_summing: pipeline("scatter_summing"),
-            small: compute_pipeline(device, "radix sort (small)", SMALL_SOURCE, "sort_small"),
+            small: ReflectedPipeline::new(
+                device,
+                "radix sort (small)",
+                SMALL_SOURCE,
+                &small,
+                "sort_small",
+            ),
             keys_tmp: None,
             vals_tmp: None,
             hist: None,
@@ -179,25 +188,13 @@ impl RadixSort {
         if count <= SMALL_SORT_MAX {
             // Same result (stable, ascending) in one dispatch instead of 3 per digit pass.
             let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
-            let bg = rec.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("radix sort (small)"),
-                layout: &self.small.get_bind_group_layout(0),
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: uniform.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: keys.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: values.as_entire_binding(),
-                    },
-                ],
-            });
-            rec.dispatch("radix sort (small)", &self.small, &[&bg], 1);
+            let bg = self.small.bind_group(
+                rec.device,
+                "radix sort (small)",
+                0,
+                &[("small", &uniform), ("s_keys", keys), ("s_vals", values)],
+            );
+            rec.dispatch("radix sort (small)", &self.small.pipeline, &[&bg], 1);
             return in_place;
         }
         let key_bits = key_bits.min(32);
@@ -218,22 +215,8 @@ impl RadixSort {
         // A copy of the device reference, so the closure does not borrow `rec` (dispatch needs it
         // mutably).
         let device = rec.device;
-        let bind = |pipeline: &wgpu::ComputePipeline,
-                    uniform: &wgpu::Buffer,
-                    buffers: &[(u32, &wgpu::Buffer)]| {
-            let mut entries = vec![wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniform.as_entire_binding(),
-            }];
-            entries.extend(buffers.iter().map(|&(binding, b)| wgpu::BindGroupEntry {
-                binding,
-                resource: b.as_entire_binding(),
-            }));
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("radix sort"),
-                layout: &pipeline.get_bind_group_layout(0),
-                entries: &entries,
-            })
+        let bind = |pipeline: &ReflectedPipeline, buffers: &[(&str, &wgpu::Buffer)]| {
+            pipeline.bind_group(device, "radix sort", 0, buffers)
         };
 
         let passes = key_bits.div_ceil(DIGIT_BITS);
@@ -251,11 +234,19 @@ impl RadixSort {
             } else {
                 ((keys_tmp, vals_tmp), (keys, values))
             };
+            let buffers = [
+                ("params", &uniform),
+                ("keys_in", src.0),
+                ("vals_in", src.1),
+                ("keys_out", dst.0),
+                ("vals_out", dst.1),
+                ("hist", hist),
+            ];
             if !(first_counted && pass == 0) {
-                let hist_group = bind(&self.histogram, &uniform, &[(1, src.0), (5, hist)]);
+                let hist_group = bind(&self.histogram, &buffers);
                 rec.dispatch(
                     "radix sort histogram",
-                    &self.histogram,
+                    &self.histogram.pipeline,
                     &[&hist_group],
                     nblocks,
                 );
@@ -263,16 +254,22 @@ impl RadixSort {
             let scatter = if nblocks <= SUMMING_MAX_BLOCKS {
                 &self.scatter_summing
             } else {
-                let scan_group = bind(&self.scan_rows, &uniform, &[(5, hist)]);
-                rec.dispatch("radix sort scan", &self.scan_rows, &[&scan_group], RADIX);
+                let scan_group = bind(&self.scan_rows, &buffers);
+                rec.dispatch(
+                    "radix sort scan",
+                    &self.scan_rows.pipeline,
+                    &[&scan_group],
+                    RADIX,
+                );
                 &self.scatter
             };
-            let scatter_group = bind(
-                scatter,
-                &uniform,
-                &[(1, src.0), (2, src.1), (3, dst.0), (4, dst.1), (5, hist)],
+            let scatter_group = bind(scatter, &buffers);
+            rec.dispatch(
+                "radix sort scatter",
+                &scatter.pipeline,
+                &[&scatter_group],
+                nblocks,
             );
-            rec.dispatch("radix sort scatter", scatter, &[&scatter_group], nblocks);
         }
         if passes % 2 == 1 {
             (keys_tmp.clone(), vals_tmp.clone())

@@ -6,7 +6,7 @@
 //! All components of one [`Ingest::record`] call go into one dispatch with a small component
 //! table, so scenes of thousands of small geometries do not cost thousands of passes.
 
-use crate::gpu::shader::compute_pipeline;
+use crate::gpu::reflect::{ReflectedPipeline, ShaderReflection};
 use crate::gpu::Recorder;
 use crate::{IndexFormat, VertexFormat};
 
@@ -43,7 +43,7 @@ pub(crate) struct ComponentIngest {
 /// The vertex-pulling pass (one pipeline, created once).
 pub(crate) struct Ingest {
     /// `ingest.wgsl`'s `ingest` entry point.
-    pipeline: wgpu::ComputePipeline,
+    pipeline: ReflectedPipeline,
 }
 
 /// Per-dispatch parameters (`Params` in `ingest.wgsl`).
@@ -59,14 +59,17 @@ struct Params {
 impl Ingest {
     /// Creates the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {
+        let source = concat!(
+            include_str!("../../shaders/ingest_decode.wgsl"),
+            include_str!("../../shaders/ingest.wgsl")
+        );
+        let shader = ShaderReflection::new(source).expect("shaders/ingest.wgsl is valid WGSL");
         Ingest {
-            pipeline: compute_pipeline(
+            pipeline: ReflectedPipeline::new(
                 device,
                 "kickstart-rt ingest",
-                concat!(
-                    include_str!("../../shaders/ingest_decode.wgsl"),
-                    include_str!("../../shaders/ingest.wgsl")
-                ),
+                source,
+                &shader,
                 "ingest",
             ),
         }
@@ -150,21 +153,21 @@ impl Ingest {
             "kickstart-rt ingest components",
             bytemuck::cast_slice(table),
         );
-        let bind = rec.bind_buffers(
+        let bind = self.pipeline.bind_group(
+            rec.device,
             "kickstart-rt ingest",
-            &self.pipeline,
             0,
             &[
-                params.as_entire_binding(),
-                rows.as_entire_binding(),
-                raw.as_entire_binding(),
-                out_tris.as_entire_binding(),
-                counters.as_entire_binding(),
+                ("params", &params),
+                ("components", &rows),
+                ("raw", raw),
+                ("out_tris", out_tris),
+                ("counters", counters),
             ],
         );
         rec.dispatch(
             "ingest",
-            &self.pipeline,
+            &self.pipeline.pipeline,
             &[&bind],
             total.div_ceil(WORKGROUP),
         );

@@ -49,7 +49,7 @@
 //! gather's place and decodes the triangles from the application's bytes itself: the ingestion
 //! fused into the refit.
 
-use crate::gpu::shader::compute_pipeline;
+use crate::gpu::reflect::{ReflectedPipeline, ShaderReflection};
 use crate::gpu::Recorder;
 use crate::scene::ingest::ROW_WORDS;
 use bytemuck::{Pod, Zeroable};
@@ -347,20 +347,20 @@ impl Grown {
 
 /// The LBVH builder: its pipelines, the radix sort, and scratch grown on demand.
 pub(crate) struct Lbvh {
-    bounds: wgpu::ComputePipeline,
-    morton: wgpu::ComputePipeline,
+    bounds: ReflectedPipeline,
+    morton: ReflectedPipeline,
     /// `lbvh_morton_histogram`: the keys and the sort's first histogram in one pass.
-    morton_histogram: wgpu::ComputePipeline,
-    hierarchy: wgpu::ComputePipeline,
-    climb: wgpu::ComputePipeline,
-    hploc: wgpu::ComputePipeline,
+    morton_histogram: ReflectedPipeline,
+    hierarchy: ReflectedPipeline,
+    climb: ReflectedPipeline,
+    hploc: ReflectedPipeline,
     /// `lbvh_refit_gather`: the range refit's gather, box pyramid and in-block nodes.
-    refit_gather: wgpu::ComputePipeline,
+    refit_gather: ReflectedPipeline,
     /// `lbvh_refit_ingest`: `lbvh_refit_gather` decoding its triangles from the application's
     /// bytes (the ingestion fused into the refit).
-    refit_ingest: wgpu::ComputePipeline,
+    refit_ingest: ReflectedPipeline,
     /// `lbvh_range_refit`: the nodes that straddle blocks, from their leaf ranges.
-    range_refit: wgpu::ComputePipeline,
+    range_refit: ReflectedPipeline,
     sort: RadixSort,
     /// Centroid bounds, inner boxes during the climb, arrival counters; for a clustered build
     /// also the cluster counts and lists ([`clustered_work_words`]).
@@ -378,58 +378,14 @@ pub(crate) struct Lbvh {
     pyramid_boxes: Grown,
 }
 
-/// Bindings of each entry point (auto layouts only contain what the entry point uses).
-const BOUNDS_BINDINGS: &[u32] = &[0, 1, 2];
-/// Bindings of `lbvh_morton`.
-const MORTON_BINDINGS: &[u32] = &[0, 1, 2, 3, 4];
-/// Bindings of `lbvh_morton_histogram` (10: the sort's histogram).
-const MORTON_HISTOGRAM_BINDINGS: &[u32] = &[0, 1, 2, 3, 4, 10];
-/// Bindings of `lbvh_hierarchy`.
-const HIERARCHY_BINDINGS: &[u32] = &[0, 3, 4, 5, 6];
-/// Bindings of `lbvh_climb`.
-const CLIMB_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8];
 /// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/hploc.wgsl`).
 const HPLOC_WORKGROUP: u32 = 32;
 
-/// Bindings of `hploc_climb`.
-const HPLOC_BINDINGS: &[u32] = &[0, 1, 2, 5, 6, 7, 8, 9];
-/// Bindings of `lbvh_refit_gather` (11: the pyramid, 12: staged triangles, 13: BLAS triangles).
-const REFIT_GATHER_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 8, 11, 12, 13];
-/// Bindings of `lbvh_refit_ingest` (no 8: its geometries have more than one block, so the
-/// range pass writes the root; no 12: it decodes from 14 with the rows at 15).
-const REFIT_INGEST_BINDINGS: &[u32] = &[0, 2, 5, 6, 7, 11, 13, 14, 15, 16];
-/// Bindings of `lbvh_range_refit`.
-const RANGE_REFIT_BINDINGS: &[u32] = &[0, 5, 6, 7, 8, 11, 13, 17];
-
-/// The buffers of one dispatch, by binding number (0 = params … 8 = bounds_out, 9 = the
-/// clustered topology, 10 = the sort's histogram, 11 = the range refit's pyramid, 12 and 13 =
-/// its source and destination triangles, 14–16 = the fused refit's raw bytes, component rows
-/// (a uniform) and dropped-triangle counters, 17 = the work buffer read-only for the range pass).
-struct Bindings<'a> {
-    all: [&'a wgpu::Buffer; 18],
-}
-
-impl Bindings<'_> {
-    fn group(
-        &self,
-        device: &wgpu::Device,
-        pipeline: &wgpu::ComputePipeline,
-        used: &[u32],
-    ) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = used
-            .iter()
-            .map(|&b| wgpu::BindGroupEntry {
-                binding: b,
-                resource: self.all[b as usize].as_entire_binding(),
-            })
-            .collect();
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lbvh"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        })
-    }
-}
+/// Buffers of one dispatch by the shader's names for them (`shaders/lbvh.wgsl`,
+/// `shaders/hploc.wgsl`): each pass binds those its entry point uses, at the binding numbers the
+/// shader declares ([`ReflectedPipeline::bind_group`]); a later entry of a name overrides an
+/// earlier one.
+type Buffers<'a> = Vec<(&'static str, &'a wgpu::Buffer)>;
 
 /// Workgroups covering `n` invocations (at least one: the small-count path needs a thread).
 fn groups(n: u32) -> u32 {
@@ -468,16 +424,18 @@ impl Lbvh {
             include_str!("../../shaders/lbvh.wgsl"),
             include_str!("../../shaders/hploc.wgsl")
         );
+        let shader = ShaderReflection::new(src).expect("shaders/lbvh.wgsl is valid WGSL");
+        let pipeline = |label, entry| ReflectedPipeline::new(device, label, src, &shader, entry);
         Lbvh {
-            bounds: compute_pipeline(device, "lbvh bounds", src, "lbvh_bounds"),
-            morton: compute_pipeline(device, "lbvh morton", src, "lbvh_morton"),
-            morton_histogram: compute_pipeline(device, "lbvh morton", src, "lbvh_morton_histogram"),
-            hierarchy: compute_pipeline(device, "lbvh hierarchy", src, "lbvh_hierarchy"),
-            climb: compute_pipeline(device, "lbvh climb", src, "lbvh_climb"),
-            hploc: compute_pipeline(device, "hploc climb", src, "hploc_climb"),
-            refit_gather: compute_pipeline(device, "lbvh refit gather", src, "lbvh_refit_gather"),
-            refit_ingest: compute_pipeline(device, "lbvh refit ingest", src, "lbvh_refit_ingest"),
-            range_refit: compute_pipeline(device, "lbvh range refit", src, "lbvh_range_refit"),
+            bounds: pipeline("lbvh bounds", "lbvh_bounds"),
+            morton: pipeline("lbvh morton", "lbvh_morton"),
+            morton_histogram: pipeline("lbvh morton", "lbvh_morton_histogram"),
+            hierarchy: pipeline("lbvh hierarchy", "lbvh_hierarchy"),
+            climb: pipeline("lbvh climb", "lbvh_climb"),
+            hploc: pipeline("hploc climb", "hploc_climb"),
+            refit_gather: pipeline("lbvh refit gather", "lbvh_refit_gather"),
+            refit_ingest: pipeline("lbvh refit ingest", "lbvh_refit_ingest"),
+            range_refit: pipeline("lbvh range refit", "lbvh_range_refit"),
             sort: RadixSort::new(device),
             work: Grown::default(),
             keys: Grown::default(),
@@ -598,90 +556,78 @@ impl Lbvh {
         } else {
             params.clone()
         };
-        let mut bind = Bindings {
-            all: [
-                &karras_params,
-                b.aabbs,
-                &work,
-                &keys,
-                &values,
-                b.order,
-                &karras,
-                b.nodes,
-                bounds_out,
-                &topology,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-            ],
-        };
+        let mut bind: Buffers<'_> = vec![
+            ("params", &karras_params),
+            ("aabbs", b.aabbs),
+            ("work", &work),
+            ("keys", &keys),
+            ("values", &values),
+            ("order", b.order),
+            // The hierarchy's Karras tree; `topo_out` is the clustered tree's topology.
+            ("topology", &karras),
+            ("nodes", b.nodes),
+            ("bounds_out", bounds_out),
+            ("topo_out", &topology),
+        ];
         // Where the sorted pairs end up (the sort's scratch after an odd number of passes).
         let sorted;
         if n >= 2 {
             Self::clear_arrivals(rec, &work, n);
-            let morton_bind = match b.centroid_bounds {
+            let mut morton_bind = bind.clone();
+            match b.centroid_bounds {
                 // The caller's words take the work buffer's place in the morton pass.
-                Some((given, _)) => {
-                    let mut all = bind.all;
-                    all[2] = given;
-                    Bindings { all }
-                }
+                Some((given, _)) => morton_bind.push(("work", given)),
                 None => {
                     // Centroid-bounds header (zero is the identity of the encoded atomicMax).
                     rec.encoder.clear_buffer(&work, 0, Some(BOXES_AT * 4));
-                    let bg = bind.group(device, &self.bounds, BOUNDS_BINDINGS);
-                    rec.dispatch("lbvh bounds", &self.bounds, &[&bg], groups(n));
-                    Bindings { all: bind.all }
+                    let bg = self.bounds.bind_group(device, "lbvh", 0, &bind);
+                    rec.dispatch("lbvh bounds", &self.bounds.pipeline, &[&bg], groups(n));
                 }
-            };
+            }
             // A sort of more than one workgroup takes its first histogram from the morton pass
             // (one dependent dispatch fewer).
             sorted = match self.sort.first_histogram(device, n, key_bits) {
                 Some((hist, nblocks)) => {
-                    let mut all = morton_bind.all;
-                    all[10] = &hist;
-                    let bg = Bindings { all }.group(
-                        device,
-                        &self.morton_histogram,
-                        MORTON_HISTOGRAM_BINDINGS,
-                    );
-                    rec.dispatch("lbvh morton", &self.morton_histogram, &[&bg], nblocks);
+                    morton_bind.push(("sort_hist", &hist));
+                    let pass = &self.morton_histogram;
+                    let bg = pass.bind_group(device, "lbvh", 0, &morton_bind);
+                    rec.dispatch("lbvh morton", &pass.pipeline, &[&bg], nblocks);
                     self.sort
                         .record_after_first_histogram(rec, &keys, &values, n, key_bits)
                 }
                 None => {
-                    let bg = morton_bind.group(device, &self.morton, MORTON_BINDINGS);
-                    rec.dispatch("lbvh morton", &self.morton, &[&bg], groups(n));
+                    let bg = self.morton.bind_group(device, "lbvh", 0, &morton_bind);
+                    rec.dispatch("lbvh morton", &self.morton.pipeline, &[&bg], groups(n));
                     self.sort.record(rec, &keys, &values, n, key_bits)
                 }
             };
-            bind.all[3] = &sorted.0;
-            bind.all[4] = &sorted.1;
+            bind.push(("keys", &sorted.0));
+            bind.push(("values", &sorted.1));
         }
         if n >= 1 {
-            let bg = bind.group(device, &self.hierarchy, HIERARCHY_BINDINGS);
-            rec.dispatch("lbvh hierarchy", &self.hierarchy, &[&bg], groups(n));
+            let bg = self.hierarchy.bind_group(device, "lbvh", 0, &bind);
+            rec.dispatch(
+                "lbvh hierarchy",
+                &self.hierarchy.pipeline,
+                &[&bg],
+                groups(n),
+            );
         }
-        bind.all[0] = &params;
+        bind.push(("params", &params));
         if b.hierarchy_only {
             return;
         }
         if clustered {
-            let bg = bind.group(device, &self.hploc, HPLOC_BINDINGS);
+            let bg = self.hploc.bind_group(device, "lbvh", 0, &bind);
             rec.dispatch(
                 "hploc climb",
-                &self.hploc,
+                &self.hploc.pipeline,
                 &[&bg],
                 n.div_ceil(HPLOC_WORKGROUP).max(1),
             );
         } else {
-            let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
-            rec.dispatch("lbvh climb", &self.climb, &[&bg], groups(n));
+            let bg = self.climb.bind_group(device, "lbvh", 0, &bind);
+            rec.dispatch("lbvh climb", &self.climb.pipeline, &[&bg], groups(n));
         }
     }
 
@@ -714,33 +660,18 @@ impl Lbvh {
                 ..Params::zeroed()
             },
         );
-        // Keys, values and the clustered topology are not used by the climb; the dummy fills
-        // their slots.
-        let bind = Bindings {
-            all: [
-                &params,
-                r.aabbs,
-                &work,
-                &dummy,
-                &dummy,
-                r.order,
-                r.topology.0,
-                r.nodes,
-                bounds_out,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-                &dummy,
-            ],
-        };
+        let bind: Buffers<'_> = vec![
+            ("params", &params),
+            ("aabbs", r.aabbs),
+            ("work", &work),
+            ("order", r.order),
+            ("topology", r.topology.0),
+            ("nodes", r.nodes),
+            ("bounds_out", bounds_out),
+        ];
         Self::clear_arrivals(rec, &work, n);
-        let bg = bind.group(device, &self.climb, CLIMB_BINDINGS);
-        rec.dispatch("lbvh refit", &self.climb, &[&bg], groups(n));
+        let bg = self.climb.bind_group(device, "lbvh", 0, &bind);
+        rec.dispatch("lbvh refit", &self.climb.pipeline, &[&bg], groups(n));
     }
 
     /// Records the range refit of a BLAS (see the module docs): `lbvh refit gather`, then
@@ -774,30 +705,23 @@ impl Lbvh {
             (pyramid_boxes(n) - u64::from(n)) * 32,
         );
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
-        // Staged triangles bind at 12; raw bytes at 14 with their rows (padded to the shader's
-        // fixed-length uniform array) at 15 and the counters at 16.
-        let (src, src_base, raw, rows, counters, ingest_row_count, ingest_counter) = match &r.source
-        {
-            RefitSource::Staged { triangles, base } => {
-                (*triangles, *base, &dummy, None, &dummy, 0, 0)
-            }
+        // Staged triangles, or raw bytes with their rows (padded to the shader's fixed-length
+        // uniform array) and the counters.
+        let (src_base, ingest_row_count, ingest_counter) = match &r.source {
+            RefitSource::Staged { base, .. } => (*base, 0, 0),
+            RefitSource::Raw(t) => (0, (t.rows.len() / ROW_WORDS) as u32, t.counter_base),
+        };
+        let rows = match &r.source {
+            RefitSource::Staged { .. } => None,
             RefitSource::Raw(t) => {
                 let mut table = t.rows.to_vec();
                 table.resize(REFIT_INGEST_ROWS * ROW_WORDS, 0);
-                let rows = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("lbvh refit ingest rows"),
-                    contents: bytemuck::cast_slice(&table),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                let count = (t.rows.len() / ROW_WORDS) as u32;
-                (
-                    &dummy,
-                    0,
-                    t.raw,
-                    Some(rows),
-                    t.counters,
-                    count,
-                    t.counter_base,
+                Some(
+                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("lbvh refit ingest rows"),
+                        contents: bytemuck::cast_slice(&table),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    }),
                 )
             }
         };
@@ -818,43 +742,48 @@ impl Lbvh {
                 ..Params::zeroed()
             },
         );
-        let bind = Bindings {
-            all: [
-                &params,
-                &dummy,
-                &work,
-                &dummy,
-                &dummy,
-                r.order,
-                r.topology.0,
-                r.nodes,
-                bounds_out,
-                &dummy,
-                &dummy,
-                &pyramid,
-                src,
-                r.dst,
-                raw,
-                rows.as_ref().unwrap_or(&dummy),
-                counters,
-                &work,
-            ],
-        };
+        let mut bind: Buffers<'_> = vec![
+            ("params", &params),
+            ("work", &work),
+            ("order", r.order),
+            ("topology", r.topology.0),
+            ("nodes", r.nodes),
+            ("bounds_out", bounds_out),
+            ("pyramid", &pyramid),
+            ("refit_dst", r.dst),
+            // The work buffer again, read-only, for the range pass.
+            ("work_read", &work),
+        ];
+        if let RefitSource::Staged { triangles, .. } = &r.source {
+            bind.push(("refit_src", triangles));
+        }
+        if let (RefitSource::Raw(t), Some(rows)) = (&r.source, &rows) {
+            bind.extend([
+                ("raw", t.raw),
+                ("ingest_rows", rows),
+                ("ingest_counters", t.counters),
+            ]);
+        }
         if !upper.is_empty() {
             rec.encoder
                 .clear_buffer(&work, upper.start * 4, Some((upper.end - upper.start) * 4));
         }
-        if rows.is_some() {
-            let bg = bind.group(device, &self.refit_ingest, REFIT_INGEST_BINDINGS);
-            rec.dispatch("lbvh refit ingest", &self.refit_ingest, &[&bg], groups(n));
+        let (label, first) = if rows.is_some() {
+            ("lbvh refit ingest", &self.refit_ingest)
         } else {
-            let bg = bind.group(device, &self.refit_gather, REFIT_GATHER_BINDINGS);
-            rec.dispatch("lbvh refit gather", &self.refit_gather, &[&bg], groups(n));
-        }
+            ("lbvh refit gather", &self.refit_gather)
+        };
+        let bg = first.bind_group(device, "lbvh", 0, &bind);
+        rec.dispatch(label, &first.pipeline, &[&bg], groups(n));
         // Up to one block every node lies inside it: the gather wrote them all.
         if n > WORKGROUP {
-            let bg = bind.group(device, &self.range_refit, RANGE_REFIT_BINDINGS);
-            rec.dispatch("lbvh range refit", &self.range_refit, &[&bg], groups(n));
+            let bg = self.range_refit.bind_group(device, "lbvh", 0, &bind);
+            rec.dispatch(
+                "lbvh range refit",
+                &self.range_refit.pipeline,
+                &[&bg],
+                groups(n),
+            );
         }
     }
 

@@ -2,7 +2,8 @@
 //! BLAS builder, triangle gather into the builder's sorted order, and instance world AABBs for the
 //! TLAS. Layouts: `docs/ray-tracing-core.md`.
 
-use crate::gpu::shader::{assemble, compute_pipeline};
+use crate::gpu::reflect::{ReflectedPipeline, ShaderReflection};
+use crate::gpu::shader::assemble;
 use crate::gpu::Recorder;
 
 /// Threads per workgroup of the triangle entry points of `prims.wgsl` (one primitive each).
@@ -19,13 +20,13 @@ pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 32;
 /// The three pipelines (one module, one entry point each).
 pub(crate) struct Prims {
     /// `triangle_aabbs` entry point.
-    triangle_aabbs: wgpu::ComputePipeline,
+    triangle_aabbs: ReflectedPipeline,
     /// `gather_triangles` entry point.
-    gather_triangles: wgpu::ComputePipeline,
+    gather_triangles: ReflectedPipeline,
     /// `gather_triangles_boxes` entry point.
-    gather_triangles_boxes: wgpu::ComputePipeline,
+    gather_triangles_boxes: ReflectedPipeline,
     /// `instance_refs` entry point.
-    instance_refs: wgpu::ComputePipeline,
+    instance_refs: ReflectedPipeline,
     /// Bound in place of missing centroid-bounds words (never written: the flag is off).
     no_bounds: wgpu::Buffer,
 }
@@ -41,7 +42,10 @@ impl Prims {
             &max_refs,
             include_str!("../../shaders/prims.wgsl"),
         ]);
-        let make = |entry: &str| compute_pipeline(device, "kickstart-rt prims", &source, entry);
+        let shader = ShaderReflection::new(&source).expect("shaders/prims.wgsl is valid WGSL");
+        let make = |entry: &str| {
+            ReflectedPipeline::new(device, "kickstart-rt prims", &source, &shader, entry)
+        };
         Prims {
             triangle_aabbs: make("triangle_aabbs"),
             gather_triangles: make("gather_triangles"),
@@ -75,19 +79,19 @@ impl Prims {
             "kickstart-rt triangle aabbs params",
             &[tri_base, count, aabb_base, 0],
         );
-        let bind = rec.bind_buffers(
+        let bind = self.triangle_aabbs.bind_group(
+            rec.device,
             "kickstart-rt triangle aabbs",
-            &self.triangle_aabbs,
             0,
             &[
-                params.as_entire_binding(),
-                tris.as_entire_binding(),
-                aabbs.as_entire_binding(),
+                ("params", &params),
+                ("aabb_tris", tris),
+                ("tri_aabbs", aabbs),
             ],
         );
         rec.dispatch(
             "blas build: triangle aabbs",
-            &self.triangle_aabbs,
+            &self.triangle_aabbs.pipeline,
             &[&bind],
             count.div_ceil(WORKGROUP),
         );
@@ -117,21 +121,26 @@ impl Prims {
             "kickstart-rt gather triangles params",
             &[src_base, order_base, count, dst_base],
         );
-        let mut entries = vec![
-            params.as_entire_binding(),
-            src.as_entire_binding(),
-            order.as_entire_binding(),
-            dst.as_entire_binding(),
+        let mut buffers = vec![
+            ("params", &params),
+            ("gather_src", src),
+            ("gather_order", order),
+            ("gather_dst", dst),
         ];
         let (pipeline, label) = match boxes {
             Some(b) => {
-                entries.push(b.as_entire_binding());
+                buffers.push(("gather_boxes", b));
                 (&self.gather_triangles_boxes, "gather triangles and boxes")
             }
             None => (&self.gather_triangles, "blas build: gather triangles"),
         };
-        let bind = rec.bind_buffers("kickstart-rt gather triangles", pipeline, 0, &entries);
-        rec.dispatch(label, pipeline, &[&bind], count.div_ceil(WORKGROUP));
+        let bind = pipeline.bind_group(rec.device, "kickstart-rt gather triangles", 0, &buffers);
+        rec.dispatch(
+            label,
+            &pipeline.pipeline,
+            &[&bind],
+            count.div_ceil(WORKGROUP),
+        );
     }
 
     /// The TLAS's primitives, `refs_per_instance` (1..=[`MAX_REFS_PER_INSTANCE`]) refs per instance slot `0..count`
@@ -171,23 +180,23 @@ impl Prims {
             "kickstart-rt instance refs params",
             &[count, flags | (k << 8), bounds_base, 0],
         );
-        let bind = rec.bind_buffers(
+        let bind = self.instance_refs.bind_group(
+            rec.device,
             "kickstart-rt instance refs",
-            &self.instance_refs,
             0,
             &[
-                params.as_entire_binding(),
-                instances.as_entire_binding(),
-                geometries.as_entire_binding(),
-                aabbs.as_entire_binding(),
-                bounds.as_entire_binding(),
-                blas_nodes.as_entire_binding(),
-                tlas_nodes.as_entire_binding(),
+                ("params", &params),
+                ("instances", instances),
+                ("geometries", geometries),
+                ("instance_boxes", aabbs),
+                ("instance_centroid_bounds", bounds),
+                ("ref_blas_nodes", blas_nodes),
+                ("ref_table", tlas_nodes),
             ],
         );
         rec.dispatch(
             "tlas build: instance refs",
-            &self.instance_refs,
+            &self.instance_refs.pipeline,
             &[&bind],
             count.div_ceil(INSTANCE_WORKGROUP),
         );
