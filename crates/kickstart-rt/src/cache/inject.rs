@@ -263,56 +263,8 @@ impl Injector {
         );
         let index = if depth_is_depth { 0 } else { 1 };
         let p = self.inject[index].get_or_insert_with(|| inject_pipeline(device, depth_is_depth));
-        let scene_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt injection scene"),
-            layout: &p.layouts[0],
-            entries: &[
-                scene.tlas_nodes,
-                scene.instances,
-                scene.geometries,
-                scene.blas_nodes,
-                scene.triangles,
-            ]
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect::<Vec<_>>(),
-        });
-        let cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt injection cache"),
-            layout: &p.layouts[1],
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: meta.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: accum.as_entire_binding(),
-                },
-            ],
-        });
-        let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt injection inputs"),
-            layout: &p.layouts[2],
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&task.depth.texture),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&task.direct_lighting),
-                },
-            ],
-        });
+        let [scene_group, cache_group, io_group] =
+            inject_groups(device, p, scene, (meta, &accum), &params, task);
         let pipeline = p.pipeline.clone();
         rec.scope = "injection";
         rec.dispatch(
@@ -321,13 +273,26 @@ impl Injector {
             &[&scene_group, &cache_group, &io_group],
             slots.div_ceil(64),
         );
+        self.record_resolve(rec, (surfels, &accum), slots, capacity, task.average_window);
+    }
+
+    /// Records the resolve pass: the accumulated injections averaged into the surfels.
+    fn record_resolve(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        (surfels, accum): (&wgpu::Buffer, &wgpu::Buffer),
+        slots: u32,
+        capacity: u32,
+        window: f32,
+    ) {
+        let device = rec.device;
         let resolve = self.resolve(device);
         let rparams = rec.uniform(
             "kickstart-rt injection resolve params",
             &ResolveParams {
                 slots,
                 map_words: capacity,
-                window: task.average_window,
+                window,
                 pad: 0,
             },
         );
@@ -343,4 +308,67 @@ impl Injector {
         );
         rec.dispatch("cache resolve", &resolve, &[&group], slots.div_ceil(64));
     }
+}
+
+/// The injection pass's three bind groups: the scene, the cache (meta, accumulation) and the
+/// task's inputs.
+fn inject_groups(
+    device: &wgpu::Device,
+    p: &InjectPipeline,
+    scene: &SceneBuffers<'_>,
+    (meta, accum): (&wgpu::Buffer, &wgpu::Buffer),
+    params: &wgpu::Buffer,
+    task: &DirectLightingInjectionTask,
+) -> [wgpu::BindGroup; 3] {
+    let scene_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("kickstart-rt injection scene"),
+        layout: &p.layouts[0],
+        entries: &[
+            scene.tlas_nodes,
+            scene.instances,
+            scene.geometries,
+            scene.blas_nodes,
+            scene.triangles,
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect::<Vec<_>>(),
+    });
+    let cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("kickstart-rt injection cache"),
+        layout: &p.layouts[1],
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: meta.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: accum.as_entire_binding(),
+            },
+        ],
+    });
+    let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("kickstart-rt injection inputs"),
+        layout: &p.layouts[2],
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: params.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&task.depth.texture),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(&task.direct_lighting),
+            },
+        ],
+    });
+    [scene_group, cache_group, io_group]
 }

@@ -13,10 +13,10 @@ use crate::scene::lbvh::{
     BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
-use crate::scene::strategy::BuildStrategy;
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
-use crate::staging::{StagingBuffer, StagingPool};
+use crate::scene::strategy::BuildStrategy;
 use crate::scene::traversal::SceneBuffers;
+use crate::staging::{StagingBuffer, StagingPool};
 
 /// Bytes of one triangle of the soup (three `vec4<f32>`).
 pub(crate) const TRIANGLE_BYTES: u64 = 48;
@@ -37,6 +37,9 @@ pub(crate) enum PendingBvh {
     /// New vertices of a built `allow_update` geometry: refit.
     Refit,
 }
+
+/// A new BLAS's pool ranges: triangles, nodes, and (sort order, refit topology) when kept.
+type BlasAlloc = (Range, Range, Option<(Range, Range)>);
 
 /// Where a built BLAS lives in the pools.
 #[derive(Debug, Clone, Copy)]
@@ -440,6 +443,60 @@ impl GpuScene {
         }
     }
 
+    /// Pool space for a BLAS of `n` triangles: its triangles and nodes, and with
+    /// `keep_for_refit` its sort order and refit topology.
+    fn alloc_blas(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        n: u32,
+        keep_for_refit: bool,
+        name: &str,
+    ) -> Result<BlasAlloc> {
+        let max = self.max_binding;
+        let tris = Self::alloc(
+            &mut self.triangles,
+            &self.device,
+            encoder,
+            n,
+            max,
+            &format!("BLAS triangles of geometry `{name}`"),
+            TRIANGLE_BYTES,
+        )?;
+        let nodes = Self::alloc(
+            &mut self.nodes,
+            &self.device,
+            encoder,
+            Lbvh::node_count(n),
+            max,
+            &format!("BLAS nodes of geometry `{name}`"),
+            NODE_BYTES,
+        )?;
+        let refit = if keep_for_refit {
+            let order = Self::alloc(
+                &mut self.orders,
+                &self.device,
+                encoder,
+                n,
+                max,
+                &format!("sort order of geometry `{name}`"),
+                4,
+            )?;
+            let topology = Self::alloc(
+                &mut self.topologies,
+                &self.device,
+                encoder,
+                Lbvh::topology_words(n),
+                max,
+                &format!("refit topology of geometry `{name}`"),
+                4,
+            )?;
+            Some((order, topology))
+        } else {
+            None
+        };
+        Ok((tris, nodes, refit))
+    }
+
     /// Builds the BLAS of geometry slot `slot` from its staged triangles. Returns the geometry
     /// table header (first 16 bytes of its record) to upload.
     pub fn build_blas(
@@ -458,48 +515,7 @@ impl GpuScene {
                 "geometry `{name}` has no staged triangles to build from"
             )));
         };
-        let max = self.max_binding;
-        let tris = Self::alloc(
-            &mut self.triangles,
-            &self.device,
-            rec.encoder,
-            n,
-            max,
-            &format!("BLAS triangles of geometry `{name}`"),
-            TRIANGLE_BYTES,
-        )?;
-        let nodes = Self::alloc(
-            &mut self.nodes,
-            &self.device,
-            rec.encoder,
-            Lbvh::node_count(n),
-            max,
-            &format!("BLAS nodes of geometry `{name}`"),
-            NODE_BYTES,
-        )?;
-        let refit = if keep_for_refit {
-            let order = Self::alloc(
-                &mut self.orders,
-                &self.device,
-                rec.encoder,
-                n,
-                max,
-                &format!("sort order of geometry `{name}`"),
-                4,
-            )?;
-            let topology = Self::alloc(
-                &mut self.topologies,
-                &self.device,
-                rec.encoder,
-                Lbvh::topology_words(n),
-                max,
-                &format!("refit topology of geometry `{name}`"),
-                4,
-            )?;
-            Some((order, topology))
-        } else {
-            None
-        };
+        let (tris, nodes, refit) = self.alloc_blas(rec.encoder, n, keep_for_refit, name)?;
         self.ensure_scratch(n);
         rec.scope = "blas build";
         let (prims, lbvh) = self.passes.build(&self.device);

@@ -142,110 +142,116 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
             "must be in [0, 1]",
         ));
     }
-    let mut out = Vec::with_capacity(input.components.len());
-    for (i, c) in input.components.iter().enumerate() {
-        let f = format!("input.components[{i}]");
-        let vb = &c.vertex_buffer;
-        if vb.stride < vb.format.size() {
-            return Err(Error::input(
-                T,
-                format!("{f}.vertex_buffer.stride"),
-                vb.stride,
-                format!("must be ≥ {} bytes for {:?}", vb.format.size(), vb.format),
-            ));
-        }
-        if vb.count == 0 {
-            return Err(Error::input(
-                T,
-                format!("{f}.vertex_buffer.count"),
-                0,
-                "must be ≥ 1",
-            ));
-        }
-        let vlen = vb.stride * (vb.count as u64 - 1) + vb.format.size();
-        let vertex_bytes = copy_range(
+    input
+        .components
+        .iter()
+        .enumerate()
+        .map(|(i, c)| component(&format!("input.components[{i}]"), c))
+        .collect()
+}
+
+/// Validates one component (`f` names it); returns its copy ranges and triangles.
+fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
+    const T: &str = "GeometryTask";
+    let vb = &c.vertex_buffer;
+    if vb.stride < vb.format.size() {
+        return Err(Error::input(
             T,
-            &format!("{f}.vertex_buffer"),
-            &vb.buffer,
-            vb.offset,
-            vlen,
-        )?;
-        if let Some(t) = c.transform {
-            if !t.is_finite() {
+            format!("{f}.vertex_buffer.stride"),
+            vb.stride,
+            format!("must be ≥ {} bytes for {:?}", vb.format.size(), vb.format),
+        ));
+    }
+    if vb.count == 0 {
+        return Err(Error::input(
+            T,
+            format!("{f}.vertex_buffer.count"),
+            0,
+            "must be ≥ 1",
+        ));
+    }
+    let vlen = vb.stride * (vb.count as u64 - 1) + vb.format.size();
+    let vertex_bytes = copy_range(
+        T,
+        &format!("{f}.vertex_buffer"),
+        &vb.buffer,
+        vb.offset,
+        vlen,
+    )?;
+    if let Some(t) = c.transform {
+        if !t.is_finite() {
+            return Err(Error::input(
+                T,
+                format!("{f}.transform"),
+                t,
+                "must be finite",
+            ));
+        }
+    }
+    let (total, index_bytes) = match &c.index_buffer {
+        Some(ib) => {
+            if ib.offset % ib.format.size() != 0 {
                 return Err(Error::input(
                     T,
-                    format!("{f}.transform"),
-                    t,
-                    "must be finite",
+                    format!("{f}.index_buffer.offset"),
+                    ib.offset,
+                    format!(
+                        "must be a multiple of the index size ({} bytes)",
+                        ib.format.size()
+                    ),
                 ));
             }
+            if ib.count % 3 != 0 || ib.count == 0 {
+                return Err(Error::input(
+                    T,
+                    format!("{f}.index_buffer.count"),
+                    ib.count,
+                    "must be a non-zero multiple of 3",
+                ));
+            }
+            let len = ib.count as u64 * ib.format.size();
+            let r = copy_range(T, &format!("{f}.index_buffer"), &ib.buffer, ib.offset, len)?;
+            (ib.count, Some(r))
         }
-        let (total, index_bytes) = match &c.index_buffer {
-            Some(ib) => {
-                if ib.offset % ib.format.size() != 0 {
-                    return Err(Error::input(
-                        T,
-                        format!("{f}.index_buffer.offset"),
-                        ib.offset,
-                        format!(
-                            "must be a multiple of the index size ({} bytes)",
-                            ib.format.size()
-                        ),
-                    ));
-                }
-                if ib.count % 3 != 0 || ib.count == 0 {
-                    return Err(Error::input(
-                        T,
-                        format!("{f}.index_buffer.count"),
-                        ib.count,
-                        "must be a non-zero multiple of 3",
-                    ));
-                }
-                let len = ib.count as u64 * ib.format.size();
-                let r = copy_range(T, &format!("{f}.index_buffer"), &ib.buffer, ib.offset, len)?;
-                (ib.count, Some(r))
+        None => {
+            if !vb.count.is_multiple_of(3) {
+                return Err(Error::input(
+                    T,
+                    format!("{f}.vertex_buffer.count"),
+                    vb.count,
+                    "a non-indexed triangle list needs a multiple of 3 vertices",
+                ));
             }
-            None => {
-                if vb.count % 3 != 0 {
-                    return Err(Error::input(
-                        T,
-                        format!("{f}.vertex_buffer.count"),
-                        vb.count,
-                        "a non-indexed triangle list needs a multiple of 3 vertices",
-                    ));
-                }
-                (vb.count, None)
+            (vb.count, None)
+        }
+    };
+    let triangles = match c.index_range {
+        Some((first, count)) => {
+            if first % 3 != 0 || count % 3 != 0 || count == 0 {
+                return Err(Error::input(
+                    T,
+                    format!("{f}.index_range"),
+                    (first, count),
+                    "first and count must be multiples of 3, count > 0",
+                ));
             }
-        };
-        let triangles = match c.index_range {
-            Some((first, count)) => {
-                if first % 3 != 0 || count % 3 != 0 || count == 0 {
-                    return Err(Error::input(
-                        T,
-                        format!("{f}.index_range"),
-                        (first, count),
-                        "first and count must be multiples of 3, count > 0",
-                    ));
-                }
-                if first.checked_add(count).is_none_or(|e| e > total) {
-                    return Err(Error::input(
-                        T,
-                        format!("{f}.index_range"),
-                        (first, count),
-                        format!("exceeds the component's {total} indices"),
-                    ));
-                }
-                count / 3
+            if first.checked_add(count).is_none_or(|e| e > total) {
+                return Err(Error::input(
+                    T,
+                    format!("{f}.index_range"),
+                    (first, count),
+                    format!("exceeds the component's {total} indices"),
+                ));
             }
-            None => total / 3,
-        };
-        out.push(ComponentExtent {
-            vertex_bytes,
-            index_bytes,
-            triangles,
-        });
-    }
-    Ok(out)
+            count / 3
+        }
+        None => total / 3,
+    };
+    Ok(ComponentExtent {
+        vertex_bytes,
+        index_bytes,
+        triangles,
+    })
 }
 
 /// Validates an instance input's own fields (the geometry handle is checked by the context).
