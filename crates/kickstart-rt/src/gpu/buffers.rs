@@ -1,4 +1,5 @@
-//! Generic buffer helpers: storage buffers, and blocking read-backs for tools and tests.
+//! Generic buffer helpers: storage buffers, scratch that only grows, and blocking read-backs for
+//! tools and tests.
 
 use crate::error::{Error, Result};
 
@@ -56,4 +57,43 @@ pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Resu
         .map_err(|e| Error::ReadBack(e.to_string()))?
         .to_vec();
     Ok(data)
+}
+
+/// A scratch buffer that only grows (recorded commands keep older buffers alive).
+#[derive(Default)]
+pub(crate) struct Grown {
+    buffer: Option<wgpu::Buffer>,
+}
+
+impl Grown {
+    /// A buffer of at least `size` bytes (at least 32, so every binding has a valid minimum).
+    pub(crate) fn get(
+        &mut self,
+        device: &wgpu::Device,
+        label: &'static str,
+        size: u64,
+    ) -> wgpu::Buffer {
+        let size = size.max(32);
+        if let Some(b) = &self.buffer {
+            if b.size() >= size {
+                return b.clone();
+            }
+        }
+        // Round up so that slowly growing scenes do not reallocate on every build.
+        let b = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.next_power_of_two(),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        self.buffer = Some(b.clone());
+        b
+    }
+
+    /// Bytes held.
+    pub(crate) fn bytes(&self) -> u64 {
+        self.buffer.as_ref().map_or(0, |b| b.size())
+    }
 }

@@ -46,8 +46,7 @@ pub(crate) fn gpu() -> &'static TestGpu {
 /// Reads `size` bytes of `buffer` from `offset` back to the CPU (waits; tests only).
 pub(crate) fn read_back(buffer: &wgpu::Buffer, offset: u64, size: u64) -> Vec<u8> {
     let g = gpu();
-    crate::gpu::buffers::read_back(&g.device, &g.queue, buffer, offset, size)
-        .expect("read-back")
+    crate::gpu::buffers::read_back(&g.device, &g.queue, buffer, offset, size).expect("read-back")
 }
 
 /// A storage buffer (STORAGE | COPY_SRC | COPY_DST) with `data` in it.

@@ -143,13 +143,14 @@ impl Prims {
         );
     }
 
-    /// The TLAS's primitives, `refs_per_instance` (1..=[`MAX_REFS_PER_INSTANCE`]) refs per instance slot `0..count`
-    /// (`shaders/prims.wgsl`, `instance_refs`): ref `i * k + j` names slot `i` and an entry into
-    /// its BLAS (the root when k = 1; with k > 1 the BLAS opened largest world box first). Each
-    /// ref's world box goes to `aabbs` (the empty box for unused refs and hidden instances) and
-    /// (slot, entry) to the ref table at the end of `tlas_nodes` (C node slots, then C table
-    /// entries: the buffer holds 80 · C bytes). With `centroid_bounds`, the boxes' centroid
-    /// bounds are also merged into its six words (cleared first) for the LBVH.
+    /// The TLAS's primitives, `refs_per_instance` (1..=[`MAX_REFS_PER_INSTANCE`]) refs per
+    /// instance slot `0..count` (`shaders/prims.wgsl`, `instance_refs`): ref `i * k + j` names
+    /// slot `i` and an entry into its BLAS (the root when k = 1; with k > 1 the BLAS opened
+    /// largest world box first). Each ref's world box goes to `aabbs` (the empty box for unused
+    /// refs and hidden instances) and (slot, entry) to the ref table at the end of `tlas_nodes`
+    /// (C node slots, then C table entries: the buffer holds 80 · C bytes). With
+    /// `centroid_bounds`, the boxes' centroid bounds are also merged into its six words (cleared
+    /// first) for the LBVH.
     #[allow(clippy::too_many_arguments)] // the scene's tables and the TLAS's buffers
     pub fn instance_refs(
         &self,
@@ -383,33 +384,95 @@ mod tests {
         }
     }
 
+    /// A geometry record (12 words): build flags, triangle count and its BLAS box.
+    fn geometry_words(built: u32, tri_count: u32, lo: [f32; 3], hi: [f32; 3]) -> Vec<u32> {
+        let mut g = vec![0, 0, tri_count, built];
+        g.extend(lo.iter().chain(&[0.0]).map(|f| f.to_bits()));
+        g.extend(hi.iter().chain(&[0.0]).map(|f| f.to_bits()));
+        g
+    }
+
+    /// An instance record (32 words): object-to-world rows of `t`, geometry slot and flags.
+    fn instance_words(t: Affine3A, geometry: u32, flags: u32) -> Vec<u32> {
+        let m = t.matrix3;
+        let mut w = Vec::new();
+        for r in 0..3 {
+            w.extend([m.x_axis[r], m.y_axis[r], m.z_axis[r], t.translation[r]].map(f32::to_bits));
+        }
+        w.extend([0u32; 12]); // world_to_object: unused here
+        w.extend([geometry, 0xff, flags, 0, 0, 0, 0, 0]);
+        w
+    }
+
+    /// A random scale (0.01..20 an axis), rotation and translation (up to 1e4 an axis).
+    fn random_transform(rng: &mut Rng) -> Affine3A {
+        Affine3A::from_scale_rotation_translation(
+            Vec3::new(
+                rng.range(0.01, 20.0),
+                rng.range(0.01, 20.0),
+                rng.range(0.01, 20.0),
+            ),
+            Quat::from_euler(
+                glam::EulerRot::ZYX,
+                rng.range(-3.2, 3.2),
+                rng.range(-3.2, 3.2),
+                rng.range(-3.2, 3.2),
+            ),
+            Vec3::new(
+                rng.range(-1e4, 1e4),
+                rng.range(-1e4, 1e4),
+                rng.range(-1e4, 1e4),
+            ),
+        )
+    }
+
+    /// Asserts that the world box `b` (2 `vec4`) of instance `i` contains every corner of the
+    /// geometry box (`gw`, a geometry record) transformed by `t` on the CPU, and is tight (only
+    /// the rounding pad).
+    fn assert_bounds_transformed_corners(i: usize, b: &[f32], t: Affine3A, gw: &[u32]) {
+        let glo = Vec3::from_array([4, 5, 6].map(|w| f32::from_bits(gw[w])));
+        let ghi = Vec3::from_array([8, 9, 10].map(|w| f32::from_bits(gw[w])));
+        let (mut wlo, mut whi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for c in 0..8 {
+            let p = Vec3::select(
+                glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0),
+                ghi,
+                glo,
+            );
+            let q = t.transform_point3(p);
+            wlo = wlo.min(q);
+            whi = whi.max(q);
+        }
+        assert_eq!((b[3], b[7]), (0.0, 0.0));
+        // Magnitude of the transform's terms: the scale of its rounding.
+        let e = glo.abs().max(ghi.abs());
+        let m = t.matrix3;
+        let row_dot = |r: usize| Vec3::from(m.row(r)).abs().dot(e);
+        let mag = Vec3::new(row_dot(0), row_dot(1), row_dot(2)) + Vec3::from(t.translation).abs();
+        for a in 0..3 {
+            // Contains every CPU-transformed corner, and is tight (only the rounding pad).
+            assert!(
+                b[a] <= wlo[a] && b[4 + a] >= whi[a],
+                "instance {i} axis {a}: {b:?} vs {wlo} {whi}"
+            );
+            let tol = 1e-5 * mag[a];
+            assert!(
+                wlo[a] - b[a] <= tol && b[4 + a] - whi[a] <= tol,
+                "instance {i} axis {a} loose: {b:?} vs {wlo} {whi}"
+            );
+        }
+    }
+
     #[test]
     fn instance_refs_of_one_bound_transformed_corners_and_hidden_ones_are_empty() {
         let mut rng = Rng(13);
-        let geometry = |built: u32, tri_count: u32, lo: [f32; 3], hi: [f32; 3]| -> Vec<u32> {
-            let mut g = vec![0, 0, tri_count, built];
-            g.extend(lo.iter().chain(&[0.0]).map(|f| f.to_bits()));
-            g.extend(hi.iter().chain(&[0.0]).map(|f| f.to_bits()));
-            g
-        };
         let (lo, hi) = ([-1.0, -2.0, -3.0], [4.0, 5.0, 6.0]);
-        let mut geos = geometry(1, 10, lo, hi);
-        geos.extend(geometry(0, 0, lo, hi)); // 1: not built
-        geos.extend(geometry(1, 0, lo, hi)); // 2: built, no triangles
-        geos.extend(geometry(1, 4, [1e30; 3], [-1e30; 3])); // 3: all triangles dropped
-        geos.extend(geometry(0b11, 3, [2.0, 2.0, 2.0], [2.0, 3.0, 2.5])); // 4: flat box, extra flag bit
-        let instance = |t: Affine3A, geometry: u32, flags: u32| -> Vec<u32> {
-            let m = t.matrix3;
-            let mut w = Vec::new();
-            for r in 0..3 {
-                w.extend(
-                    [m.x_axis[r], m.y_axis[r], m.z_axis[r], t.translation[r]].map(f32::to_bits),
-                );
-            }
-            w.extend([0u32; 12]); // world_to_object: unused here
-            w.extend([geometry, 0xff, flags, 0, 0, 0, 0, 0]);
-            w
-        };
+        let mut geos = geometry_words(1, 10, lo, hi);
+        geos.extend(geometry_words(0, 0, lo, hi)); // 1: not built
+        geos.extend(geometry_words(1, 0, lo, hi)); // 2: built, no triangles
+        geos.extend(geometry_words(1, 4, [1e30; 3], [-1e30; 3])); // 3: all triangles dropped
+                                                                  // 4: flat box, extra flag bit
+        geos.extend(geometry_words(0b11, 3, [2.0, 2.0, 2.0], [2.0, 3.0, 2.5]));
         let spin = Affine3A::from_scale_rotation_translation(
             Vec3::new(2.0, 0.5, 3.0),
             Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -0.4),
@@ -427,29 +490,12 @@ mod tests {
             (spin, 4, 0b101, true),
         ];
         for _ in 0..60 {
-            let t = Affine3A::from_scale_rotation_translation(
-                Vec3::new(
-                    rng.range(0.01, 20.0),
-                    rng.range(0.01, 20.0),
-                    rng.range(0.01, 20.0),
-                ),
-                Quat::from_euler(
-                    glam::EulerRot::ZYX,
-                    rng.range(-3.2, 3.2),
-                    rng.range(-3.2, 3.2),
-                    rng.range(-3.2, 3.2),
-                ),
-                Vec3::new(
-                    rng.range(-1e4, 1e4),
-                    rng.range(-1e4, 1e4),
-                    rng.range(-1e4, 1e4),
-                ),
-            );
+            let t = random_transform(&mut rng);
             cases.push((t, if rng.below(4) == 0 { 4 } else { 0 }, 1, true));
         }
         let inst: Vec<u32> = cases
             .iter()
-            .flat_map(|&(t, g, f, _)| instance(t, g, f))
+            .flat_map(|&(t, g, f, _)| instance_words(t, g, f))
             .collect();
         let n = cases.len();
         let inst_buf = buffer_with(bytemuck::cast_slice(&inst));
@@ -483,38 +529,7 @@ mod tests {
                 continue;
             }
             let gw = &geos[12 * g as usize..12 * g as usize + 12];
-            let glo = Vec3::from_array([4, 5, 6].map(|w| f32::from_bits(gw[w])));
-            let ghi = Vec3::from_array([8, 9, 10].map(|w| f32::from_bits(gw[w])));
-            let (mut wlo, mut whi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-            for c in 0..8 {
-                let p = Vec3::select(
-                    glam::BVec3::new(c & 1 != 0, c & 2 != 0, c & 4 != 0),
-                    ghi,
-                    glo,
-                );
-                let q = t.transform_point3(p);
-                wlo = wlo.min(q);
-                whi = whi.max(q);
-            }
-            assert_eq!((b[3], b[7]), (0.0, 0.0));
-            // Magnitude of the transform's terms: the scale of its rounding.
-            let e = glo.abs().max(ghi.abs());
-            let m = t.matrix3;
-            let row_dot = |r: usize| Vec3::from(m.row(r)).abs().dot(e);
-            let mag =
-                Vec3::new(row_dot(0), row_dot(1), row_dot(2)) + Vec3::from(t.translation).abs();
-            for a in 0..3 {
-                // Contains every CPU-transformed corner, and is tight (only the rounding pad).
-                assert!(
-                    b[a] <= wlo[a] && b[4 + a] >= whi[a],
-                    "instance {i} axis {a}: {b:?} vs {wlo} {whi}"
-                );
-                let tol = 1e-5 * mag[a];
-                assert!(
-                    wlo[a] - b[a] <= tol && b[4 + a] - whi[a] <= tol,
-                    "instance {i} axis {a} loose: {b:?} vs {wlo} {whi}"
-                );
-            }
+            assert_bounds_transformed_corners(i, b, t, gw);
         }
         assert!(
             got[8 * n..].iter().all(|&w| w.to_bits() == SENTINEL),
@@ -532,8 +547,9 @@ mod tests {
         w
     }
 
-    #[test]
-    fn instance_refs_open_the_largest_subtrees_first_up_to_k() {
+    /// The BLAS nodes and geometry records of the opening test below, and the leaf refs of its
+    /// leaves A–E (geometry 0) and F (geometry 1).
+    fn opening_scene() -> (Vec<u32>, Vec<u32>, [u32; 6]) {
         const LEAF: u32 = 0x8000_0000;
         let empty = ([1e30f32; 3], [-1e30f32; 3], LEAF);
         // Geometry 0, nodes from 1 (node_base 1; node 0 of the buffer is junk that must not be
@@ -560,6 +576,58 @@ mod tests {
         geos.extend([0.0f32, 0.0, 0.0, 0.0, 20.0, 1.0, 1.0, 0.0].map(f32::to_bits));
         geos.extend([5, 6, 1, 1]);
         geos.extend([-1.0f32, -1.0, -1.0, 0.0, 1.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        (nodes, geos, [a.2, b.2, c.2, d.2, e.2, f.2])
+    }
+
+    /// Asserts the refs instance slots 0 (`want`: entry and world x range of each, in ref
+    /// order), 1 (hidden) and 2 (one triangle, leaf ref `f`) were opened into, `k` each.
+    fn assert_opened_refs(k: u32, want: &[(u32, f32, f32)], table: &[u32], boxes: &[f32], f: u32) {
+        let refs = 3 * k as usize;
+        let at = 16 * refs;
+        for j in 0..k as usize {
+            let e = &table[at + 4 * j..at + 4 * j + 4];
+            let (lo, hi) = (&boxes[8 * j..8 * j + 3], &boxes[8 * j + 4..8 * j + 7]);
+            match want.get(j) {
+                Some(&(entry, x0, x1)) => {
+                    assert_eq!(e, &[0, entry, 5, 0], "k {k} ref {j}");
+                    // The padded world box: x moved by 100, within 2^-21 of the magnitude.
+                    assert!(
+                        (lo[0] - x0).abs() < 1e-3 && lo[0] <= x0,
+                        "k {k} ref {j}: {lo:?}"
+                    );
+                    assert!(
+                        (hi[0] - x1).abs() < 1e-3 && hi[0] >= x1,
+                        "k {k} ref {j}: {hi:?}"
+                    );
+                }
+                None => {
+                    assert_eq!(e, &[0, 0, 5, 0], "k {k} unused ref {j}");
+                    assert_eq!([lo[0], hi[0]], [1e30, -1e30], "k {k} unused ref {j}");
+                }
+            }
+        }
+        // Slot 1 is hidden: every ref empty, entries 0.
+        for j in 0..k as usize {
+            let r = k as usize + j;
+            assert_eq!(&table[at + 4 * r..at + 4 * r + 4], &[1, 0, 0, 0]);
+            assert_eq!([boxes[8 * r], boxes[8 * r + 4]], [1e30, -1e30]);
+        }
+        // Slot 2: one triangle; opened (k > 1), its root's one leaf child is its only ref.
+        let r = 2 * k as usize;
+        let entry = if k == 1 { 0 } else { f };
+        assert_eq!(
+            &table[at + 4 * r..at + 4 * r + 4],
+            &[2, entry, 0, 0],
+            "k {k}"
+        );
+        for j in 1..k as usize {
+            assert_eq!(boxes[8 * (r + j)], 1e30, "k {k}: slot 2 ref {j} unused");
+        }
+    }
+
+    #[test]
+    fn instance_refs_open_the_largest_subtrees_first_up_to_k() {
+        let (nodes, geos, [a, b, c, d, e, f]) = opening_scene();
         let instance = |x: f32, geometry: u32, flags: u32| -> Vec<u32> {
             let mut w = Vec::new();
             for r in 0..3 {
@@ -589,16 +657,16 @@ mod tests {
             // Node 2 (larger) opens first, then node 3 (larger than node 1), then node 1.
             (
                 3,
-                &[(1, 100.0, 101.0), (c.2, 110.0, 112.0), (3, 112.0, 120.0)],
+                &[(1, 100.0, 101.0), (c, 110.0, 112.0), (3, 112.0, 120.0)],
             ),
             (
                 8,
                 &[
-                    (a.2, 100.0, 100.5),
-                    (c.2, 110.0, 112.0),
-                    (d.2, 112.0, 115.0),
-                    (e.2, 115.0, 120.0),
-                    (b.2, 100.5, 101.0),
+                    (a, 100.0, 100.5),
+                    (c, 110.0, 112.0),
+                    (d, 112.0, 115.0),
+                    (e, 115.0, 120.0),
+                    (b, 100.5, 101.0),
                 ],
             ),
         ];
@@ -617,46 +685,7 @@ mod tests {
                 .into_iter()
                 .map(f32::from_bits)
                 .collect();
-            let at = 16 * refs;
-            for j in 0..k as usize {
-                let e = &table[at + 4 * j..at + 4 * j + 4];
-                let (lo, hi) = (&boxes[8 * j..8 * j + 3], &boxes[8 * j + 4..8 * j + 7]);
-                match want.get(j) {
-                    Some(&(entry, x0, x1)) => {
-                        assert_eq!(e, &[0, entry, 5, 0], "k {k} ref {j}");
-                        // The padded world box: x moved by 100, within 2^-21 of the magnitude.
-                        assert!(
-                            (lo[0] - x0).abs() < 1e-3 && lo[0] <= x0,
-                            "k {k} ref {j}: {lo:?}"
-                        );
-                        assert!(
-                            (hi[0] - x1).abs() < 1e-3 && hi[0] >= x1,
-                            "k {k} ref {j}: {hi:?}"
-                        );
-                    }
-                    None => {
-                        assert_eq!(e, &[0, 0, 5, 0], "k {k} unused ref {j}");
-                        assert_eq!([lo[0], hi[0]], [1e30, -1e30], "k {k} unused ref {j}");
-                    }
-                }
-            }
-            // Slot 1 is hidden: every ref empty, entries 0.
-            for j in 0..k as usize {
-                let r = k as usize + j;
-                assert_eq!(&table[at + 4 * r..at + 4 * r + 4], &[1, 0, 0, 0]);
-                assert_eq!([boxes[8 * r], boxes[8 * r + 4]], [1e30, -1e30]);
-            }
-            // Slot 2: one triangle; opened (k > 1), its root's one leaf child is its only ref.
-            let r = 2 * k as usize;
-            let entry = if k == 1 { 0 } else { f.2 };
-            assert_eq!(
-                &table[at + 4 * r..at + 4 * r + 4],
-                &[2, entry, 0, 0],
-                "k {k}"
-            );
-            for j in 1..k as usize {
-                assert_eq!(boxes[8 * (r + j)], 1e30, "k {k}: slot 2 ref {j} unused");
-            }
+            assert_opened_refs(k, want, &table, &boxes, f);
         }
     }
 
