@@ -1,8 +1,6 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
 mod bench;
-mod bench_denoise;
-mod bench_profile;
 mod composite;
 mod debug_view;
 mod frame;
@@ -192,7 +190,7 @@ enum Command {
         /// Only time the denoisers (every task and method, synthetic inputs at --size).
         #[arg(long)]
         denoisers: bool,
-        /// CPU peers, scaling, frames in flight and charts (bench_extras.rs).
+        /// CPU peers, scaling, frames in flight and charts (bench/extras/).
         #[command(flatten)]
         extras: bench::extras::ExtraArgs,
         /// Also measure a peer on the same meshes and rays and print ours, theirs and the
@@ -552,7 +550,7 @@ fn main() {
             size,
             denoisers: true,
             ..
-        } => parse_size(&size).and_then(|s| bench_denoise::run(s, iterations, json.as_deref())),
+        } => parse_size(&size).and_then(|s| bench::denoise::run(s, iterations, json.as_deref())),
         Command::Bench {
             scenes,
             scene,

@@ -12,24 +12,21 @@ use kickstart_rt as ksrt;
 use serde::{Deserialize, Serialize};
 use wgpu::util::DeviceExt;
 
-use crate::bench_profile::{self as prof, PassProfile};
 use crate::gpu::{self, UploadedMesh};
 use crate::scene::{self, Camera, Scene};
 use crate::sdk_glue::{self as glue, GpuHit, GpuRay, Query, Tlas};
 use crate::AnyResult;
 
-#[path = "bench_busy.rs"]
 mod busy;
-#[path = "bench_cache.rs"]
 mod cache;
-#[path = "bench_extras.rs"]
+pub mod denoise;
 pub mod extras;
-#[path = "bench_peer.rs"]
 mod peer;
-#[path = "bench_tree_work.rs"]
+mod profile;
 mod tree_work;
 
 pub use peer::PeerKind;
+use profile::{self as prof, PassProfile};
 
 /// Scenes benchmarked when no `--scene` is given.
 pub const DEFAULT_SCENES: [&str; 2] = ["dragon", "apartment"];
@@ -61,7 +58,7 @@ pub struct BenchOptions {
     pub iterations: u32,
     /// Ray batch image size.
     pub size: (u32, u32),
-    /// The optional passes (`bench_extras.rs`).
+    /// The optional passes (`extras`).
     pub extras: extras::ExtraArgs,
     /// A peer to compare with on the same rays (`--peer`), if any.
     pub peer: Option<PeerKind>,
@@ -264,7 +261,7 @@ pub struct SceneReport {
     pub peer_mrays_per_s: Option<f64>,
     /// Primary rays checked against the CPU reference BVH on this GPU (untimed).
     pub oracle: Option<OracleCheck>,
-    /// Direct lighting cache: bytes, injection time, cache error (`bench_cache.rs`).
+    /// Direct lighting cache: bytes, injection time, cache error (`cache`).
     pub cache: Option<cache::CacheReport>,
     /// The SDK's trace tasks on a G-buffer of the primary hits (`trace …` passes).
     pub trace_tasks: Vec<TraceTaskTime>,

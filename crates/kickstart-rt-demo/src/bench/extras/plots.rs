@@ -16,7 +16,7 @@ use crate::AnyResult;
 pub const CHART_SIZE: (u32, u32) = (960, 600);
 
 /// DejaVu Sans (see `assets/fonts/DejaVuSans-LICENSE.txt`).
-static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
 
 /// Registers the font under plotters' default family once per process.
 fn register_font() -> AnyResult<()> {

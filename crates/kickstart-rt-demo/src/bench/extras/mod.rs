@@ -12,13 +12,9 @@ use super::Bench;
 use crate::scene::{self, Scene};
 use crate::AnyResult;
 
-#[path = "bench_cpu_peers.rs"]
 pub mod cpu_peers;
-#[path = "bench_fif.rs"]
 pub mod fif;
-#[path = "bench_plots.rs"]
 pub mod plots;
-#[path = "bench_scaling.rs"]
 pub mod scaling;
 
 /// The command-line options of the optional passes (flattened into `ksrt bench`).
