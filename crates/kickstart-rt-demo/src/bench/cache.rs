@@ -19,7 +19,9 @@ use kickstart_rt as ksrt;
 use serde::Serialize;
 use wgpu::util::DeviceExt;
 
-use super::{surface, Bench, Stats};
+use super::harness::Bench;
+use super::rays::surface;
+use super::Stats;
 use crate::gpu::{self, UploadedMesh};
 use crate::scene::{Camera, Scene};
 use crate::sdk_glue as glue;

@@ -11,10 +11,13 @@ use std::time::Duration;
 use kickstart_rt_peer_vulkan as vkrt;
 use serde::Serialize;
 
-use super::{attempt, Bench, GpuHit, RayBatches, SceneReport, Stats};
+use super::harness::Bench;
+use super::rays::RayBatches;
+use super::report::SceneReport;
+use super::{attempt, Stats};
 use crate::gpu::UploadedMesh;
 use crate::scene::Scene;
-use crate::sdk_glue::Query;
+use crate::sdk_glue::{GpuHit, Query};
 
 /// The peers `ksrt bench --peer` knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -393,7 +396,7 @@ pub fn print(r: &PeerReport) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::{primary_rays, rays, secondary_rays, Rng, Surface};
+    use crate::bench::rays::{primary_rays, rays, secondary_rays, Rng, Surface};
     use crate::scene;
     use glam::Vec3;
 

@@ -7,9 +7,11 @@
 use glam::{Affine3A, Vec3};
 use serde::Serialize;
 
-use super::{work_per_ray, GpuRay, WorkPerRay};
+use super::rays::work_per_ray;
+use super::report::WorkPerRay;
 use crate::obvhs_peer::{self, Preset};
 use crate::scene::Scene;
+use crate::sdk_glue::GpuRay;
 use crate::AnyResult;
 use kickstart_rt as ksrt;
 

@@ -9,7 +9,8 @@ use std::time::Instant;
 use glam::{Affine3A, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::bench::{attempt, Bench, Stats};
+use crate::bench::harness::Bench;
+use crate::bench::{attempt, Stats};
 use crate::gpu;
 use crate::obvhs_peer::{self, Preset};
 use crate::scene::{Mesh, Scene};

@@ -8,7 +8,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::bench::{attempt, issue_camera, Bench};
+use crate::bench::harness::Bench;
+use crate::bench::{attempt, issue_camera};
 use crate::frames_in_flight::{self as fif, FifSummary, FrameRecord, LoopOptions};
 use crate::renderer::{Renderer, RendererOptions};
 

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::Bench;
+use super::harness::Bench;
 use crate::scene::{self, Scene};
 use crate::AnyResult;
 

@@ -18,10 +18,10 @@ use glam::{Affine3A, Vec3};
 use kickstart_rt as ksrt;
 use serde::{Deserialize, Serialize};
 
-use crate::bench::{
-    attempt, batch, bench_tlas, issue_camera, primary_rays, secondary_rays, surface, Bench, Rng,
-    Stats,
-};
+use crate::bench::harness::Bench;
+use crate::bench::rays::{batch, primary_rays, secondary_rays, surface, Rng};
+use crate::bench::scenes::bench_tlas;
+use crate::bench::{attempt, issue_camera, Stats};
 use crate::gpu::{self, UploadedMesh};
 use crate::renderer::{Renderer, RendererOptions};
 use crate::scene::{Camera, Instance, Scene};
