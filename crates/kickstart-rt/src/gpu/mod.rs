@@ -10,5 +10,7 @@ pub(crate) mod shader;
 pub(crate) mod spirv;
 #[cfg(test)]
 pub(crate) mod testing;
+#[cfg(test)]
+pub(crate) mod wgsl_check;
 
 pub(crate) use recorder::Recorder;
