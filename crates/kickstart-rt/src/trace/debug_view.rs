@@ -13,10 +13,10 @@
 //! HitT is the world-space distance along the ray from its origin (the eye; the near plane for
 //! orthographic views).
 
-use crate::scene::traversal::{SceneBuffers, TRAVERSE_WGSL};
 use crate::camera::camera;
 use crate::gpu::shader::{assemble, compute_pipeline};
 use crate::gpu::Recorder;
+use crate::scene::traversal::{SceneBuffers, TRAVERSE_WGSL};
 use crate::{DebugOutputType, Error, InstanceInclusionMask, Result, ViewInfo};
 use bytemuck::{Pod, Zeroable};
 
@@ -55,6 +55,16 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
     }
 }
 
+/// The WGSL of the debug view pass writing the storage format `format_name` (a name
+/// [`wgsl_format`] gives).
+fn debug_view_wgsl(format_name: &str) -> String {
+    assemble(&[
+        TRAVERSE_WGSL,
+        &crate::cache::sample_wgsl(2, false),
+        &DEBUG_PRIMARY_WGSL.replace("OUTPUT_FORMAT", format_name),
+    ])
+}
+
 /// The primary-ray debug view pass (`debug view`); pipelines are created per output format on
 /// first use.
 #[derive(Default)]
@@ -85,11 +95,7 @@ impl DebugViewPass {
                         "must be one of WRITABLE_OUTPUT_FORMATS",
                     ));
                 };
-                let source = assemble(&[
-                    TRAVERSE_WGSL,
-                    &crate::cache::sample_wgsl(2, false),
-                    &DEBUG_PRIMARY_WGSL.replace("OUTPUT_FORMAT", name),
-                ]);
+                let source = debug_view_wgsl(name);
                 let pipeline = compute_pipeline(device, "kickstart-rt debug view", &source, "main");
                 self.pipelines.push((format, pipeline));
                 self.pipelines.len() - 1
@@ -208,6 +214,35 @@ mod tests {
     const TW: u32 = W + 5;
     const TH: u32 = H + 4;
     const EYE: Vec3 = Vec3::new(0.0, 0.0, 5.0);
+
+    /// Every pipeline `prepare` creates (one per writable output format) validated with naga
+    /// without a device, and the uniform against the WGSL.
+    #[test]
+    fn every_variant_validates_and_matches_the_rust_layout() {
+        use crate::gpu::wgsl_check::{assert_wgsl_layout, validate};
+        for format in crate::WRITABLE_OUTPUT_FORMATS {
+            let name = wgsl_format(format).unwrap();
+            let module = validate(&format!("debug view ({format:?})"), &debug_view_wgsl(name));
+            assert!(module.entry_points.iter().any(|e| e.name == "main"));
+            // `pad[0]` carries the shader's `bilinear` flag (see `record`).
+            assert_wgsl_layout!(
+                module,
+                "DebugParams",
+                DebugParams {
+                    clip_to_world,
+                    eye,
+                    viewport,
+                    ortho,
+                    kind,
+                    z_origin,
+                    z_target,
+                    mask,
+                    pad => "bilinear",
+                }
+            );
+        }
+        assert_eq!(wgsl_format(wgpu::TextureFormat::Rgba8Unorm), None);
+    }
 
     /// The quad [-1, 1]² at z = 0: triangle 0 below the diagonal x = y, triangle 1 above.
     fn quad() -> Vec<Tri> {

@@ -325,5 +325,36 @@ impl GBufferBinder {
     }
 }
 
+/// Asserts that [`GBufferParams`] has the layout of the WGSL `GBufferParams` in `module` (a
+/// validated pass that includes [`gbuffer_wgsl`]).
+#[cfg(test)]
+pub(crate) fn assert_wgsl_layout(module: &naga::Module) {
+    crate::gpu::wgsl_check::assert_wgsl_layout!(
+        module,
+        "GBufferParams",
+        GBufferParams {
+            clip_to_world,
+            world_to_clip,
+            prev_world_to_clip,
+            normal_to_world,
+            eye,
+            forward,
+            roughness_mask,
+            viewport,
+            depth_type,
+            normal_type,
+            has_textures,
+            far_ndc,
+            global_roughness,
+            roughness_multiplier,
+            min_roughness,
+            max_roughness,
+            global_metalness,
+            jitter => "jitter_x",
+            pad => "pad0",
+        }
+    );
+}
+
 #[cfg(test)]
 mod tests;

@@ -59,3 +59,10 @@ pub(crate) fn pack_lights(lights: &[LightInfo]) -> [GpuLight; MAX_MULTI_SHADOW_L
     }
     out
 }
+
+/// Asserts that [`GpuLight`] has the layout of `TrLight` in `module` (a validated pass that
+/// includes `shaders/trace_common.wgsl`).
+#[cfg(test)]
+pub(crate) fn assert_wgsl_layout(module: &naga::Module) {
+    crate::gpu::wgsl_check::assert_wgsl_layout!(module, "TrLight", GpuLight { a, b, c });
+}

@@ -33,6 +33,11 @@ fn io_layout(device: &wgpu::Device) -> BoundLayout {
     )
 }
 
+/// The WGSL of the ray batch pass.
+fn trace_rays_wgsl() -> String {
+    assemble(&[TRAVERSE_WGSL, TRACE_RAYS_WGSL])
+}
+
 /// Uniform parameters of the ray batch shader (`TraceParams`).
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy)]
@@ -55,7 +60,7 @@ impl RayTracer {
     /// Creates the pipeline (one for both queries: the query is a uniform, so one bind group
     /// layout serves every batch).
     pub fn new(device: &wgpu::Device) -> Self {
-        let source = assemble(&[TRAVERSE_WGSL, TRACE_RAYS_WGSL]);
+        let source = trace_rays_wgsl();
         let scene_layout = SceneBuffers::layout(device);
         let io_layout = io_layout(device);
         let layouts = [scene_layout.group(), io_layout.group()];
@@ -168,6 +173,49 @@ mod tests {
     use glam::{Affine3A, Quat, Vec3};
 
     const MISS: u32 = u32::MAX;
+
+    /// The pass's WGSL validated with naga without a device; the uniform and the ray and hit
+    /// records (the public `GpuRay`, `GpuHit`) against its structs and buffer strides.
+    #[test]
+    fn the_wgsl_validates_and_matches_the_rust_layouts() {
+        use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
+        let module = validate("trace rays", &trace_rays_wgsl());
+        assert!(module.entry_points.iter().any(|e| e.name == "main"));
+        assert_wgsl_layout!(
+            module,
+            "TraceParams",
+            TraceParams {
+                count,
+                query,
+                mask,
+                pad
+            }
+        );
+        assert_wgsl_layout!(
+            module,
+            "RtRay",
+            GpuRay {
+                origin,
+                t_min,
+                dir,
+                t_max
+            }
+        );
+        assert_wgsl_layout!(
+            module,
+            "GpuHitOut",
+            GpuHit {
+                t,
+                u,
+                v,
+                instance,
+                primitive,
+                _pad => "pad0",
+            }
+        );
+        assert_eq!(storage_stride(&module, "rays") as u64, RECORD_SIZE);
+        assert_eq!(storage_stride(&module, "hits") as u64, RECORD_SIZE);
+    }
 
     #[test]
     fn the_pass_comes_from_own_spirv_where_the_device_takes_it() {

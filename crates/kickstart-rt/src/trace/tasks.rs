@@ -11,11 +11,11 @@
 
 use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use super::sampling::blue_noise_texture;
 use crate::gpu::layout::{float_texture_entry, uniform_entry, BoundLayout, GroupLayout};
 use crate::gpu::shader::{assemble, traversal_pipeline};
 use crate::gpu::Recorder;
+use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use crate::tasks::*;
 use crate::{Error, InstanceInclusionMask, Result};
 use bytemuck::{Pod, Zeroable};
@@ -168,7 +168,7 @@ impl TracePasses {
                 "kickstart-rt trace cache",
                 &crate::cache::DirectLightingCache::sample_layout_entries(),
             ),
-            cache_wgsl: crate::cache::sample_wgsl(3, false),
+            cache_wgsl: cache_sampling_wgsl(),
             pipelines: Vec::new(),
         }
     }
@@ -218,47 +218,7 @@ impl TracePasses {
         {
             return Ok(i);
         }
-        let name = |f: wgpu::TextureFormat, field: &str| {
-            wgsl_format(f).ok_or_else(|| {
-                Error::input(
-                    kind.label(),
-                    field.to_string(),
-                    f,
-                    "must be one of WRITABLE_OUTPUT_FORMATS",
-                )
-            })
-        };
-        let f0 = name(formats.0, "output")?;
-        let f1 = match formats.1 {
-            Some(f) => name(f, "output1")?,
-            None => "r32float",
-        };
-        let (body, entry) = match kind {
-            TraceKind::AmbientOcclusion => (AO_WGSL, "main"),
-            TraceKind::Shadow => (SHADOW_WGSL, "shadow"),
-            TraceKind::MultiShadow => (SHADOW_WGSL, "multi_shadow"),
-            TraceKind::Specular => (RADIANCE_WGSL, "specular"),
-            TraceKind::Diffuse => (RADIANCE_WGSL, "diffuse"),
-        };
-        let (declaration, store) = if formats.1.is_some() {
-            (
-                format!("@group(2) @binding(5) var out1: texture_storage_2d<{f1}, write>;"),
-                "textureStore(out1, texel, v);",
-            )
-        } else {
-            (String::new(), "")
-        };
-        let body = body
-            .replace("OUTPUT0_FORMAT", f0)
-            .replace("OUTPUT1_FORMAT", f1)
-            .replace("OUTPUT1_DECLARATION", &declaration)
-            .replace("OUTPUT1_STORE", store);
-        let cache = if kind.reads_cache() {
-            self.cache_wgsl.as_str()
-        } else {
-            ""
-        };
-        let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
+        let (source, entry) = trace_wgsl(kind, formats, &self.cache_wgsl)?;
         let io = BoundLayout::new(device, "kickstart-rt trace io", &io_layout_entries(formats));
         let mut layouts = vec![
             self.scene_layout.group(),
@@ -450,6 +410,59 @@ impl TracePasses {
     }
 }
 
+/// The lighting cache's sampling module as the passes that read the cache include it (group 3).
+fn cache_sampling_wgsl() -> String {
+    crate::cache::sample_wgsl(3, false)
+}
+
+/// The WGSL of the pass of `kind` writing `formats` and its entry point; `cache` is the lighting
+/// cache's sampling module at group 3, included where the pass reads the cache. An output format
+/// without a WGSL name is refused.
+fn trace_wgsl(
+    kind: TraceKind,
+    formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+    cache: &str,
+) -> Result<(String, &'static str)> {
+    let name = |f: wgpu::TextureFormat, field: &str| {
+        wgsl_format(f).ok_or_else(|| {
+            Error::input(
+                kind.label(),
+                field.to_string(),
+                f,
+                "must be one of WRITABLE_OUTPUT_FORMATS",
+            )
+        })
+    };
+    let f0 = name(formats.0, "output")?;
+    let f1 = match formats.1 {
+        Some(f) => name(f, "output1")?,
+        None => "r32float",
+    };
+    let (body, entry) = match kind {
+        TraceKind::AmbientOcclusion => (AO_WGSL, "main"),
+        TraceKind::Shadow => (SHADOW_WGSL, "shadow"),
+        TraceKind::MultiShadow => (SHADOW_WGSL, "multi_shadow"),
+        TraceKind::Specular => (RADIANCE_WGSL, "specular"),
+        TraceKind::Diffuse => (RADIANCE_WGSL, "diffuse"),
+    };
+    let (declaration, store) = if formats.1.is_some() {
+        (
+            format!("@group(2) @binding(5) var out1: texture_storage_2d<{f1}, write>;"),
+            "textureStore(out1, texel, v);",
+        )
+    } else {
+        (String::new(), "")
+    };
+    let body = body
+        .replace("OUTPUT0_FORMAT", f0)
+        .replace("OUTPUT1_FORMAT", f1)
+        .replace("OUTPUT1_DECLARATION", &declaration)
+        .replace("OUTPUT1_STORE", store);
+    let cache = if kind.reads_cache() { cache } else { "" };
+    let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
+    Ok((source, entry))
+}
+
 /// The explicit layout of group 2: uniform, three sampled textures, one or two storage outputs.
 fn io_layout_entries(
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
@@ -548,3 +561,71 @@ fn trace_params(job: &Job<'_>) -> TraceParams {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod wgsl_tests {
+    //! Every pass variant `TracePasses` can create, validated with naga without a device, and
+    //! the uniform against the WGSL.
+    use super::*;
+    use crate::gpu::wgsl_check::{assert_wgsl_layout, validate};
+    use wgpu::TextureFormat as F;
+
+    const KINDS: [TraceKind; 5] = [
+        TraceKind::AmbientOcclusion,
+        TraceKind::Shadow,
+        TraceKind::MultiShadow,
+        TraceKind::Specular,
+        TraceKind::Diffuse,
+    ];
+
+    /// The second outputs a pass of `kind` can write (`TracePasses::record`): the specular's
+    /// demodulation output (when demodulating), the multi-shadow's `output1`.
+    fn second_outputs(kind: TraceKind) -> Vec<Option<F>> {
+        let writable = WRITABLE_OUTPUT_FORMATS.map(Some);
+        match kind {
+            TraceKind::AmbientOcclusion | TraceKind::Shadow | TraceKind::Diffuse => vec![None],
+            TraceKind::MultiShadow => writable.to_vec(),
+            TraceKind::Specular => [None].into_iter().chain(writable).collect(),
+        }
+    }
+
+    #[test]
+    fn every_trace_task_variant_validates_and_matches_the_rust_layouts() {
+        let cache = cache_sampling_wgsl();
+        let mut variants = 0;
+        for kind in KINDS {
+            for f0 in WRITABLE_OUTPUT_FORMATS {
+                for f1 in second_outputs(kind) {
+                    let (source, entry) = trace_wgsl(kind, (f0, f1), &cache).unwrap();
+                    let label = format!("{} ({f0:?}, {f1:?})", kind.label());
+                    let module = validate(&label, &source);
+                    assert!(
+                        module.entry_points.iter().any(|e| e.name == entry),
+                        "{label}: no entry point {entry}"
+                    );
+                    assert_wgsl_layout!(
+                        module,
+                        "TraceParams",
+                        TraceParams {
+                            mode,
+                            lengths,
+                            misc,
+                            offset_wp,
+                            offset_cd,
+                            lights,
+                        }
+                    );
+                    super::super::lights::assert_wgsl_layout(&module);
+                    super::super::gbuffer::assert_wgsl_layout(&module);
+                    variants += 1;
+                }
+            }
+        }
+        // 4 formats × (AO, shadow, diffuse: 1; multi-shadow: 4; specular: 5 second outputs).
+        assert_eq!(variants, 48);
+        // A format without a WGSL name is refused before any WGSL is made.
+        for formats in [(F::Rgba8Unorm, None), (F::R32Float, Some(F::Rgba8Unorm))] {
+            assert!(trace_wgsl(TraceKind::MultiShadow, formats, &cache).is_err());
+        }
+    }
+}
