@@ -45,6 +45,11 @@ pub(crate) struct AllocJob {
     pub initial: glam::Vec4,
 }
 
+/// The WGSL of the allocation passes (entry points `insert`, `count`, `allocate`, `write`).
+fn alloc_wgsl() -> String {
+    assemble(&[ALLOC_WGSL])
+}
+
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy)]
 struct AllocParams {
@@ -374,7 +379,7 @@ impl DirectLightingCache {
             });
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("kickstart-rt cache allocation"),
-                source: wgpu::ShaderSource::Wgsl(assemble(&[ALLOC_WGSL]).into()),
+                source: wgpu::ShaderSource::Wgsl(alloc_wgsl().into()),
             });
             let make = |entry: &str| {
                 device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -738,6 +743,44 @@ mod tests {
     use super::*;
     use crate::cache::{CacheLevel, CacheParams};
     use crate::gpu::testing::{buffer, gpu, run};
+
+    /// The allocation passes' WGSL validated with naga without a device; the uniform, the surfel
+    /// stride and the allocation state's word offsets against it.
+    #[test]
+    fn the_wgsl_validates_and_matches_the_rust_layouts() {
+        use crate::gpu::wgsl_check::{assert_wgsl_layout, const_u32, storage_stride, validate};
+        let module = validate("cache allocation", &alloc_wgsl());
+        for entry in ["insert", "count", "allocate", "write"] {
+            assert!(
+                module.entry_points.iter().any(|e| e.name == entry),
+                "{entry}"
+            );
+        }
+        assert_wgsl_layout!(
+            module,
+            "AllocParams",
+            AllocParams {
+                rows => "row0",
+                initial,
+                tri_count,
+                tri_base,
+                records,
+                header,
+                hash_size,
+                mesh_colors,
+                resolution_limit,
+                force_direct,
+                unit_length,
+                direct_threshold,
+                log_index,
+                pad,
+            }
+        );
+        assert_eq!(storage_stride(&module, "surfels") as u64, SURFEL_BYTES);
+        assert_eq!(const_u32(&module, "ST_FREE") as u64, ST_FREE);
+        assert_eq!(const_u32(&module, "ST_LOG") as u64, ST_LOG);
+        assert_eq!(const_u32(&module, "ST_MAX_FREE") as usize, MAX_FREE_BLOCKS);
+    }
 
     fn job(slot: u32, tri_count: u32) -> AllocJob {
         AllocJob {

@@ -81,7 +81,9 @@ fn texture_entry(binding: u32, depth: bool) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline {
+/// The WGSL of the injection pass reading depth of a depth format (`depth_format`) or a float
+/// texture.
+fn inject_wgsl(depth_format: bool) -> String {
     let (ty, load) = if depth_format {
         (
             "texture_depth_2d",
@@ -90,13 +92,17 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
     } else {
         ("texture_2d<f32>", "textureLoad(depth_tex, pixel, 0)")
     };
-    let source = assemble(&[
+    assemble(&[
         TRAVERSE_WGSL,
         &super::sample_wgsl(1, false),
         &INJECT_WGSL
             .replace("DEPTH_TEXTURE_TYPE", ty)
             .replace("DEPTH_LOAD", load),
-    ]);
+    ])
+}
+
+fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline {
+    let source = inject_wgsl(depth_format);
     let scene = SceneBuffers::layout(device);
     let cache = BoundLayout::new(
         device,
@@ -371,4 +377,56 @@ fn inject_groups(
         ],
     });
     [scene_group, cache_group, io_group]
+}
+
+#[cfg(test)]
+mod wgsl_tests {
+    //! The injection and resolve passes' WGSL validated with naga without a device, and their
+    //! uniforms against it.
+    use super::*;
+    use crate::cache::alloc::SURFEL_BYTES;
+    use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
+
+    #[test]
+    fn both_injection_variants_validate_and_match_the_rust_layout() {
+        for depth_format in [true, false] {
+            let label = format!("injection (depth format: {depth_format})");
+            let module = validate(&label, &inject_wgsl(depth_format));
+            assert!(module.entry_points.iter().any(|e| e.name == "inject"));
+            assert_wgsl_layout!(
+                module,
+                "InjectParams",
+                InjectParams {
+                    clip_to_world,
+                    eye,
+                    viewport,
+                    grid,
+                    offset,
+                    f,
+                    jitter,
+                }
+            );
+            assert_eq!(
+                storage_stride(&module, "cache_surfels") as u64,
+                SURFEL_BYTES
+            );
+        }
+    }
+
+    #[test]
+    fn the_resolve_pass_validates_and_matches_the_rust_layout() {
+        let module = validate("injection resolve", RESOLVE_WGSL);
+        assert!(module.entry_points.iter().any(|e| e.name == "resolve"));
+        assert_wgsl_layout!(
+            module,
+            "ResolveParams",
+            ResolveParams {
+                slots,
+                map_words,
+                window,
+                pad,
+            }
+        );
+        assert_eq!(storage_stride(&module, "surfels") as u64, SURFEL_BYTES);
+    }
 }

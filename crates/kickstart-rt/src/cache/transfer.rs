@@ -11,6 +11,11 @@ use crate::gpu::Recorder;
 
 const TRANSFER_WGSL: &str = include_str!("../../shaders/cache_transfer.wgsl");
 
+/// The WGSL of the transfer pass (the sampling module at group 0, its surfels writable).
+fn transfer_wgsl() -> String {
+    assemble(&[&super::sample_wgsl(0, true), TRANSFER_WGSL])
+}
+
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy)]
 struct TransferParams {
@@ -30,7 +35,7 @@ impl Transferer {
     fn pipeline(&mut self, device: &wgpu::Device) -> wgpu::ComputePipeline {
         self.pipeline
             .get_or_insert_with(|| {
-                let source = assemble(&[&super::sample_wgsl(0, true), TRANSFER_WGSL]);
+                let source = transfer_wgsl();
                 compute_pipeline(device, "kickstart-rt light transfer", &source, "transfer")
             })
             .clone()
@@ -78,6 +83,33 @@ impl Transferer {
             &pipeline,
             &[&cache, &io],
             tri_count.div_ceil(64),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
+
+    /// The pass's WGSL validated with naga without a device, and its uniform against it.
+    #[test]
+    fn the_wgsl_validates_and_matches_the_rust_layout() {
+        let module = validate("light transfer", &transfer_wgsl());
+        assert!(module.entry_points.iter().any(|e| e.name == "transfer"));
+        assert_wgsl_layout!(
+            module,
+            "TransferParams",
+            TransferParams {
+                source,
+                target => "target_slot",
+                tri_count,
+                pad,
+            }
+        );
+        assert_eq!(
+            storage_stride(&module, "cache_surfels") as u64,
+            crate::cache::alloc::SURFEL_BYTES
         );
     }
 }

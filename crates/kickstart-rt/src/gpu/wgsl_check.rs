@@ -129,6 +129,21 @@ pub(crate) fn storage_stride(module: &naga::Module, name: &str) -> u32 {
     }
 }
 
+/// The value of the WGSL `const NAME: u32` of `module` (a constant the Rust side mirrors).
+pub(crate) fn const_u32(module: &naga::Module, name: &str) -> u32 {
+    let Some((_, c)) = module
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some(name))
+    else {
+        panic!("no WGSL const {name} in the module");
+    };
+    match module.global_expressions[c.init] {
+        naga::Expression::Literal(naga::Literal::U32(v)) => v,
+        ref other => panic!("WGSL const {name} is not a u32 literal: {other:?}"),
+    }
+}
+
 /// `assert_wgsl_layout!(module, "WgslName", RustType { field, other => "wgsl_member", … })`:
 /// checks `RustType` against the WGSL struct `WgslName` of the validated `module` (see
 /// [`assert_layout`]). Every field of `RustType` must be listed (the macro destructures the type
@@ -218,6 +233,7 @@ mod tests {
         let module = validate("test", SOURCE);
         assert_wgsl_layout!(module, "Params", Params { a, count, scale => "scale_x", pad => "pad0" });
         assert_eq!(storage_stride(&module, "out"), 8);
+        assert_eq!(const_u32(&validate("const", "const N: u32 = 7u;"), "N"), 7);
     }
 
     #[test]
