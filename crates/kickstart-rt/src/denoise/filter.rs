@@ -264,6 +264,22 @@ impl Shared {
     }
 }
 
+/// The WGSL of the temporal pass of `set` (the G-buffer module at group 0).
+fn temporal_wgsl(set: SignalSet) -> String {
+    assemble(&[
+        &gbuffer_wgsl(0),
+        &set.prelude(None),
+        COMMON_WGSL,
+        TEMPORAL_WGSL,
+    ])
+}
+
+/// The WGSL of an à-trous iteration of `set`; `outputs`: the last iteration's, writing textures
+/// of those formats (see [`SignalSet::prelude`]).
+fn atrous_wgsl(set: SignalSet, outputs: Option<&[wgpu::TextureFormat]>) -> String {
+    assemble(&[&set.prelude(outputs), COMMON_WGSL, ATROUS_WGSL])
+}
+
 /// The pipelines of one signal set.
 struct SetPipelines {
     temporal: wgpu::ComputePipeline,
@@ -295,29 +311,26 @@ struct Pipelines {
 impl Pipelines {
     /// The temporal and à-trous pipelines of `set`.
     fn set(&mut self, device: &wgpu::Device, shared: &Shared, set: SignalSet) -> &mut SetPipelines {
-        self.sets.entry(set).or_insert_with(|| {
-            let prelude = set.prelude(None);
-            SetPipelines {
-                temporal: compute_pipeline_with_layouts(
-                    device,
-                    "kickstart-rt denoise temporal",
-                    &assemble(&[&gbuffer_wgsl(0), &prelude, COMMON_WGSL, TEMPORAL_WGSL]),
-                    "main",
-                    &[
-                        shared.gbuffer.layout(),
-                        &shared.temporal_inputs,
-                        &shared.temporal_buffers,
-                    ],
-                ),
-                atrous: compute_pipeline_with_layouts(
-                    device,
-                    "kickstart-rt denoise a-trous",
-                    &assemble(&[&prelude, COMMON_WGSL, ATROUS_WGSL]),
-                    "main",
-                    &[&shared.atrous_params, &shared.atrous_buffers],
-                ),
-                last: Vec::new(),
-            }
+        self.sets.entry(set).or_insert_with(|| SetPipelines {
+            temporal: compute_pipeline_with_layouts(
+                device,
+                "kickstart-rt denoise temporal",
+                &temporal_wgsl(set),
+                "main",
+                &[
+                    shared.gbuffer.layout(),
+                    &shared.temporal_inputs,
+                    &shared.temporal_buffers,
+                ],
+            ),
+            atrous: compute_pipeline_with_layouts(
+                device,
+                "kickstart-rt denoise a-trous",
+                &atrous_wgsl(set, None),
+                "main",
+                &[&shared.atrous_params, &shared.atrous_buffers],
+            ),
+            last: Vec::new(),
         })
     }
 
@@ -355,7 +368,7 @@ impl Pipelines {
         let pipeline = compute_pipeline_with_layouts(
             device,
             "kickstart-rt denoise a-trous (last, output)",
-            &assemble(&[&set.prelude(Some(formats)), COMMON_WGSL, ATROUS_WGSL]),
+            &atrous_wgsl(set, Some(formats)),
             "main",
             &[&shared.atrous_params, &shared.atrous_buffers, &out_layout],
         );
@@ -702,3 +715,6 @@ fn record_atrous(
         src = dst;
     }
 }
+
+#[cfg(test)]
+mod wgsl_tests;

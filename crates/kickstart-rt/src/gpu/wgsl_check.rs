@@ -7,9 +7,13 @@
 
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 
-/// The capabilities a shader may use: none. The SDK requires no device feature
-/// (`device::required_features` is empty), so every variant must validate without any.
-const CAPABILITIES: Capabilities = Capabilities::empty();
+/// The capabilities a shader may use: those wgpu grants a WebGPU-compliant adapter without any
+/// optional feature (`wgpu-naga-bridge`'s `features_to_naga_capabilities` of
+/// `device::required_features()`, which is empty, and `DownlevelFlags::compliant()`). The
+/// denoisers' records need `SHADER_FLOAT16_IN_FLOAT32` (`pack2x16float`/`unpack2x16float`).
+const CAPABILITIES: Capabilities = Capabilities::SHADER_FLOAT16_IN_FLOAT32
+    .union(Capabilities::MULTISAMPLED_SHADING)
+    .union(Capabilities::CUBE_ARRAY_TEXTURES);
 
 /// Parses and validates `source` (variant `label`) with naga and every validation flag; panics
 /// naming the variant and naga's message with its source location.
