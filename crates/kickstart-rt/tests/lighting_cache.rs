@@ -728,6 +728,29 @@ fn a_short_pool_gives_coarse_caches_at_once_and_grows_later() {
     }
 }
 
+/// Each transfer from `source` to a target of `refused` is refused as invalid input whose message
+/// contains the paired word.
+fn assert_transfers_refused(
+    ctx: &ExecuteContext,
+    source: InstanceHandle,
+    refused: &[(InstanceHandle, &str)],
+) {
+    for &(target, why) in refused {
+        let mut c = ctx.create_task_container();
+        c.schedule_render_task(RenderTask::DirectLightTransfer(DirectLightTransferTask {
+            source,
+            target,
+        }));
+        let err = ctx
+            .build_gpu_task(c, &mut encoder())
+            .expect_err("bad transfer");
+        assert!(
+            matches!(err, Error::InvalidInput { .. }) && err.to_string().contains(why),
+            "{err}"
+        );
+    }
+}
+
 #[test]
 fn transfer_reproduces_the_source_lighting_on_the_target() {
     let ctx = context(4);
@@ -751,41 +774,21 @@ fn transfer_reproduces_the_source_lighting_on_the_target() {
     .mesh(1, false);
     let plain = |_: &mut GeometryInput| {};
     let shift = Vec3::new(10.0, 0.0, 0.0);
+    // The source, then targets: same layout, warped-barycentric tiles, another triangle count,
+    // and a geometry without allow_light_transfer_target.
+    let placed: Vec<_> = [0, 0, 1, 2, 3]
+        .into_iter()
+        .enumerate()
+        .map(|(k, geometry)| {
+            let tint = if k == 0 { Vec4::ZERO } else { MAGENTA };
+            let at = Affine3A::from_translation(shift * k as f32);
+            (geometry, at, tint, InstanceInclusionMask::ALL)
+        })
+        .collect();
     let (_, inst) = scene(
         &ctx,
         &[(&mesh, &mc), (&mesh, &wb), (&other, &mc), (&mesh, &plain)],
-        &[
-            (
-                0,
-                Affine3A::IDENTITY,
-                Vec4::ZERO,
-                InstanceInclusionMask::ALL,
-            ),
-            (
-                0,
-                Affine3A::from_translation(shift),
-                MAGENTA,
-                InstanceInclusionMask::ALL,
-            ),
-            (
-                1,
-                Affine3A::from_translation(2.0 * shift),
-                MAGENTA,
-                InstanceInclusionMask::ALL,
-            ),
-            (
-                2,
-                Affine3A::from_translation(3.0 * shift),
-                MAGENTA,
-                InstanceInclusionMask::ALL,
-            ),
-            (
-                3,
-                Affine3A::from_translation(4.0 * shift),
-                MAGENTA,
-                InstanceInclusionMask::ALL,
-            ),
-        ],
+        &placed,
     );
     let cam = above();
     run_tasks(
@@ -798,24 +801,15 @@ fn transfer_reproduces_the_source_lighting_on_the_target() {
         ))],
     );
     // Bad transfers are refused before anything is recorded.
-    for (target, why) in [
-        (inst[3], "triangles"),
-        (inst[4], "allow_light_transfer_target"),
-        (inst[0], "differ"),
-    ] {
-        let mut c = ctx.create_task_container();
-        c.schedule_render_task(RenderTask::DirectLightTransfer(DirectLightTransferTask {
-            source: inst[0],
-            target,
-        }));
-        let err = ctx
-            .build_gpu_task(c, &mut encoder())
-            .expect_err("bad transfer");
-        assert!(
-            matches!(err, Error::InvalidInput { .. }) && err.to_string().contains(why),
-            "{err}"
-        );
-    }
+    assert_transfers_refused(
+        &ctx,
+        inst[0],
+        &[
+            (inst[3], "triangles"),
+            (inst[4], "allow_light_transfer_target"),
+            (inst[0], "differ"),
+        ],
+    );
     run_tasks(
         &ctx,
         vec![

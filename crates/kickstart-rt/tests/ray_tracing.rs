@@ -384,11 +384,11 @@ fn closed_meshes_have_no_gaps() {
     assert!(hits.iter().filter(|h| h.is_hit()).count() > 50);
 }
 
-/// Per-component formats, strides, offsets, transforms and index ranges: each hit reports the
-/// documented primitive index (earlier components' triangles first).
-#[test]
-fn ingestion_formats_and_components_hit_the_documented_primitives() {
-    let ctx = context(4);
+/// A geometry of three components in three vertex formats, with offsets, strides, transforms
+/// and an index range: component 0 Float16x4 at byte offset 8 with stride 12, u16 indices at
+/// offset 2; component 1 Snorm16x4, non-indexed, translated by x = 2, its first triangle skipped
+/// by its index range; component 2 Float32x4 with u32 indices, translated by x = 4.
+fn mixed_components() -> GeometryInput {
     // Component 0: Float16x4 at byte offset 8 with stride 12, u16 indices at offset 2;
     // 2 triangles (a quad at z = 0 spanning x 0..1).
     let quad = [
@@ -429,8 +429,7 @@ fn ingestion_formats_and_components_hit_the_documented_primitives() {
     let f4: Vec<f32> = quad.iter().flat_map(|p| [p[0], p[1], p[2], 7.0]).collect();
     let i4 = [0u32, 1, 2, 0, 2, 3];
     let src = wgpu::BufferUsages::COPY_SRC;
-    let g = ctx.create_geometry_handle();
-    let input = GeometryInput {
+    GeometryInput {
         name: "mixed".into(),
         components: vec![
             GeometryComponent {
@@ -481,7 +480,16 @@ fn ingestion_formats_and_components_hit_the_documented_primitives() {
             },
         ],
         ..Default::default()
-    };
+    }
+}
+
+/// Per-component formats, strides, offsets, transforms and index ranges: each hit reports the
+/// documented primitive index (earlier components' triangles first).
+#[test]
+fn ingestion_formats_and_components_hit_the_documented_primitives() {
+    let ctx = context(4);
+    let g = ctx.create_geometry_handle();
+    let input = mixed_components();
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(GeometryTask {
         operation: TaskOperation::Register,
