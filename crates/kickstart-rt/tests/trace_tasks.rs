@@ -554,104 +554,140 @@ fn differing(a: &Traced, b: &Traced, ao_tol: f32, t_tol: f32) -> (usize, usize) 
     (ao, shadow)
 }
 
-/// One camera sees a ground slab and a rotated box; the G-buffer is written once per depth
-/// encoding (RgbWorldSpace; RClipSpace in R32Float and in a Depth32Float depth buffer, each with
-/// a normal-Z and a reverse-Z infinite projection of the same frustum) and once per normal
-/// encoding (all six NormalTypes, world-space, rotated or view-space via `normal_to_world`, in
-/// Rgba32Float and in 8-bit formats). An AO task and a hard directional shadow task at a fixed
-/// frame index must give every encoding the reference encoding's result per pixel.
-///
-/// The reference itself is checked against the CPU: its shadow (kind and distance) against an
-/// analytic ray–box test away from shadow and object boundaries, its AO exactly 1 wherever
-/// nothing lies within the AO radius above the surface. Two wrong G-buffers on purpose (normals
-/// flipped, depth 0.5 % too far) must fail the comparison: the bounds catch wrong decodes.
-#[test]
-fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
-    let started = std::time::Instant::now();
-    let ctx = context(4);
-    let mut c = ctx.create_task_container();
-    add(
-        &ctx,
-        &mut c,
-        &Mesh::cuboid(
-            Vec3::new(-GROUND as f32, -0.1, -GROUND as f32),
-            Vec3::new(GROUND as f32, 0.0, GROUND as f32),
-        ),
-        Affine3A::IDENTITY,
-        Vec3::ONE,
-    );
-    add(
-        &ctx,
-        &mut c,
-        &Mesh::cuboid(BOX_LO, BOX_HI),
-        box_transform(),
-        Vec3::ONE,
-    );
-    build(&ctx, c);
-    let scene = GroundAndBox::new();
+/// The encoding test's image size.
+const ENC_W: u32 = 48;
+const ENC_H: u32 = 48;
 
-    const W: u32 = 48;
-    const H: u32 = 48;
-    let fov = 0.8;
-    let world_to_view =
-        Mat4::look_at_rh(Vec3::new(1.8, 2.2, 2.4), Vec3::new(0.1, 0.3, -0.1), Vec3::Y);
-    let normal_z = Mat4::perspective_rh(fov, 1.0, 0.1, 50.0);
-    let reverse_z = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1);
-    let view_of = |view_to_clip| ViewInfo {
+/// A static camera (previous view = current) with `world_to_view` and `view_to_clip`.
+fn static_view(world_to_view: Mat4, view_to_clip: Mat4) -> ViewInfo {
+    ViewInfo {
         world_to_view,
         view_to_clip,
         prev_world_to_view: world_to_view,
         prev_view_to_clip: view_to_clip,
         ..Default::default()
-    };
-    let surfaces: Vec<Option<(DVec3, DVec3, u32)>> = (0..W * H)
-        .map(|i| {
-            let (o, d) = pixel_ray(&view_of(normal_z), W, H, i % W, i / W);
-            scene.cast(o, d)
-        })
-        .collect();
-    let positions: Vec<Option<DVec3>> = surfaces.iter().map(|s| s.map(|s| s.0)).collect();
-    // Where nothing was rendered the normal points down, away from the light: a decode that
-    // took the far plane for a surface would write "shadowed at distance 0" there, not "lit".
-    let normals: Vec<DVec3> = surfaces
-        .iter()
-        .map(|s| s.map_or(DVec3::NEG_Y, |s| s.1))
-        .collect();
-    let n_surface = surfaces.iter().filter(|s| s.is_some()).count();
-    let n_box = surfaces
-        .iter()
-        .filter(|s| s.is_some_and(|s| s.2 == 1))
-        .count();
-    assert!(
-        n_surface < (W * H) as usize - 40 && n_box > 150,
-        "the view shows sky ({}), ground and box ({n_box})",
-        (W * H) as usize - n_surface
-    );
+    }
+}
 
-    let to_light = DVec3::new(-1.0, 0.9, -0.6).normalize();
-    let light = LightInfo::Directional {
-        direction: -to_light.as_vec3(),
-        angular_extent: 0.0,
-    };
-    let ao_radius = 0.5;
-    let trace = |depth: DepthInput, normal: NormalInput, view_to_clip: Mat4| -> Traced {
+/// The encoding test's setup: the ground slab and the rotated box built on the device and on
+/// the CPU, the camera (one frustum as a normal-Z and a reverse-Z infinite projection), what
+/// each pixel sees, and the light and AO radius of every trace.
+struct EncodingScene {
+    ctx: ExecuteContext,
+    scene: GroundAndBox,
+    world_to_view: Mat4,
+    normal_z: Mat4,
+    reverse_z: Mat4,
+    /// Per pixel: (position, normal, object: 0 ground, 1 box), `None` where nothing is seen.
+    surfaces: Vec<Option<(DVec3, DVec3, u32)>>,
+    positions: Vec<Option<DVec3>>,
+    normals: Vec<DVec3>,
+    n_surface: usize,
+    to_light: DVec3,
+    light: LightInfo,
+    ao_radius: f32,
+}
+
+impl EncodingScene {
+    fn new() -> Self {
+        let ctx = context(4);
+        let mut c = ctx.create_task_container();
+        add(
+            &ctx,
+            &mut c,
+            &Mesh::cuboid(
+                Vec3::new(-GROUND as f32, -0.1, -GROUND as f32),
+                Vec3::new(GROUND as f32, 0.0, GROUND as f32),
+            ),
+            Affine3A::IDENTITY,
+            Vec3::ONE,
+        );
+        add(
+            &ctx,
+            &mut c,
+            &Mesh::cuboid(BOX_LO, BOX_HI),
+            box_transform(),
+            Vec3::ONE,
+        );
+        build(&ctx, c);
+        let scene = GroundAndBox::new();
+
+        let fov = 0.8;
+        let world_to_view =
+            Mat4::look_at_rh(Vec3::new(1.8, 2.2, 2.4), Vec3::new(0.1, 0.3, -0.1), Vec3::Y);
+        let normal_z = Mat4::perspective_rh(fov, 1.0, 0.1, 50.0);
+        let reverse_z = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1);
+        let view = static_view(world_to_view, normal_z);
+        let surfaces: Vec<Option<(DVec3, DVec3, u32)>> = (0..ENC_W * ENC_H)
+            .map(|i| {
+                let (o, d) = pixel_ray(&view, ENC_W, ENC_H, i % ENC_W, i / ENC_W);
+                scene.cast(o, d)
+            })
+            .collect();
+        let positions: Vec<Option<DVec3>> = surfaces.iter().map(|s| s.map(|s| s.0)).collect();
+        // Where nothing was rendered the normal points down, away from the light: a decode that
+        // took the far plane for a surface would write "shadowed at distance 0" there, not "lit".
+        let normals: Vec<DVec3> = surfaces
+            .iter()
+            .map(|s| s.map_or(DVec3::NEG_Y, |s| s.1))
+            .collect();
+        let n_surface = surfaces.iter().filter(|s| s.is_some()).count();
+        let n_box = surfaces
+            .iter()
+            .filter(|s| s.is_some_and(|s| s.2 == 1))
+            .count();
+        assert!(
+            n_surface < (ENC_W * ENC_H) as usize - 40 && n_box > 150,
+            "the view shows sky ({}), ground and box ({n_box})",
+            (ENC_W * ENC_H) as usize - n_surface
+        );
+
+        let to_light = DVec3::new(-1.0, 0.9, -0.6).normalize();
+        let light = LightInfo::Directional {
+            direction: -to_light.as_vec3(),
+            angular_extent: 0.0,
+        };
+        EncodingScene {
+            ctx,
+            scene,
+            world_to_view,
+            normal_z,
+            reverse_z,
+            surfaces,
+            positions,
+            normals,
+            n_surface,
+            to_light,
+            light,
+            ao_radius: 0.5,
+        }
+    }
+
+    /// The camera with the projection `view_to_clip`.
+    fn view_of(&self, view_to_clip: Mat4) -> ViewInfo {
+        static_view(self.world_to_view, view_to_clip)
+    }
+
+    /// The AO task and the hard shadow task at frame 5 on the G-buffer (`depth`, `normal`)
+    /// seen with `view_to_clip`: their R channels.
+    fn trace(&self, depth: DepthInput, normal: NormalInput, view_to_clip: Mat4) -> Traced {
         let mut common = TraceTaskCommon::new(depth, normal);
-        common.view = view_of(view_to_clip);
+        common.view = self.view_of(view_to_clip);
         common.ray_offset.offset_type = RayOffsetType::WorldPosition;
         common.debug_parameters.frame_index = 5;
-        let (ao, shadow) = (output(W, H), output(W, H));
+        let (ao, shadow) = (output(ENC_W, ENC_H), output(ENC_W, ENC_H));
         run_tasks(
-            &ctx,
+            &self.ctx,
             vec![
                 RenderTask::TraceAmbientOcclusion(TraceAmbientOcclusionTask {
                     common: common.clone(),
                     output: ao.clone(),
-                    ao_radius,
+                    ao_radius: self.ao_radius,
                 }),
                 RenderTask::TraceShadow(TraceShadowTask {
                     common,
                     output: shadow.clone(),
-                    light,
+                    light: self.light,
                     enable_first_hit_and_end_search: false,
                 }),
             ],
@@ -660,28 +696,42 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
             ao: read_rgba32(&ao).iter().map(|v| v[0]).collect(),
             shadow: read_rgba32(&shadow).iter().map(|v| v[0]).collect(),
         }
-    };
-    let depth = |enc, view_to_clip, scale| {
-        encode_depth(enc, W, H, &view_of(view_to_clip), &positions, scale)
-    };
-    let normal =
-        |ty, format, normal_to_world| encode_normals(ty, format, normal_to_world, W, H, &normals);
+    }
 
-    // The reference: world positions and world-space float normals.
-    let reference = trace(
-        depth(DepthEncoding::WorldPosition, normal_z, 1.0),
-        normal(NormalType::RgbVector, F::Rgba32Float, Mat4::IDENTITY),
-        normal_z,
-    );
+    /// The depth input of the pixels' surfaces in `enc`, seen with `view_to_clip`, each
+    /// clip-space view distance times `scale`.
+    fn depth(&self, enc: DepthEncoding, view_to_clip: Mat4, scale: f64) -> DepthInput {
+        encode_depth(
+            enc,
+            ENC_W,
+            ENC_H,
+            &self.view_of(view_to_clip),
+            &self.positions,
+            scale,
+        )
+    }
 
-    // The reference against the CPU. Shadow: away from the boundaries of (object, kind) regions.
-    let labels: Vec<Option<(u32, u32, Option<f64>)>> = surfaces
+    /// The normal input of the pixels' normals in `ty` and `format`, via `normal_to_world`.
+    fn normal(&self, ty: NormalType, format: F, normal_to_world: Mat4) -> NormalInput {
+        encode_normals(ty, format, normal_to_world, ENC_W, ENC_H, &self.normals)
+    }
+
+    /// World-space float normals in `ty`.
+    fn f32_normals(&self, ty: NormalType) -> NormalInput {
+        self.normal(ty, F::Rgba32Float, Mat4::IDENTITY)
+    }
+}
+
+/// The reference's shadow against the CPU, away from the boundaries of (object, kind) regions.
+fn check_reference_shadow(e: &EncodingScene, reference: &Traced) {
+    let labels: Vec<Option<(u32, u32, Option<f64>)>> = e
+        .surfaces
         .iter()
         .map(|s| {
             s.map(|(p, n, k)| {
-                if n.dot(to_light) <= 0.0 {
+                if n.dot(e.to_light) <= 0.0 {
                     (k, 1, None)
-                } else if let Some((t, _)) = scene.box_hit(p, to_light) {
+                } else if let Some((t, _)) = e.scene.box_hit(p, e.to_light) {
                     (k, 2, Some(t))
                 } else {
                     (k, 0, None)
@@ -698,7 +748,7 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
             assert_eq!(reference.ao[i], 1.0, "pixel {i} shows nothing: open");
             continue;
         };
-        if !away_from_boundaries(&kinds, W, H, i as u32 % W, i as u32 / W, 1) {
+        if !away_from_boundaries(&kinds, ENC_W, ENC_H, i as u32 % ENC_W, i as u32 / ENC_W, 1) {
             continue;
         }
         checked[kind as usize] += 1;
@@ -718,12 +768,17 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
         checked.iter().all(|&n| n > 40),
         "lit / facing away / shadowed pixels checked: {checked:?}"
     );
-    // AO: exactly 1 where no geometry lies within the radius above the surface (ground far
-    // from the box, the box's top); below 1 only where the box or the ground is within it.
+}
+
+/// The reference's AO against the CPU: exactly 1 where no geometry lies within the radius above
+/// the surface (ground far from the box, the box's top); below 1 only where the box or the
+/// ground is within it.
+fn check_reference_ao(e: &EncodingScene, reference: &Traced) {
+    let ao_radius = e.ao_radius;
     let (mut open, mut occluded) = (0, 0);
-    for (i, s) in surfaces.iter().enumerate() {
+    for (i, s) in e.surfaces.iter().enumerate() {
         let Some((p, n, k)) = s else { continue };
-        let ground_open = *k == 0 && scene.distance_to_box(*p) > ao_radius as f64 + 1e-3;
+        let ground_open = *k == 0 && e.scene.distance_to_box(*p) > ao_radius as f64 + 1e-3;
         if ground_open || (*k == 1 && n.y > 0.5) {
             assert_eq!(
                 reference.ao[i], 1.0,
@@ -733,7 +788,7 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
         }
         if reference.ao[i] < 1.0 {
             let near = if *k == 0 {
-                scene.distance_to_box(*p) < ao_radius as f64
+                e.scene.distance_to_box(*p) < ao_radius as f64
             } else {
                 p.y < ao_radius as f64
             };
@@ -745,12 +800,20 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
         open > 300 && occluded > 40,
         "open {open}, occluded {occluded}"
     );
+}
 
-    // The encodings. A rotation whose inverse takes the ground's normal to z > 0 and the box's
-    // front face to z < 0, so both branches of the octahedral decode are used.
+/// One G-buffer encoding: (name, depth, normal, projection, 8-bit normals).
+type EncodingVariant = (String, DepthInput, NormalInput, Mat4, bool);
+
+/// Every encoding compared with the reference. A rotation whose inverse takes the ground's
+/// normal to z > 0 and the box's front face to z < 0, so both branches of the octahedral decode
+/// are used.
+fn encoding_variants(e: &EncodingScene) -> Vec<EncodingVariant> {
+    let (normal_z, reverse_z) = (e.normal_z, e.reverse_z);
     let rotated = Mat4::from_rotation_x(-2.2);
-    let view_space = world_to_view.inverse();
-    let stored_z: Vec<f64> = surfaces
+    let view_space = e.world_to_view.inverse();
+    let stored_z: Vec<f64> = e
+        .surfaces
         .iter()
         .flatten()
         .map(|s| rotated.as_dmat4().inverse().transform_vector3(s.1).z)
@@ -760,9 +823,7 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
             && stored_z.iter().filter(|z| **z > 0.1).count() > 50,
         "both octahedral hemispheres are used"
     );
-    let f32_normals = |ty| normal(ty, F::Rgba32Float, Mat4::IDENTITY);
-    // (name, depth, normal, projection, 8-bit normals)
-    let mut variants: Vec<(String, DepthInput, NormalInput, Mat4, bool)> = Vec::new();
+    let mut variants: Vec<EncodingVariant> = Vec::new();
     for (enc, proj, proj_name) in [
         (DepthEncoding::ClipR32Float, normal_z, "normal Z"),
         (DepthEncoding::ClipR32Float, reverse_z, "reverse-Z infinite"),
@@ -775,8 +836,8 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
     ] {
         variants.push((
             format!("{enc:?} {proj_name}"),
-            depth(enc, proj, 1.0),
-            f32_normals(NormalType::RgbVector),
+            e.depth(enc, proj, 1.0),
+            e.f32_normals(NormalType::RgbVector),
             proj,
             false,
         ));
@@ -824,8 +885,8 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
     ] {
         variants.push((
             format!("{ty:?} {format:?} {space}"),
-            depth(DepthEncoding::WorldPosition, normal_z, 1.0),
-            normal(ty, format, to_world),
+            e.depth(DepthEncoding::WorldPosition, normal_z, 1.0),
+            e.normal(ty, format, to_world),
             normal_z,
             format != F::Rgba32Float,
         ));
@@ -833,8 +894,8 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
     // A typical engine G-buffer: a reverse-Z depth buffer and 8-bit view-space octahedral normals.
     variants.push((
         "ClipDepth32Float reverse-Z infinite + RgNormalizedOctahedron Rgba8Unorm view space".into(),
-        depth(DepthEncoding::ClipDepth32Float, reverse_z, 1.0),
-        normal(
+        e.depth(DepthEncoding::ClipDepth32Float, reverse_z, 1.0),
+        e.normal(
             NormalType::RgNormalizedOctahedron,
             F::Rgba8Unorm,
             view_space,
@@ -842,7 +903,100 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
         reverse_z,
         true,
     ));
+    variants
+}
 
+/// Traces every variant; each may differ from the reference in at most `float_allowed` shadow
+/// pixels and `float_allowed` AO pixels (by more than 2e-3), or with 8-bit normals
+/// `quantised_allowed` AO pixels (by more than 0.05).
+fn check_variants(
+    e: &EncodingScene,
+    reference: &Traced,
+    variants: Vec<EncodingVariant>,
+    float_allowed: usize,
+    quantised_allowed: usize,
+) {
+    let n_surface = e.n_surface;
+    for (name, d, n, proj, quantised) in variants {
+        let got = e.trace(d, n, proj);
+        let (ao_tol, allowed_ao) = if quantised {
+            (0.05, quantised_allowed)
+        } else {
+            (2e-3, float_allowed)
+        };
+        let (ao, shadow) = differing(reference, &got, ao_tol, 2e-3);
+        eprintln!("{name}: {ao} AO and {shadow} shadow pixels differ (of {n_surface})");
+        assert!(
+            ao <= allowed_ao && shadow <= float_allowed,
+            "{name}: {ao} AO pixels (allowed {allowed_ao}) and {shadow} shadow pixels (allowed \
+             {float_allowed}) differ from the reference"
+        );
+    }
+}
+
+/// The bounds catch wrong decodes: flipped normals, and a depth 0.5 % too far.
+fn check_wrong_on_purpose_is_rejected(
+    e: &EncodingScene,
+    reference: &Traced,
+    quantised_allowed: usize,
+) {
+    let normal_z = e.normal_z;
+    let flipped: Vec<DVec3> = e.normals.iter().map(|n| -*n).collect();
+    for (name, d, n) in [
+        (
+            "flipped normals",
+            e.depth(DepthEncoding::WorldPosition, normal_z, 1.0),
+            encode_normals(
+                NormalType::RgbVector,
+                F::Rgba32Float,
+                Mat4::IDENTITY,
+                ENC_W,
+                ENC_H,
+                &flipped,
+            ),
+        ),
+        (
+            "depth 0.5 % too far",
+            e.depth(DepthEncoding::ClipR32Float, normal_z, 1.005),
+            e.f32_normals(NormalType::RgbVector),
+        ),
+    ] {
+        let got = e.trace(d, n, normal_z);
+        let (ao, shadow) = differing(reference, &got, 0.05, 2e-3);
+        eprintln!("wrong on purpose, {name}: {ao} AO and {shadow} shadow pixels differ");
+        assert!(
+            ao > 10 * quantised_allowed || shadow > 10 * quantised_allowed,
+            "{name}: the comparison must reject it ({ao} AO, {shadow} shadow pixels differ)"
+        );
+    }
+}
+
+/// One camera sees a ground slab and a rotated box; the G-buffer is written once per depth
+/// encoding (RgbWorldSpace; RClipSpace in R32Float and in a Depth32Float depth buffer, each with
+/// a normal-Z and a reverse-Z infinite projection of the same frustum) and once per normal
+/// encoding (all six NormalTypes, world-space, rotated or view-space via `normal_to_world`, in
+/// Rgba32Float and in 8-bit formats). An AO task and a hard directional shadow task at a fixed
+/// frame index must give every encoding the reference encoding's result per pixel.
+///
+/// The reference itself is checked against the CPU: its shadow (kind and distance) against an
+/// analytic ray–box test away from shadow and object boundaries, its AO exactly 1 wherever
+/// nothing lies within the AO radius above the surface. Two wrong G-buffers on purpose (normals
+/// flipped, depth 0.5 % too far) must fail the comparison: the bounds catch wrong decodes.
+#[test]
+fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
+    let started = std::time::Instant::now();
+    let e = EncodingScene::new();
+
+    // The reference: world positions and world-space float normals.
+    let reference = e.trace(
+        e.depth(DepthEncoding::WorldPosition, e.normal_z, 1.0),
+        e.normal(NormalType::RgbVector, F::Rgba32Float, Mat4::IDENTITY),
+        e.normal_z,
+    );
+    check_reference_shadow(&e, &reference);
+    check_reference_ao(&e, &reference);
+
+    let variants = encoding_variants(&e);
     // Bounds. Float encodings decode to within f32 rounding of the reference surface (clip depth:
     // ~1e-5 of position, normals ~1e-7): a pixel can differ only where its AO ray grazes an
     // edge of the box, which such a shift turns from hit to miss — at most 0.25 % of the surface
@@ -853,57 +1007,302 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
     // normal only through the ray offset and the facing test (every face is ≥ 20° from the
     // light's direction), so the float bound holds for them with every encoding. A wrong decode
     // changes most pixels (the two wrong G-buffers below: > 90 %).
-    let float_allowed = n_surface / 400;
-    let quantised_allowed = n_surface / 100;
-    for (name, d, n, proj, quantised) in variants {
-        let got = trace(d, n, proj);
-        let (ao_tol, allowed_ao) = if quantised {
-            (0.05, quantised_allowed)
-        } else {
-            (2e-3, float_allowed)
-        };
-        let (ao, shadow) = differing(&reference, &got, ao_tol, 2e-3);
-        eprintln!("{name}: {ao} AO and {shadow} shadow pixels differ (of {n_surface})");
-        assert!(
-            ao <= allowed_ao && shadow <= float_allowed,
-            "{name}: {ao} AO pixels (allowed {allowed_ao}) and {shadow} shadow pixels (allowed \
-             {float_allowed}) differ from the reference"
-        );
-    }
-
-    // The bounds catch wrong decodes: flipped normals, and a depth 0.5 % too far.
-    let flipped: Vec<DVec3> = normals.iter().map(|n| -*n).collect();
-    for (name, d, n) in [
-        (
-            "flipped normals",
-            depth(DepthEncoding::WorldPosition, normal_z, 1.0),
-            encode_normals(
-                NormalType::RgbVector,
-                F::Rgba32Float,
-                Mat4::IDENTITY,
-                W,
-                H,
-                &flipped,
-            ),
-        ),
-        (
-            "depth 0.5 % too far",
-            depth(DepthEncoding::ClipR32Float, normal_z, 1.005),
-            f32_normals(NormalType::RgbVector),
-        ),
-    ] {
-        let got = trace(d, n, normal_z);
-        let (ao, shadow) = differing(&reference, &got, 0.05, 2e-3);
-        eprintln!("wrong on purpose, {name}: {ao} AO and {shadow} shadow pixels differ");
-        assert!(
-            ao > 10 * quantised_allowed || shadow > 10 * quantised_allowed,
-            "{name}: the comparison must reject it ({ao} AO, {shadow} shadow pixels differ)"
-        );
-    }
+    let float_allowed = e.n_surface / 400;
+    let quantised_allowed = e.n_surface / 100;
+    check_variants(&e, &reference, variants, float_allowed, quantised_allowed);
+    check_wrong_on_purpose_is_rejected(&e, &reference, quantised_allowed);
     eprintln!("took {:?}", started.elapsed());
 }
 
 // --- Multi-shadow trace → multi-shadow denoiser, checkerboard, viewport at an odd x ----------
+
+/// The multi-shadow test's image size.
+const CB_W: u32 = 64;
+const CB_H: u32 = 64;
+/// What the trace's output0 holds before the first frame: a plausible wrong value.
+const GARBAGE: [f32; 4] = [0.25, 0.05, 0.05, 9.0];
+/// What the denoised output holds before the first frame (every channel).
+const UNTOUCHED: f32 = 7.0;
+
+/// The multi-shadow test's analytic answer per pixel.
+struct MultiShadowTruth {
+    /// World position of the surface seen.
+    positions: Vec<Option<DVec3>>,
+    /// (object, lights visible).
+    labels: Vec<(usize, u32)>,
+    /// Closest occluder distance over the lights, `None` without an occluder.
+    closest: Vec<Option<f32>>,
+    /// Mean occluder distance over the occluded lights, `None` without an occluder.
+    mean: Vec<Option<f32>>,
+}
+
+impl MultiShadowTruth {
+    fn new(view: &ViewInfo, ground: Rect, occluder: Rect, to_lights: &[Vec3]) -> Self {
+        let quads = [ground, occluder];
+        let mut positions = Vec::new();
+        let mut labels = Vec::new();
+        let mut closest = Vec::new();
+        let mut mean = Vec::new();
+        for i in 0..CB_W * CB_H {
+            let (o, d) = pixel_ray(view, CB_W, CB_H, i % CB_W, i / CB_W);
+            let (o, d) = (o.as_vec3(), d.as_vec3());
+            let (t, object) = cast(&quads, o, d).expect("every pixel shows the ground or the quad");
+            let p = o + d * t;
+            let hits: Vec<Option<f32>> = to_lights
+                .iter()
+                .map(|l| occluder.hit(p, *l).filter(|t| *t > 1e-3))
+                .collect();
+            positions.push(Some(p.as_dvec3()));
+            labels.push((object, hits.iter().filter(|h| h.is_none()).count() as u32));
+            closest.push(hits.iter().flatten().copied().reduce(f32::min));
+            let occluded: Vec<f32> = hits.iter().flatten().copied().collect();
+            mean.push(
+                (!occluded.is_empty())
+                    .then(|| occluded.iter().sum::<f32>() / occluded.len() as f32),
+            );
+        }
+        MultiShadowTruth {
+            positions,
+            labels,
+            closest,
+            mean,
+        }
+    }
+}
+
+/// The multi-shadow test's setup: the ground and the occluder built on the device, the odd
+/// viewport, the static camera, the two lights, the G-buffer and the analytic answer.
+struct CheckerboardScene {
+    ctx: ExecuteContext,
+    vp: Viewport,
+    view: ViewInfo,
+    lights: Vec<LightInfo>,
+    depth: DepthInput,
+    normal: NormalInput,
+    truth: MultiShadowTruth,
+}
+
+impl CheckerboardScene {
+    fn new() -> Self {
+        let vp = Viewport {
+            x: 1,
+            y: 0,
+            width: CB_W - 1,
+            height: CB_H,
+        };
+        let ground = Rect {
+            origin: Vec3::new(-6.0, 0.0, -6.0),
+            a: Vec3::new(0.0, 0.0, 12.0),
+            b: Vec3::new(12.0, 0.0, 0.0),
+        };
+        let occluder = Rect {
+            origin: Vec3::new(-0.8, 0.8, -0.5),
+            a: Vec3::new(0.0, 0.0, 1.0),
+            b: Vec3::new(1.6, 0.0, 0.0),
+        };
+        let ctx = context(4);
+        let mut c = ctx.create_task_container();
+        add(
+            &ctx,
+            &mut c,
+            &ground.mesh(1, false),
+            Affine3A::IDENTITY,
+            Vec3::ONE,
+        );
+        add(
+            &ctx,
+            &mut c,
+            &occluder.mesh(1, false),
+            Affine3A::IDENTITY,
+            Vec3::ONE,
+        );
+        build(&ctx, c);
+
+        let to_lights = [
+            Vec3::new(0.35, 1.0, -0.7).normalize(),
+            Vec3::new(-0.35, 1.0, -0.7).normalize(),
+        ];
+        let lights: Vec<LightInfo> = to_lights
+            .iter()
+            .map(|l| LightInfo::Directional {
+                direction: -*l,
+                angular_extent: 0.01,
+            })
+            .collect();
+        let w2v = Mat4::look_at_rh(Vec3::new(0.0, 3.2, 3.4), Vec3::new(0.0, 0.0, 0.4), Vec3::Y);
+        let v2c = Mat4::perspective_rh(0.75, CB_W as f32 / CB_H as f32, 0.1, 50.0);
+        let view = static_view(w2v, v2c);
+
+        // The analytic answer per pixel: (object, lights visible, closest occluder distance).
+        let truth = MultiShadowTruth::new(&view, ground, occluder, &to_lights);
+        let depth = encode_depth(
+            DepthEncoding::ClipR32Float,
+            CB_W,
+            CB_H,
+            &view,
+            &truth.positions,
+            1.0,
+        );
+        let normal = encode_normals(
+            NormalType::RgbVector,
+            F::Rgba32Float,
+            Mat4::IDENTITY,
+            CB_W,
+            CB_H,
+            &vec![DVec3::Y; (CB_W * CB_H) as usize],
+        );
+        CheckerboardScene {
+            ctx,
+            vp,
+            view,
+            lights,
+            depth,
+            normal,
+            truth,
+        }
+    }
+
+    /// 12 frames of TraceMultiShadowTask and DenoiseMultiShadowTask on the checkerboard of the
+    /// viewport: (the trace's output0, the denoised output).
+    fn trace_and_denoise(&self) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
+        let (vp, view) = (self.vp, self.view);
+        let filled = |v: [f32; 4], usage| {
+            let data: Vec<f32> = (0..CB_W * CB_H).flat_map(|_| v).collect();
+            texture_with(
+                F::Rgba32Float,
+                CB_W,
+                CB_H,
+                usage,
+                bytemuck::cast_slice(&data),
+            )
+        };
+        let output0 = filled(
+            GARBAGE,
+            U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
+        );
+        let output1 = filled([0.0; 4], U::STORAGE_BINDING | U::TEXTURE_BINDING);
+        let denoised = filled([UNTOUCHED; 4], U::STORAGE_BINDING | U::COPY_SRC);
+        let handle = self
+            .ctx
+            .create_denoising_context_handle(DenoisingContextInput {
+                max_width: CB_W,
+                max_height: CB_H,
+                signal_type: SignalType::MultiShadow,
+                method: DenoisingMethod::HighQuality,
+            })
+            .expect("denoising context");
+        for frame in 0..12 {
+            let mut common = TraceTaskCommon::new(self.depth.clone(), self.normal.clone());
+            common.viewport = Some(vp);
+            common.view = view;
+            common.ray_offset.offset_type = RayOffsetType::WorldPosition;
+            common.half_resolution_mode = HalfResolutionMode::Checkerboard;
+            common.debug_parameters.frame_index = frame;
+            let denoise_common = DenoiseTaskCommon {
+                context: handle,
+                viewport: Some(vp),
+                depth: self.depth.clone(),
+                normal: self.normal.clone(),
+                roughness: RoughnessInput::default(),
+                motion: None,
+                view,
+                half_resolution_mode: HalfResolutionMode::Checkerboard,
+                mode: DenoiseMode::Continue,
+            };
+            run_tasks(
+                &self.ctx,
+                vec![
+                    RenderTask::TraceMultiShadow(TraceMultiShadowTask {
+                        common,
+                        output0: output0.clone(),
+                        output1: output1.clone(),
+                        lights: self.lights.clone(),
+                        enable_first_hit_and_end_search: false,
+                    }),
+                    RenderTask::DenoiseMultiShadow(DenoiseMultiShadowTask {
+                        common: denoise_common,
+                        input0: output0.clone(),
+                        input1: output1.clone(),
+                        output: denoised.clone(),
+                    }),
+                ],
+            );
+        }
+        (read_rgba32(&output0), read_rgba32(&denoised))
+    }
+
+    /// Checks the trace's output0 and the denoised output against the analytic answer (see the
+    /// test); returns the pixels compared per [region (visible count)][traced, untraced] and
+    /// the worst denoised error.
+    fn check(&self, traced_img: &[[f32; 4]], out: &[[f32; 4]]) -> ([[usize; 2]; 3], f32) {
+        let vp = self.vp;
+        let MultiShadowTruth {
+            labels,
+            closest,
+            mean,
+            ..
+        } = &self.truth;
+        // [region (visible count)][traced, untraced] pixels compared.
+        let mut compared = [[0usize; 2]; 3];
+        let mut worst = 0.0f32;
+        for i in 0..(CB_W * CB_H) as usize {
+            let (x, y) = (i as u32 % CB_W, i as u32 / CB_W);
+            if x < vp.x {
+                assert_eq!(
+                    traced_img[i], GARBAGE,
+                    "trace wrote ({x}, {y}) left of the viewport"
+                );
+                assert_eq!(
+                    out[i], [UNTOUCHED; 4],
+                    "denoiser wrote ({x}, {y}) left of the viewport"
+                );
+                continue;
+            }
+            let traced = (x - vp.x + y - vp.y).is_multiple_of(2);
+            if !traced {
+                assert_eq!(
+                    traced_img[i], GARBAGE,
+                    "trace wrote the untraced cell ({x}, {y})"
+                );
+            }
+            if !away_from_boundaries(labels, CB_W, CB_H, x, y, 2) {
+                continue;
+            }
+            let (object, visible) = labels[i];
+            let fraction = visible as f32 / 2.0;
+            if traced {
+                let t = traced_img[i];
+                assert_eq!(
+                    t[0], fraction,
+                    "trace R at ({x}, {y}), object {object}: {t:?}"
+                );
+                assert_eq!(t[3], 2.0, "trace A (light count) at ({x}, {y}): {t:?}");
+                for (k, want, what) in [(1, closest[i], "closest"), (2, mean[i], "mean")] {
+                    match want {
+                        None => {
+                            assert_eq!(t[k], -1.0, "trace output0[{k}] at ({x}, {y}): no occluder")
+                        }
+                        Some(d) => assert!(
+                            (t[k] - d).abs() < 0.02 * d,
+                            "trace output0[{k}] at ({x}, {y}): {what} occluder distance {d}, got \
+                             {t:?}"
+                        ),
+                    }
+                }
+            }
+            let o = out[i];
+            let err = (0..3).map(|k| (o[k] - fraction).abs()).fold(0.0, f32::max);
+            worst = worst.max(err);
+            assert!(
+                err <= 0.02,
+                "denoised ({x}, {y}) ({}), object {object}: {o:?}, fraction visible {fraction}",
+                if traced { "traced" } else { "untraced" }
+            );
+            compared[visible as usize][usize::from(!traced)] += 1;
+        }
+        (compared, worst)
+    }
+}
 
 /// A ground quad and a horizontal quad above it, lit by two directional lights tilted ±x: the
 /// fraction of the lights visible on the ground is 0 under both shadows, 1/2 under one and 1
@@ -924,211 +1323,9 @@ fn every_depth_and_normal_type_traces_the_same_scene_to_the_same_result() {
 #[test]
 fn checkerboard_multi_shadow_at_an_odd_viewport_denoises_to_the_fraction_of_lights_visible() {
     let started = std::time::Instant::now();
-    const W: u32 = 64;
-    const H: u32 = 64;
-    let vp = Viewport {
-        x: 1,
-        y: 0,
-        width: W - 1,
-        height: H,
-    };
-    let ground = Rect {
-        origin: Vec3::new(-6.0, 0.0, -6.0),
-        a: Vec3::new(0.0, 0.0, 12.0),
-        b: Vec3::new(12.0, 0.0, 0.0),
-    };
-    let occluder = Rect {
-        origin: Vec3::new(-0.8, 0.8, -0.5),
-        a: Vec3::new(0.0, 0.0, 1.0),
-        b: Vec3::new(1.6, 0.0, 0.0),
-    };
-    let ctx = context(4);
-    let mut c = ctx.create_task_container();
-    add(
-        &ctx,
-        &mut c,
-        &ground.mesh(1, false),
-        Affine3A::IDENTITY,
-        Vec3::ONE,
-    );
-    add(
-        &ctx,
-        &mut c,
-        &occluder.mesh(1, false),
-        Affine3A::IDENTITY,
-        Vec3::ONE,
-    );
-    build(&ctx, c);
-
-    let to_lights = [
-        Vec3::new(0.35, 1.0, -0.7).normalize(),
-        Vec3::new(-0.35, 1.0, -0.7).normalize(),
-    ];
-    let lights: Vec<LightInfo> = to_lights
-        .iter()
-        .map(|l| LightInfo::Directional {
-            direction: -*l,
-            angular_extent: 0.01,
-        })
-        .collect();
-    let w2v = Mat4::look_at_rh(Vec3::new(0.0, 3.2, 3.4), Vec3::new(0.0, 0.0, 0.4), Vec3::Y);
-    let v2c = Mat4::perspective_rh(0.75, W as f32 / H as f32, 0.1, 50.0);
-    let view = ViewInfo {
-        world_to_view: w2v,
-        view_to_clip: v2c,
-        prev_world_to_view: w2v,
-        prev_view_to_clip: v2c,
-        ..Default::default()
-    };
-
-    // The analytic answer per pixel: (object, lights visible, closest occluder distance).
-    let quads = [ground, occluder];
-    let mut positions = Vec::new();
-    let mut labels = Vec::new();
-    let mut closest = Vec::new();
-    let mut mean = Vec::new();
-    for i in 0..W * H {
-        let (o, d) = pixel_ray(&view, W, H, i % W, i / W);
-        let (o, d) = (o.as_vec3(), d.as_vec3());
-        let (t, object) = cast(&quads, o, d).expect("every pixel shows the ground or the quad");
-        let p = o + d * t;
-        let hits: Vec<Option<f32>> = to_lights
-            .iter()
-            .map(|l| occluder.hit(p, *l).filter(|t| *t > 1e-3))
-            .collect();
-        positions.push(Some(p.as_dvec3()));
-        labels.push((object, hits.iter().filter(|h| h.is_none()).count() as u32));
-        closest.push(hits.iter().flatten().copied().reduce(f32::min));
-        let occluded: Vec<f32> = hits.iter().flatten().copied().collect();
-        mean.push(
-            (!occluded.is_empty()).then(|| occluded.iter().sum::<f32>() / occluded.len() as f32),
-        );
-    }
-    let depth = encode_depth(DepthEncoding::ClipR32Float, W, H, &view, &positions, 1.0);
-    let normal = encode_normals(
-        NormalType::RgbVector,
-        F::Rgba32Float,
-        Mat4::IDENTITY,
-        W,
-        H,
-        &vec![DVec3::Y; (W * H) as usize],
-    );
-
-    let garbage = [0.25f32, 0.05, 0.05, 9.0];
-    let filled = |v: [f32; 4], usage| {
-        let data: Vec<f32> = (0..W * H).flat_map(|_| v).collect();
-        texture_with(F::Rgba32Float, W, H, usage, bytemuck::cast_slice(&data))
-    };
-    let output0 = filled(
-        garbage,
-        U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC,
-    );
-    let output1 = filled([0.0; 4], U::STORAGE_BINDING | U::TEXTURE_BINDING);
-    let untouched = 7.0;
-    let denoised = filled([untouched; 4], U::STORAGE_BINDING | U::COPY_SRC);
-    let handle = ctx
-        .create_denoising_context_handle(DenoisingContextInput {
-            max_width: W,
-            max_height: H,
-            signal_type: SignalType::MultiShadow,
-            method: DenoisingMethod::HighQuality,
-        })
-        .expect("denoising context");
-    for frame in 0..12 {
-        let mut common = TraceTaskCommon::new(depth.clone(), normal.clone());
-        common.viewport = Some(vp);
-        common.view = view;
-        common.ray_offset.offset_type = RayOffsetType::WorldPosition;
-        common.half_resolution_mode = HalfResolutionMode::Checkerboard;
-        common.debug_parameters.frame_index = frame;
-        let denoise_common = DenoiseTaskCommon {
-            context: handle,
-            viewport: Some(vp),
-            depth: depth.clone(),
-            normal: normal.clone(),
-            roughness: RoughnessInput::default(),
-            motion: None,
-            view,
-            half_resolution_mode: HalfResolutionMode::Checkerboard,
-            mode: DenoiseMode::Continue,
-        };
-        run_tasks(
-            &ctx,
-            vec![
-                RenderTask::TraceMultiShadow(TraceMultiShadowTask {
-                    common,
-                    output0: output0.clone(),
-                    output1: output1.clone(),
-                    lights: lights.clone(),
-                    enable_first_hit_and_end_search: false,
-                }),
-                RenderTask::DenoiseMultiShadow(DenoiseMultiShadowTask {
-                    common: denoise_common,
-                    input0: output0.clone(),
-                    input1: output1.clone(),
-                    output: denoised.clone(),
-                }),
-            ],
-        );
-    }
-
-    let traced_img = read_rgba32(&output0);
-    let out = read_rgba32(&denoised);
-    // [region (visible count)][traced, untraced] pixels compared.
-    let mut compared = [[0usize; 2]; 3];
-    let mut worst = 0.0f32;
-    for i in 0..(W * H) as usize {
-        let (x, y) = (i as u32 % W, i as u32 / W);
-        if x < vp.x {
-            assert_eq!(
-                traced_img[i], garbage,
-                "trace wrote ({x}, {y}) left of the viewport"
-            );
-            assert_eq!(
-                out[i], [untouched; 4],
-                "denoiser wrote ({x}, {y}) left of the viewport"
-            );
-            continue;
-        }
-        let traced = (x - vp.x + y - vp.y).is_multiple_of(2);
-        if !traced {
-            assert_eq!(
-                traced_img[i], garbage,
-                "trace wrote the untraced cell ({x}, {y})"
-            );
-        }
-        if !away_from_boundaries(&labels, W, H, x, y, 2) {
-            continue;
-        }
-        let (object, visible) = labels[i];
-        let fraction = visible as f32 / 2.0;
-        if traced {
-            let t = traced_img[i];
-            assert_eq!(
-                t[0], fraction,
-                "trace R at ({x}, {y}), object {object}: {t:?}"
-            );
-            assert_eq!(t[3], 2.0, "trace A (light count) at ({x}, {y}): {t:?}");
-            for (k, want, what) in [(1, closest[i], "closest"), (2, mean[i], "mean")] {
-                match want {
-                    None => assert_eq!(t[k], -1.0, "trace output0[{k}] at ({x}, {y}): no occluder"),
-                    Some(d) => assert!(
-                        (t[k] - d).abs() < 0.02 * d,
-                        "trace output0[{k}] at ({x}, {y}): {what} occluder distance {d}, got {t:?}"
-                    ),
-                }
-            }
-        }
-        let o = out[i];
-        let err = (0..3).map(|k| (o[k] - fraction).abs()).fold(0.0, f32::max);
-        worst = worst.max(err);
-        assert!(
-            err <= 0.02,
-            "denoised ({x}, {y}) ({}), object {object}: {o:?}, fraction visible {fraction}",
-            if traced { "traced" } else { "untraced" }
-        );
-        compared[visible as usize][usize::from(!traced)] += 1;
-    }
+    let s = CheckerboardScene::new();
+    let (traced_img, out) = s.trace_and_denoise();
+    let (compared, worst) = s.check(&traced_img, &out);
     eprintln!(
         "compared [0, 1/2, 1 visible][traced, untraced]: {compared:?}, worst {worst}, took {:?}",
         started.elapsed()
