@@ -135,8 +135,6 @@
 //! | denoise tasks | `viewport` | within the context's `max_width × max_height` | larger |
 
 #![warn(missing_docs)]
-// Functions stay short enough to read in one screen (threshold in the workspace clippy.toml).
-#![warn(clippy::too_many_lines)]
 
 // The SDK's layers, lowest first; a module imports only from its own layer and those before it,
 // and no two files or folders import each other (checked by `layering.rs`'s tests):
