@@ -3,9 +3,9 @@
 //! GPU builder; and the CPU oracle over instances (brute force with `cpu::intersect_triangle`
 //! and the documented tie rule).
 
-use crate::scene::traversal::SceneBuffers;
 use crate::cpu::{intersect_triangle, CpuBvh, Ray, TriangleHit};
 use crate::gpu::testing;
+use crate::scene::traversal::SceneBuffers;
 use bytemuck::{Pod, Zeroable};
 use glam::{Affine3A, Vec3};
 
