@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::gpu::layout::{storage_entry, uniform_entry};
 use crate::gpu::shader::assemble;
 use crate::gpu::Recorder;
-use crate::scene::gpu_scene::storage;
+use crate::gpu::buffers::storage;
 use crate::scene::pool::{Pool, Range};
 
 const ALLOC_WGSL: &str = include_str!("../../shaders/cache_alloc.wgsl");

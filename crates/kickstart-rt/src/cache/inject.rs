@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
 use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline};
 use crate::gpu::Recorder;
-use crate::scene::gpu_scene::storage;
+use crate::gpu::buffers::storage;
 use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use crate::{DepthType, DirectLightingInjectionTask};
 

@@ -5,11 +5,11 @@
 use crate::error::{Error, Result};
 // Generic buffer helpers live in the gpu layer; re-exported here for the modules that still
 // import them from the scene.
-pub(crate) use crate::gpu::buffers::{read_back, storage};
+use crate::gpu::buffers::{read_back, storage, Grown};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    Grown, Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles, RefitSource,
+    Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles, RefitSource,
     BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};

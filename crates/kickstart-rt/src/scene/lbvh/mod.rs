@@ -65,7 +65,7 @@ use crate::gpu::Recorder;
 use bytemuck::{Pod, Zeroable};
 
 // The builder's scratch that only grows (gpu layer); the scene's tables use it too.
-pub(crate) use crate::gpu::buffers::Grown;
+use crate::gpu::buffers::Grown;
 #[cfg(test)]
 pub(crate) use cpu::cpu_centroid_bounds;
 #[cfg(test)]
