@@ -6,7 +6,6 @@ use crate::cache::DirectLightingCache;
 use crate::denoise::Denoisers;
 use crate::error::Result;
 use crate::gpu::Recorder;
-use crate::handles::InstanceHandle;
 use crate::scene::traversal::SceneBuffers;
 use crate::tasks::*;
 use crate::trace::debug_view::DebugViewPass;
@@ -50,16 +49,10 @@ pub(super) struct Inputs<'a> {
     pub scene: SceneBuffers<'a>,
     /// The direct lighting cache.
     pub cache: &'a mut DirectLightingCache,
-    /// Triangles of each instance's geometry, as the context knows them now.
-    pub instance_triangles: &'a dyn Fn(InstanceHandle) -> u32,
+    /// Triangles of a transfer's target geometry (0 for other tasks).
+    pub transfer_triangles: u32,
     /// The task's serial number.
     pub serial: u64,
-}
-
-impl Inputs<'_> {
-    fn instance_triangles(&self, h: InstanceHandle) -> u32 {
-        (self.instance_triangles)(h)
-    }
 }
 
 impl Effects {
@@ -127,7 +120,7 @@ impl Effects {
                     .record(rec, &inputs.scene, (&meta, &surfels, capacity), t);
             }
             Route::Transfer(t) => {
-                let triangles = inputs.instance_triangles(t.target);
+                let triangles = inputs.transfer_triangles;
                 let cache = inputs.cache;
                 let meta = cache.meta_buffer().clone();
                 let surfels = cache.surfel_buffer().clone();

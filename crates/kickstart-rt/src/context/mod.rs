@@ -522,7 +522,7 @@ impl ExecuteContext {
             timestamps: self.gpu_timing.then(|| Timestamps::new(&self.device)),
             ws: WorkingSet {
                 staging: Vec::new(),
-                _inputs: Vec::new(),
+                held: Vec::new(),
                 dropped: None,
             },
             serial,

@@ -169,14 +169,12 @@ fn route<'c>(s: &State, task: &'c RenderTask, limits: &wgpu::Limits) -> Result<O
             check_transfer(s, t)?;
             Route::Transfer(t)
         }
-        t if t.denoise_common().is_some() => {
-            if let Some(c) = t.denoise_common() {
+        t => match (t.denoise_common(), t.trace_common()) {
+            (Some(c), _) => {
                 denoise::check_task(t, &s.denoisers.get(c.context)?.input)?;
+                Route::Denoise(t)
             }
-            Route::Denoise(t)
-        }
-        t => match t.trace_common() {
-            Some((common, output)) => match common.debug_parameters.debug_output_type {
+            (None, Some((common, output))) => match common.debug_parameters.debug_output_type {
                 DebugOutputType::Default if TracePasses::handles(t) => Route::Trace(t),
                 DebugOutputType::HitT
                 | DebugOutputType::Barycentrics
@@ -185,7 +183,7 @@ fn route<'c>(s: &State, task: &'c RenderTask, limits: &wgpu::Limits) -> Result<O
                 | DebugOutputType::DirectLightingCache => Route::DebugView { common, output },
                 _ => return Ok(None),
             },
-            None => return Ok(None),
+            (None, None) => return Ok(None),
         },
     };
     Ok(Some(route))
@@ -196,20 +194,14 @@ fn route<'c>(s: &State, task: &'c RenderTask, limits: &wgpu::Limits) -> Result<O
 fn check_transfer(s: &State, t: &DirectLightTransferTask) -> Result<()> {
     const TASK: &str = "DirectLightTransferTask";
     let geometry = |h: InstanceHandle, field: &'static str| -> Result<&GeometryData> {
-        s.instances
-            .get(h)?
-            .input
-            .as_ref()
-            .and_then(|i| s.geometries.get(i.geometry).ok())
-            .and_then(|g| g.data.as_ref())
-            .ok_or_else(|| {
-                Error::input(
-                    TASK,
-                    field,
-                    h,
-                    "the instance must be registered by an earlier GPU task",
-                )
-            })
+        s.instance_geometry(h)?.ok_or_else(|| {
+            Error::input(
+                TASK,
+                field,
+                h,
+                "the instance must be registered by an earlier GPU task",
+            )
+        })
     };
     let src = geometry(t.source, "source")?;
     let dst = geometry(t.target, "target")?;

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use super::effects::Inputs;
+use super::effects::{Inputs, Route};
 use super::plan::FramePlan;
 use super::settings::INSTANCE_RECORD_SIZE;
 use super::state::{instance_record, DroppedReadback, GeometryData, State, WorkingSet};
@@ -262,7 +262,7 @@ fn ingest(
                 .record_ingest(&mut rec, &raw, &comps, *staged, i as u32),
         }
     }
-    frame.ws._inputs.push(raw);
+    frame.ws.held.push(raw);
     frame.ws.dropped = Some(dropped_readback(frame.device, ingestions));
     deferred
 }
@@ -290,7 +290,7 @@ fn copy_raw_geometry(
             frame
                 .encoder
                 .copy_buffer_to_buffer(&vb.buffer, vs, &raw, cursor, ve - vs);
-            frame.ws._inputs.push(vb.buffer.clone());
+            frame.ws.held.push(vb.buffer.clone());
             let vertex_byte_offset = cursor + (vb.offset - vs);
             cursor += ve - vs;
             let index = match (&c.index_buffer, e.index_bytes) {
@@ -298,7 +298,7 @@ fn copy_raw_geometry(
                     frame
                         .encoder
                         .copy_buffer_to_buffer(&ib.buffer, is, &raw, cursor, ie - is);
-                    frame.ws._inputs.push(ib.buffer.clone());
+                    frame.ws.held.push(ib.buffer.clone());
                     let off = cursor + (ib.offset - is);
                     cursor += ie - is;
                     Some((off, ib.format))
@@ -538,29 +538,25 @@ fn allocate_caches(frame: &mut Frame<'_>, s: &mut State) -> Result<()> {
 }
 
 /// Step 7: one render task, on its effect.
-fn record_render_task(
-    frame: &mut Frame<'_>,
-    s: &mut State,
-    route: &super::effects::Route<'_>,
-) -> Result<()> {
-    if let super::effects::Route::RayBatch(t) = route {
-        frame.ws._inputs.push(t.rays.clone());
-        frame.ws._inputs.push(t.hits.clone());
+fn record_render_task(frame: &mut Frame<'_>, s: &mut State, route: &Route<'_>) -> Result<()> {
+    if let Route::RayBatch(t) = route {
+        frame.ws.held.push(t.rays.clone());
+        frame.ws.held.push(t.hits.clone());
     }
-    let (instances, geometries) = (&s.instances, &s.geometries);
-    let instance_triangles = |h: InstanceHandle| {
-        instances
-            .get(h)
+    // The target's geometry as this task left it (an instance update earlier in the container
+    // may have given it another geometry).
+    let transfer_triangles = match route {
+        Route::Transfer(t) => s
+            .instance_geometry(t.target)
             .ok()
-            .and_then(|i| i.input.as_ref())
-            .and_then(|i| geometries.get(i.geometry).ok())
-            .and_then(|g| g.data.as_ref())
-            .map_or(0, |d| d.triangles)
+            .flatten()
+            .map_or(0, |d| d.triangles),
+        _ => 0,
     };
     let inputs = Inputs {
         scene: s.scene.scene_buffers(),
         cache: &mut s.cache,
-        instance_triangles: &instance_triangles,
+        transfer_triangles,
         serial: frame.serial,
     };
     let queue = frame.queue;

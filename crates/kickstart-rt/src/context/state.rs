@@ -55,7 +55,7 @@ pub(super) struct DenoisingSlot {
 pub(super) struct WorkingSet {
     pub(super) staging: Vec<StagingBuffer>,
     /// Inputs the task reads and the raw copies it made, kept alive while the GPU may read them.
-    pub(super) _inputs: Vec<wgpu::Buffer>,
+    pub(super) held: Vec<wgpu::Buffer>,
     pub(super) dropped: Option<DroppedReadback>,
 }
 
@@ -94,6 +94,21 @@ pub(super) struct State {
 }
 
 impl State {
+    /// The registered geometry of a registered instance; `None` where either is not registered
+    /// yet, [`crate::Error::InvalidHandle`] for a stale instance handle.
+    pub(super) fn instance_geometry(
+        &self,
+        h: InstanceHandle,
+    ) -> crate::error::Result<Option<&GeometryData>> {
+        Ok(self
+            .instances
+            .get(h)?
+            .input
+            .as_ref()
+            .and_then(|i| self.geometries.get(i.geometry).ok())
+            .and_then(|g| g.data.as_ref()))
+    }
+
     /// Returns a completed task's staging to the pool and starts reading back its counters.
     pub(super) fn retire(&mut self, serial: u64, ws: WorkingSet) {
         self.cache.task_completed(serial);
