@@ -20,6 +20,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::history::{self, Histories, History};
 use super::signal::{wgsl_format, Kind, SignalSet};
+use crate::gpu::buffers::placeholder_texture;
 use crate::gpu::layout::{float_texture_entry, storage_entry, uniform_entry};
 use crate::gpu::shader::{assemble, compute_pipeline_with_layouts};
 use crate::gpu::Recorder;
@@ -228,22 +229,7 @@ impl Shared {
                 storage_entry(4, false),
             ],
         );
-        let placeholder_texture = device
-            .create_texture(&wgpu::TextureDescriptor {
-                label: Some("kickstart-rt denoise placeholder"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8Unorm,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-            .create_view(&Default::default());
+        let placeholder_texture = placeholder_texture(device, "kickstart-rt denoise placeholder");
         let placeholder_buffer = || {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("kickstart-rt denoise placeholder"),

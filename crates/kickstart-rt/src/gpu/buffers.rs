@@ -97,3 +97,24 @@ impl Grown {
         self.buffer.as_ref().map_or(0, |b| b.size())
     }
 }
+
+/// A 1×1 `Rgba8Unorm` texture bound where a pass's optional input is absent (the shader never
+/// reads it then).
+pub(crate) fn placeholder_texture(device: &wgpu::Device, label: &str) -> wgpu::TextureView {
+    device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        })
+        .create_view(&Default::default())
+}

@@ -22,6 +22,7 @@
 //! - Normals are decoded by type (octahedral: Cigolle et al. 2014), transformed by
 //!   `normal_to_world` and normalised.
 
+use crate::gpu::buffers::placeholder_texture;
 use crate::gpu::layout::{float_texture_entry, uniform_entry};
 use crate::tasks::{
     DenoiseTaskCommon, DepthInput, DepthType, NormalInput, NormalType, RoughnessInput,
@@ -254,22 +255,7 @@ impl GBufferBinder {
                 float_texture_entry(5),
             ],
         });
-        let placeholder = device
-            .create_texture(&wgpu::TextureDescriptor {
-                label: Some("kickstart-rt g-buffer placeholder"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8Unorm,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-            .create_view(&Default::default());
+        let placeholder = placeholder_texture(device, "kickstart-rt g-buffer placeholder");
         GBufferBinder {
             layout,
             placeholder,

@@ -43,23 +43,7 @@ fn ao_inside_a_closed_box_is_near_zero() {
     let box_tris: Vec<Tri> = cube(2).into_iter().map(|t| t.map(|v| v * 0.1)).collect();
     let scene = TestScene::single(box_tris);
     let mut rng = testing::Rng(7);
-    let texels: Vec<Texel> = (0..N * N)
-        .map(|_| {
-            let p = Vec3::new(
-                rng.range(-0.05, 0.05),
-                rng.range(-0.05, 0.05),
-                rng.range(-0.05, 0.05),
-            );
-            let n = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            )
-            .try_normalize()
-            .unwrap_or(Vec3::Y);
-            Some((p, n))
-        })
-        .collect();
+    let texels = random_texels(&mut rng, 0.05);
     let out = output(N, N, -5.0);
     let c = common(
         gbuffer(N, N, |x, y| texels[(y * N + x) as usize]),

@@ -17,6 +17,28 @@ use glam::{Mat4, Vec3};
 /// A G-buffer texel: world position and unit normal, or `None` (nothing rendered).
 type Texel = Option<(Vec3, Vec3)>;
 
+/// `N × N` texels at random points of the cube of half-size `half` about the origin, each with a
+/// random unit normal (drawn point then normal, texel by texel).
+fn random_texels(rng: &mut testing::Rng, half: f32) -> Vec<Texel> {
+    (0..N * N)
+        .map(|_| {
+            let p = Vec3::new(
+                rng.range(-half, half),
+                rng.range(-half, half),
+                rng.range(-half, half),
+            );
+            let n = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            )
+            .try_normalize()
+            .unwrap_or(Vec3::Y);
+            Some((p, n))
+        })
+        .collect()
+}
+
 /// The world-position depth and vector normal inputs of `w × h` texels from `f(x, y)`.
 fn gbuffer(w: u32, h: u32, f: impl Fn(u32, u32) -> Texel) -> (DepthInput, NormalInput) {
     let mut pos = Vec::new();

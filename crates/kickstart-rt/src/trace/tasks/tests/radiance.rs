@@ -149,23 +149,7 @@ fn furnace_with_a_uniform_stand_in_cache_gives_l_at_every_roughness() {
     let colours = vec![vec![l; tris.len()]];
     let scene = TestScene::single(tris);
     let mut rng = testing::Rng(11);
-    let texels: Vec<Texel> = (0..N * N)
-        .map(|_| {
-            let p = Vec3::new(
-                rng.range(-0.5, 0.5),
-                rng.range(-0.5, 0.5),
-                rng.range(-0.5, 0.5),
-            );
-            let n = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            )
-            .try_normalize()
-            .unwrap_or(Vec3::Y);
-            Some((p, n))
-        })
-        .collect();
+    let texels = random_texels(&mut rng, 0.5);
     let gb = |x: u32, y: u32| texels[(y * N + x) as usize];
     for roughness in [0.0, 0.1, 0.4, 0.8, 1.0] {
         let out = output(N, N, -5.0);
