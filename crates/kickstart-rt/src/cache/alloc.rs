@@ -10,10 +10,10 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{inject::Injector, transfer::Transferer, CacheParams};
 use crate::error::{Error, Result};
+use crate::gpu::buffers::storage;
 use crate::gpu::layout::{storage_entry, uniform_entry};
 use crate::gpu::shader::assemble;
 use crate::gpu::Recorder;
-use crate::gpu::buffers::storage;
 use crate::scene::pool::{Pool, Range};
 
 const ALLOC_WGSL: &str = include_str!("../../shaders/cache_alloc.wgsl");

@@ -13,10 +13,10 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
+use crate::gpu::buffers::storage;
 use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
 use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline};
 use crate::gpu::Recorder;
-use crate::gpu::buffers::storage;
 use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
 use crate::{DepthType, DirectLightingInjectionTask};
 
