@@ -12,11 +12,8 @@ use super::{inject::Injector, transfer::Transferer, CacheParams};
 use crate::error::{Error, Result};
 use crate::gpu::buffers::storage;
 use crate::gpu::layout::{storage_entry, uniform_entry};
-use crate::gpu::shader::assemble;
 use crate::gpu::Recorder;
 use crate::scene::pool::{Pool, Range};
-
-const ALLOC_WGSL: &str = include_str!("../../shaders/cache_alloc.wgsl");
 
 /// Words per instance header and per triangle record in `meta`.
 pub(crate) const HEADER_WORDS: u32 = 8;
@@ -26,7 +23,7 @@ pub(crate) const SURFEL_BYTES: u64 = 16;
 /// Free blocks handed to the GPU per task, and allocations per task (the rest wait a task).
 const MAX_FREE_BLOCKS: usize = 64;
 pub(crate) const MAX_ALLOCS_PER_TASK: usize = 256;
-/// Word offsets of the allocation state buffer (as `cache_alloc.wgsl`).
+/// Word offsets of the allocation state buffer (as `cache/alloc.wgsl`).
 const ST_FREE: u64 = 4;
 const ST_LOG: u64 = 132;
 
@@ -47,7 +44,7 @@ pub(crate) struct AllocJob {
 
 /// The WGSL of the allocation passes (entry points `insert`, `count`, `allocate`, `write`).
 fn alloc_wgsl() -> String {
-    assemble(&[ALLOC_WGSL])
+    crate::gpu::compose::compose(&["cache/alloc"], &[])
 }
 
 #[repr(C)]
@@ -184,23 +181,12 @@ impl DirectLightingCache {
         }
     }
 
-    #[allow(dead_code)] // part of the sampling contract: trace tasks build layouts with it
-    /// Layout entries of the sampling bindings (group `CACHE_GROUP` of [`super::SAMPLE_WGSL`]).
-    pub fn sample_layout_entries() -> [wgpu::BindGroupLayoutEntry; 2] {
-        [storage_entry(0, true), storage_entry(1, true)]
-    }
-
-    /// The sampling bindings: `meta` at 0, surfels at 1 (valid before any instance exists).
-    pub fn sample_bind_group_entries(&self) -> [wgpu::BindGroupEntry<'_>; 2] {
+    /// The sampling bindings by the names `cache/sample` gives them (valid before any instance
+    /// exists).
+    pub fn sample_resources(&self) -> [(&'static str, wgpu::BindingResource<'_>); 2] {
         [
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: self.meta.buffer().as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: self.surfels.as_entire_binding(),
-            },
+            ("cache_meta", self.meta.buffer().as_entire_binding()),
+            ("cache_surfels", self.surfels.as_entire_binding()),
         ]
     }
 

@@ -14,14 +14,12 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::error::{Error, Result};
 use crate::gpu::buffers::storage;
-use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
-use crate::gpu::shader::{assemble, compute_pipeline, traversal_pipeline};
+use crate::gpu::reflect::{ReflectedLayout, ReflectedPipeline, ReflectedShader};
+use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
+use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK};
 use crate::{DepthType, DirectLightingInjectionTask};
 
-const INJECT_WGSL: &str = include_str!("../../shaders/cache_inject.wgsl");
-const RESOLVE_WGSL: &str = include_str!("../../shaders/cache_resolve.wgsl");
 const TASK: &str = "DirectLightingInjectionTask";
 /// Relative distance within which a traced hit counts as the surface the depth shows.
 const DEPTH_TOLERANCE: f32 = 2e-3;
@@ -49,7 +47,10 @@ struct ResolveParams {
 }
 
 struct InjectPipeline {
-    layouts: [wgpu::BindGroupLayout; 3],
+    /// Group 1: the cache's meta and the accumulation, as the entry point uses them.
+    cache: ReflectedLayout,
+    /// Group 2: the task's parameters and textures.
+    io: ReflectedLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
@@ -58,66 +59,36 @@ struct InjectPipeline {
 pub(crate) struct Injector {
     /// Index 0: a depth-format depth texture; 1: a float texture.
     inject: [Option<InjectPipeline>; 2],
-    resolve: Option<wgpu::ComputePipeline>,
+    resolve: Option<ReflectedPipeline>,
     /// Surfel → slot map (one word per surfel of the pool), then 8 words per slot.
     accum: Option<(wgpu::Buffer, u32, u32)>,
     tasks: u32,
 }
 
-fn texture_entry(binding: u32, depth: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: if depth {
-                wgpu::TextureSampleType::Depth
-            } else {
-                wgpu::TextureSampleType::Float { filterable: false }
-            },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
 /// The WGSL of the injection pass reading depth of a depth format (`depth_format`) or a float
 /// texture.
-fn inject_wgsl(depth_format: bool) -> String {
-    let (ty, load) = if depth_format {
-        (
-            "texture_depth_2d",
-            "vec4<f32>(textureLoad(depth_tex, pixel, 0), 0.0, 0.0, 0.0)",
-        )
+fn inject_shader(depth_format: bool) -> ReflectedShader {
+    let depth = if depth_format {
+        "cache/inject_depth/depth_format"
     } else {
-        ("texture_2d<f32>", "textureLoad(depth_tex, pixel, 0)")
+        "cache/inject_depth/float_format"
     };
-    assemble(&[
-        TRAVERSE_WGSL,
-        &super::sample_wgsl(1, false),
-        &INJECT_WGSL
-            .replace("DEPTH_TEXTURE_TYPE", ty)
-            .replace("DEPTH_LOAD", load),
-    ])
+    ReflectedShader::compose(&["cache/inject", depth], &super::sample_params(1, false))
+}
+
+/// The resolve pass's shader.
+fn resolve_shader() -> ReflectedShader {
+    ReflectedShader::compose(&["cache/resolve"], &[])
 }
 
 fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline {
-    let source = inject_wgsl(depth_format);
+    let shader = inject_shader(depth_format);
     let scene = SceneBuffers::layout(device);
-    let cache = BoundLayout::new(
-        device,
-        "kickstart-rt injection cache",
-        &[storage_entry(0, true), storage_entry(2, false)],
-    );
-    let io = BoundLayout::new(
-        device,
-        "kickstart-rt injection inputs",
-        &[
-            uniform_entry(0),
-            texture_entry(1, depth_format),
-            texture_entry(2, false),
-        ],
-    );
+    let layout = |label, group| {
+        ReflectedLayout::of_entry_point(device, label, shader.reflection(), "inject", group)
+    };
+    let cache = layout("kickstart-rt injection cache", 1);
+    let io = layout("kickstart-rt injection inputs", 2);
     let groups = [scene.group(), cache.group(), io.group()];
     // SAFETY: with naga's checks on, only the dropped zero fill needs an argument: the
     // traversal reads `rt_stack` only below its stack pointer, where it wrote first.
@@ -125,7 +96,7 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
         traversal_pipeline(
             device,
             "kickstart-rt injection",
-            &source,
+            shader.source(),
             "inject",
             &groups,
             wgpu::ShaderRuntimeChecks::checked(),
@@ -133,7 +104,8 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
         )
     };
     InjectPipeline {
-        layouts: [scene.layout, cache.layout, io.layout],
+        cache,
+        io,
         pipeline,
     }
 }
@@ -179,17 +151,10 @@ impl Injector {
         self.resolve(device);
     }
 
-    fn resolve(&mut self, device: &wgpu::Device) -> wgpu::ComputePipeline {
-        self.resolve
-            .get_or_insert_with(|| {
-                compute_pipeline(
-                    device,
-                    "kickstart-rt injection resolve",
-                    RESOLVE_WGSL,
-                    "resolve",
-                )
-            })
-            .clone()
+    fn resolve(&mut self, device: &wgpu::Device) -> &ReflectedPipeline {
+        self.resolve.get_or_insert_with(|| {
+            resolve_shader().pipeline(device, "kickstart-rt injection resolve", "resolve")
+        })
     }
 
     /// Bytes of the accumulation buffer.
@@ -302,17 +267,18 @@ impl Injector {
                 pad: 0,
             },
         );
-        let group = rec.bind_buffers(
+        let group = resolve.bind_group(
+            device,
             "kickstart-rt injection resolve",
-            &resolve,
             0,
-            &[
-                surfels.as_entire_binding(),
-                accum.as_entire_binding(),
-                rparams.as_entire_binding(),
-            ],
+            &[("surfels", surfels), ("accum", accum), ("params", &rparams)],
         );
-        rec.dispatch("cache resolve", &resolve, &[&group], slots.div_ceil(64));
+        rec.dispatch(
+            "cache resolve",
+            &resolve.pipeline,
+            &[&group],
+            slots.div_ceil(64),
+        );
     }
 }
 
@@ -326,57 +292,26 @@ fn inject_groups(
     params: &wgpu::Buffer,
     task: &DirectLightingInjectionTask,
 ) -> [wgpu::BindGroup; 3] {
-    let scene_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("kickstart-rt injection scene"),
-        layout: &p.layouts[0],
-        entries: &[
-            scene.tlas_nodes,
-            scene.instances,
-            scene.geometries,
-            scene.blas_nodes,
-            scene.triangles,
-        ]
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect::<Vec<_>>(),
-    });
-    let cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("kickstart-rt injection cache"),
-        layout: &p.layouts[1],
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: meta.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: accum.as_entire_binding(),
-            },
-        ],
-    });
-    let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("kickstart-rt injection inputs"),
-        layout: &p.layouts[2],
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: params.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::TextureView(&task.depth.texture),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: wgpu::BindingResource::TextureView(&task.direct_lighting),
-            },
-        ],
-    });
-    [scene_group, cache_group, io_group]
+    let cache = [
+        ("cache_meta", meta.as_entire_binding()),
+        ("accum", accum.as_entire_binding()),
+    ];
+    let io = [
+        ("params", params.as_entire_binding()),
+        (
+            "depth_tex",
+            wgpu::BindingResource::TextureView(&task.depth.texture),
+        ),
+        (
+            "light_tex",
+            wgpu::BindingResource::TextureView(&task.direct_lighting),
+        ),
+    ];
+    [
+        scene.bind_group(device, &p.pipeline),
+        p.cache.bind_group(device, &cache),
+        p.io.bind_group(device, &io),
+    ]
 }
 
 #[cfg(test)]
@@ -391,7 +326,7 @@ mod wgsl_tests {
     fn both_injection_variants_validate_and_match_the_rust_layout() {
         for depth_format in [true, false] {
             let label = format!("injection (depth format: {depth_format})");
-            let module = validate(&label, &inject_wgsl(depth_format));
+            let module = validate(&label, inject_shader(depth_format).source());
             assert!(module.entry_points.iter().any(|e| e.name == "inject"));
             assert_wgsl_layout!(
                 module,
@@ -415,7 +350,7 @@ mod wgsl_tests {
 
     #[test]
     fn the_resolve_pass_validates_and_matches_the_rust_layout() {
-        let module = validate("injection resolve", RESOLVE_WGSL);
+        let module = validate("injection resolve", resolve_shader().source());
         assert!(module.entry_points.iter().any(|e| e.name == "resolve"));
         assert_wgsl_layout!(
             module,

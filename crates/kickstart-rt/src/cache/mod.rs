@@ -3,11 +3,11 @@
 //!
 //! # Sampling contract (for trace shaders)
 //!
-//! [`SAMPLE_WGSL`] is a WGSL module concatenated into a trace shader **after** the traversal
-//! module. It declares two read-only storage buffers at `@group(CACHE_GROUP)` bindings 0 (`meta`)
-//! and 1 (`surfels`); the includer replaces the token `CACHE_GROUP` with its group number and
-//! binds [`DirectLightingCache::sample_bind_group_entries`] there (layout entries:
-//! [`DirectLightingCache::sample_layout_entries`]). It defines
+//! `cache/sample` is a WGSL module a trace shader imports (`#import cache/sample`, see
+//! [`crate::gpu::compose`]). It declares two storage buffers at `@group(CACHE_GROUP)` bindings 0
+//! (`meta`) and 1 (`surfels`); the importer gives the group number and the surfels' access with
+//! [`sample_params`] and binds [`DirectLightingCache::sample_resources`] there by name (its
+//! layout comes from the module itself). It defines
 //!
 //! - `fn cache_radiance(instance: u32, prim: u32, bary: vec2<f32>, bilinear: bool) -> vec3<f32>`:
 //!   the cached linear radiance at that surface point; the instance's `initial_tile_color` where
@@ -89,23 +89,23 @@ pub struct CacheAllocation {
     pub level: CacheLevel,
 }
 
-/// The sampling module for trace shaders (see the module docs); replace `CACHE_GROUP`.
-pub(crate) const SAMPLE_WGSL: &str = concat!(
-    include_str!("../../shaders/cache_layout.wgsl"),
-    include_str!("../../shaders/cache_sample.wgsl")
-);
-
-/// [`SAMPLE_WGSL`] with its group number and surfel access filled in.
-pub(crate) fn sample_wgsl(group: u32, surfels_writable: bool) -> String {
-    let source = SAMPLE_WGSL.replace("CACHE_GROUP", &group.to_string());
-    if surfels_writable {
-        source.replace(
-            "var<storage, read> cache_surfels",
-            "var<storage, read_write> cache_surfels",
-        )
+/// The parameters of the sampling module `cache/sample` (see the module docs) bound at
+/// `@group(group)`, its surfels writable or read-only.
+///
+/// # Panics
+///
+/// When `group` is over 3 (WebGPU has four bind groups; the SDK's passes pass constants).
+pub(crate) fn sample_params(
+    group: u32,
+    surfels_writable: bool,
+) -> [(&'static str, &'static str); 2] {
+    let group = ["0", "1", "2", "3"][group as usize];
+    let access = if surfels_writable {
+        "read_write"
     } else {
-        source
-    }
+        "read"
+    };
+    [("CACHE_GROUP", group), ("SURFEL_ACCESS", access)]
 }
 
 /// Cache layout settings of a geometry (from its `GeometryInput`).

@@ -1,4 +1,4 @@
-//! The sizing formulas of the module docs, on the CPU: the GPU allocation (`cache_alloc.wgsl`)
+//! The sizing formulas of the module docs, on the CPU: the GPU allocation (`cache/alloc.wgsl`)
 //! implements the same rules; these give tools and tests the expected surfel counts.
 
 use super::CacheParams;

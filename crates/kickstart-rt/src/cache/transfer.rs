@@ -6,14 +6,12 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::gpu::shader::{assemble, compute_pipeline};
+use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 
-const TRANSFER_WGSL: &str = include_str!("../../shaders/cache_transfer.wgsl");
-
-/// The WGSL of the transfer pass (the sampling module at group 0, its surfels writable).
-fn transfer_wgsl() -> String {
-    assemble(&[&super::sample_wgsl(0, true), TRANSFER_WGSL])
+/// The transfer pass's shader (the sampling module at group 0, its surfels writable).
+fn transfer_shader() -> ReflectedShader {
+    ReflectedShader::compose(&["cache/transfer"], &super::sample_params(0, true))
 }
 
 #[repr(C)]
@@ -28,17 +26,14 @@ struct TransferParams {
 /// The transfer pass.
 #[derive(Default)]
 pub(crate) struct Transferer {
-    pipeline: Option<wgpu::ComputePipeline>,
+    pipeline: Option<ReflectedPipeline>,
 }
 
 impl Transferer {
-    fn pipeline(&mut self, device: &wgpu::Device) -> wgpu::ComputePipeline {
-        self.pipeline
-            .get_or_insert_with(|| {
-                let source = transfer_wgsl();
-                compute_pipeline(device, "kickstart-rt light transfer", &source, "transfer")
-            })
-            .clone()
+    fn pipeline(&mut self, device: &wgpu::Device) -> &ReflectedPipeline {
+        self.pipeline.get_or_insert_with(|| {
+            transfer_shader().pipeline(device, "kickstart-rt light transfer", "transfer")
+        })
     }
 
     /// Creates the pipeline now.
@@ -65,22 +60,22 @@ impl Transferer {
                 pad: 0,
             },
         );
-        let cache = rec.bind_buffers(
+        let cache = pipeline.bind_group(
+            rec.device,
             "kickstart-rt light transfer cache",
-            &pipeline,
             0,
-            &[meta.as_entire_binding(), surfels.as_entire_binding()],
+            &[("cache_meta", meta), ("cache_surfels", surfels)],
         );
-        let io = rec.bind_buffers(
+        let io = pipeline.bind_group(
+            rec.device,
             "kickstart-rt light transfer params",
-            &pipeline,
             1,
-            &[params.as_entire_binding()],
+            &[("params", &params)],
         );
         rec.scope = "light transfer";
         rec.dispatch(
             "cache transfer",
-            &pipeline,
+            &pipeline.pipeline,
             &[&cache, &io],
             tri_count.div_ceil(64),
         );
@@ -95,7 +90,7 @@ mod tests {
     /// The pass's WGSL validated with naga without a device, and its uniform against it.
     #[test]
     fn the_wgsl_validates_and_matches_the_rust_layout() {
-        let module = validate("light transfer", &transfer_wgsl());
+        let module = validate("light transfer", transfer_shader().source());
         assert!(module.entry_points.iter().any(|e| e.name == "transfer"));
         assert_wgsl_layout!(
             module,

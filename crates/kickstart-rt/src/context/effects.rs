@@ -134,7 +134,7 @@ impl Effects {
             }
             Route::Trace(task) => {
                 rec.scope = "trace";
-                let cache = inputs.cache.sample_bind_group_entries();
+                let cache = inputs.cache.sample_resources();
                 self.traces(device, queue)
                     .record(rec, &inputs.scene, &cache, task)?;
             }

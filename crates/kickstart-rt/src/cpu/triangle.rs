@@ -5,7 +5,7 @@
 //! ray through a shared edge or vertex hits every triangle that shares it (never none: no gaps);
 //! a closest-hit query that finds several hits at the same `t` reports the lowest primitive index.
 //! Edge functions are evaluated in f32 only and an exact 0 is inside: the rule the GPU traversal
-//! (`shaders/traverse.wgsl`) implements too, so the two agree (up to FMA contraction on the GPU).
+//! (`shaders/scene/traversal.wgsl`) implements too, so the two agree (up to FMA contraction on the GPU).
 
 use glam::Vec3;
 

@@ -1,11 +1,11 @@
 //! The spatio-temporal filter every denoiser runs (SVGF-like, written here in WGSL; NRD is not
 //! used), per frame of a context:
-//! 1. **temporal** (`shaders/denoise_temporal.wgsl`): G-buffer decode into a compact guide,
+//! 1. **temporal** (`shaders/denoise/temporal.wgsl`): G-buffer decode into a compact guide,
 //!    checkerboard resolve, reprojection (motion vectors of either type with their scale, or the
 //!    previous matrices when there are none; camera jitter compensated), disocclusion from plane
 //!    distance and normal, per-pixel history length, history clamping against ghosting, firefly
 //!    clamping, accumulation of the raw signal and of its luminance's second moment;
-//! 2. **à-trous** (`shaders/denoise_atrous.wgsl`), 3 (Fast) or 5 (HighQuality) iterations of
+//! 2. **à-trous** (`shaders/denoise/atrous.wgsl`), 3 (Fast) or 5 (HighQuality) iterations of
 //!    an edge-stopping wavelet filter guided by normal, plane distance and the estimated noise,
 //!    with a radius that follows roughness, hit distance, the occluder distance of a shadow (its
 //!    penumbra width) and the history length; one chain of dispatches per signal, whose last
@@ -22,20 +22,14 @@ use super::history::{self, Histories, History};
 use super::signal::{wgsl_format, Kind, SignalSet};
 use crate::gpu::buffers::placeholder_texture;
 use crate::gpu::layout::{float_texture_entry, storage_entry, uniform_entry};
-use crate::gpu::shader::{assemble, compute_pipeline_with_layouts};
+use crate::gpu::shader::compute_pipeline_with_layouts;
 use crate::gpu::Recorder;
 use crate::handles::DenoisingContextHandle;
 use crate::tasks::{
     DenoiseMode, DenoiseTaskCommon, DenoisingContextInput, DenoisingMethod, HalfResolutionMode,
     MotionType, SignalType, TextureInput, Viewport,
 };
-use crate::trace::gbuffer::{
-    gbuffer_wgsl, resolve_viewport, CameraFrame, GBufferBinder, GBufferInputs,
-};
-
-const COMMON_WGSL: &str = include_str!("../../shaders/denoise_common.wgsl");
-const TEMPORAL_WGSL: &str = include_str!("../../shaders/denoise_temporal.wgsl");
-const ATROUS_WGSL: &str = include_str!("../../shaders/denoise_atrous.wgsl");
+use crate::trace::gbuffer::{resolve_viewport, CameraFrame, GBufferBinder, GBufferInputs};
 
 /// Invocations per workgroup side of every denoise pass (`@workgroup_size(8, 8)`).
 const TILE: u32 = 8;
@@ -66,7 +60,7 @@ fn method_settings(method: DenoisingMethod) -> MethodSettings {
     }
 }
 
-/// The uniform of `shaders/denoise_common.wgsl` (`DenoiseParams`).
+/// The uniform of `shaders/denoise/common.wgsl` (`DenoiseParams`).
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy, Debug)]
 struct DenoiseParams {
@@ -252,18 +246,13 @@ impl Shared {
 
 /// The WGSL of the temporal pass of `set` (the G-buffer module at group 0).
 fn temporal_wgsl(set: SignalSet) -> String {
-    assemble(&[
-        &gbuffer_wgsl(0),
-        &set.prelude(None),
-        COMMON_WGSL,
-        TEMPORAL_WGSL,
-    ])
+    set.compose(&["denoise/temporal"], None, &[("GBUFFER_GROUP", "0")])
 }
 
 /// The WGSL of an à-trous iteration of `set`; `outputs`: the last iteration's, writing textures
-/// of those formats (see [`SignalSet::prelude`]).
+/// of those formats (see [`SignalSet::compose`]).
 fn atrous_wgsl(set: SignalSet, outputs: Option<&[wgpu::TextureFormat]>) -> String {
-    assemble(&[&set.prelude(outputs), COMMON_WGSL, ATROUS_WGSL])
+    set.compose(&["denoise/atrous"], outputs, &[])
 }
 
 /// The pipelines of one signal set.

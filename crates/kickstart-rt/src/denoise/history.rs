@@ -1,7 +1,7 @@
 //! The GPU memory of one denoising context: guides, history and filter intermediates, sized by
 //! the context's maximum resolution. Guides hold 16 bytes per pixel, a signal's history and
 //! intermediates 16 (radiance) or 8 (occlusion, shadows) bytes per pixel (see
-//! `shaders/denoise_common.wgsl` and the record files); a signal's buffers are separate so that
+//! `shaders/denoise/common.wgsl` and the record files); a signal's buffers are separate so that
 //! each binding stays under WebGPU's default 128 MiB binding limit up to 4K.
 
 use std::collections::HashMap;
@@ -13,7 +13,7 @@ use crate::tasks::{DenoisingContextInput, SignalType, Viewport};
 pub(crate) const RECORD_BYTES: u64 = 16;
 
 /// Bytes per pixel of a signal record of a context of `signal_type`: scalar signals keep one
-/// value (`shaders/denoise_record_scalar.wgsl`).
+/// value (`shaders/denoise/record_scalar.wgsl`).
 pub(crate) fn signal_record_bytes(signal_type: SignalType) -> u64 {
     match signal_type {
         SignalType::DiffuseOcclusion | SignalType::Shadow | SignalType::MultiShadow => 8,

@@ -4,9 +4,6 @@
 
 use crate::tasks::SignalType;
 
-const RECORD_RGBA_WGSL: &str = include_str!("../../shaders/denoise_record_rgba.wgsl");
-const RECORD_SCALAR_WGSL: &str = include_str!("../../shaders/denoise_record_scalar.wgsl");
-
 /// Signal kinds of the shaders (`DN_KIND_*`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub(super) enum Kind {
@@ -73,48 +70,47 @@ impl SignalSet {
             .collect()
     }
 
-    /// The WGSL in front of a pass of this set: constants, the record layout and (`outputs`:
-    /// the last à-trous iteration) the output textures of group 2.
-    pub fn prelude(self, outputs: Option<&[wgpu::TextureFormat]>) -> String {
-        let mut s = format!(
-            "const DN_SIGNALS: u32 = {}u;\nconst DN_KIND0: u32 = {}u;\nconst DN_KIND1: u32 = {}u;\n",
-            self.count, self.kinds[0] as u32, self.kinds[1] as u32
-        );
-        s += if self.scalar() {
-            RECORD_SCALAR_WGSL
+    /// The WGSL of a pass of this set: the modules `roots` (the pass) composed with the set's
+    /// constants (`denoise/signals`), its record layout and (`outputs`: the last à-trous
+    /// iteration) the output textures of group 2, and the pass's own `params`.
+    pub fn compose(
+        self,
+        roots: &[&str],
+        outputs: Option<&[wgpu::TextureFormat]>,
+        params: &[(&str, &str)],
+    ) -> String {
+        let record = if self.scalar() {
+            "denoise/record_scalar"
         } else {
-            RECORD_RGBA_WGSL
+            "denoise/record_rgba"
         };
-        match outputs {
-            None => {
-                s += "\nconst DN_LAST: bool = false;\n\
-                      fn dn_write_output(s: u32, texel: vec2<u32>, v: vec4<f32>) {}\n";
-            }
-            Some(formats) => {
-                s += "\nconst DN_LAST: bool = true;\n";
-                for (k, f) in formats.iter().enumerate() {
-                    let name = wgsl_format(*f).unwrap_or("rgba16float");
-                    s += &format!(
-                        "@group(2) @binding({k}) var dn_out{k}: texture_storage_2d<{name}, write>;\n"
-                    );
-                }
-                // Radiance: rgb and the filtered hit distance; occlusion and shadows: the value
-                // in every channel.
-                s += "fn dn_write_output(s: u32, texel: vec2<u32>, v: vec4<f32>) {\n\
-                      var out = v;\n\
-                      if dn_kind(s) != DN_KIND_SPECULAR && dn_kind(s) != DN_KIND_DIFFUSE {\n\
-                      out = vec4<f32>(v.x);\n\
-                      }\n\
-                      if s == 0u {\n\
-                      textureStore(dn_out0, texel, out);\n\
-                      }\n";
-                if formats.len() > 1 {
-                    s += "if s == 1u {\ntextureStore(dn_out1, texel, out);\n}\n";
-                }
-                s += "}\n";
-            }
-        }
-        s
+        // Formats are checked before any pipeline is made; the fallback is never used.
+        let name = |k: usize| {
+            outputs
+                .and_then(|f| f.get(k))
+                .map(|&f| wgsl_format(f).unwrap_or("rgba16float"))
+        };
+        let output = match outputs.map_or(0, <[_]>::len) {
+            0 => "denoise/output/none",
+            1 => "denoise/output/one",
+            _ => "denoise/output/two",
+        };
+        let constants = [
+            self.count.to_string(),
+            (self.kinds[0] as u32).to_string(),
+            (self.kinds[1] as u32).to_string(),
+        ];
+        let mut all: Vec<(&str, &str)> = vec![
+            ("DN_SIGNALS", &constants[0]),
+            ("DN_KIND0", &constants[1]),
+            ("DN_KIND1", &constants[2]),
+        ];
+        all.extend(name(0).map(|f| ("DN_OUTPUT0_FORMAT", f)));
+        all.extend(name(1).map(|f| ("DN_OUTPUT1_FORMAT", f)));
+        all.extend_from_slice(params);
+        let mut modules = vec![record, output];
+        modules.extend_from_slice(roots);
+        crate::gpu::compose::compose(&modules, &all)
     }
 }
 

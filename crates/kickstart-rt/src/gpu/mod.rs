@@ -1,12 +1,14 @@
 //! Small wgpu helpers shared by every pass: buffers and read-backs, recording dispatches (with
-//! optional timestamps), shader assembly and pipeline creation, and the GPU radix sort.
+//! optional timestamps), the shader composer and pipeline creation, and the GPU radix sort.
 
 pub(crate) mod buffers;
+pub(crate) mod compose;
 pub(crate) mod layout;
 pub(crate) mod radix_sort;
 pub(crate) mod recorder;
 pub(crate) mod reflect;
 pub(crate) mod shader;
+pub(crate) mod shader_files;
 pub(crate) mod spirv;
 #[cfg(test)]
 pub(crate) mod testing;

@@ -1,4 +1,4 @@
-//! Stable GPU LSD radix sort of (u32 key, u32 value) pairs (`shaders/radix_sort.wgsl`).
+//! Stable GPU LSD radix sort of (u32 key, u32 value) pairs (`shaders/gpu/radix_sort.wgsl`).
 //!
 //! Portable by construction: WebGPU default limits, no subgroup operations, no inter-workgroup
 //! communication inside a dispatch (so no reliance on forward progress between workgroups).
@@ -11,7 +11,7 @@
 //! multi-level scan). Up to [`SUMMING_MAX_BLOCKS`] blocks (65536 pairs) a pass is 2 dispatches:
 //! the scatter sums the histogram rows itself (`scatter_summing`). A caller whose own pass
 //! writes the keys can count their first digit into the histogram too
-//! ([`RadixSort::first_histogram`], with `shaders/digit_histogram.wgsl`), saving the first
+//! ([`RadixSort::first_histogram`], with `shaders/gpu/digit_histogram.wgsl`), saving the first
 //! pass's `histogram` dispatch. The scatter ranks a block by two 4-bit splits in workgroup memory:
 //! per-thread counters for all 256 digit values would not fit in 16 KiB, those of 16 nibble
 //! values (two 16-bit lanes per word) take 8 KiB and rank in O(1) per element.
@@ -20,17 +20,9 @@
 //! bound by dispatch count. An odd number of digit passes ends in the scratch buffers, which
 //! [`RadixSort::record`] returns to the caller instead of copying them back (a dispatch saved).
 
-use super::reflect::{ReflectedPipeline, ShaderReflection};
+use super::reflect::{ReflectedPipeline, ReflectedShader};
 use super::Recorder;
 
-/// WGSL source of every kernel of the sort (after the digit counting it shares with the LBVH's
-/// morton pass).
-const SOURCE: &str = concat!(
-    include_str!("../../shaders/digit_histogram.wgsl"),
-    include_str!("../../shaders/radix_sort.wgsl")
-);
-/// One-workgroup stable sort for small inputs (`shaders/radix_sort_small.wgsl`).
-const SMALL_SOURCE: &str = include_str!("../../shaders/radix_sort_small.wgsl");
 /// Largest count sorted by the one-workgroup path (its workgroup arrays' length).
 pub(crate) const SMALL_SORT_MAX: u32 = 1024;
 
@@ -83,22 +75,17 @@ pub(crate) struct RadixSort {
 impl RadixSort {
     /// Compiles the sort's pipelines; scratch buffers are created by the first [`Self::record`].
     pub fn new(device: &wgpu::Device) -> Self {
-        let shader = ShaderReflection::new(SOURCE).expect("shaders/radix_sort.wgsl is valid WGSL");
-        let pipeline = |entry| ReflectedPipeline::new(device, "radix sort", SOURCE, &shader, entry);
-        let small = ShaderReflection::new(SMALL_SOURCE)
-            .expect("shaders/radix_sort_small.wgsl is valid WGSL");
+        // Every kernel of the sort (it imports the digit counting it shares with the LBVH's
+        // morton pass), and the one-workgroup stable sort for small inputs.
+        let shader = ReflectedShader::compose(&["gpu/radix_sort"], &[]);
+        let pipeline = |entry| shader.pipeline(device, "radix sort", entry);
+        let small = ReflectedShader::compose(&["gpu/radix_sort_small"], &[]);
         RadixSort {
             histogram: pipeline("histogram"),
             scan_rows: pipeline("scan_rows"),
             scatter: pipeline("scatter"),
             scatter_summing: pipeline("scatter_summing"),
-            small: ReflectedPipeline::new(
-                device,
-                "radix sort (small)",
-                SMALL_SOURCE,
-                &small,
-                "sort_small",
-            ),
+            small: small.pipeline(device, "radix sort (small)", "sort_small"),
             keys_tmp: None,
             vals_tmp: None,
             hist: None,
@@ -141,7 +128,7 @@ impl RadixSort {
     /// For a sort that will run the digit passes (more than [`SMALL_SORT_MAX`] pairs, at least
     /// 8 key bits): the histogram buffer, reserved, and the block count, so the caller's pass
     /// that writes the keys can also count their first digit (`key & 255`) into it with
-    /// `shaders/digit_histogram.wgsl` (as `lbvh_morton_histogram` does). Then
+    /// `shaders/gpu/digit_histogram.wgsl` (as `lbvh_morton_histogram` does). Then
     /// [`Self::record_after_first_histogram`] sorts.
     pub fn first_histogram(
         &mut self,

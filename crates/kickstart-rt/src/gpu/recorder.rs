@@ -183,29 +183,6 @@ impl<'a> Recorder<'a> {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             })
     }
-
-    /// A bind group for `pipeline`'s group `index` with `buffers` at bindings 0, 1, 2, … in order.
-    pub fn bind_buffers(
-        &self,
-        label: &str,
-        pipeline: &wgpu::ComputePipeline,
-        index: u32,
-        buffers: &[wgpu::BindingResource<'_>],
-    ) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, r)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: r.clone(),
-            })
-            .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout: &pipeline.get_bind_group_layout(index),
-            entries: &entries,
-        })
-    }
 }
 
 #[cfg(test)]

@@ -32,6 +32,20 @@ pub(crate) struct ShaderBinding {
     pub name: String,
     /// Its kind.
     pub kind: ResourceKind,
+    /// Its type as a bind group layout entry declares it (see [`binding_type`]).
+    pub ty: wgpu::BindingType,
+}
+
+impl ShaderBinding {
+    /// The bind group layout entry of this binding (compute stage).
+    pub fn layout_entry(&self) -> wgpu::BindGroupLayoutEntry {
+        wgpu::BindGroupLayoutEntry {
+            binding: self.binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: self.ty,
+            count: None,
+        }
+    }
 }
 
 /// A parsed and validated WGSL module, for reading its entry points' bindings.
@@ -64,25 +78,269 @@ impl ShaderReflection {
             .global_variables
             .iter()
             .filter(|&(handle, _)| !uses[handle].is_empty())
-            .filter_map(|(_, var)| {
-                let rb = var.binding.as_ref()?;
-                let kind = match var.space {
-                    naga::AddressSpace::Uniform => ResourceKind::Uniform,
-                    naga::AddressSpace::Storage { access } => ResourceKind::Storage {
-                        read_only: !access.contains(naga::StorageAccess::STORE),
-                    },
-                    _ => ResourceKind::Handle,
-                };
-                Some(ShaderBinding {
-                    group: rb.group,
-                    binding: rb.binding,
-                    name: var.name.clone().unwrap_or_default(),
-                    kind,
-                })
-            })
+            .filter_map(|(_, var)| self.binding(var))
             .collect();
         bindings.sort_by_key(|b| (b.group, b.binding));
         Some(bindings)
+    }
+
+    /// Every binding the module declares in `group`, whether an entry point uses it or not
+    /// (what an explicit layout shared by several passes needs), sorted by binding.
+    pub fn group_bindings(&self, group: u32) -> Vec<ShaderBinding> {
+        let mut bindings: Vec<ShaderBinding> = self
+            .module
+            .global_variables
+            .iter()
+            .filter_map(|(_, var)| self.binding(var))
+            .filter(|b| b.group == group)
+            .collect();
+        bindings.sort_by_key(|b| b.binding);
+        bindings
+    }
+
+    /// The binding of the global `var`, `None` when it has no `@group`/`@binding`.
+    fn binding(&self, var: &naga::GlobalVariable) -> Option<ShaderBinding> {
+        let rb = var.binding.as_ref()?;
+        let name = var.name.clone().unwrap_or_default();
+        let kind = match var.space {
+            naga::AddressSpace::Uniform => ResourceKind::Uniform,
+            naga::AddressSpace::Storage { access } => ResourceKind::Storage {
+                read_only: !access.contains(naga::StorageAccess::STORE),
+            },
+            _ => ResourceKind::Handle,
+        };
+        let ty = binding_type(kind, &self.module.types[var.ty].inner)
+            .unwrap_or_else(|| panic!("binding `{name}`: a resource type the SDK never binds"));
+        Some(ShaderBinding {
+            group: rb.group,
+            binding: rb.binding,
+            name,
+            kind,
+            ty,
+        })
+    }
+}
+
+/// The layout type of a binding of `kind` and naga type `inner`: buffers as declared; 2-D float
+/// textures as unfilterable (every pass reads them with `textureLoad`, so `R32Float` and depth
+/// formats bind too); depth textures; write, read or read-write storage textures of the declared
+/// format. `None` for what the SDK's shaders never declare (arrays, cubes, samplers, …).
+fn binding_type(kind: ResourceKind, inner: &naga::TypeInner) -> Option<wgpu::BindingType> {
+    use naga::{ImageClass, ImageDimension, ScalarKind, TypeInner};
+    let buffer = |ty| wgpu::BindingType::Buffer {
+        ty,
+        has_dynamic_offset: false,
+        min_binding_size: None,
+    };
+    let texture = |sample_type| wgpu::BindingType::Texture {
+        sample_type,
+        view_dimension: wgpu::TextureViewDimension::D2,
+        multisampled: false,
+    };
+    match (kind, inner) {
+        (ResourceKind::Uniform, _) => Some(buffer(wgpu::BufferBindingType::Uniform)),
+        (ResourceKind::Storage { read_only }, _) => {
+            Some(buffer(wgpu::BufferBindingType::Storage { read_only }))
+        }
+        (
+            ResourceKind::Handle,
+            &TypeInner::Image {
+                dim: ImageDimension::D2,
+                arrayed: false,
+                class,
+            },
+        ) => match class {
+            ImageClass::Sampled {
+                kind: ScalarKind::Float,
+                multi: false,
+            } => Some(texture(wgpu::TextureSampleType::Float {
+                filterable: false,
+            })),
+            ImageClass::Depth { multi: false } => Some(texture(wgpu::TextureSampleType::Depth)),
+            ImageClass::Storage { format, access } => {
+                let access = match (
+                    access.contains(naga::StorageAccess::LOAD),
+                    access.contains(naga::StorageAccess::STORE),
+                ) {
+                    (true, true) => wgpu::StorageTextureAccess::ReadWrite,
+                    (true, false) => wgpu::StorageTextureAccess::ReadOnly,
+                    _ => wgpu::StorageTextureAccess::WriteOnly,
+                };
+                Some(wgpu::BindingType::StorageTexture {
+                    access,
+                    format: storage_format(format)?,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                })
+            }
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// The texture format of a WGSL storage format the SDK writes (`WRITABLE_OUTPUT_FORMATS`).
+fn storage_format(format: naga::StorageFormat) -> Option<wgpu::TextureFormat> {
+    use naga::StorageFormat as S;
+    use wgpu::TextureFormat as F;
+    Some(match format {
+        S::Rgba16Float => F::Rgba16Float,
+        S::Rgba32Float => F::Rgba32Float,
+        S::R32Float => F::R32Float,
+        S::Rg32Float => F::Rg32Float,
+        S::Rgba8Unorm => F::Rgba8Unorm,
+        _ => return None,
+    })
+}
+
+/// The entries of a bind group over `bindings` (one group's), each resource taken from
+/// `resources` by the shader's name for it.
+///
+/// # Panics
+///
+/// When a binding has no resource of its name (a programming error: the pass's tests record
+/// it); `label` names the pass.
+pub(crate) fn named_entries<'a>(
+    label: &str,
+    bindings: &[ShaderBinding],
+    resources: &[(&str, wgpu::BindingResource<'a>)],
+) -> Vec<wgpu::BindGroupEntry<'a>> {
+    bindings
+        .iter()
+        .map(|b| {
+            let resource = resources
+                .iter()
+                .rev()
+                .find(|(name, _)| *name == b.name)
+                .map(|(_, r)| r.clone())
+                .unwrap_or_else(|| {
+                    panic!(
+                        "{label}: no resource given for `{}` (group {}, binding {})",
+                        b.name, b.group, b.binding
+                    )
+                });
+            wgpu::BindGroupEntry {
+                binding: b.binding,
+                resource,
+            }
+        })
+        .collect()
+}
+
+/// An explicit bind group layout made from the bindings a shader declares in one group, and
+/// bind groups for it by the shader's names: for passes whose layouts are shared or explicit
+/// (the traversal's own SPIR-V needs them), so no Rust table repeats the shader's bindings.
+pub(crate) struct ReflectedLayout {
+    /// The layout and its binding numbers.
+    pub layout: super::layout::BoundLayout,
+    bindings: Vec<ShaderBinding>,
+    label: &'static str,
+}
+
+impl ReflectedLayout {
+    /// The layout of every binding `reflection` declares in `group`.
+    pub fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        reflection: &ShaderReflection,
+        group: u32,
+    ) -> Self {
+        Self::from_bindings(device, label, reflection.group_bindings(group))
+    }
+
+    /// The layout of the bindings `entry_point` of `reflection` uses in `group` (a pass whose
+    /// shared modules declare bindings it does not read, such as the cache's surfels).
+    ///
+    /// # Panics
+    ///
+    /// When the module has no such entry point (a programming error).
+    pub fn of_entry_point(
+        device: &wgpu::Device,
+        label: &'static str,
+        reflection: &ShaderReflection,
+        entry_point: &str,
+        group: u32,
+    ) -> Self {
+        let bindings: Vec<ShaderBinding> = reflection
+            .entry_point_bindings(entry_point)
+            .unwrap_or_else(|| panic!("{label}: the shader has no entry point `{entry_point}`"))
+            .into_iter()
+            .filter(|b| b.group == group)
+            .collect();
+        Self::from_bindings(device, label, bindings)
+    }
+
+    fn from_bindings(
+        device: &wgpu::Device,
+        label: &'static str,
+        bindings: Vec<ShaderBinding>,
+    ) -> Self {
+        let entries: Vec<_> = bindings.iter().map(ShaderBinding::layout_entry).collect();
+        ReflectedLayout {
+            layout: super::layout::BoundLayout::new(device, label, &entries),
+            bindings,
+            label,
+        }
+    }
+
+    /// This layout as a pipeline's group.
+    pub fn group(&self) -> super::layout::GroupLayout<'_> {
+        self.layout.group()
+    }
+
+    /// A bind group with each binding's resource taken from `resources` by the shader's name
+    /// (see [`named_entries`]).
+    pub fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        resources: &[(&str, wgpu::BindingResource<'_>)],
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.label),
+            layout: &self.layout.layout,
+            entries: &named_entries(self.label, &self.bindings, resources),
+        })
+    }
+}
+
+/// A composed shader (see [`super::compose`]) and its reflection, from which a pass makes the
+/// pipelines of its entry points.
+pub(crate) struct ReflectedShader {
+    source: String,
+    reflection: ShaderReflection,
+}
+
+impl ReflectedShader {
+    /// The SDK's modules `roots` composed with `params`, parsed and validated.
+    ///
+    /// # Panics
+    ///
+    /// When the composition or naga's validation fails: the roots and parameters are the SDK's
+    /// own per variant, and a CPU-only test of each pass validates every variant it creates.
+    pub fn compose(roots: &[&str], params: &[(&str, &str)]) -> Self {
+        let source = super::compose::compose(roots, params);
+        let reflection = ShaderReflection::new(&source)
+            .unwrap_or_else(|e| panic!("composed shader {roots:?} is not valid WGSL: {e}"));
+        ReflectedShader { source, reflection }
+    }
+
+    /// The composed WGSL.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// Its reflection.
+    pub fn reflection(&self) -> &ShaderReflection {
+        &self.reflection
+    }
+
+    /// The pipeline of `entry_point`, with an automatic layout and the bindings it uses.
+    pub fn pipeline(
+        &self,
+        device: &wgpu::Device,
+        label: &'static str,
+        entry_point: &str,
+    ) -> ReflectedPipeline {
+        ReflectedPipeline::new(device, label, &self.source, &self.reflection, entry_point)
     }
 }
 
@@ -137,32 +395,33 @@ impl ReflectedPipeline {
         group: u32,
         buffers: &[(&str, &wgpu::Buffer)],
     ) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = self
+        let resources: Vec<(&str, wgpu::BindingResource<'_>)> = buffers
+            .iter()
+            .map(|&(name, buffer)| (name, buffer.as_entire_binding()))
+            .collect();
+        self.bind_resources(device, label, group, &resources)
+    }
+}
+
+impl ReflectedPipeline {
+    /// As [`Self::bind_group`], with any resources (texture views, buffer ranges) by name.
+    pub fn bind_resources(
+        &self,
+        device: &wgpu::Device,
+        label: &str,
+        group: u32,
+        resources: &[(&str, wgpu::BindingResource<'_>)],
+    ) -> wgpu::BindGroup {
+        let group_bindings: Vec<ShaderBinding> = self
             .bindings
             .iter()
             .filter(|b| b.group == group)
-            .map(|b| {
-                let buffer = buffers
-                    .iter()
-                    .rev()
-                    .find(|(name, _)| *name == b.name)
-                    .map(|&(_, buffer)| buffer)
-                    .unwrap_or_else(|| {
-                        panic!(
-                            "{}: no buffer given for `{}` (group {group}, binding {})",
-                            self.label, b.name, b.binding
-                        )
-                    });
-                wgpu::BindGroupEntry {
-                    binding: b.binding,
-                    resource: buffer.as_entire_binding(),
-                }
-            })
+            .cloned()
             .collect();
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(label),
             layout: &self.pipeline.get_bind_group_layout(group),
-            entries: &entries,
+            entries: &named_entries(self.label, &group_bindings, resources),
         })
     }
 }
@@ -199,11 +458,73 @@ fn count(@builtin(global_invocation_id) id: vec3<u32>) {
 ";
 
     fn binding(group: u32, binding: u32, name: &str, kind: ResourceKind) -> ShaderBinding {
+        let ty = match kind {
+            ResourceKind::Uniform => wgpu::BufferBindingType::Uniform,
+            ResourceKind::Storage { read_only } => wgpu::BufferBindingType::Storage { read_only },
+            ResourceKind::Handle => unreachable!("buffers only"),
+        };
         ShaderBinding {
             group,
             binding,
             name: name.into(),
             kind,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+        }
+    }
+
+    #[test]
+    fn a_group_s_layout_comes_from_every_binding_the_module_declares() {
+        let source = "
+@group(2) @binding(0) var<uniform> p: vec4<u32>;
+@group(2) @binding(1) var colour: texture_2d<f32>;
+@group(2) @binding(3) var depth: texture_depth_2d;
+@group(2) @binding(4) var out0: texture_storage_2d<rgba16float, write>;
+@group(2) @binding(5) var out1: texture_storage_2d<r32float, write>;
+@group(1) @binding(0) var<storage, read> other: array<u32>;
+@compute @workgroup_size(1)
+fn main() {
+    textureStore(out0, vec2<u32>(0u), textureLoad(colour, vec2<u32>(p.xy), 0));
+}
+";
+        let r = ShaderReflection::new(source).expect("valid WGSL");
+        let entries: Vec<_> = r
+            .group_bindings(2)
+            .iter()
+            .map(|b| (b.name.clone(), b.layout_entry()))
+            .collect();
+        let texture = |sample_type| wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        };
+        let storage = |format| wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format,
+            view_dimension: wgpu::TextureViewDimension::D2,
+        };
+        let expected = [
+            ("p", 0, binding(2, 0, "p", ResourceKind::Uniform).ty),
+            (
+                "colour",
+                1,
+                texture(wgpu::TextureSampleType::Float { filterable: false }),
+            ),
+            ("depth", 3, texture(wgpu::TextureSampleType::Depth)),
+            ("out0", 4, storage(wgpu::TextureFormat::Rgba16Float)),
+            // Declared but unused by `main`: still in the group's layout.
+            ("out1", 5, storage(wgpu::TextureFormat::R32Float)),
+        ];
+        assert_eq!(entries.len(), expected.len());
+        for ((name, entry), (want_name, want_binding, want_ty)) in entries.iter().zip(expected) {
+            assert_eq!(
+                (name.as_str(), entry.binding, entry.ty),
+                (want_name, want_binding, want_ty)
+            );
+            assert_eq!(entry.visibility, wgpu::ShaderStages::COMPUTE);
         }
     }
 
@@ -268,7 +589,7 @@ fn count(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 
     #[test]
-    #[should_panic(expected = "no buffer given for `dst` (group 0, binding 2)")]
+    #[should_panic(expected = "no resource given for `dst` (group 0, binding 2)")]
     fn a_bind_group_missing_a_used_buffer_is_a_programming_error() {
         let g = crate::gpu::testing::gpu();
         let r = ShaderReflection::new(SOURCE).expect("valid WGSL");

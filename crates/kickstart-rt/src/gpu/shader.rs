@@ -1,5 +1,4 @@
-//! WGSL assembly and compute pipeline creation. WGSL has no `#include`: shared snippets (the
-//! traversal module, packing helpers) are concatenated in front of a pass's source.
+//! Compute pipeline creation from composed WGSL (see [`super::compose`]).
 
 use super::layout::GroupLayout;
 
@@ -152,9 +151,4 @@ fn pipeline_with_layouts(
         compilation_options: Default::default(),
         cache: None,
     })
-}
-
-/// Concatenates WGSL sources (shared modules first).
-pub(crate) fn assemble(parts: &[&str]) -> String {
-    parts.join("\n")
 }

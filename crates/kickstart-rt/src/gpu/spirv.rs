@@ -3,7 +3,7 @@
 //!
 //! WGSL zero-initialises every variable, and naga writes that rule into SPIR-V as a null
 //! initializer on each `var<private>` and function `var`. For scalars that costs nothing (they
-//! live in registers), but the traversal stack (`rt_stack` in `shaders/traverse.wgsl`) is a
+//! live in registers), but the traversal stack (`rt_stack` in `shaders/scene/traversal.wgsl`) is a
 //! dynamically indexed array of 64 × 8 bytes, which the driver places in local memory: the null
 //! initializer becomes 512 bytes of stores per invocation before the first ray step, whether the
 //! ray needs two stack entries or forty. The traversal never reads an entry it has not written

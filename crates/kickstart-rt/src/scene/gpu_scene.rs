@@ -750,7 +750,7 @@ impl GpuScene {
         let refs = slots.saturating_mul(per_instance);
         if refs > self.tlas.capacity {
             let cap = refs.next_power_of_two().max(64);
-            // Node slots, then the ref table (one vec4 a ref; traverse.wgsl finds it from the
+            // Node slots, then the ref table (one vec4 a ref; scene/traversal.wgsl finds it from the
             // buffer's length).
             let need = cap as u64 * (NODE_BYTES + REF_BYTES);
             if need > self.max_binding {
@@ -887,7 +887,7 @@ const REF_BYTES: u64 = 16;
 /// docs/decisions/instance-refs.md).
 const TLAS_REF_BUDGET: u32 = 2048;
 
-/// Refs each instance slot is opened into (`instance_refs` in `shaders/prims.wgsl`): up to
+/// Refs each instance slot is opened into (`instance_refs` in `shaders/scene/prims.wgsl`): up to
 /// [`MAX_REFS_PER_INSTANCE`] while the TLAS stays within [`TLAS_REF_BUDGET`] refs, then fewer,
 /// down to one (the instance as a whole) from 1025 slots on, and one for a lone instance. Opening
 /// lets rays skip the parts of big instances they do not pass near (a scene of a few big

@@ -6,14 +6,14 @@
 //! All components of one [`Ingest::record`] call go into one dispatch with a small component
 //! table, so scenes of thousands of small geometries do not cost thousands of passes.
 
-use crate::gpu::reflect::{ReflectedPipeline, ShaderReflection};
+use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 use crate::{IndexFormat, VertexFormat};
 
-/// Threads per workgroup of `ingest.wgsl` (one triangle each).
+/// Threads per workgroup of `scene/ingest.wgsl` (one triangle each).
 const WORKGROUP: u32 = 64;
 
-/// `u32`s per component row of the table (`Component` in `ingest.wgsl`: 112 bytes).
+/// `u32`s per component row of the table (`Component` in `scene/ingest.wgsl`: 112 bytes).
 pub(crate) const ROW_WORDS: usize = 28;
 
 /// Where one component's bytes sit in the raw copy buffer, and where its triangles go.
@@ -42,11 +42,11 @@ pub(crate) struct ComponentIngest {
 
 /// The vertex-pulling pass (one pipeline, created once).
 pub(crate) struct Ingest {
-    /// `ingest.wgsl`'s `ingest` entry point.
+    /// `scene/ingest.wgsl`'s `ingest` entry point.
     pipeline: ReflectedPipeline,
 }
 
-/// Per-dispatch parameters (`Params` in `ingest.wgsl`).
+/// Per-dispatch parameters (`Params` in `scene/ingest.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
@@ -59,19 +59,9 @@ struct Params {
 impl Ingest {
     /// Creates the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {
-        let source = concat!(
-            include_str!("../../shaders/ingest_decode.wgsl"),
-            include_str!("../../shaders/ingest.wgsl")
-        );
-        let shader = ShaderReflection::new(source).expect("shaders/ingest.wgsl is valid WGSL");
+        let shader = ReflectedShader::compose(&["scene/ingest"], &[]);
         Ingest {
-            pipeline: ReflectedPipeline::new(
-                device,
-                "kickstart-rt ingest",
-                source,
-                &shader,
-                "ingest",
-            ),
+            pipeline: shader.pipeline(device, "kickstart-rt ingest", "ingest"),
         }
     }
 
@@ -187,7 +177,7 @@ pub(crate) fn component_rows(components: &[ComponentIngest], out_base: u32) -> O
     Some(table)
 }
 
-/// The table row of `c` (`Component` in `ingest.wgsl`), its triangles starting at `tri_start`
+/// The table row of `c` (`Component` in `scene/ingest.wgsl`), its triangles starting at `tri_start`
 /// within the dispatch; `None` when an address the shader computes would overflow `u32`.
 fn component_row(c: &ComponentIngest, out_base: u32, tri_start: u32) -> Option<[u32; ROW_WORDS]> {
     let vtx_format = match c.vertex_format {

@@ -1,12 +1,11 @@
-//! Small per-primitive passes of the BVH builds (`shaders/prims.wgsl`): triangle AABBs for the
+//! Small per-primitive passes of the BVH builds (`shaders/scene/prims.wgsl`): triangle AABBs for the
 //! BLAS builder, triangle gather into the builder's sorted order, and instance world AABBs for the
 //! TLAS. Layouts: `docs/ray-tracing-core.md`.
 
-use crate::gpu::reflect::{ReflectedPipeline, ShaderReflection};
-use crate::gpu::shader::assemble;
+use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 
-/// Threads per workgroup of the triangle entry points of `prims.wgsl` (one primitive each).
+/// Threads per workgroup of the triangle entry points of `scene/prims.wgsl` (one primitive each).
 const WORKGROUP: u32 = 64;
 /// Threads per workgroup of `instance_refs` (the shader's `INSTANCE_WG`): wider, so fewer
 /// workgroups merge the centroid bounds with device atomics.
@@ -34,18 +33,9 @@ pub(crate) struct Prims {
 impl Prims {
     /// Creates the pipelines.
     pub fn new(device: &wgpu::Device) -> Self {
-        let max_refs = format!("const MAX_REFS: u32 = {MAX_REFS_PER_INSTANCE}u;\n");
-        let source = assemble(&[
-            include_str!("../../shaders/scene_types.wgsl"),
-            include_str!("../../shaders/centroid_bounds.wgsl"),
-            include_str!("../../shaders/triangle_box.wgsl"),
-            &max_refs,
-            include_str!("../../shaders/prims.wgsl"),
-        ]);
-        let shader = ShaderReflection::new(&source).expect("shaders/prims.wgsl is valid WGSL");
-        let make = |entry: &str| {
-            ReflectedPipeline::new(device, "kickstart-rt prims", &source, &shader, entry)
-        };
+        let max_refs = MAX_REFS_PER_INSTANCE.to_string();
+        let shader = ReflectedShader::compose(&["scene/prims"], &[("MAX_REFS", &max_refs)]);
+        let make = |entry: &str| shader.pipeline(device, "kickstart-rt prims", entry);
         Prims {
             triangle_aabbs: make("triangle_aabbs"),
             gather_triangles: make("gather_triangles"),
@@ -144,7 +134,7 @@ impl Prims {
     }
 
     /// The TLAS's primitives, `refs_per_instance` (1..=[`MAX_REFS_PER_INSTANCE`]) refs per
-    /// instance slot `0..count` (`shaders/prims.wgsl`, `instance_refs`): ref `i * k + j` names
+    /// instance slot `0..count` (`shaders/scene/prims.wgsl`, `instance_refs`): ref `i * k + j` names
     /// slot `i` and an entry into its BLAS (the root when k = 1; with k > 1 the BLAS opened
     /// largest world box first). Each ref's world box goes to `aabbs` (the empty box for unused
     /// refs and hidden instances) and (slot, entry) to the ref table at the end of `tlas_nodes`

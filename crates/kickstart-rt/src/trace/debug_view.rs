@@ -14,16 +14,14 @@
 //! orthographic views).
 
 use crate::camera::camera;
-use crate::gpu::shader::{assemble, compute_pipeline};
+use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSE_WGSL};
+use crate::scene::traversal::SceneBuffers;
 use crate::{DebugOutputType, Error, InstanceInclusionMask, Result, ViewInfo};
 use bytemuck::{Pod, Zeroable};
 
-const DEBUG_PRIMARY_WGSL: &str = include_str!("../../shaders/debug_primary.wgsl");
-
 /// Invocations per workgroup of the debug view shader (its `@workgroup_size`): `RT_WORKGROUP_SIZE`
-/// of `shaders/traverse.wgsl`.
+/// of `shaders/scene/traversal.wgsl`.
 const WORKGROUP_SIZE: u32 = 64;
 
 /// The task name used in errors.
@@ -57,19 +55,20 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
 
 /// The WGSL of the debug view pass writing the storage format `format_name` (a name
 /// [`wgsl_format`] gives).
-fn debug_view_wgsl(format_name: &str) -> String {
-    assemble(&[
-        TRAVERSE_WGSL,
-        &crate::cache::sample_wgsl(2, false),
-        &DEBUG_PRIMARY_WGSL.replace("OUTPUT_FORMAT", format_name),
-    ])
+fn debug_view_shader(format_name: &str) -> ReflectedShader {
+    // The lighting cache's sampling module at group 2 (the DirectLightingCache view reads it).
+    let [group, access] = crate::cache::sample_params(2, false);
+    ReflectedShader::compose(
+        &["trace/debug_view"],
+        &[group, access, ("OUTPUT_FORMAT", format_name)],
+    )
 }
 
 /// The primary-ray debug view pass (`debug view`); pipelines are created per output format on
 /// first use.
 #[derive(Default)]
 pub(crate) struct DebugViewPass {
-    pipelines: Vec<(wgpu::TextureFormat, wgpu::ComputePipeline)>,
+    pipelines: Vec<(wgpu::TextureFormat, ReflectedPipeline)>,
 }
 
 impl DebugViewPass {
@@ -83,7 +82,7 @@ impl DebugViewPass {
         &mut self,
         device: &wgpu::Device,
         format: wgpu::TextureFormat,
-    ) -> Result<&wgpu::ComputePipeline> {
+    ) -> Result<&ReflectedPipeline> {
         let index = match self.pipelines.iter().position(|(f, _)| *f == format) {
             Some(i) => i,
             None => {
@@ -95,8 +94,8 @@ impl DebugViewPass {
                         "must be one of WRITABLE_OUTPUT_FORMATS",
                     ));
                 };
-                let source = debug_view_wgsl(name);
-                let pipeline = compute_pipeline(device, "kickstart-rt debug view", &source, "main");
+                let pipeline =
+                    debug_view_shader(name).pipeline(device, "kickstart-rt debug view", "main");
                 self.pipelines.push((format, pipeline));
                 self.pipelines.len() - 1
             }
@@ -167,29 +166,25 @@ impl DebugViewPass {
         );
         let device = rec.device;
         let pipeline = self.pipeline(device, format)?;
-        let scene_group = scene.bind_group(rec, pipeline);
-        let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt debug view io"),
-            layout: &pipeline.get_bind_group_layout(1),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(output),
-                },
+        let scene_group = scene.bind_group(rec.device, &pipeline.pipeline);
+        let io_group = pipeline.bind_resources(
+            device,
+            "kickstart-rt debug view io",
+            1,
+            &[
+                ("params", params.as_entire_binding()),
+                ("output", wgpu::BindingResource::TextureView(output)),
             ],
-        });
-        let cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt debug view cache"),
-            layout: &pipeline.get_bind_group_layout(2),
-            entries: &cache.sample_bind_group_entries(),
-        });
+        );
+        let cache_group = pipeline.bind_resources(
+            device,
+            "kickstart-rt debug view cache",
+            2,
+            &cache.sample_resources(),
+        );
         rec.dispatch(
             "debug view",
-            pipeline,
+            &pipeline.pipeline,
             &[&scene_group, &io_group, &cache_group],
             pixels.div_ceil(WORKGROUP_SIZE),
         );
@@ -222,7 +217,10 @@ mod tests {
         use crate::gpu::wgsl_check::{assert_wgsl_layout, validate};
         for format in crate::WRITABLE_OUTPUT_FORMATS {
             let name = wgsl_format(format).unwrap();
-            let module = validate(&format!("debug view ({format:?})"), &debug_view_wgsl(name));
+            let module = validate(
+                &format!("debug view ({format:?})"),
+                debug_view_shader(name).source(),
+            );
             assert!(module.entry_points.iter().any(|e| e.name == "main"));
             // `pad[0]` carries the shader's `bilinear` flag (see `record`).
             assert_wgsl_layout!(

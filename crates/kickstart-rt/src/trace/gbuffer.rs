@@ -1,9 +1,9 @@
 //! G-buffer decoding shared by every pass that reads the engine's G-buffer: the trace tasks, the
-//! lighting injection and the denoisers. The WGSL side is `shaders/gbuffer.wgsl` (functions
+//! lighting injection and the denoisers. The WGSL side is `shaders/trace/gbuffer.wgsl` (functions
 //! `gb_surface`, `gb_roughness`, `gb_specular`, `gb_mask`, `gb_project`, …); this side packs its
 //! uniform from the task's inputs and binds the textures.
 //!
-//! Binding: one bind group (the includer picks its number with [`gbuffer_wgsl`]) with an explicit
+//! Binding: one bind group (the importer picks its number with the module's parameter `GBUFFER_GROUP`) with an explicit
 //! layout ([`GBufferBinder::layout`]) — uniform at 0, then depth, normal, roughness, specular and
 //! input mask textures at 1–5, all read with `textureLoad` as unfilterable float (so `R32Float`
 //! and depth formats bind too). Absent optional textures bind a 1×1 placeholder; the uniform says
@@ -23,7 +23,7 @@
 //!   `normal_to_world` and normalised.
 
 use crate::gpu::buffers::placeholder_texture;
-use crate::gpu::layout::{float_texture_entry, uniform_entry};
+use crate::gpu::reflect::{ReflectedLayout, ReflectedShader};
 use crate::tasks::{
     DenoiseTaskCommon, DepthInput, DepthType, NormalInput, NormalType, RoughnessInput,
     SpecularInput, TextureInput, TraceTaskCommon, ViewInfo, Viewport,
@@ -31,15 +31,7 @@ use crate::tasks::{
 use bytemuck::{Pod, Zeroable};
 use glam::{DMat4, DVec3, DVec4};
 
-/// The WGSL module (bind group token `GBUFFER_GROUP` not yet replaced).
-const GBUFFER_SOURCE: &str = include_str!("../../shaders/gbuffer.wgsl");
-
-/// The G-buffer WGSL module bound at `@group(group)`.
-pub(crate) fn gbuffer_wgsl(group: u32) -> String {
-    GBUFFER_SOURCE.replace("GBUFFER_GROUP", &group.to_string())
-}
-
-/// The uniform of `shaders/gbuffer.wgsl` (`GBufferParams`).
+/// The uniform of `shaders/trace/gbuffer.wgsl` (`GBufferParams`).
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy, Debug, PartialEq)]
 pub(crate) struct GBufferParams {
@@ -234,27 +226,17 @@ impl<'a> GBufferInputs<'a> {
 
 /// The G-buffer bind group layout and the placeholder bound for absent optional textures.
 pub(crate) struct GBufferBinder {
-    layout: wgpu::BindGroupLayout,
+    /// Every binding the module declares (a pass may read only some of them).
+    layout: ReflectedLayout,
     placeholder: wgpu::TextureView,
 }
 
 impl GBufferBinder {
-    /// The binding numbers of the layout's entries: the uniform, then five textures.
-    pub const BINDINGS: [u32; 6] = [0, 1, 2, 3, 4, 5];
-
-    /// Creates the layout and the 1×1 placeholder texture.
+    /// Creates the layout (the bindings of `trace/gbuffer` as it declares them) and the 1×1
+    /// placeholder texture.
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("kickstart-rt g-buffer"),
-            entries: &[
-                uniform_entry(0),
-                float_texture_entry(1),
-                float_texture_entry(2),
-                float_texture_entry(3),
-                float_texture_entry(4),
-                float_texture_entry(5),
-            ],
-        });
+        let shader = ReflectedShader::compose(&["trace/gbuffer"], &[("GBUFFER_GROUP", "0")]);
+        let layout = ReflectedLayout::new(device, "kickstart-rt g-buffer", shader.reflection(), 0);
         let placeholder = placeholder_texture(device, "kickstart-rt g-buffer placeholder");
         GBufferBinder {
             layout,
@@ -269,7 +251,12 @@ impl GBufferBinder {
 
     /// The bind group layout (for pipeline layouts).
     pub fn layout(&self) -> &wgpu::BindGroupLayout {
-        &self.layout
+        &self.layout.layout.layout
+    }
+
+    /// The layout with its binding numbers (for the traversal passes' own SPIR-V).
+    pub fn group(&self) -> crate::gpu::layout::GroupLayout<'_> {
+        self.layout.group()
     }
 
     /// The bind group of `inputs` with its uniform in `params` (a buffer holding
@@ -286,33 +273,23 @@ impl GBufferBinder {
         let roughness = or_placeholder(inputs.roughness.and_then(|r| r.texture.as_ref()));
         let specular = or_placeholder(inputs.specular.and_then(|s| s.texture.as_ref()));
         let mask = or_placeholder(inputs.input_mask);
-        let views = [
-            &inputs.depth.texture,
-            &inputs.normal.texture,
-            &roughness,
-            &specular,
-            &mask,
-        ];
-        let mut entries = vec![wgpu::BindGroupEntry {
-            binding: 0,
-            resource: params.as_entire_binding(),
-        }];
-        for (i, v) in views.into_iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry {
-                binding: i as u32 + 1,
-                resource: wgpu::BindingResource::TextureView(v),
-            });
-        }
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt g-buffer"),
-            layout: &self.layout,
-            entries: &entries,
-        })
+        let view = wgpu::BindingResource::TextureView;
+        self.layout.bind_group(
+            device,
+            &[
+                ("gb", params.as_entire_binding()),
+                ("gb_depth", view(&inputs.depth.texture)),
+                ("gb_normal", view(&inputs.normal.texture)),
+                ("gb_roughness_tex", view(&roughness)),
+                ("gb_specular_tex", view(&specular)),
+                ("gb_mask_tex", view(&mask)),
+            ],
+        )
     }
 }
 
 /// Asserts that [`GBufferParams`] has the layout of the WGSL `GBufferParams` in `module` (a
-/// validated pass that includes [`gbuffer_wgsl`]).
+/// validated pass that imports `trace/gbuffer`).
 #[cfg(test)]
 pub(crate) fn assert_wgsl_layout(module: &naga::Module) {
     crate::gpu::wgsl_check::assert_wgsl_layout!(

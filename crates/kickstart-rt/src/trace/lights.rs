@@ -1,4 +1,4 @@
-//! Lights as the shadow passes read them (`TrLight` in `shaders/trace_common.wgsl`).
+//! Lights as the shadow passes read them (`TrLight` in `shaders/trace/common.wgsl`).
 
 use crate::tasks::{LightInfo, MAX_MULTI_SHADOW_LIGHTS};
 use bytemuck::{Pod, Zeroable};
@@ -61,7 +61,7 @@ pub(crate) fn pack_lights(lights: &[LightInfo]) -> [GpuLight; MAX_MULTI_SHADOW_L
 }
 
 /// Asserts that [`GpuLight`] has the layout of `TrLight` in `module` (a validated pass that
-/// includes `shaders/trace_common.wgsl`).
+/// includes `shaders/trace/common.wgsl`).
 #[cfg(test)]
 pub(crate) fn assert_wgsl_layout(module: &naga::Module) {
     crate::gpu::wgsl_check::assert_wgsl_layout!(module, "TrLight", GpuLight { a, b, c });

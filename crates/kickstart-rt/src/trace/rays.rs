@@ -1,17 +1,15 @@
 //! Ray batches: rays from a buffer are traced through the scene (closest or any hit) and their
 //! hits written to a buffer. Also holds the scene bindings every tracing pass shares.
 
-use crate::gpu::layout::{storage_entry, uniform_entry, BoundLayout};
-use crate::gpu::shader::{assemble, traversal_pipeline};
+use crate::gpu::reflect::{ReflectedLayout, ReflectedShader};
+use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
+use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK};
 use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
 
-const TRACE_RAYS_WGSL: &str = include_str!("../../shaders/trace_rays.wgsl");
-
 /// Invocations per workgroup of the ray batch shader (its `@workgroup_size`): `RT_WORKGROUP_SIZE`
-/// of `shaders/traverse.wgsl`.
+/// of `shaders/scene/traversal.wgsl`.
 const WORKGROUP_SIZE: u32 = 64;
 
 /// Size of one [`GpuRay`] / [`GpuHit`] record in bytes.
@@ -20,22 +18,18 @@ pub(crate) const RECORD_SIZE: u64 = 32;
 #[allow(unused_imports)] // GpuHit and GpuRay are this module's tests' vocabulary
 pub(crate) use crate::tasks::{GpuHit, GpuRay, RayQuery};
 
-/// The layout of the ray batch's `@group(1)`: parameters, rays, hits.
-fn io_layout(device: &wgpu::Device) -> BoundLayout {
-    BoundLayout::new(
-        device,
-        "kickstart-rt trace rays io",
-        &[
-            uniform_entry(0),
-            storage_entry(1, true),
-            storage_entry(2, false),
-        ],
-    )
+/// The ray batch pass's shader.
+fn trace_rays_shader() -> ReflectedShader {
+    ReflectedShader::compose(&["trace/rays"], &[])
 }
 
-/// The WGSL of the ray batch pass.
-fn trace_rays_wgsl() -> String {
-    assemble(&[TRAVERSE_WGSL, TRACE_RAYS_WGSL])
+/// `size` bytes of a buffer from a byte offset, as a binding.
+fn range((buffer, offset): (&wgpu::Buffer, u64), size: NonZeroU64) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer,
+        offset,
+        size: Some(size),
+    })
 }
 
 /// Uniform parameters of the ray batch shader (`TraceParams`).
@@ -51,6 +45,8 @@ struct TraceParams {
 /// The ray batch pass (`trace rays`).
 pub(crate) struct RayTracer {
     pipeline: wgpu::ComputePipeline,
+    /// The layout of `@group(1)` (parameters, rays, hits) as the shader declares it.
+    io_layout: ReflectedLayout,
     /// Whether the pipeline came from our own SPIR-V (no stack zero fill).
     #[cfg_attr(not(test), allow(dead_code))] // tests: a silent fallback to WGSL must fail them
     own_spirv: bool,
@@ -60,9 +56,10 @@ impl RayTracer {
     /// Creates the pipeline (one for both queries: the query is a uniform, so one bind group
     /// layout serves every batch).
     pub fn new(device: &wgpu::Device) -> Self {
-        let source = trace_rays_wgsl();
+        let shader = trace_rays_shader();
         let scene_layout = SceneBuffers::layout(device);
-        let io_layout = io_layout(device);
+        let io_layout =
+            ReflectedLayout::new(device, "kickstart-rt trace rays io", shader.reflection(), 1);
         let layouts = [scene_layout.group(), io_layout.group()];
         // SAFETY: the pass is bounded by construction, so naga's checks only cost time:
         // - the ray and hit bindings hold exactly `count` records and `main` returns for
@@ -81,7 +78,7 @@ impl RayTracer {
             traversal_pipeline(
                 device,
                 "kickstart-rt trace rays",
-                &source,
+                shader.source(),
                 "main",
                 &layouts,
                 wgpu::ShaderRuntimeChecks::unchecked(),
@@ -90,6 +87,7 @@ impl RayTracer {
         };
         RayTracer {
             pipeline,
+            io_layout,
             own_spirv,
         }
     }
@@ -124,23 +122,13 @@ impl RayTracer {
                 pad: 0,
             },
         );
-        let scene_group = scene.bind_group(rec, &self.pipeline);
-        let io_group = rec.bind_buffers(
-            "kickstart-rt trace rays io",
-            &self.pipeline,
-            1,
+        let scene_group = scene.bind_group(rec.device, &self.pipeline);
+        let io_group = self.io_layout.bind_group(
+            rec.device,
             &[
-                params.as_entire_binding(),
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: rays.0,
-                    offset: rays.1,
-                    size: Some(size),
-                }),
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: hits.0,
-                    offset: hits.1,
-                    size: Some(size),
-                }),
+                ("params", params.as_entire_binding()),
+                ("rays", range(rays, size)),
+                ("hits", range(hits, size)),
             ],
         );
         rec.dispatch(
@@ -179,7 +167,7 @@ mod tests {
     #[test]
     fn the_wgsl_validates_and_matches_the_rust_layouts() {
         use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
-        let module = validate("trace rays", &trace_rays_wgsl());
+        let module = validate("trace rays", trace_rays_shader().source());
         assert!(module.entry_points.iter().any(|e| e.name == "main"));
         assert_wgsl_layout!(
             module,

@@ -1,6 +1,6 @@
 //! Random numbers of the trace tasks: the blue-noise tile the SDK generates (void and cluster,
 //! Ulichney 1993), uploaded once per context. The WGSL side (`tr_next` in
-//! `shaders/trace_common.wgsl`) reads dimension `d` of a pixel from the tile at a fixed toroidal
+//! `shaders/trace/common.wgsl`) reads dimension `d` of a pixel from the tile at a fixed toroidal
 //! shift of `d` and adds `frame_index × (golden ratio − 1)`: every frame is spatially blue, frames
 //! are a low-discrepancy sequence per pixel, and the same frame index gives the same numbers.
 

@@ -9,27 +9,24 @@
 //! per (task kind, output formats) on first use, with explicit layouts (the shared WGSL modules
 //! declare bindings some passes do not use).
 
-use super::gbuffer::{gbuffer_wgsl, GBufferBinder, GBufferInputs};
+use super::gbuffer::{GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
 use super::sampling::blue_noise_texture;
-use crate::gpu::layout::{float_texture_entry, uniform_entry, BoundLayout, GroupLayout};
-use crate::gpu::shader::{assemble, traversal_pipeline};
+use crate::gpu::compose::ShaderLibrary;
+use crate::gpu::layout::BoundLayout;
+use crate::gpu::reflect::{ReflectedLayout, ReflectedShader, ShaderReflection};
+use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK, TRAVERSE_WGSL};
+use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK};
 use crate::tasks::*;
 use crate::{Error, InstanceInclusionMask, Result};
 use bytemuck::{Pod, Zeroable};
 
-const COMMON_WGSL: &str = include_str!("../../shaders/trace_common.wgsl");
-const AO_WGSL: &str = include_str!("../../shaders/trace_ao.wgsl");
-const SHADOW_WGSL: &str = include_str!("../../shaders/trace_shadow.wgsl");
-const RADIANCE_WGSL: &str = include_str!("../../shaders/trace_radiance.wgsl");
-
 /// Invocations per workgroup (`RT_WORKGROUP_SIZE` of the traversal module): one workgroup traces
-/// one `TILE` × `TILE` tile of pixels (`tr_pixel` in `shaders/trace_common.wgsl`).
+/// one `TILE` × `TILE` tile of pixels (`tr_pixel` in `shaders/trace/common.wgsl`).
 const WORKGROUP_SIZE: u32 = 64;
 
-/// Side of the square pixel tile one workgroup traces (`TR_TILE` of `trace_common.wgsl`).
+/// Side of the square pixel tile one workgroup traces (`TR_TILE` of `trace/common.wgsl`).
 const TILE: u32 = 8;
 
 /// Workgroups a trace dispatch needs: one per tile of the traced grid (the viewport, or its
@@ -86,7 +83,7 @@ impl TraceKind {
     }
 }
 
-/// The uniform of `shaders/trace_common.wgsl` (`TraceParams`).
+/// The uniform of `shaders/trace/common.wgsl` (`TraceParams`).
 #[repr(C)]
 #[derive(Pod, Zeroable, Clone, Copy)]
 struct TraceParams {
@@ -121,7 +118,8 @@ struct Pipeline {
     kind: TraceKind,
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
     pipeline: wgpu::ComputePipeline,
-    io_layout: wgpu::BindGroupLayout,
+    /// Group 2 (parameters, textures, outputs) as the entry point uses it.
+    io_layout: ReflectedLayout,
     /// Whether the pipeline came from our own SPIR-V (no stack zero fill).
     #[cfg_attr(not(test), allow(dead_code))] // tests: a silent fallback to WGSL must fail them
     own_spirv: bool,
@@ -146,9 +144,11 @@ pub(crate) struct TracePasses {
     gbuffer: GBufferBinder,
     blue_noise: wgpu::TextureView,
     placeholder: wgpu::TextureView,
-    cache_layout: BoundLayout,
-    /// The lighting cache's sampling module at group 3 (a stand-in in unit tests).
-    cache_wgsl: String,
+    /// Group 3 of the radiance passes: the lighting cache's sampling bindings.
+    cache_layout: ReflectedLayout,
+    /// The shader modules (unit tests stand a simple module in for the lighting cache's
+    /// `cache/sample`).
+    library: ShaderLibrary,
     pipelines: Vec<Pipeline>,
 }
 
@@ -163,12 +163,14 @@ impl TracePasses {
             gbuffer,
             blue_noise: blue_noise_texture(device, queue),
             placeholder,
-            cache_layout: BoundLayout::new(
+            cache_layout: ReflectedLayout::new(
                 device,
                 "kickstart-rt trace cache",
-                &crate::cache::DirectLightingCache::sample_layout_entries(),
+                ReflectedShader::compose(&["cache/sample"], &crate::cache::sample_params(3, false))
+                    .reflection(),
+                3,
             ),
-            cache_wgsl: cache_sampling_wgsl(),
+            library: ShaderLibrary::builtin(),
             pipelines: Vec::new(),
         }
     }
@@ -218,16 +220,13 @@ impl TracePasses {
         {
             return Ok(i);
         }
-        let (source, entry) = trace_wgsl(kind, formats, &self.cache_wgsl)?;
-        let io = BoundLayout::new(device, "kickstart-rt trace io", &io_layout_entries(formats));
-        let mut layouts = vec![
-            self.scene_layout.group(),
-            GroupLayout {
-                layout: self.gbuffer.layout(),
-                bindings: &GBufferBinder::BINDINGS,
-            },
-            io.group(),
-        ];
+        let (source, entry) = trace_wgsl(&self.library, kind, formats)?;
+        let reflection = ShaderReflection::new(&source)
+            .unwrap_or_else(|e| panic!("{}: composed WGSL is invalid: {e}", kind.label()));
+        // Group 2 as the entry point uses it (a shadow pass declares output1 it may not write).
+        let io =
+            ReflectedLayout::of_entry_point(device, "kickstart-rt trace io", &reflection, entry, 2);
+        let mut layouts = vec![self.scene_layout.group(), self.gbuffer.group(), io.group()];
         if kind.reads_cache() {
             layouts.push(self.cache_layout.group());
         }
@@ -248,19 +247,19 @@ impl TracePasses {
             kind,
             formats,
             pipeline,
-            io_layout: io.layout,
+            io_layout: io,
             own_spirv,
         });
         Ok(self.pipelines.len() - 1)
     }
 
     /// Records `task` (validated by the caller; [`Self::handles`] must be true). `cache` are the
-    /// lighting cache's sampling bindings (`DirectLightingCache::sample_bind_group_entries`).
+    /// lighting cache's sampling bindings by name (`DirectLightingCache::sample_resources`).
     pub fn record(
         &mut self,
         rec: &mut Recorder<'_>,
         scene: &SceneBuffers<'_>,
-        cache: &[wgpu::BindGroupEntry<'_>],
+        cache: &[(&str, wgpu::BindingResource<'_>)],
         task: &RenderTask,
     ) -> Result<()> {
         let job = match task {
@@ -333,7 +332,7 @@ impl TracePasses {
         &mut self,
         rec: &mut Recorder<'_>,
         scene: &SceneBuffers<'_>,
-        cache: &[wgpu::BindGroupEntry<'_>],
+        cache: &[(&str, wgpu::BindingResource<'_>)],
         job: &Job<'_>,
     ) -> Result<()> {
         let c = job.common;
@@ -359,50 +358,23 @@ impl TracePasses {
         let device = rec.device;
         let gb_group = self.gbuffer.bind_group(device, &gb_params, &inputs);
         let p = &self.pipelines[index];
-        let scene_group = scene.bind_group(rec, &p.pipeline);
+        let scene_group = scene.bind_group(rec.device, &p.pipeline);
         let env = c.environment_map.as_ref().unwrap_or(&self.placeholder);
         let direct = c.direct_lighting.as_ref().unwrap_or(&self.placeholder);
-        let mut entries = vec![
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: tp.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::TextureView(&self.blue_noise),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: wgpu::BindingResource::TextureView(env),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: wgpu::BindingResource::TextureView(direct),
-            },
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: wgpu::BindingResource::TextureView(job.out0),
-            },
+        let view = wgpu::BindingResource::TextureView;
+        let mut io = vec![
+            ("tp", tp.as_entire_binding()),
+            ("tr_blue_noise", view(&self.blue_noise)),
+            ("tr_env", view(env)),
+            ("tr_direct_lighting", view(direct)),
+            ("out0", view(job.out0)),
         ];
-        if let Some(o) = job.out1 {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 5,
-                resource: wgpu::BindingResource::TextureView(o),
-            });
-        }
-        let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("kickstart-rt trace io"),
-            layout: &p.io_layout,
-            entries: &entries,
-        });
+        io.extend(job.out1.map(|o| ("out1", view(o))));
+        let io_group = p.io_layout.bind_group(device, &io);
         let mut groups = vec![&scene_group, &gb_group, &io_group];
         let cache_group;
         if job.kind.reads_cache() {
-            cache_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("kickstart-rt trace cache"),
-                layout: &self.cache_layout.layout,
-                entries: cache,
-            });
+            cache_group = self.cache_layout.bind_group(device, cache);
             groups.push(&cache_group);
         }
         rec.dispatch(job.kind.label(), &p.pipeline, &groups, tiles);
@@ -410,18 +382,13 @@ impl TracePasses {
     }
 }
 
-/// The lighting cache's sampling module as the passes that read the cache include it (group 3).
-fn cache_sampling_wgsl() -> String {
-    crate::cache::sample_wgsl(3, false)
-}
-
-/// The WGSL of the pass of `kind` writing `formats` and its entry point; `cache` is the lighting
-/// cache's sampling module at group 3, included where the pass reads the cache. An output format
-/// without a WGSL name is refused.
+/// The WGSL of the pass of `kind` writing `formats`, composed from `library`, and its entry
+/// point. Specular and diffuse read the lighting cache's sampling module at group 3. An output
+/// format without a WGSL name is refused.
 fn trace_wgsl(
+    library: &ShaderLibrary,
     kind: TraceKind,
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
-    cache: &str,
 ) -> Result<(String, &'static str)> {
     let name = |f: wgpu::TextureFormat, field: &str| {
         wgsl_format(f).ok_or_else(|| {
@@ -434,60 +401,41 @@ fn trace_wgsl(
         })
     };
     let f0 = name(formats.0, "output")?;
-    let f1 = match formats.1 {
-        Some(f) => name(f, "output1")?,
-        None => "r32float",
+    let f1 = formats.1.map(|f| name(f, "output1")).transpose()?;
+    let mut params = vec![("GBUFFER_GROUP", "1"), ("OUTPUT0_FORMAT", f0)];
+    let (roots, entry): (&[&str], _) = match kind {
+        TraceKind::AmbientOcclusion => (&["trace/ao"], "main"),
+        TraceKind::Shadow | TraceKind::MultiShadow => {
+            // The single-light pass never writes output1; its declaration needs a format.
+            params.push(("OUTPUT1_FORMAT", f1.unwrap_or("r32float")));
+            let entry = if kind == TraceKind::Shadow {
+                "shadow"
+            } else {
+                "multi_shadow"
+            };
+            (&["trace/shadow"], entry)
+        }
+        TraceKind::Specular | TraceKind::Diffuse => {
+            params.extend(crate::cache::sample_params(3, false));
+            let roots: &[&str] = match f1 {
+                Some(f) => {
+                    params.push(("OUTPUT1_FORMAT", f));
+                    &["trace/radiance", "trace/demodulation/texture"]
+                }
+                None => &["trace/radiance", "trace/demodulation/none"],
+            };
+            let entry = if kind == TraceKind::Specular {
+                "specular"
+            } else {
+                "diffuse"
+            };
+            (roots, entry)
+        }
     };
-    let (body, entry) = match kind {
-        TraceKind::AmbientOcclusion => (AO_WGSL, "main"),
-        TraceKind::Shadow => (SHADOW_WGSL, "shadow"),
-        TraceKind::MultiShadow => (SHADOW_WGSL, "multi_shadow"),
-        TraceKind::Specular => (RADIANCE_WGSL, "specular"),
-        TraceKind::Diffuse => (RADIANCE_WGSL, "diffuse"),
-    };
-    let (declaration, store) = if formats.1.is_some() {
-        (
-            format!("@group(2) @binding(5) var out1: texture_storage_2d<{f1}, write>;"),
-            "textureStore(out1, texel, v);",
-        )
-    } else {
-        (String::new(), "")
-    };
-    let body = body
-        .replace("OUTPUT0_FORMAT", f0)
-        .replace("OUTPUT1_FORMAT", f1)
-        .replace("OUTPUT1_DECLARATION", &declaration)
-        .replace("OUTPUT1_STORE", store);
-    let cache = if kind.reads_cache() { cache } else { "" };
-    let source = assemble(&[TRAVERSE_WGSL, &gbuffer_wgsl(1), COMMON_WGSL, cache, &body]);
+    let source = library
+        .compose(roots, &params)
+        .unwrap_or_else(|e| panic!("{}: {e}", kind.label()));
     Ok((source, entry))
-}
-
-/// The explicit layout of group 2: uniform, three sampled textures, one or two storage outputs.
-fn io_layout_entries(
-    formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
-) -> Vec<wgpu::BindGroupLayoutEntry> {
-    let storage = |binding, format| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    };
-    let mut entries = vec![
-        uniform_entry(0),
-        float_texture_entry(1),
-        float_texture_entry(2),
-        float_texture_entry(3),
-        storage(4, formats.0),
-    ];
-    if let Some(f) = formats.1 {
-        entries.push(storage(5, f));
-    }
-    entries
 }
 
 /// The pass uniform of `job`.
@@ -591,12 +539,12 @@ mod wgsl_tests {
 
     #[test]
     fn every_trace_task_variant_validates_and_matches_the_rust_layouts() {
-        let cache = cache_sampling_wgsl();
+        let library = ShaderLibrary::builtin();
         let mut variants = 0;
         for kind in KINDS {
             for f0 in WRITABLE_OUTPUT_FORMATS {
                 for f1 in second_outputs(kind) {
-                    let (source, entry) = trace_wgsl(kind, (f0, f1), &cache).unwrap();
+                    let (source, entry) = trace_wgsl(&library, kind, (f0, f1)).unwrap();
                     let label = format!("{} ({f0:?}, {f1:?})", kind.label());
                     let module = validate(&label, &source);
                     assert!(
@@ -625,7 +573,7 @@ mod wgsl_tests {
         assert_eq!(variants, 48);
         // A format without a WGSL name is refused before any WGSL is made.
         for formats in [(F::Rgba8Unorm, None), (F::R32Float, Some(F::Rgba8Unorm))] {
-            assert!(trace_wgsl(TraceKind::MultiShadow, formats, &cache).is_err());
+            assert!(trace_wgsl(&library, TraceKind::MultiShadow, formats).is_err());
         }
     }
 }

@@ -31,7 +31,7 @@ fn readable(task: &'static str, field: &str, t: &TextureInput) -> Result<()> {
     if format.is_combined_depth_stencil_format() {
         return Err(Error::input(task, field, format, "combined depth-stencil formats are not accepted: use a Depth32Float depth buffer, or copy depth to R32Float"));
     }
-    // Every input is read as unfilterable float (shaders/gbuffer.wgsl): integer formats cannot
+    // Every input is read as unfilterable float (shaders/trace/gbuffer.wgsl): integer formats cannot
     // bind that way.
     if matches!(
         format.sample_type(None, None),

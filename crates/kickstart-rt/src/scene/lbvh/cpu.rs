@@ -1,6 +1,6 @@
 //! CPU helpers of the tests: what the GPU passes compute, the plain way.
 
-/// The centroid-bounds words (`shaders/centroid_bounds.wgsl`) of stored boxes `(min, max)`, as
+/// The centroid-bounds words (`shaders/scene/centroid_bounds.wgsl`) of stored boxes `(min, max)`, as
 /// the GPU merges them: the CPU oracle of both passes that merge them.
 pub(crate) fn cpu_centroid_bounds(boxes: impl Iterator<Item = ([f32; 3], [f32; 3])>) -> [u32; 6] {
     // A float as a u32 that sorts like it (the shader's `enc`).

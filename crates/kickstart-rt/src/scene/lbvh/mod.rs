@@ -1,4 +1,4 @@
-//! GPU LBVH (Karras 2012) over primitive AABBs, and its refit. Shaders: `shaders/lbvh.wgsl`;
+//! GPU LBVH (Karras 2012) over primitive AABBs, and its refit. Shaders: `shaders/scene/lbvh/lbvh.wgsl`;
 //! layouts: `docs/ray-tracing-core.md` (AABB input, BVH2 node format).
 //!
 //! Build, all recorded into the caller's encoder:
@@ -24,7 +24,7 @@
 //!    the buffer, unreferenced).
 //!
 //! With [`LbvhBuild::clustered`] (the fast-trace BLAS), step 5 writes the Karras hierarchy to
-//! the builder's scratch and step 6 is `hploc climb` instead (`shaders/hploc.wgsl`, workgroups of
+//! the builder's scratch and step 6 is `hploc climb` instead (`shaders/scene/lbvh/hploc.wgsl`, workgroups of
 //! 32): the same bottom-up walk, merging clusters by PLOC at every node that covers more than 16
 //! leaves (H-PLOC), writing the nodes and the caller's topology of the clustered tree (whose parent
 //! refs never carry the block-local bit, so a refit of it runs the climb's device-scope phase
@@ -38,7 +38,7 @@
 //! instead ([`Lbvh::refit_triangles`]), which starts from the re-ingested triangles: every inner
 //! node covers one range of sorted positions (the hierarchy pass stores each node's other range
 //! end in the topology), and the box of a range is the union of at most two boxes per level of a
-//! pyramid over the sorted leaf boxes (`shaders/lbvh.wgsl`, "Range refit"). `lbvh refit gather`
+//! pyramid over the sorted leaf boxes (`shaders/scene/lbvh/lbvh.wgsl`, "Range refit"). `lbvh refit gather`
 //! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
 //! 256 in workgroup memory, writes every node whose range lies inside its block, lists the others
 //! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
@@ -60,7 +60,7 @@ mod refit;
 mod tests;
 
 use crate::gpu::radix_sort::RadixSort;
-use crate::gpu::reflect::{ReflectedPipeline, ShaderReflection};
+use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 use bytemuck::{Pod, Zeroable};
 
@@ -146,7 +146,7 @@ pub(crate) struct LbvhBuild<'a> {
     /// equal to it (the far corner cell) is lowered into its neighbour's.
     pub key_bits: u32,
     /// Centroid bounds the caller's pass merged while writing `aabbs` (buffer, first u32 word):
-    /// 6 words in the encoding of `shaders/centroid_bounds.wgsl`, which that pass must include
+    /// 6 words in the encoding of `shaders/scene/centroid_bounds.wgsl`, which that pass must include
     /// (same primitives counted, same words), so the build skips its `lbvh bounds` pass. `None`:
     /// the build computes them. The words must be ready (zeroed, then merged) before the build's
     /// passes run; the buffer needs STORAGE usage.
@@ -250,7 +250,7 @@ pub(crate) struct RawTriangles<'a> {
     pub counter_base: u32,
 }
 
-/// Component rows `lbvh refit ingest` takes (`REFIT_INGEST_ROWS` in `shaders/lbvh.wgsl`).
+/// Component rows `lbvh refit ingest` takes (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/lbvh.wgsl`).
 pub(crate) const REFIT_INGEST_ROWS: usize = 32;
 
 /// Per-dispatch parameters (the shader's `Params`).
@@ -313,11 +313,11 @@ pub(crate) struct Lbvh {
     pyramid_boxes: Grown,
 }
 
-/// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/hploc.wgsl`).
+/// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/scene/lbvh/hploc.wgsl`).
 const HPLOC_WORKGROUP: u32 = 32;
 
-/// Buffers of one dispatch by the shader's names for them (`shaders/lbvh.wgsl`,
-/// `shaders/hploc.wgsl`): each pass binds those its entry point uses, at the binding numbers the
+/// Buffers of one dispatch by the shader's names for them (`shaders/scene/lbvh/lbvh.wgsl`,
+/// `shaders/scene/lbvh/hploc.wgsl`): each pass binds those its entry point uses, at the binding numbers the
 /// shader declares ([`ReflectedPipeline::bind_group`]); a later entry of a name overrides an
 /// earlier one.
 type Buffers<'a> = Vec<(&'static str, &'a wgpu::Buffer)>;
@@ -333,7 +333,7 @@ fn work_words(n: u32) -> u64 {
     BOXES_AT + 10 * u64::from(n.saturating_sub(1))
 }
 
-/// Words of the work buffer of a clustered build (`shaders/hploc.wgsl`): [`work_words`], then a
+/// Words of the work buffer of a clustered build (`shaders/scene/lbvh/hploc.wgsl`): [`work_words`], then a
 /// cluster count per Karras node, a cluster-list slot and a free-slot-list slot per primitive.
 fn clustered_work_words(n: u32) -> u64 {
     work_words(n) + u64::from(n.saturating_sub(1)) + 2 * u64::from(n)
@@ -351,16 +351,10 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
-        let src = concat!(
-            include_str!("../../../shaders/digit_histogram.wgsl"),
-            include_str!("../../../shaders/centroid_bounds.wgsl"),
-            include_str!("../../../shaders/triangle_box.wgsl"),
-            include_str!("../../../shaders/ingest_decode.wgsl"),
-            include_str!("../../../shaders/lbvh.wgsl"),
-            include_str!("../../../shaders/hploc.wgsl")
-        );
-        let shader = ShaderReflection::new(src).expect("shaders/lbvh.wgsl is valid WGSL");
-        let pipeline = |label, entry| ReflectedPipeline::new(device, label, src, &shader, entry);
+        // The LBVH and its clustered variant (which imports it), with the digit counting, centroid
+        // bounds, triangle boxes and vertex decoding they share with other passes.
+        let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
+        let pipeline = |label, entry| shader.pipeline(device, label, entry);
         Lbvh {
             bounds: pipeline("lbvh bounds", "lbvh_bounds"),
             morton: pipeline("lbvh morton", "lbvh_morton"),

@@ -11,7 +11,7 @@ use crate::scene::ingest::ROW_WORDS;
 use bytemuck::Zeroable;
 use wgpu::util::DeviceExt;
 
-/// Boxes of the box pyramid over `n` boxes (`shaders/lbvh.wgsl`, "Range refit"): level 0 (the
+/// Boxes of the box pyramid over `n` boxes (`shaders/scene/lbvh/lbvh.wgsl`, "Range refit"): level 0 (the
 /// boxes), then `ceil(n / 2^L)` a level up to the level of one box.
 pub(super) fn pyramid_boxes(n: u32) -> u64 {
     let mut total = u64::from(n);
@@ -28,7 +28,7 @@ pub(super) fn pyramid_boxes(n: u32) -> u64 {
 #[cfg(test)]
 pub(super) const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
 
-/// The range refit's layout in `work` (`shaders/lbvh.wgsl`, above `straddle_list_at`), for `n`
+/// The range refit's layout in `work` (`shaders/scene/lbvh/lbvh.wgsl`, above `straddle_list_at`), for `n`
 /// triangles in `nb` blocks of 256: the straddling nodes' lists and counts, then the pyramid's
 /// levels above the blocks' 8 (6 words a box; returned as the word range to clear). Returns
 /// (words, that range).

@@ -19,6 +19,8 @@ const VP: Viewport = Viewport {
 const STRIDE: usize = 20;
 
 const PROBE_WGSL: &str = r#"
+#import trace/gbuffer
+
 @group(1) @binding(0) var<storage, read_write> out: array<f32>;
 
 @compute @workgroup_size(64)
@@ -74,7 +76,11 @@ fn probe(inputs: &GBufferInputs<'_>) -> Vec<f32> {
                 count: None,
             }],
         });
-    let source = format!("{}\n{}", gbuffer_wgsl(0), PROBE_WGSL);
+    let mut library = crate::gpu::compose::ShaderLibrary::builtin();
+    library.replace("test/gbuffer_probe", PROBE_WGSL);
+    let source = library
+        .compose(&["test/gbuffer_probe"], &[("GBUFFER_GROUP", "0")])
+        .unwrap();
     let pipeline = compute_pipeline_with_layouts(
         &g.device,
         "g-buffer probe",

@@ -24,7 +24,7 @@ fn staged_triangles(rng: &mut Rng, n: usize, spread: f32) -> Vec<[f32; 4]> {
     tris
 }
 
-/// Each staged triangle's box as `triangle_box.wgsl` makes it (dropped: the empty box).
+/// Each staged triangle's box as `scene/triangle_box.wgsl` makes it (dropped: the empty box).
 fn staged_boxes(tris: &[[f32; 4]]) -> Vec<Aabb> {
     tris.chunks(3)
         .map(|v| {

@@ -8,10 +8,12 @@ use super::*;
 /// A stand-in for the lighting cache's sampling module (same bindings and function): one colour
 /// per (instance, primitive), so the radiance passes are checked independently of the cache.
 const STUB_CACHE_WGSL: &str = r#"
-@group(3) @binding(0) var<storage, read> stub_base: array<u32>;
-@group(3) @binding(1) var<storage, read> stub_colour: array<vec4<f32>>;
+#param CACHE_GROUP
+#param SURFEL_ACCESS
+@group({{CACHE_GROUP}}) @binding(0) var<storage, read> cache_meta: array<u32>;
+@group({{CACHE_GROUP}}) @binding(1) var<storage, {{SURFEL_ACCESS}}> cache_surfels: array<vec4<f32>>;
 fn cache_radiance(instance: u32, prim: u32, bary: vec2<f32>, bilinear: bool) -> vec3<f32> {
-    return stub_colour[stub_base[instance] + prim].xyz;
+    return cache_surfels[cache_meta[instance] + prim].xyz;
 }
 "#;
 
@@ -19,7 +21,7 @@ fn cache_radiance(instance: u32, prim: u32, bary: vec2<f32>, bilinear: bool) -> 
 fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
     let g = testing::gpu();
     let mut passes = TracePasses::new(&g.device, &g.queue);
-    passes.cache_wgsl = STUB_CACHE_WGSL.to_string();
+    passes.library.replace("cache/sample", STUB_CACHE_WGSL);
     let mut base = Vec::new();
     let mut flat: Vec<[f32; 4]> = Vec::new();
     for c in colours {
@@ -29,14 +31,8 @@ fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
     let base = testing::buffer_with(bytemuck::cast_slice(&base));
     let flat = testing::buffer_with(bytemuck::cast_slice(&flat));
     let entries = [
-        wgpu::BindGroupEntry {
-            binding: 0,
-            resource: base.as_entire_binding(),
-        },
-        wgpu::BindGroupEntry {
-            binding: 1,
-            resource: flat.as_entire_binding(),
-        },
+        ("cache_meta", base.as_entire_binding()),
+        ("cache_surfels", flat.as_entire_binding()),
     ];
     testing::run(|rec| {
         for t in tasks {

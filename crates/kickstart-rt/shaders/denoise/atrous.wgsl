@@ -1,0 +1,318 @@
+// kickstart-rt denoisers, pass 2 (repeated): one edge-stopping à-trous iteration (3×3 taps
+// `step` pixels apart) over the temporally accumulated signal(s).
+//
+// Tap weights: B-spline kernel × normal (exponent grows as roughness falls) × plane distance
+// (depth edges) × luminance against the estimated noise (SVGF: |Δl| / (σ_l·√variance)) × a
+// Gaussian of the pixel distance whose radius follows the signal: specular roughness, hit
+// distance (contact detail keeps a small radius), the shadow's occluder distance (penumbra
+// width) and the history length (converged pixels need less blur).
+//
+// The first iteration estimates the noise variance of the accumulated value (see
+// dn_variance_estimate).
+// Later iterations propagate it (Σ w² var / (Σ w)²). The last iteration (DN_LAST) writes the
+// output textures instead of an intermediate buffer (dn_write_output, defined by the prelude).
+//
+// Cost: per tap one guide and one record read, one log2 (normal weight) and per signal one exp2:
+// the plane, luminance, normal and distance weights are multiplied as one exponential, with
+// their per-pixel factors (reciprocal widths, the distance term of the two tap distances)
+// computed once per pixel.
+//
+// Composed with a record module and an output module (see denoise/common.wgsl).
+
+#import denoise/common
+
+struct AtrousParams {
+    step: u32,
+    first: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> dp: DenoiseParams;
+@group(0) @binding(1) var<uniform> ap: AtrousParams;
+
+@group(1) @binding(0) var<storage, read> guide: array<vec4<u32>>;
+@group(1) @binding(1) var<storage, read> src0: array<DnRecord>;
+@group(1) @binding(2) var<storage, read> src1: array<DnRecord>;
+@group(1) @binding(3) var<storage, read_write> dst0: array<DnRecord>;
+@group(1) @binding(4) var<storage, read_write> dst1: array<DnRecord>;
+
+// Luminance edge-stopping strength, in standard deviations of the noise.
+const SIGMA_L: f32 = 4.0;
+
+fn dn_src(s: u32, i: u32) -> DnRecord {
+    if s == 0u {
+        return src0[i];
+    }
+    return src1[i];
+}
+
+fn dn_dst(s: u32, i: u32, v: DnRecord) {
+    if s == 0u {
+        dst0[i] = v;
+    } else {
+        dst1[i] = v;
+    }
+}
+
+// Noise variance of the accumulated value at pixel `p` (first iteration): the temporal estimate
+// (second moment − mean², / history length), averaged over the 3×3 neighbours of the same
+// surface since one pixel's few samples make a noisy estimate, blended from the 3×3 spatial
+// variance of the values over the first 8 frames (the temporal estimate needs a few frames).
+fn dn_variance_estimate(s: u32, p: vec2<i32>, centre: DnGuide, dist: f32) -> f32 {
+    var m1 = 0.0;
+    var m2 = 0.0;
+    var temporal = 0.0;
+    var len = 0.0;
+    var cnt = 0.0;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let q = p + vec2<i32>(dx, dy);
+            if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
+                continue;
+            }
+            let j = u32(q.y) * dp.viewport.z + u32(q.x);
+            let g = dn_unpack_guide(guide[j]);
+            if !g.valid || abs(dot(centre.normal, g.position - centre.position)) > 0.02 * dist {
+                continue;
+            }
+            let h = dn_src(s, j);
+            let l = dn_luminance(dn_value(h).xyz);
+            let n = max(dn_rec_len(h), 1.0);
+            m1 += l;
+            m2 += l * l;
+            temporal += max(dn_rec_z(h) - l * l, 0.0) / n;
+            len += n;
+            cnt += 1.0;
+        }
+    }
+    let k = max(cnt, 1.0);
+    m1 /= k;
+    let spatial = max(m2 / k - m1 * m1, 0.0);
+    let t = clamp((len / k - 1.0) / 7.0, 0.0, 1.0);
+    return mix(spatial, temporal / k, t);
+}
+
+// Radius (pixels) of the distance falloff for signal `s` at a pixel.
+fn dn_radius(s: u32, value: vec4<f32>, len: f32, roughness: f32, dist: f32) -> f32 {
+    // Converged pixels need less blur; not shadows, whose penumbrae are smooth by nature.
+    let converged = clamp(len / dp.max_history, 0.0, 1.0);
+    var r = dp.base_radius;
+    if dn_kind(s) < DN_KIND_SHADOW {
+        r *= mix(1.0, 0.35, converged);
+    }
+    let hit = clamp(value.w / max(0.2 * dist, 1e-6), 0.2, 1.0);
+    switch dn_kind(s) {
+        case DN_KIND_SPECULAR: {
+            r *= clamp(roughness * 2.0, 0.05, 1.0) * hit;
+        }
+        case DN_KIND_DIFFUSE: {
+            r *= hit;
+        }
+        case DN_KIND_OCCLUSION: {
+            r *= 0.3 + 0.7 * clamp(value.w, 0.0, 1.0);
+        }
+        default: {
+            r *= clamp(0.3 + value.w / max(0.05 * dist, 1e-6), 0.3, 1.0);
+        }
+    }
+    return max(r, 0.5);
+}
+
+// Per-pixel constants of the tap weights (see main).
+struct DnCentre {
+    p: vec2<i32>,
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    z_edge: f32,
+    z_corner: f32,
+    r_edge: f32,
+    r_corner: f32,
+    l_fac: f32,
+    n_exp: f32,
+    lum: f32,
+    variance: f32,
+}
+
+// Weighted sums of the taps.
+struct DnAcc {
+    sum: vec4<f32>,
+    wsum: f32,
+    vsum: f32,
+}
+
+// Index of the tap `o` (in steps) of pixel `p`, clamped into the viewport (taps outside are
+// dropped by dn_tap).
+fn dn_tap_index(p: vec2<i32>, o: vec2<i32>, step: i32) -> u32 {
+    let q = clamp(p + o * step, vec2<i32>(0), vec2<i32>(dp.viewport.zw) - vec2<i32>(1));
+    return u32(q.y) * dp.viewport.z + u32(q.x);
+}
+
+// Adds the tap `o` (guide `g`, record `h`) of the centre `c`.
+fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnRecord) -> DnAcc {
+    let q = c.p + o * step;
+    if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
+        return acc;
+    }
+    let gq = dn_unpack_guide(g);
+    if !gq.valid {
+        return acc;
+    }
+    let cos_n = dot(c.normal, gq.normal);
+    if cos_n <= 0.0 {
+        return acc; // pow(0, e) = 0
+    }
+    let corner = o.x != 0 && o.y != 0;
+    // B-spline kernel (0.25, 0.5, 0.25)²: an edge tap 0.125, a corner 0.0625.
+    let kernel = select(0.125, 0.0625, corner);
+    let plane = abs(dot(c.normal, gq.position - c.position));
+    let v = dn_value(h);
+    var var_q = c.variance;
+    if ap.first == 0u {
+        var_q = dn_rec_z(h);
+    }
+    let dl = abs(dn_luminance(v.xyz) - c.lum);
+    let e = -plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * log2(cos_n) - dl * c.l_fac
+        + select(c.r_edge, c.r_corner, corner);
+    let w = kernel * exp2(e);
+    var r = acc;
+    r.sum += w * v;
+    r.wsum += w;
+    r.vsum += w * w * var_q;
+    return r;
+}
+
+// log2(e): exp(x) = exp2(x · LOG2E).
+const LOG2E: f32 = 1.4426950408889634;
+
+// Stores the filtered record of signal `s`: to the next intermediate, or (last iteration) to the
+// output texture.
+fn dn_emit(s: u32, i: u32, p: vec2<u32>, value: vec4<f32>, z: f32, len: f32) {
+    if DN_LAST {
+        dn_write_output(s, p + dp.viewport.xy, value);
+    } else {
+        dn_dst(s, i, dn_pack_signal(value, z, len));
+    }
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
+        return;
+    }
+    let p = vec2<i32>(gid.xy);
+    let i = gid.y * dp.viewport.z + gid.x;
+    let gp = dn_unpack_guide(guide[i]);
+    if !gp.valid {
+        // No surface: the accumulated input passes through.
+        for (var s = 0u; s < DN_SIGNALS; s++) {
+            let h = dn_src(s, i);
+            dn_emit(s, i, gid.xy, dn_value(h), 0.0, dn_rec_len(h));
+        }
+        return;
+    }
+    let dist = max(dn_view_distance(gp.position), 1e-6);
+    let step = i32(ap.step);
+    let stepf = f32(ap.step);
+    // Tap distances of the 3×3 pattern: edge and corner.
+    let d_edge = stepf;
+    let d_corner = stepf * 1.4142135;
+    // Plane weight exp(-plane / (dist · 0.004 · (1 + d))), as log2 factors per tap distance.
+    let z_edge = LOG2E / (dist * 0.004 * (1.0 + d_edge));
+    let z_corner = LOG2E / (dist * 0.004 * (1.0 + d_corner));
+
+    var centre: array<vec4<f32>, DN_SIGNALS>;
+    var var_c: array<f32, DN_SIGNALS>;
+    var lum_c: array<f32, DN_SIGNALS>;
+    var len_c: array<f32, DN_SIGNALS>;
+    var n_exp: array<f32, DN_SIGNALS>;
+    // log2 factor of the luminance weight exp(-|Δl| / (σ_l √var + ε)).
+    var l_fac: array<f32, DN_SIGNALS>;
+    // log2 of the distance weight exp(-d² / (2 r²)) at an edge and a corner tap.
+    var r_edge: array<f32, DN_SIGNALS>;
+    var r_corner: array<f32, DN_SIGNALS>;
+    for (var s = 0u; s < DN_SIGNALS; s++) {
+        let h = dn_src(s, i);
+        centre[s] = dn_value(h);
+        len_c[s] = dn_rec_len(h);
+        if ap.first != 0u {
+            var_c[s] = dn_variance_estimate(s, p, gp, dist);
+        } else {
+            var_c[s] = dn_rec_z(h);
+        }
+        lum_c[s] = dn_luminance(centre[s].xyz);
+        let radius = dn_radius(s, centre[s], len_c[s], gp.roughness, dist);
+        let r2 = LOG2E / (2.0 * radius * radius);
+        r_edge[s] = -d_edge * d_edge * r2;
+        r_corner[s] = -d_corner * d_corner * r2;
+        l_fac[s] = LOG2E / (SIGMA_L * sqrt(var_c[s]) + 1e-4 + 0.01 * abs(lum_c[s]));
+        n_exp[s] = 64.0;
+        if dn_kind(s) == DN_KIND_SPECULAR {
+            n_exp[s] = mix(256.0, 32.0, gp.roughness);
+        }
+    }
+
+    // The centre tap: kernel weight 0.5 × 0.5, every other factor 1.
+    var sum: array<vec4<f32>, DN_SIGNALS>;
+    var wsum: array<f32, DN_SIGNALS>;
+    var vsum: array<f32, DN_SIGNALS>;
+    for (var s = 0u; s < DN_SIGNALS; s++) {
+        sum[s] = 0.25 * centre[s];
+        wsum[s] = 0.25;
+        vsum[s] = 0.0625 * var_c[s];
+    }
+    // The eight taps, written out: every guide and record load is issued before any is used
+    // (no arrays, which would live in local memory), so that their latencies overlap. One
+    // signal per dispatch (SpecularAndDiffuse runs a chain per signal): the records are
+    // signal 0's.
+    var c: DnCentre;
+    c.p = p;
+    c.position = gp.position;
+    c.normal = gp.normal;
+    c.z_edge = z_edge;
+    c.z_corner = z_corner;
+    c.r_edge = r_edge[0];
+    c.r_corner = r_corner[0];
+    c.l_fac = l_fac[0];
+    c.n_exp = n_exp[0];
+    c.lum = lum_c[0];
+    c.variance = var_c[0];
+    let j0 = dn_tap_index(p, vec2<i32>(-1, -1), step);
+    let j1 = dn_tap_index(p, vec2<i32>(0, -1), step);
+    let j2 = dn_tap_index(p, vec2<i32>(1, -1), step);
+    let j3 = dn_tap_index(p, vec2<i32>(-1, 0), step);
+    let j4 = dn_tap_index(p, vec2<i32>(1, 0), step);
+    let j5 = dn_tap_index(p, vec2<i32>(-1, 1), step);
+    let j6 = dn_tap_index(p, vec2<i32>(0, 1), step);
+    let j7 = dn_tap_index(p, vec2<i32>(1, 1), step);
+    let g0 = guide[j0];
+    let g1 = guide[j1];
+    let g2 = guide[j2];
+    let g3 = guide[j3];
+    let g4 = guide[j4];
+    let g5 = guide[j5];
+    let g6 = guide[j6];
+    let g7 = guide[j7];
+    let h0 = src0[j0];
+    let h1 = src0[j1];
+    let h2 = src0[j2];
+    let h3 = src0[j3];
+    let h4 = src0[j4];
+    let h5 = src0[j5];
+    let h6 = src0[j6];
+    let h7 = src0[j7];
+    var acc: DnAcc;
+    acc.sum = 0.25 * centre[0];
+    acc.wsum = 0.25;
+    acc.vsum = 0.0625 * var_c[0];
+    acc = dn_tap(acc, c, vec2<i32>(-1, -1), step, g0, h0);
+    acc = dn_tap(acc, c, vec2<i32>(0, -1), step, g1, h1);
+    acc = dn_tap(acc, c, vec2<i32>(1, -1), step, g2, h2);
+    acc = dn_tap(acc, c, vec2<i32>(-1, 0), step, g3, h3);
+    acc = dn_tap(acc, c, vec2<i32>(1, 0), step, g4, h4);
+    acc = dn_tap(acc, c, vec2<i32>(-1, 1), step, g5, h5);
+    acc = dn_tap(acc, c, vec2<i32>(0, 1), step, g6, h6);
+    acc = dn_tap(acc, c, vec2<i32>(1, 1), step, g7, h7);
+    let ws = max(acc.wsum, 1e-8);
+    dn_emit(0u, i, gid.xy, acc.sum / ws, acc.vsum / (ws * ws), len_c[0]);
+}

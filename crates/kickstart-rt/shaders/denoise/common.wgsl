@@ -1,0 +1,158 @@
+// kickstart-rt denoisers: parameters and packing shared by every denoise pass
+// (src/denoise/mod.rs fills DenoiseParams).
+//
+// Every pass is compiled per signal set (src/denoise/signal.rs): denoise/signals gives
+// DN_SIGNALS (1 or 2) and DN_KIND0 / DN_KIND1 (DN_KIND_*) as constants, so that signal loops have
+// constant bounds (their arrays stay in registers) and kind switches fold away. The pass composes
+// beside this module one of denoise/record_rgba (radiance) or denoise/record_scalar (occlusion,
+// shadows), which define the signal record `DnRecord` and its accessors, and one of
+// denoise/output/* (none, one or two output textures), which define DN_LAST (the last à-trous
+// iteration, which writes the output textures) and dn_write_output.
+//
+// Per-pixel buffers are indexed by viewport-relative pixel, row-major with the viewport's width.
+// - guide (vec4<u32>): world position xyz (f32 bits); w = octahedral normal (12 + 12 bits) and
+//   roughness (8 bits), or DN_INVALID where the G-buffer holds no surface.
+// - signal (DnRecord, history and filter intermediates): the value (rgb or scalar), the hit
+//   distance, z = history: second moment of luminance / filter: variance of the value's noise,
+//   and the history length in frames (layouts in the record files).
+
+#import denoise/signals
+
+struct DenoiseParams {
+    // x, y, width, height of the viewport in texels.
+    viewport: vec4<u32>,
+    // xyz: this frame's eye; w: 1 perspective, 0 orthographic.
+    eye: vec4<f32>,
+    // xyz: this frame's viewing direction.
+    forward: vec4<f32>,
+    // xyz: the previous frame's eye; w: 1 perspective.
+    prev_eye: vec4<f32>,
+    // xyz: the previous frame's viewing direction.
+    prev_forward: vec4<f32>,
+    // xy: this frame's jitter, zw: the previous frame's (pixels; a point at unjittered pixel
+    // coordinate c is rendered at c + jitter).
+    jitter: vec4<f32>,
+    // xyz: motion scale.
+    motion_scale: vec4<f32>,
+    // Signal kind of signal 0 and 1 (DN_KIND_*).
+    kind0: u32,
+    kind1: u32,
+    // 1 or 2.
+    signal_count: u32,
+    // 0: none (reproject with the matrices), 1: RgViewSpace, 2: RgbWorldSpace.
+    motion_type: u32,
+    // Longest history, frames.
+    max_history: f32,
+    // 1: drop the history this frame.
+    discard_history: u32,
+    // 0: off, 1: checkerboard (even cells traced), 2: inverted (odd cells traced).
+    checkerboard: u32,
+    // Base radius of the spatial filter, pixels.
+    base_radius: f32,
+}
+
+const DN_INVALID: u32 = 0xffffffffu;
+
+const DN_KIND_SPECULAR: u32 = 0u;
+const DN_KIND_DIFFUSE: u32 = 1u;
+const DN_KIND_OCCLUSION: u32 = 2u;
+const DN_KIND_SHADOW: u32 = 3u;
+const DN_KIND_MULTI_SHADOW: u32 = 4u;
+
+// Largest magnitude stored as f16 (keeps huge hit distances and HDR spikes finite).
+const DN_F16_MAX: f32 = 65000.0;
+
+fn dn_non_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) == 0x7f800000u;
+}
+
+// A finite, f16-representable copy of `v` (NaN and ±∞ become 0).
+fn dn_sanitize(v: vec4<f32>) -> vec4<f32> {
+    var r = v;
+    for (var k = 0; k < 4; k++) {
+        if dn_non_finite(r[k]) {
+            r[k] = 0.0;
+        }
+    }
+    return clamp(r, vec4<f32>(-DN_F16_MAX), vec4<f32>(DN_F16_MAX));
+}
+
+fn dn_luminance(c: vec3<f32>) -> f32 {
+    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
+}
+
+fn dn_oct_encode(n: vec3<f32>) -> vec2<f32> {
+    let p = n.xy / (abs(n.x) + abs(n.y) + abs(n.z));
+    if n.z < 0.0 {
+        let s = select(vec2<f32>(-1.0), vec2<f32>(1.0), p >= vec2<f32>(0.0));
+        return (1.0 - abs(p.yx)) * s;
+    }
+    return p;
+}
+
+fn dn_oct_decode(e: vec2<f32>) -> vec3<f32> {
+    var n = vec3<f32>(e, 1.0 - abs(e.x) - abs(e.y));
+    if n.z < 0.0 {
+        let s = select(vec2<f32>(-1.0), vec2<f32>(1.0), n.xy >= vec2<f32>(0.0));
+        n = vec3<f32>((1.0 - abs(n.yx)) * s, n.z);
+    }
+    return normalize(n);
+}
+
+fn dn_pack_guide(p: vec3<f32>, n: vec3<f32>, roughness: f32) -> vec4<u32> {
+    let e = clamp(dn_oct_encode(n) * 0.5 + 0.5, vec2<f32>(0.0), vec2<f32>(1.0));
+    let q = vec2<u32>(round(e * 4095.0));
+    let r = u32(round(clamp(roughness, 0.0, 1.0) * 254.0));
+    return vec4<u32>(bitcast<vec3<u32>>(p), q.x | (q.y << 12u) | (r << 24u));
+}
+
+struct DnGuide {
+    valid: bool,
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    roughness: f32,
+}
+
+fn dn_unpack_guide(g: vec4<u32>) -> DnGuide {
+    var r: DnGuide;
+    r.valid = g.w != DN_INVALID;
+    if !r.valid {
+        return r;
+    }
+    r.position = bitcast<vec3<f32>>(g.xyz);
+    let e = vec2<f32>(f32(g.w & 4095u), f32((g.w >> 12u) & 4095u)) / 4095.0;
+    r.normal = dn_oct_decode(e * 2.0 - 1.0);
+    r.roughness = f32(g.w >> 24u) / 254.0;
+    return r;
+}
+
+fn dn_pixel_count() -> u32 {
+    return dp.viewport.z * dp.viewport.w;
+}
+
+// Distance of `p` from this frame's camera (along the view direction when orthographic).
+fn dn_view_distance(p: vec3<f32>) -> f32 {
+    if dp.eye.w > 0.5 {
+        return length(dp.eye.xyz - p);
+    }
+    return abs(dot(p - dp.eye.xyz, dp.forward.xyz));
+}
+
+fn dn_prev_view_distance(p: vec3<f32>) -> f32 {
+    if dp.prev_eye.w > 0.5 {
+        return length(dp.prev_eye.xyz - p);
+    }
+    return abs(dot(p - dp.prev_eye.xyz, dp.prev_forward.xyz));
+}
+
+// Unit vector from `p` towards this frame's camera.
+fn dn_to_eye(p: vec3<f32>) -> vec3<f32> {
+    if dp.eye.w > 0.5 {
+        return normalize(dp.eye.xyz - p);
+    }
+    return -dp.forward.xyz;
+}
+
+fn dn_kind(s: u32) -> u32 {
+    return select(DN_KIND0, DN_KIND1, s == 1u);
+}

@@ -1,0 +1,374 @@
+// kickstart-rt denoisers, pass 1: temporal accumulation.
+//
+// Per viewport pixel: decodes the G-buffer (with the camera jitter) into this frame's guide,
+// reads the noisy signal(s) (checkerboard: untraced pixels are rebuilt from their four traced
+// neighbours, weighted by geometric similarity), reprojects into the previous frame (motion
+// vectors of either type, or the previous matrices), keeps the bilinear taps whose surface
+// matches (normal and plane distance; disocclusion drops the history), clamps the history to
+// the current neighbourhood's mean ± γσ (ghosting), and blends: the history length grows by one
+// up to max_history and the new sample weighs 1 / length. The history holds the accumulated raw
+// signal (never the spatially filtered one), so the spatial filter cannot blur it over time.
+//
+// The G-buffer is at group 0 (trace/gbuffer).
+
+#import denoise/common
+#import trace/gbuffer
+
+@group(1) @binding(0) var<uniform> dp: DenoiseParams;
+@group(1) @binding(1) var dn_motion: texture_2d<f32>;
+@group(1) @binding(2) var dn_input0: texture_2d<f32>;
+@group(1) @binding(3) var dn_input1: texture_2d<f32>;
+
+@group(2) @binding(0) var<storage, read> guide_prev: array<vec4<u32>>;
+@group(2) @binding(1) var<storage, read_write> guide_cur: array<vec4<u32>>;
+@group(2) @binding(2) var<storage, read> hist_prev0: array<DnRecord>;
+@group(2) @binding(3) var<storage, read> hist_prev1: array<DnRecord>;
+@group(2) @binding(4) var<storage, read_write> hist_cur0: array<DnRecord>;
+@group(2) @binding(5) var<storage, read_write> hist_cur1: array<DnRecord>;
+
+// Width of the history clamp, in standard deviations of the neighbourhood.
+const CLAMP_SIGMAS: f32 = 2.0;
+
+// The workgroup's 8×8 pixels and a 1-pixel border of the decoded input (dn_load_input), loaded
+// once per workgroup (100 loads for 64 pixels instead of 9 per pixel) for the 3×3 neighbourhood
+// statistics; dn_tile_ok: inside the viewport and traced.
+const DN_TILE: u32 = 10u;
+var<workgroup> dn_tile: array<array<vec4<f32>, 100>, DN_SIGNALS>;
+var<workgroup> dn_tile_ok: array<u32, 100>;
+// History length from which the pixel's own sample spread (its moments) is trusted.
+const TEMPORAL_SPREAD_FRAMES: f32 = 4.0;
+
+// The noisy input of signal `s` at `texel` as (rgb, hit distance); scalar signals repeat their
+// value in rgb. Occlusion: normalised hit distance (1 = open). Shadow: visibility 1 where the
+// input is negative (the light is visible), 0 where a hit was found; the hit distance is kept
+// for the penumbra estimate. Multi-shadow: the trace's packed output0, r = fraction of lights visible, g = closest
+// occluder distance (-1 when none).
+fn dn_load_input(s: u32, texel: vec2<u32>) -> vec4<f32> {
+    var t: vec4<f32>;
+    if s == 0u {
+        t = textureLoad(dn_input0, texel, 0);
+    } else {
+        t = textureLoad(dn_input1, texel, 0);
+    }
+    t = dn_sanitize(t);
+    switch dn_kind(s) {
+        case DN_KIND_OCCLUSION: {
+            let v = clamp(t.x, 0.0, 1.0);
+            return vec4<f32>(v, v, v, v);
+        }
+        case DN_KIND_SHADOW: {
+            let v = select(0.0, 1.0, t.x < 0.0);
+            return vec4<f32>(v, v, v, max(t.x, 0.0));
+        }
+        case DN_KIND_MULTI_SHADOW: {
+            let v = clamp(t.x, 0.0, 1.0);
+            return vec4<f32>(v, v, v, max(t.y, 0.0));
+        }
+        default: {
+            return vec4<f32>(t.xyz, max(t.w, 0.0));
+        }
+    }
+}
+
+// Whether the input holds a traced sample at viewport-relative pixel `p`.
+fn dn_traced(p: vec2<u32>) -> bool {
+    if dp.checkerboard == 0u {
+        return true;
+    }
+    // Viewport-relative parity, the rule the trace tasks use (trace/common.wgsl, tr_pixel), so a
+    // viewport at an odd offset still reads the pixels that were traced.
+    return ((p.x + p.y) & 1u) == dp.checkerboard - 1u;
+}
+
+fn dn_in_viewport(p: vec2<i32>) -> bool {
+    return p.x >= 0 && p.y >= 0 && p.x < i32(dp.viewport.z) && p.y < i32(dp.viewport.w);
+}
+
+// The signal at viewport-relative pixel `p`; checkerboard holes are filled from the traced
+// 4-neighbours, weighted by how well their surface matches (`pos`, `n`; `valid` false: plain
+// average).
+fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) -> vec4<f32> {
+    if dn_traced(p) {
+        return dn_load_input(s, p + dp.viewport.xy);
+    }
+    var sum = vec4<f32>(0.0);
+    var wsum = 0.0;
+    var any_sum = vec4<f32>(0.0);
+    var any_count = 0.0;
+    let offsets = array<vec2<i32>, 4>(vec2<i32>(-1, 0), vec2<i32>(1, 0), vec2<i32>(0, -1), vec2<i32>(0, 1));
+    let dist = max(dn_view_distance(pos), 1e-6);
+    for (var k = 0; k < 4; k++) {
+        let q = vec2<i32>(p) + offsets[k];
+        if !dn_in_viewport(q) {
+            continue;
+        }
+        let texel = vec2<u32>(q) + dp.viewport.xy;
+        let v = dn_load_input(s, texel);
+        any_sum += v;
+        any_count += 1.0;
+        if valid {
+            let sq = gb_surface(texel);
+            if sq.valid {
+                let plane = abs(dot(n, sq.position - pos)) / (0.02 * dist);
+                let w = max(dot(n, sq.normal), 0.0) * exp(-plane * plane);
+                sum += w * v;
+                wsum += w;
+            }
+        }
+    }
+    if wsum > 1e-4 {
+        return sum / wsum;
+    }
+    return any_sum / max(any_count, 1.0);
+}
+
+// Row-major index of viewport pixel `q` clamped into the viewport.
+fn dn_clamped_index(q: vec2<i32>) -> u32 {
+    let c = clamp(q, vec2<i32>(0), vec2<i32>(dp.viewport.zw) - vec2<i32>(1));
+    return u32(c.y) * dp.viewport.z + u32(c.x);
+}
+
+// Weight of the previous frame's pixel `q` (guide `g`, bilinear weight `bw`) for this pixel's
+// history: 0 outside the viewport or where it shows another surface.
+fn dn_history_weight(
+    q: vec2<i32>,
+    g: vec4<u32>,
+    bw: f32,
+    pos: vec3<f32>,
+    n: vec3<f32>,
+    pred: vec3<f32>,
+) -> f32 {
+    if !dn_in_viewport(q) {
+        return 0.0;
+    }
+    let gq = dn_unpack_guide(g);
+    if !gq.valid || !dn_reusable(gq, pos, n, pred) {
+        return 0.0;
+    }
+    return max(bw, 1e-4);
+}
+
+fn dn_store_hist(s: u32, i: u32, v: DnRecord) {
+    if s == 0u {
+        hist_cur0[i] = v;
+    } else {
+        hist_cur1[i] = v;
+    }
+}
+
+// Whether the previous frame's surface `g` is the current one: similar normal, and on the same
+// plane as the predicted previous position (or, with view-space motion, which does not say how
+// depth changed, at the same camera distance).
+fn dn_reusable(g: DnGuide, pos: vec3<f32>, n: vec3<f32>, pred: vec3<f32>) -> bool {
+    if dot(g.normal, n) < 0.8 {
+        return false;
+    }
+    let dist = max(dn_prev_view_distance(pred), 1e-6);
+    let plane_ok = abs(dot(n, g.position - pred)) < 0.01 * dist;
+    if dp.motion_type != 1u {
+        return plane_ok;
+    }
+    let d = dn_view_distance(pos);
+    let ndv = max(abs(dot(n, dn_to_eye(pos))), 0.1);
+    return plane_ok || abs(dn_prev_view_distance(g.position) - d) < (0.03 / ndv) * d;
+}
+
+// Loads the workgroup's tile (every invocation takes part, before any returns).
+fn dn_fill_tile(wg: vec2<u32>, lid: u32) {
+    let origin = vec2<i32>(wg * 8u) - vec2<i32>(1);
+    for (var t = lid; t < DN_TILE * DN_TILE; t += 64u) {
+        let q = origin + vec2<i32>(i32(t % DN_TILE), i32(t / DN_TILE));
+        var ok = false;
+        if dn_in_viewport(q) {
+            ok = dn_traced(vec2<u32>(q));
+        }
+        dn_tile_ok[t] = select(0u, 1u, ok);
+        if ok {
+            for (var s = 0u; s < DN_SIGNALS; s++) {
+                dn_tile[s][t] = dn_load_input(s, vec2<u32>(q) + dp.viewport.xy);
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(8, 8)
+fn main(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(local_invocation_index) lindex: u32,
+) {
+    dn_fill_tile(wg.xy, lindex);
+    workgroupBarrier();
+    if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
+        return;
+    }
+    let p = gid.xy;
+    let i = p.y * dp.viewport.z + p.x;
+    let texel = p + dp.viewport.xy;
+
+    // gb_surface unprojects the jittered depth where it was sampled (trace/gbuffer.wgsl).
+    let surf = gb_surface(texel);
+    let pos = surf.position;
+    let n = surf.normal;
+
+    if !surf.valid {
+        guide_cur[i] = vec4<u32>(DN_INVALID);
+        for (var s = 0u; s < DN_SIGNALS; s++) {
+            let v = dn_sample(s, p, false, pos, n);
+            dn_store_hist(s, i, dn_pack_signal(v, 0.0, 0.0));
+        }
+        return;
+    }
+    guide_cur[i] = dn_pack_guide(pos, n, gb_roughness(texel));
+
+    // Where this surface was in the previous frame (continuous viewport pixel coordinates).
+    var prev_xy: vec2<f32>;
+    var pred = pos;
+    let size = vec2<f32>(dp.viewport.zw);
+    if dp.motion_type == 1u {
+        let m = textureLoad(dn_motion, texel, 0).xy * dp.motion_scale.xy;
+        let uv = (vec2<f32>(p) + 0.5 - dp.jitter.xy) / size;
+        prev_xy = (uv + m) * size + dp.jitter.zw;
+    } else {
+        if dp.motion_type == 2u {
+            pred = pos + textureLoad(dn_motion, texel, 0).xyz * dp.motion_scale.xyz;
+        }
+        let c = gb_project_prev(pred);
+        prev_xy = c.xy + dp.jitter.zw;
+        if c.w <= 0.0 {
+            prev_xy = vec2<f32>(-1e6);
+        }
+    }
+
+    // Bilinear taps of the previous frame that show this surface, written out: the four
+    // previous guides and history records are loaded before any is used (indices clamped into
+    // the viewport; unusable taps get weight 0), so that their latencies overlap.
+    let use_history = dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6));
+    let base_f = select(vec2<f32>(0.0), floor(prev_xy - 0.5), use_history);
+    let f = prev_xy - 0.5 - base_f;
+    let base = vec2<i32>(base_f);
+    let q0 = base;
+    let q1 = base + vec2<i32>(1, 0);
+    let q2 = base + vec2<i32>(0, 1);
+    let q3 = base + vec2<i32>(1, 1);
+    let j0 = dn_clamped_index(q0);
+    let j1 = dn_clamped_index(q1);
+    let j2 = dn_clamped_index(q2);
+    let j3 = dn_clamped_index(q3);
+    let pg0 = guide_prev[j0];
+    let pg1 = guide_prev[j1];
+    let pg2 = guide_prev[j2];
+    let pg3 = guide_prev[j3];
+    var h00 = hist_prev0[j0];
+    var h01 = hist_prev0[j1];
+    var h02 = hist_prev0[j2];
+    var h03 = hist_prev0[j3];
+    var h10 = h00;
+    var h11 = h01;
+    var h12 = h02;
+    var h13 = h03;
+    if DN_SIGNALS > 1u {
+        h10 = hist_prev1[j0];
+        h11 = hist_prev1[j1];
+        h12 = hist_prev1[j2];
+        h13 = hist_prev1[j3];
+    }
+    var w0 = 0.0;
+    var w1 = 0.0;
+    var w2 = 0.0;
+    var w3 = 0.0;
+    if use_history {
+        w0 = dn_history_weight(q0, pg0, (1.0 - f.x) * (1.0 - f.y), pos, n, pred);
+        w1 = dn_history_weight(q1, pg1, f.x * (1.0 - f.y), pos, n, pred);
+        w2 = dn_history_weight(q2, pg2, (1.0 - f.x) * f.y, pos, n, pred);
+        w3 = dn_history_weight(q3, pg3, f.x * f.y, pos, n, pred);
+    }
+    let wsum = w0 + w1 + w2 + w3;
+
+    for (var s = 0u; s < DN_SIGNALS; s++) {
+        var cur = dn_sample(s, p, true, pos, n);
+
+        // Neighbourhood statistics of the current input (traced pixels only).
+        var m1 = vec4<f32>(0.0);
+        var m2 = vec4<f32>(0.0);
+        var cnt = 0.0;
+        var m1_nc = vec4<f32>(0.0);
+        var m2_nc = vec4<f32>(0.0);
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
+                let t = (lid.y + u32(1 + dy)) * DN_TILE + lid.x + u32(1 + dx);
+                if dn_tile_ok[t] == 0u {
+                    continue;
+                }
+                let v = dn_tile[s][t];
+                m1 += v;
+                m2 += v * v;
+                cnt += 1.0;
+                if dx != 0 || dy != 0 {
+                    m1_nc += v;
+                    m2_nc += v * v;
+                }
+            }
+        }
+        let mean = m1 / max(cnt, 1.0);
+        let sigma = sqrt(max(m2 / max(cnt, 1.0) - mean * mean, vec4<f32>(0.0)));
+        let kind = dn_kind(s);
+
+        var hist = vec4<f32>(0.0);
+        var hist_m2 = 0.0;
+        var hist_len = 0.0;
+        if wsum > 1e-3 {
+            let second = s == 1u;
+            let ha = select(h00, h10, second);
+            let hb = select(h01, h11, second);
+            let hc = select(h02, h12, second);
+            let hd = select(h03, h13, second);
+            let inv = 1.0 / wsum;
+            hist = (w0 * dn_value(ha) + w1 * dn_value(hb) + w2 * dn_value(hc) + w3 * dn_value(hd)) * inv;
+            hist_m2 = (w0 * dn_rec_z(ha) + w1 * dn_rec_z(hb) + w2 * dn_rec_z(hc) + w3 * dn_rec_z(hd)) * inv;
+            hist_len = (w0 * dn_rec_len(ha) + w1 * dn_rec_len(hb) + w2 * dn_rec_len(hc)
+                + w3 * dn_rec_len(hd)) * inv;
+        }
+        // The spread of the samples this pixel has seen (its luminance moments over the
+        // history), once a few frames back it. A 3×3 neighbourhood of a sparse 1-spp signal
+        // (dark radiance with rare bright hits, a penumbra's 0/1 visibility) is often all alike,
+        // so its spread alone would call the rare samples the mean is made of outliers and
+        // clamp them away: a darkening bias that grows with every frame of history.
+        let temporal = hist_len >= TEMPORAL_SPREAD_FRAMES;
+        var sigma_t = 0.0;
+        if temporal {
+            let hl = dn_luminance(hist.xyz);
+            sigma_t = sqrt(max(hist_m2 - hl * hl, 0.0));
+        }
+        if (kind == DN_KIND_SPECULAR || kind == DN_KIND_DIFFUSE) && cnt > 2.0 && temporal {
+            // Fireflies: a sample far above all its neighbours and far above what this pixel's
+            // history has seen is clamped (not before the history can tell: early frames keep
+            // their samples, whose weight fades as 1 / length).
+            let cn = cnt - select(0.0, 1.0, dn_traced(p));
+            let mean_nc = m1_nc / max(cn, 1.0);
+            let sigma_nc = sqrt(max(m2_nc / max(cn, 1.0) - mean_nc * mean_nc, vec4<f32>(0.0)));
+            let hi_spatial = mean_nc + 4.0 * sigma_nc + 0.1 * abs(mean_nc);
+            let hi_temporal = hist + vec4<f32>(4.0 * sigma_t) + 0.1 * abs(hist);
+            let hi = max(hi_spatial, hi_temporal);
+            cur = vec4<f32>(min(cur.xyz, hi.xyz), cur.w);
+        }
+        if wsum > 1e-3 {
+            // Ghosting: the history may not leave the range the current neighbourhood and the
+            // pixel's own sample spread allow. The range has a floor too, for the first frames
+            // of a sparse signal, when neither spread is known yet.
+            var floor = 0.25 * max(abs(mean), abs(hist));
+            if kind != DN_KIND_SPECULAR && kind != DN_KIND_DIFFUSE {
+                floor += vec4<f32>(0.2);
+            }
+            let half = CLAMP_SIGMAS * max(sigma, vec4<f32>(sigma_t)) + floor;
+            hist = clamp(hist, mean - half, mean + half);
+        }
+        let len = min(hist_len + 1.0, dp.max_history);
+        let alpha = 1.0 / len;
+        let lum = dn_luminance(cur.xyz);
+        let value = mix(hist, cur, alpha);
+        let moment2 = mix(hist_m2, lum * lum, alpha);
+        dn_store_hist(s, i, dn_pack_signal(value, moment2, len));
+    }
+}
