@@ -68,6 +68,7 @@ pub enum Error {
         library: crate::Version,
     },
     /// A shared pool or table would exceed what one storage binding of this device may hold.
+    /// Found by `build_gpu_task`'s plan, before anything is recorded: the context is unchanged.
     #[error("{what}: {bytes} bytes would exceed the device's max_storage_buffer_binding_size ({limit} bytes)")]
     OutOfDeviceMemory {
         /// The pool or object that needed the memory.

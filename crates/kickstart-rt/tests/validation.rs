@@ -957,3 +957,135 @@ fn refused_for_any_reason_the_context_is_unchanged() {
         |e| matches!(e, Error::WorkingSetsExhausted { supported: 1 }),
     );
 }
+
+/// A device of the test adapter whose storage buffers bind at most `bytes` bytes, and a context
+/// on it.
+fn small_binding_context(bytes: u64) -> (wgpu::Device, wgpu::Queue, ExecuteContext) {
+    let g = gpu();
+    let mut limits = g.device.limits();
+    limits.max_storage_buffer_binding_size = bytes;
+    let (device, queue) = pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("kickstart-rt small-binding tests"),
+        required_features: g.device.features(),
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("a device with smaller limits than the adapter's");
+    let settings = InitSettings {
+        supported_working_sets: 2,
+        ..Default::default()
+    };
+    let ctx = ExecuteContext::new(&device, &queue, settings).expect("context");
+    (device, queue, ctx)
+}
+
+/// A geometry of `triangles` triangles over the 4 corners of a unit quad (the indices cycle
+/// through its two triangles), in buffers of `device`.
+fn many_triangles(device: &wgpu::Device, triangles: u32) -> GeometryInput {
+    use wgpu::util::DeviceExt;
+    let p: [[f32; 3]; 4] = [[0.0; 3], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let quad = [0u32, 1, 2, 0, 2, 3];
+    let indices: Vec<u32> = (0..triangles as usize * 3).map(|i| quad[i % 6]).collect();
+    let init = |contents: &[u8], usage| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents,
+            usage: usage | wgpu::BufferUsages::COPY_SRC,
+        })
+    };
+    let (vb, ib) = (
+        init(bytemuck::cast_slice(&p), wgpu::BufferUsages::VERTEX),
+        init(bytemuck::cast_slice(&indices), wgpu::BufferUsages::INDEX),
+    );
+    GeometryInput {
+        name: format!("{triangles} triangles"),
+        components: vec![GeometryComponent {
+            vertex_buffer: VertexBufferInput {
+                buffer: vb,
+                offset: 0,
+                stride: 12,
+                count: 4,
+                format: VertexFormat::Float32x3,
+            },
+            index_buffer: Some(IndexBufferInput {
+                buffer: ib,
+                offset: 0,
+                count: triangles * 3,
+                format: IndexFormat::Uint32,
+            }),
+            transform: None,
+            index_range: None,
+        }],
+        ..Default::default()
+    }
+}
+
+/// A container registering `input` as `geometry`, an instance of it, and building both.
+fn register_and_build(
+    ctx: &ExecuteContext,
+    (geometry, instance): (GeometryHandle, InstanceHandle),
+    input: GeometryInput,
+) -> TaskContainer {
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: geometry,
+        input,
+    });
+    register_instance(&mut c, instance, geometry, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    c
+}
+
+/// The record phase allocates as it goes (staged triangles, then the BLAS's triangles and
+/// nodes, ...). A task whose allocation past the first would exceed the device's binding size
+/// must be refused by the plan, before the earlier ones changed anything: the context is as it
+/// was, and then accepts a task that fits.
+#[test]
+fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
+    // The least binding size the SDK works with (`Limits::default()`'s), whatever the adapter
+    // offers.
+    const LIMIT: u64 = 128 << 20;
+    let (device, queue, ctx) = small_binding_context(LIMIT);
+    let submit = |e: wgpu::CommandEncoder| {
+        queue.submit([e.finish()]);
+        device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    };
+    let encoder = || device.create_command_encoder(&Default::default());
+    // An earlier task the refused one must not disturb.
+    let first = ctx.create_geometry_handle();
+    let c = register_and_build(
+        &ctx,
+        (first, ctx.create_instance_handle()),
+        many_triangles(&device, 2),
+    );
+    let mut e = encoder();
+    let earlier = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(earlier).unwrap();
+    // 2.2M triangles: their staged copy and BLAS triangles (48 bytes each, 106 MB) fit the
+    // 128 MiB binding, their BLAS nodes (64 bytes each, 141 MB) do not.
+    let handles = (ctx.create_geometry_handle(), ctx.create_instance_handle());
+    let before = observe(&ctx, &[first, handles.0]);
+    let c = register_and_build(&ctx, handles, many_triangles(&device, 2_200_000));
+    let mut e = encoder();
+    match ctx.build_gpu_task(c, &mut e) {
+        Err(Error::OutOfDeviceMemory { what, bytes, limit }) => {
+            assert_eq!(what, "BLAS nodes of geometry `2200000 triangles`");
+            assert_eq!(limit, LIMIT);
+            assert!(bytes > LIMIT, "{bytes}");
+        }
+        other => panic!("expected OutOfDeviceMemory, got {other:?}"),
+    }
+    submit(e);
+    assert_eq!(observe(&ctx, &[first, handles.0]), before);
+    // The same context accepts the same work at a size that fits.
+    let c = register_and_build(&ctx, handles, many_triangles(&device, 1000));
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).expect("a task that fits");
+    submit(e);
+    assert_eq!(t.serial(), earlier.serial() + 1);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    assert_eq!(ctx.geometry_triangle_count(handles.0).unwrap(), Some(1000));
+    assert!(ctx.geometry_is_built(handles.0).unwrap());
+}

@@ -394,26 +394,54 @@ impl DirectLightingCache {
         self.transferer.prepare(&self.device);
     }
 
-    /// Grows the header region to `slots` instance slots and the pool when a read-back asked for
-    /// it (degraded caches are re-allocated). Records copies into `encoder`.
-    pub fn prepare_task(
-        &mut self,
-        encoder: &mut wgpu::CommandEncoder,
-        slots: u32,
-        serial: u64,
-    ) -> Result<()> {
+    /// Refuses a task whose `slots` instance slots would grow the header region past the
+    /// device's binding size: the plan's check of [`Self::prepare_task`], on a copy of the meta
+    /// pool's ledger as that task will find it: collected from `oldest_in_flight` on
+    /// ([`Self::collect`]), and nothing else allocated from it before.
+    pub fn check_headers(&self, slots: u32, oldest_in_flight: u64) -> Result<()> {
+        if slots <= self.header_slots {
+            return Ok(());
+        }
+        let (_, words) = header_region(slots);
+        let mut meta = self.meta.ledger().clone();
+        meta.collect(oldest_in_flight);
+        match meta.alloc(words, self.max_binding) {
+            Some(_) => Ok(()),
+            None => Err(Error::OutOfDeviceMemory {
+                what: "lighting cache headers".into(),
+                bytes: words as u64 * 4,
+                limit: self.max_binding,
+            }),
+        }
+    }
+
+    /// Refuses an instance whose geometry has `triangles` triangles when the allocation passes'
+    /// scratch for it would exceed the device's binding size: checked by the plan for every
+    /// instance task, so that [`Self::record_allocations`], which allocates the instance's
+    /// cache in this or a later task, cannot fail.
+    pub fn check_allocation(&self, triangles: u32) -> Result<()> {
+        let (_, words) = scratch_words(triangles.max(1));
+        if words * 4 > self.max_binding {
+            return Err(Error::OutOfDeviceMemory {
+                what: "lighting cache allocation scratch".into(),
+                bytes: words * 4,
+                limit: self.max_binding,
+            });
+        }
+        Ok(())
+    }
+
+    /// Grows the header region to `slots` instance slots ([`Self::check_headers`] admitted them)
+    /// and the pool when a read-back asked for it (degraded caches are re-allocated). Records
+    /// copies into `encoder`.
+    pub fn prepare_task(&mut self, encoder: &mut wgpu::CommandEncoder, slots: u32, serial: u64) {
         let device = self.device.clone();
         if slots > self.header_slots {
-            let new_slots = slots.next_power_of_two().max(64);
-            let words = new_slots * HEADER_WORDS;
+            let (new_slots, words) = header_region(slots);
             let range = self
                 .meta
                 .alloc(&self.device, encoder, words, self.max_binding)
-                .ok_or_else(|| Error::OutOfDeviceMemory {
-                    what: "lighting cache headers".into(),
-                    bytes: words as u64 * 4,
-                    limit: self.max_binding,
-                })?;
+                .expect("the plan reserved the headers (DirectLightingCache::check_headers)");
             let meta = self.meta.buffer().clone();
             if self.header_slots > 0 {
                 // Same-buffer copies are not allowed: go through a temporary buffer.
@@ -467,38 +495,34 @@ impl DirectLightingCache {
                 );
             }
         }
-        Ok(())
     }
 
-    /// Records the GPU allocation of `jobs` (instances whose geometry's BLAS is built). Jobs past
-    /// the per-task limit stay waiting.
+    /// Records the GPU allocation of `jobs` (instances whose geometry's BLAS is built; the plan
+    /// checked each with [`Self::check_allocation`] when its instance task came). Jobs past the
+    /// per-task limit stay waiting.
     pub fn record_allocations(
         &mut self,
         rec: &mut Recorder<'_>,
         triangles: &wgpu::Buffer,
         jobs: &[AllocJob],
         serial: u64,
-    ) -> Result<()> {
+    ) {
         let jobs = &jobs[..jobs.len().min(MAX_ALLOCS_PER_TASK)];
         if jobs.is_empty() {
-            return Ok(());
+            return;
         }
         // Triangle records (CPU-allocated) and scratch big enough for the largest job.
         let (fitted, records) = self.allocate_records(rec, jobs);
         let jobs = &fitted[..];
         if jobs.is_empty() {
-            return Ok(());
+            return;
         }
         let max_tris = jobs.iter().map(|j| j.tri_count).max().unwrap_or(1).max(1);
-        let hash_size = (6 * max_tris).next_power_of_two();
-        let scratch_words = 4 + 13 * max_tris as u64 + 2 * hash_size as u64;
-        if scratch_words * 4 > self.max_binding {
-            return Err(Error::OutOfDeviceMemory {
-                what: "lighting cache allocation scratch".into(),
-                bytes: scratch_words * 4,
-                limit: self.max_binding,
-            });
-        }
+        let (hash_size, scratch_words) = scratch_words(max_tris);
+        debug_assert!(
+            self.check_allocation(max_tris).is_ok(),
+            "the plan checked every instance's allocation scratch"
+        );
         if self.scratch.size() < scratch_words * 4 {
             self.scratch = storage(
                 &self.device,
@@ -574,7 +598,6 @@ impl DirectLightingCache {
             self.waiting.remove(&j.slot);
         }
         self.read_back_allocations(rec, slots, serial);
-        Ok(())
     }
 
     /// Allocates the triangle records of each job in the meta pool: the jobs that fit and their
@@ -680,6 +703,19 @@ impl DirectLightingCache {
             Surfels::Pending { .. } => None,
         }
     }
+}
+
+/// The header region for `slots` instance slots: the slots it holds and its words.
+fn header_region(slots: u32) -> (u32, u32) {
+    let new_slots = slots.next_power_of_two().max(64);
+    (new_slots, new_slots * HEADER_WORDS)
+}
+
+/// The allocation passes' hash table size and scratch words for jobs of up to `max_tris`
+/// triangles (at least 1).
+fn scratch_words(max_tris: u32) -> (u32, u64) {
+    let hash_size = (6 * max_tris).next_power_of_two();
+    (hash_size, 4 + 13 * max_tris as u64 + 2 * hash_size as u64)
 }
 
 /// Copies `words` into `dst` at byte `offset` inside `encoder`, through a buffer written at
@@ -794,13 +830,11 @@ mod tests {
         let triangles = buffer(4 * 48);
         cache.register(0, 0);
         cache.register(1, 0);
-        let mut result = Ok(());
+        assert!(cache.check_headers(2, u64::MAX).is_ok());
         run(|rec| {
-            result = cache.prepare_task(rec.encoder, 2, 1).and_then(|()| {
-                cache.record_allocations(rec, &triangles, &[job(0, 1), job(1, 10_000)], 1)
-            });
+            cache.prepare_task(rec.encoder, 2, 1);
+            cache.record_allocations(rec, &triangles, &[job(0, 1), job(1, 10_000)], 1);
         });
-        assert!(result.is_ok(), "the task must not fail: {result:?}");
         assert!(
             cache.waiting().is_empty(),
             "neither instance waits any more"

@@ -3,17 +3,16 @@
 //! `match` that sends a planned render task to its effect.
 
 use crate::cache::DirectLightingCache;
-use crate::denoise::Denoisers;
-use crate::error::Result;
+use crate::denoise::{DenoiseJob, Denoisers};
 use crate::gpu::Recorder;
 use crate::scene::traversal::SceneBuffers;
 use crate::tasks::*;
-use crate::trace::debug_view::DebugViewPass;
+use crate::trace::debug_view::{DebugView, DebugViewPass};
 use crate::trace::rays::RayTracer;
-use crate::trace::tasks::TracePasses;
+use crate::trace::tasks::{Job as TraceJob, TracePasses};
 
-/// Where a render task is recorded: the effect that records it, with what the plan learned.
-#[derive(Clone, Copy)]
+/// Where a render task is recorded: the effect that records it, with what the plan resolved,
+/// so that recording it cannot fail.
 pub(super) enum Route<'c> {
     /// A batch of rays from a buffer.
     RayBatch(&'c TraceRaysTask),
@@ -21,15 +20,16 @@ pub(super) enum Route<'c> {
     Injection(&'c DirectLightingInjectionTask),
     /// The lighting cache copied from one instance to another.
     Transfer(&'c DirectLightTransferTask),
-    /// A trace task writing its normal output.
-    Trace(&'c RenderTask),
-    /// A trace task writing a primary-ray debug view instead.
+    /// A trace task writing its normal output: its pass and its viewport checked.
+    Trace(TraceJob<'c>),
+    /// A trace task writing a primary-ray debug view instead: the view and its viewport.
     DebugView {
         common: &'c TraceTaskCommon,
         output: &'c TextureInput,
+        view: DebugView,
     },
-    /// A denoise task.
-    Denoise(&'c RenderTask),
+    /// A denoise task, with its denoiser.
+    Denoise(DenoiseJob<'c>),
 }
 
 /// The effects' pipelines and history. Pipelines are created on first use, so a context that
@@ -93,8 +93,8 @@ impl Effects {
         rec: &mut Recorder<'_>,
         queue: &wgpu::Queue,
         inputs: Inputs<'_>,
-        route: Route<'_>,
-    ) -> Result<()> {
+        route: &Route<'_>,
+    ) {
         let device = rec.device;
         match route {
             Route::RayBatch(t) => {
@@ -132,34 +132,29 @@ impl Effects {
                     triangles,
                 );
             }
-            Route::Trace(task) => {
+            Route::Trace(job) => {
                 rec.scope = "trace";
                 let cache = inputs.cache.sample_resources();
                 self.traces(device, queue)
-                    .record(rec, &inputs.scene, &cache, task)?;
+                    .record(rec, &inputs.scene, &cache, job);
             }
-            Route::DebugView { common, output } => {
-                let size = output.texture().size();
-                let vp = common.viewport.unwrap_or(Viewport {
-                    x: 0,
-                    y: 0,
-                    width: size.width,
-                    height: size.height,
-                });
+            Route::DebugView {
+                common,
+                output,
+                view,
+            } => {
                 rec.scope = "debug view";
                 self.debug_views(device).record(
                     rec,
                     &inputs.scene,
                     output,
                     output.texture().format(),
-                    (vp.x, vp.y, vp.width, vp.height),
+                    *view,
                     &common.view,
-                    common.debug_parameters.debug_output_type,
                     (inputs.cache, common.use_bilinear_sampling),
-                )?;
+                );
             }
-            Route::Denoise(task) => self.denoisers.record(rec, task, inputs.serial),
+            Route::Denoise(job) => self.denoisers.record(rec, job, inputs.serial),
         }
-        Ok(())
     }
 }

@@ -1,13 +1,15 @@
 //! The SDK instance: handles, working sets, and GPU tasks recorded into the engine's encoder.
 //!
 //! `build_gpu_task` runs in two phases: [`plan`] checks every task of a container against the
-//! context's state without changing anything, and [`record`] carries the checked plan out, one
-//! function per step of the data flow. The render effects live in [`effects`], the state kept
+//! context's state without changing anything (including, in [`reserve`], that the memory the
+//! task allocates fits the device), and [`record`] carries the checked plan out, one function
+//! per step of the data flow; it cannot fail, so a refused task never changes the context. The render effects live in [`effects`], the state kept
 //! between tasks in [`state`].
 
 mod effects;
 mod plan;
 mod record;
+mod reserve;
 mod settings;
 mod state;
 mod validate;
@@ -511,7 +513,9 @@ impl ExecuteContext {
                 supported: self.working_sets,
             });
         }
-        let plan = plan::plan(&s, &container, &self.device.limits())?;
+        let mut plan = plan::plan(&s, &container, &self.device.limits())?;
+        // Last: every input is valid; the device memory the record phase allocates must fit.
+        plan.reserved = reserve::check(&s, &plan)?;
         let s = &mut *s;
         let serial = s.next_serial;
         s.next_serial += 1;
@@ -527,7 +531,7 @@ impl ExecuteContext {
             },
             serial,
         };
-        record::record(&mut frame, s, &plan)?;
+        record::record(&mut frame, s, &plan);
         if let Some(ts) = frame.timestamps.take() {
             if let Some(r) = TimingReadback::record(&self.device, frame.encoder, ts) {
                 s.timings.insert(serial, r);

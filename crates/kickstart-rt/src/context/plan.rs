@@ -12,7 +12,9 @@ use crate::container::TaskContainer;
 use crate::denoise;
 use crate::error::{Error, Result};
 use crate::handles::*;
+use crate::scene::gpu_scene::PendingBvh;
 use crate::tasks::*;
+use crate::trace::debug_view::DebugView;
 use crate::trace::tasks::TracePasses;
 
 /// What one container asks for, checked: the record phase carries it out in this order.
@@ -25,6 +27,19 @@ pub(super) struct FramePlan<'c> {
     pub build: Option<BvhBuildTask>,
     /// The render tasks in the order scheduled.
     pub render: Vec<Route<'c>>,
+    /// What the record phase allocates, checked against the device's limits (filled in by the
+    /// reserve module's check, which runs after this plan).
+    pub reserved: Reserved,
+}
+
+/// What the check predicted of the record phase; it asserts the same in debug builds, so that
+/// a record step changed without its simulation here fails the tests.
+#[derive(Debug, Default, PartialEq, Eq)]
+pub(super) struct Reserved {
+    /// Step 5's BVH work in order: each geometry and whether it is (re)built or refitted.
+    pub blas: Vec<(GeometryHandle, PendingBvh)>,
+    /// Whether step 6 updates the TLAS.
+    pub tlas: bool,
 }
 
 /// Checks every task of `c` against the context's state `s` and the device's `limits`.
@@ -38,6 +53,7 @@ pub(super) fn plan<'c>(
         instances: Vec::new(),
         build: None,
         render: Vec::new(),
+        reserved: Reserved::default(),
     };
     let mut geometries_here = HashSet::new();
     let mut instances_here = HashSet::new();
@@ -171,22 +187,47 @@ fn route<'c>(s: &State, task: &'c RenderTask, limits: &wgpu::Limits) -> Result<O
         }
         t => match (t.denoise_common(), t.trace_common()) {
             (Some(c), _) => {
-                denoise::check_task(t, &s.denoisers.get(c.context)?.input)?;
-                Route::Denoise(t)
+                let Some(job) = denoise::route(t) else {
+                    return Ok(None);
+                };
+                denoise::check_task(t, &job, &s.denoisers.get(c.context)?.input)?;
+                Route::Denoise(job)
             }
-            (None, Some((common, output))) => match common.debug_parameters.debug_output_type {
-                DebugOutputType::Default if TracePasses::handles(t) => Route::Trace(t),
-                DebugOutputType::HitT
-                | DebugOutputType::Barycentrics
-                | DebugOutputType::RandomMeshColor
-                | DebugOutputType::RandomTileColor
-                | DebugOutputType::DirectLightingCache => Route::DebugView { common, output },
-                _ => return Ok(None),
-            },
+            (None, Some((common, output))) => return trace_route(t, common, output),
             (None, None) => return Ok(None),
         },
     };
     Ok(Some(route))
+}
+
+/// The route of a trace task: its pass for the default output, or the primary-ray debug view
+/// it asks for (`None` for a view this version does not write).
+fn trace_route<'c>(
+    task: &'c RenderTask,
+    common: &'c TraceTaskCommon,
+    output: &'c TextureInput,
+) -> Result<Option<Route<'c>>> {
+    let kind = common.debug_parameters.debug_output_type;
+    if kind == DebugOutputType::Default {
+        let Some(job) = TracePasses::job(task) else {
+            return Ok(None);
+        };
+        TracePasses::check(&job)?;
+        return Ok(Some(Route::Trace(job)));
+    }
+    let size = output.texture().size();
+    let vp = common.viewport.unwrap_or(Viewport {
+        x: 0,
+        y: 0,
+        width: size.width,
+        height: size.height,
+    });
+    let view = DebugView::new(kind, (vp.x, vp.y, vp.width, vp.height))?;
+    Ok(view.map(|view| Route::DebugView {
+        common,
+        output,
+        view,
+    }))
 }
 
 /// Checks a transfer: both instances registered (in an earlier task), distinct, the target's

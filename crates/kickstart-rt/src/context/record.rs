@@ -1,7 +1,9 @@
 //! The record phase of `build_gpu_task`: carries out a checked [`FramePlan`] into the engine's
 //! encoder, one function per step of the data flow (`../shared/DESIGN.md`, "Data flow of one
-//! `build_gpu_task`"). Every input was checked by the plan; what can still fail here is the
-//! device running out of memory while a pool grows ([`crate::Error::OutOfDeviceMemory`]).
+//! `build_gpu_task`"). Nothing here can fail: the plan checked every input, resolved every
+//! render task's effect, and ran this phase's allocations on copies of the pools' bookkeeping
+//! (`super::reserve`), so every allocation made here fits. A refused task therefore never
+//! leaves a step half done.
 
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -12,7 +14,6 @@ use super::plan::FramePlan;
 use super::settings::INSTANCE_RECORD_SIZE;
 use super::state::{instance_record, DroppedReadback, GeometryData, State, WorkingSet};
 use super::validate::ComponentExtent;
-use crate::error::Result;
 use crate::gpu::buffers::storage;
 use crate::gpu::recorder::Timestamps;
 use crate::gpu::Recorder;
@@ -60,14 +61,14 @@ impl Frame<'_> {
 type Ingestion<'c> = (&'c GeometryTask, &'c [ComponentExtent], Range, u32);
 
 /// Records `plan`, in the order of the data flow.
-pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) -> Result<()> {
+pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) {
     release_completed(s);
     s.scene.ensure_tables(
         frame.encoder,
         s.geometries.slot_count(),
         s.instances.slot_count(),
-    )?;
-    let ingestions = allocate_staged(frame, s, plan)?;
+    );
+    let ingestions = allocate_staged(frame, s, plan);
     let mut uploads = Uploads::default();
     clear_dead_slots(s, &mut uploads, frame.serial);
     for (task, ..) in &ingestions {
@@ -83,7 +84,7 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
     frame.flush(s, uploads);
     let deferred = ingest(frame, s, plan, &ingestions);
     register_geometries(s, &ingestions, frame.serial);
-    let deferred = build_blases(frame, s, plan.build, deferred)?;
+    let deferred = build_blases(frame, s, plan, deferred);
     record_deferred_ingestions(frame, s, deferred);
     if let Some(dropped) = &frame.ws.dropped {
         // The dropped-triangle counts, after every pass that counts them.
@@ -92,19 +93,19 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
             .encoder
             .copy_buffer_to_buffer(&s.scene.counters, 0, &dropped.buffer, 0, size);
     }
-    update_tlas(frame, s, plan.build)?;
+    update_tlas(frame, s, plan);
     register_instances(s, &plan.instances, frame.serial);
-    allocate_caches(frame, s)?;
+    allocate_caches(frame, s);
     for route in &plan.render {
-        record_render_task(frame, s, route)?;
+        record_render_task(frame, s, route);
     }
-    Ok(())
 }
 
-/// Step 1, deferred destruction: releases what no in-flight task can still read; creates the
-/// history of new denoising contexts and retires that of destroyed ones.
+/// Step 1, deferred destruction: releases what no in-flight task can still read (the plan
+/// simulated this on its copies of the pools); creates the history of new denoising contexts
+/// and retires that of destroyed ones.
 fn release_completed(s: &mut State) {
-    let oldest = s.in_flight.keys().next().copied().unwrap_or(u64::MAX);
+    let oldest = s.oldest_in_flight();
     s.scene.collect(oldest);
     s.cache.collect(oldest);
     let live: Vec<_> = s
@@ -117,12 +118,13 @@ fn release_completed(s: &mut State) {
     s.effects.denoisers.collect(oldest);
 }
 
-/// Staged-triangle space for every geometry task: updates reuse their range.
+/// Staged-triangle space for every geometry task (reserved by the plan): updates reuse their
+/// range.
 fn allocate_staged<'c>(
     frame: &mut Frame<'_>,
     s: &mut State,
     plan: &'c FramePlan<'_>,
-) -> Result<Vec<Ingestion<'c>>> {
+) -> Vec<Ingestion<'c>> {
     let mut ingestions = Vec::new();
     for (task, extents) in &plan.geometries {
         let triangles: u32 = extents.iter().map(|e| e.triangles).sum();
@@ -135,13 +137,11 @@ fn allocate_staged<'c>(
         };
         let staged = match staged {
             Some(r) => r,
-            None => s
-                .scene
-                .alloc_staged(frame.encoder, triangles, &task.input.name)?,
+            None => s.scene.alloc_staged(frame.encoder, triangles),
         };
         ingestions.push((*task, extents.as_slice(), staged, triangles));
     }
-    Ok(ingestions)
+    ingestions
 }
 
 /// Step 2: destroyed objects leave the tables.
@@ -154,20 +154,7 @@ fn clear_dead_slots(s: &mut State, uploads: &mut Uploads, serial: u64) {
                 bytemuck::bytes_of(&[0u32; 4]),
             );
         }
-        // Instances of destroyed geometry must not trace a geometry that reuses its slot.
-        let dead: Vec<u32> = s
-            .instances
-            .handles()
-            .into_iter()
-            .filter(|h| {
-                s.instances
-                    .get(*h)
-                    .ok()
-                    .and_then(|i| i.input.as_ref())
-                    .is_some_and(|i| s.geometries.get(i.geometry).is_err())
-            })
-            .map(|h| h.index)
-            .collect();
+        let dead = s.instances_of_dead_geometry();
         s.dead_instance_slots.extend(dead);
     }
     if !s.dead_instance_slots.is_empty() {
@@ -376,17 +363,20 @@ fn register_geometries(s: &mut State, ingestions: &[Ingestion<'_>], serial: u64)
     }
 }
 
-/// Step 5: BLAS builds and refits, at most `max_blas_build_count`, in queue order. Returns the
-/// fused ingestions whose refit waits for a later task.
+/// Step 5: BLAS builds and refits, at most `max_blas_build_count`, in queue order, into the
+/// pool space the plan reserved for them. Returns the fused ingestions whose refit waits for a
+/// later task.
 fn build_blases(
     frame: &mut Frame<'_>,
     s: &mut State,
-    build: Option<BvhBuildTask>,
+    plan: &FramePlan<'_>,
     mut deferred: HashMap<GeometryHandle, DeferredIngest>,
-) -> Result<HashMap<GeometryHandle, DeferredIngest>> {
-    let Some(build) = build else {
-        return Ok(deferred);
+) -> HashMap<GeometryHandle, DeferredIngest> {
+    let Some(build) = plan.build else {
+        return deferred;
     };
+    // The work the plan reserved for, in order (compared in debug builds).
+    let mut done_work = Vec::new();
     let serial = frame.serial;
     let mut headers = Uploads::default();
     let mut rec = frame.recorder("blas build");
@@ -402,7 +392,11 @@ fn build_blases(
             continue;
         };
         slot.last_used = serial;
-        match d.gpu.pending.take() {
+        let pending = d.gpu.pending.take();
+        if let Some(work) = pending {
+            done_work.push((h, work));
+        }
+        match pending {
             Some(PendingBvh::Build) => {
                 if let Some(old) = d.gpu.blas.take() {
                     let mut previous = GeometryGpu {
@@ -411,14 +405,19 @@ fn build_blases(
                     };
                     previous.free_after(&mut s.scene, serial);
                 }
+                // register_geometries gives every geometry it queues for a build its staged
+                // range, and only a build (of a static geometry) takes it away.
+                let staged = d
+                    .gpu
+                    .staged
+                    .expect("a geometry queued for a build is staged");
                 let header = s.scene.build_blas(
                     &mut rec,
-                    h.index,
+                    (h.index, staged),
                     &mut d.gpu,
                     d.allow_update,
                     d.strategy,
-                    &d.name,
-                )?;
+                );
                 headers.push(
                     &s.scene.geometry_table.buffer,
                     h.index as u64 * GEOMETRY_RECORD_SIZE,
@@ -442,8 +441,12 @@ fn build_blases(
         }
         done += 1;
     }
+    debug_assert_eq!(
+        done_work, plan.reserved.blas,
+        "the plan's prediction of step 5"
+    );
     frame.flush(s, headers);
-    Ok(deferred)
+    deferred
 }
 
 /// Ingestions deferred for refits that step 5 left to a later task, in ingestion order (as
@@ -465,14 +468,16 @@ fn record_deferred_ingestions(
     }
 }
 
-/// Step 6: the TLAS over every instance slot, in every task that changed something it depends
-/// on, unless a BvhBuildTask opts out with `build_tlas: false`.
-fn update_tlas(frame: &mut Frame<'_>, s: &mut State, build: Option<BvhBuildTask>) -> Result<()> {
-    let tlas_update = build.map_or(Some(TlasUpdate::Auto), |b| {
+/// Step 6: the TLAS over every instance slot (its size checked by the plan), in every task that
+/// changed something it depends on, unless a BvhBuildTask opts out with `build_tlas: false`.
+fn update_tlas(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) {
+    let tlas_update = plan.build.map_or(Some(TlasUpdate::Auto), |b| {
         b.build_tlas.then_some(b.tlas_update)
     });
-    let Some(mode) = tlas_update.filter(|_| s.tlas_rebuild || s.tlas_refit) else {
-        return Ok(());
+    let mode = tlas_update.filter(|_| s.tlas_rebuild || s.tlas_refit);
+    debug_assert_eq!(mode.is_some(), plan.reserved.tlas, "the plan's prediction");
+    let Some(mode) = mode else {
+        return;
     };
     let slots = s.instances.slot_count();
     let refit = !s.tlas_rebuild
@@ -493,10 +498,9 @@ fn update_tlas(frame: &mut Frame<'_>, s: &mut State, build: Option<BvhBuildTask>
     }
     frame.flush(s, records);
     let mut rec = frame.recorder("tlas build");
-    s.scene.update_tlas(&mut rec, slots, refit)?;
+    s.scene.update_tlas(&mut rec, slots, refit);
     s.tlas_rebuild = false;
     s.tlas_refit = false;
-    Ok(())
 }
 
 /// Instance bookkeeping (after the records are recorded): a new instance, or one given another
@@ -523,22 +527,22 @@ fn register_instances(s: &mut State, instances: &[&InstanceTask], serial: u64) {
 }
 
 /// The direct lighting cache: grows what a read-back asked for, and allocates the waiting
-/// instances whose BLAS is built.
-fn allocate_caches(frame: &mut Frame<'_>, s: &mut State) -> Result<()> {
+/// instances whose BLAS is built (headers and scratch checked by the plan).
+fn allocate_caches(frame: &mut Frame<'_>, s: &mut State) {
     s.cache
-        .prepare_task(frame.encoder, s.instances.slot_count(), frame.serial)?;
+        .prepare_task(frame.encoder, s.instances.slot_count(), frame.serial);
     let jobs = s.cache_jobs();
     if jobs.is_empty() {
-        return Ok(());
+        return;
     }
     let serial = frame.serial;
     let mut rec = frame.recorder("cache allocation");
     s.cache
-        .record_allocations(&mut rec, s.scene.triangles.buffer(), &jobs, serial)
+        .record_allocations(&mut rec, s.scene.triangles.buffer(), &jobs, serial);
 }
 
 /// Step 7: one render task, on its effect.
-fn record_render_task(frame: &mut Frame<'_>, s: &mut State, route: &Route<'_>) -> Result<()> {
+fn record_render_task(frame: &mut Frame<'_>, s: &mut State, route: &Route<'_>) {
     if let Route::RayBatch(t) = route {
         frame.ws.held.push(t.rays.clone());
         frame.ws.held.push(t.hits.clone());
@@ -561,5 +565,5 @@ fn record_render_task(frame: &mut Frame<'_>, s: &mut State, route: &Route<'_>) -
     };
     let queue = frame.queue;
     let mut rec = frame.recorder("");
-    s.effects.record(&mut rec, queue, inputs, *route)
+    s.effects.record(&mut rec, queue, inputs, route);
 }

@@ -109,6 +109,29 @@ impl State {
             .and_then(|g| g.data.as_ref()))
     }
 
+    /// Slots of the registered instances whose geometry was destroyed: they must not trace a
+    /// geometry that reuses its slot.
+    pub(super) fn instances_of_dead_geometry(&self) -> Vec<u32> {
+        self.instances
+            .handles()
+            .into_iter()
+            .filter(|h| {
+                self.instances
+                    .get(*h)
+                    .ok()
+                    .and_then(|i| i.input.as_ref())
+                    .is_some_and(|i| self.geometries.get(i.geometry).is_err())
+            })
+            .map(|h| h.index)
+            .collect()
+    }
+
+    /// The serial of the oldest task in flight (`u64::MAX` when none is): what no task older
+    /// than it reads is released at the start of the next record phase.
+    pub(super) fn oldest_in_flight(&self) -> u64 {
+        self.in_flight.keys().next().copied().unwrap_or(u64::MAX)
+    }
+
     /// Returns a completed task's staging to the pool and starts reading back its counters.
     pub(super) fn retire(&mut self, serial: u64, ws: WorkingSet) {
         self.cache.task_completed(serial);

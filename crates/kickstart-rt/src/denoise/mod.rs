@@ -37,9 +37,15 @@ enum Denoiser {
     Shadow,
 }
 
+/// A denoise task the plan resolved ([`route`]): its denoiser and its signals.
+pub(crate) struct DenoiseJob<'a> {
+    denoiser: Denoiser,
+    job: Job<'a>,
+}
+
 /// The denoiser of a task and the task's signals; `None` for other tasks.
-fn route(task: &RenderTask) -> Option<(Denoiser, Job<'_>)> {
-    Some(match task {
+pub(crate) fn route(task: &RenderTask) -> Option<DenoiseJob<'_>> {
+    let (denoiser, job) = match task {
         RenderTask::DenoiseSpecular(t) => (Denoiser::Radiance, radiance::specular(t)),
         RenderTask::DenoiseDiffuse(t) => (Denoiser::Radiance, radiance::diffuse(t)),
         RenderTask::DenoiseSpecularAndDiffuse(t) => {
@@ -51,16 +57,19 @@ fn route(task: &RenderTask) -> Option<(Denoiser, Job<'_>)> {
         RenderTask::DenoiseShadow(t) => (Denoiser::Shadow, shadow::shadow(t)),
         RenderTask::DenoiseMultiShadow(t) => (Denoiser::Shadow, shadow::multi_shadow(t)),
         _ => return None,
-    })
+    };
+    Some(DenoiseJob { denoiser, job })
 }
 
 /// Checks a denoise task against its context (the task's own fields are checked by
 /// `validate::render_task`): the context's signal type, and the viewport within its maximum
 /// size.
-pub(crate) fn check_task(task: &RenderTask, context: &DenoisingContextInput) -> Result<()> {
-    let Some((_, job)) = route(task) else {
-        return Ok(());
-    };
+pub(crate) fn check_task(
+    task: &RenderTask,
+    routed: &DenoiseJob<'_>,
+    context: &DenoisingContextInput,
+) -> Result<()> {
+    let job = &routed.job;
     let needed = job.signal_type;
     let name = task.name();
     if context.signal_type != needed {
@@ -165,12 +174,10 @@ impl Denoisers {
             .sum()
     }
 
-    /// Records a validated denoise task (`check_task` passed; its context has a history after
-    /// `sync`). Other tasks are ignored.
-    pub fn record(&mut self, rec: &mut Recorder<'_>, task: &RenderTask, serial: u64) {
-        let Some((denoiser, job)) = route(task) else {
-            return;
-        };
+    /// Records a validated denoise task ([`route`]d, `check_task` passed; its context has a
+    /// history after `sync`).
+    pub fn record(&mut self, rec: &mut Recorder<'_>, routed: &DenoiseJob<'_>, serial: u64) {
+        let (denoiser, job) = (routed.denoiser, &routed.job);
         let device = &self.device;
         let shared = self.shared.get_or_insert_with(|| Shared::new(device));
         let denoiser = match denoiser {
@@ -178,6 +185,6 @@ impl Denoisers {
             Denoiser::Occlusion => &mut self.occlusion,
             Denoiser::Shadow => &mut self.shadow,
         };
-        denoiser.record(rec, shared, &job, serial);
+        denoiser.record(rec, shared, job, serial);
     }
 }

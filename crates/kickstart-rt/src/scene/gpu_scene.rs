@@ -118,30 +118,36 @@ impl Table {
         self.buffer.size() / self.record
     }
 
-    fn ensure(
-        &mut self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        slots: u64,
-        max_bytes: u64,
-    ) -> Result<()> {
+    /// Refuses `slots` records past `max_bytes` (the plan's check before [`Table::ensure`]).
+    fn check(&self, slots: u64, max_bytes: u64) -> Result<()> {
         // The growth check counts records of the real size (the instance-id bug report's
         // buffer-growth bug compared against the wrong element size).
-        if self.slots() >= slots {
-            return Ok(());
-        }
-        let bytes = slots.next_power_of_two().max(64) * self.record;
-        if slots * self.record > max_bytes {
+        if self.slots() < slots && slots * self.record > max_bytes {
             return Err(Error::OutOfDeviceMemory {
                 what: self.label.to_string(),
                 bytes: slots * self.record,
                 limit: max_bytes,
             });
         }
+        Ok(())
+    }
+
+    /// Grows the table to `slots` records, which [`Table::check`] admitted.
+    fn ensure(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        slots: u64,
+        max_bytes: u64,
+    ) {
+        if self.slots() >= slots {
+            return;
+        }
+        debug_assert!(self.check(slots, max_bytes).is_ok(), "the plan checked it");
+        let bytes = slots.next_power_of_two().max(64) * self.record;
         let new = storage(device, self.label, bytes.min(max_bytes));
         encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
         self.buffer = new;
-        Ok(())
     }
 }
 
@@ -340,53 +346,52 @@ impl GpuScene {
         self.topologies.collect(oldest_in_flight);
     }
 
-    fn alloc(
+    /// The most bytes one pool or table may bind.
+    pub fn max_binding(&self) -> u64 {
+        self.max_binding
+    }
+
+    /// `len` elements of `pool`, which the plan reserved on a copy of its ledger
+    /// (`SceneReservation`, in the sibling module `reserve`): the same allocations in the same
+    /// order, so this one fits.
+    fn reserved(
         pool: &mut Pool,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         len: u32,
         max: u64,
-        what: &str,
-        element: u64,
-    ) -> Result<Range> {
+    ) -> Range {
         pool.alloc(device, encoder, len, max)
-            .ok_or_else(|| Error::OutOfDeviceMemory {
-                what: what.to_string(),
-                bytes: pool.used_bytes() + len as u64 * element,
-                limit: max,
-            })
+            .expect("the plan reserved this range (SceneReservation)")
     }
 
-    /// Space for `triangles` ingested triangles.
-    pub fn alloc_staged(
-        &mut self,
-        encoder: &mut wgpu::CommandEncoder,
-        triangles: u32,
-        name: &str,
-    ) -> Result<Range> {
-        Self::alloc(
-            &mut self.staged,
-            &self.device,
-            encoder,
-            triangles,
-            self.max_binding,
-            &format!("staged triangles of geometry `{name}`"),
-            TRIANGLE_BYTES,
-        )
+    /// Space for `triangles` ingested triangles (reserved by the plan).
+    pub fn alloc_staged(&mut self, encoder: &mut wgpu::CommandEncoder, triangles: u32) -> Range {
+        let max = self.max_binding;
+        Self::reserved(&mut self.staged, &self.device, encoder, triangles, max)
     }
 
-    /// Makes the geometry and instance tables hold the given slots.
+    /// Refuses table sizes past the device's limit (the plan's check of
+    /// [`GpuScene::ensure_tables`]).
+    pub fn check_tables(&self, geometry_slots: u32, instance_slots: u32) -> Result<()> {
+        let max = self.max_binding;
+        self.geometry_table.check(geometry_slots as u64, max)?;
+        self.instance_table.check(instance_slots as u64, max)
+    }
+
+    /// Makes the geometry and instance tables hold the given slots ([`GpuScene::check_tables`]
+    /// admitted them).
     pub fn ensure_tables(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         geometry_slots: u32,
         instance_slots: u32,
-    ) -> Result<()> {
+    ) {
         let max = self.max_binding;
         self.geometry_table
-            .ensure(&self.device, encoder, geometry_slots as u64, max)?;
+            .ensure(&self.device, encoder, geometry_slots as u64, max);
         self.instance_table
-            .ensure(&self.device, encoder, instance_slots as u64, max)
+            .ensure(&self.device, encoder, instance_slots as u64, max);
     }
 
     /// Makes the counters buffer hold `ingestions` pairs and zeroes them.
@@ -443,79 +448,40 @@ impl GpuScene {
         }
     }
 
-    /// Pool space for a BLAS of `n` triangles: its triangles and nodes, and with
-    /// `keep_for_refit` its sort order and refit topology.
+    /// Pool space for a BLAS of `n` triangles (reserved by the plan, in this order): its
+    /// triangles and nodes, and with `keep_for_refit` its sort order and refit topology.
     fn alloc_blas(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         n: u32,
         keep_for_refit: bool,
-        name: &str,
-    ) -> Result<BlasAlloc> {
-        let max = self.max_binding;
-        let tris = Self::alloc(
-            &mut self.triangles,
-            &self.device,
-            encoder,
-            n,
-            max,
-            &format!("BLAS triangles of geometry `{name}`"),
-            TRIANGLE_BYTES,
-        )?;
-        let nodes = Self::alloc(
-            &mut self.nodes,
-            &self.device,
-            encoder,
-            Lbvh::node_count(n),
-            max,
-            &format!("BLAS nodes of geometry `{name}`"),
-            NODE_BYTES,
-        )?;
-        let refit = if keep_for_refit {
-            let order = Self::alloc(
-                &mut self.orders,
-                &self.device,
-                encoder,
-                n,
-                max,
-                &format!("sort order of geometry `{name}`"),
-                4,
-            )?;
-            let topology = Self::alloc(
-                &mut self.topologies,
-                &self.device,
-                encoder,
-                Lbvh::topology_words(n),
-                max,
-                &format!("refit topology of geometry `{name}`"),
-                4,
-            )?;
-            Some((order, topology))
-        } else {
-            None
-        };
-        Ok((tris, nodes, refit))
+    ) -> BlasAlloc {
+        let (max, d) = (self.max_binding, &self.device);
+        let tris = Self::reserved(&mut self.triangles, d, encoder, n, max);
+        let nodes = Self::reserved(&mut self.nodes, d, encoder, Lbvh::node_count(n), max);
+        let refit = keep_for_refit.then(|| {
+            let order = Self::reserved(&mut self.orders, d, encoder, n, max);
+            let words = Lbvh::topology_words(n);
+            let topology = Self::reserved(&mut self.topologies, d, encoder, words, max);
+            (order, topology)
+        });
+        (tris, nodes, refit)
     }
 
-    /// Builds the BLAS of geometry slot `slot` from its staged triangles. Returns the geometry
-    /// table header (first 16 bytes of its record) to upload.
+    /// Builds the BLAS of geometry slot `slot` from its staged triangles `staged` into pool
+    /// space the plan reserved. Returns the geometry table header (first 16 bytes of its
+    /// record) to upload.
     pub fn build_blas(
         &mut self,
         rec: &mut Recorder<'_>,
-        slot: u32,
+        (slot, staged): (u32, Range),
         g: &mut GeometryGpu,
         keep_for_refit: bool,
         strategy: BuildStrategy,
-        name: &str,
-    ) -> Result<[u32; 4]> {
+    ) -> [u32; 4] {
         let n = g.triangles;
         let max_leaf = strategy.max_leaf();
-        let Some(staged) = g.staged else {
-            return Err(Error::ReadBack(format!(
-                "geometry `{name}` has no staged triangles to build from"
-            )));
-        };
-        let (tris, nodes, refit) = self.alloc_blas(rec.encoder, n, keep_for_refit, name)?;
+        let (tris, nodes, refit) = self.alloc_blas(rec.encoder, n, keep_for_refit);
         self.ensure_scratch(n);
         rec.scope = "blas build";
         let (prims, lbvh) = self.passes.build(&self.device);
@@ -611,12 +577,12 @@ impl GpuScene {
         // BLAS, so the traversal enters a ref whose stamp is not the geometry's current one at
         // the BLAS root instead (a TLAS update deferred past a rebuild; see instance_refs).
         self.blas_builds = self.blas_builds.wrapping_add(1);
-        Ok([
+        [
             nodes.start,
             tris.start,
             n,
             1 | ((self.blas_builds & 0x00ff_ffff) << 8),
-        ])
+        ]
     }
 
     /// Whether [`GpuScene::refit_blas`] can decode `triangles` triangles of these component
@@ -743,23 +709,39 @@ impl GpuScene {
         self.tlas.refits_since_rebuild
     }
 
-    /// Builds (`refit == false`) or refits the TLAS over instance slots `0..slots`.
-    pub fn update_tlas(&mut self, rec: &mut Recorder<'_>, slots: u32, refit: bool) -> Result<()> {
-        let refit = refit && !self.tlas_needs_rebuild(slots);
-        let per_instance = refs_per_instance(slots);
-        let refs = slots.saturating_mul(per_instance);
-        if refs > self.tlas.capacity {
+    /// The capacity (refs) and node buffer bytes the TLAS buffers grow to for `slots` instance
+    /// slots; `None` when they hold them already.
+    fn tlas_growth(&self, slots: u32) -> Option<(u32, u64)> {
+        let refs = slots.saturating_mul(refs_per_instance(slots));
+        (refs > self.tlas.capacity).then(|| {
             let cap = refs.next_power_of_two().max(64);
             // Node slots, then the ref table (one vec4 a ref; scene/traversal.wgsl finds it from the
             // buffer's length).
-            let need = cap as u64 * (NODE_BYTES + REF_BYTES);
-            if need > self.max_binding {
-                return Err(Error::OutOfDeviceMemory {
-                    what: "TLAS nodes".into(),
-                    bytes: need,
-                    limit: self.max_binding,
-                });
-            }
+            (cap, cap as u64 * (NODE_BYTES + REF_BYTES))
+        })
+    }
+
+    /// Refuses a TLAS over `slots` instance slots past the device's limit (the plan's check of
+    /// [`GpuScene::update_tlas`]).
+    pub fn check_tlas(&self, slots: u32) -> Result<()> {
+        match self.tlas_growth(slots) {
+            Some((_, need)) if need > self.max_binding => Err(Error::OutOfDeviceMemory {
+                what: "TLAS nodes".into(),
+                bytes: need,
+                limit: self.max_binding,
+            }),
+            _ => Ok(()),
+        }
+    }
+
+    /// Builds (`refit == false`) or refits the TLAS over instance slots `0..slots`
+    /// ([`GpuScene::check_tlas`] admitted them).
+    pub fn update_tlas(&mut self, rec: &mut Recorder<'_>, slots: u32, refit: bool) {
+        let refit = refit && !self.tlas_needs_rebuild(slots);
+        let per_instance = refs_per_instance(slots);
+        let refs = slots.saturating_mul(per_instance);
+        if let Some((cap, need)) = self.tlas_growth(slots) {
+            debug_assert!(need <= self.max_binding, "the plan checked the TLAS fits");
             let d = &self.device;
             self.tlas.nodes = storage(d, "kickstart-rt TLAS nodes", need);
             self.tlas.order = storage(d, "kickstart-rt TLAS order", cap as u64 * 4);
@@ -834,7 +816,6 @@ impl GpuScene {
             self.tlas.slots = slots;
             self.tlas.built = true;
         }
-        Ok(())
     }
 
     /// The scene as every tracing pass binds it.

@@ -6,5 +6,6 @@ pub(crate) mod ingest;
 pub(crate) mod lbvh;
 pub(crate) mod pool;
 pub(crate) mod prims;
+pub(crate) mod reserve;
 pub(crate) mod strategy;
 pub(crate) mod traversal;

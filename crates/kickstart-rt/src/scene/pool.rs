@@ -1,6 +1,11 @@
 //! Sub-allocation of one growable GPU buffer: the shared pools of DESIGN.md (one large buffer for
 //! many geometries instead of a buffer per mesh). Ranges are in elements of a fixed size; freed
 //! ranges return to the pool only once no in-flight GPU task can still read them.
+//!
+//! The bookkeeping ([`Ledger`]) is separate from the buffer so that `build_gpu_task`'s plan can
+//! run a task's allocations on a copy first: a task whose allocations would exceed the device's
+//! limit is refused before anything changes, and the record phase, repeating the same
+//! allocations on the real pool, cannot fail.
 
 use std::collections::BTreeMap;
 
@@ -11,12 +16,12 @@ pub(crate) struct Range {
     pub len: u32,
 }
 
-/// A growable GPU buffer carved into ranges (first fit, coalescing frees).
-pub(crate) struct Pool {
-    label: &'static str,
+/// The CPU side of a [`Pool`]: its capacity and which ranges are free, handed out or waiting to
+/// be released. Cloning it and allocating on the copy predicts exactly what the pool will hand
+/// out (and whether it grows) for the same calls in the same order.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Ledger {
     element_bytes: u64,
-    usage: wgpu::BufferUsages,
-    buffer: wgpu::Buffer,
     capacity: u32,
     /// Free ranges by start.
     free: BTreeMap<u32, u32>,
@@ -25,18 +30,11 @@ pub(crate) struct Pool {
     used: u64,
 }
 
-impl Pool {
-    /// An empty pool whose elements are `element_bytes` each.
-    pub fn new(device: &wgpu::Device, label: &'static str, element_bytes: u64) -> Self {
-        let usage = wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST;
-        let capacity = 16;
-        Pool {
-            label,
+impl Ledger {
+    /// An empty ledger of `capacity` elements of `element_bytes` each.
+    fn new(element_bytes: u64, capacity: u32) -> Self {
+        Ledger {
             element_bytes,
-            usage,
-            buffer: create(device, label, capacity as u64 * element_bytes, usage),
             capacity,
             free: BTreeMap::from([(0, capacity)]),
             pending: Vec::new(),
@@ -44,9 +42,9 @@ impl Pool {
         }
     }
 
-    /// The buffer (changes when the pool grows: bind it after allocating).
-    pub fn buffer(&self) -> &wgpu::Buffer {
-        &self.buffer
+    /// Elements the buffer holds.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
     }
 
     /// Bytes handed out or waiting to be released.
@@ -55,36 +53,23 @@ impl Pool {
             * self.element_bytes
     }
 
-    /// Bytes of the buffer not handed out.
-    pub fn reserve_bytes(&self) -> u64 {
-        self.buffer.size() - self.used_bytes().min(self.buffer.size())
-    }
-
-    /// `len` elements (at least 1), growing the buffer (copying its contents inside `encoder`)
-    /// when no free range fits. Fails only when the pool would exceed `max_bytes`.
-    pub fn alloc(
-        &mut self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        len: u32,
-        max_bytes: u64,
-    ) -> Option<Range> {
+    /// `len` elements (at least 1), first fit; when nothing fits, the capacity grows (doubles,
+    /// or more when one allocation needs it) and the new tail is free. `None` only when the
+    /// capacity would exceed `max_bytes`; then nothing changed.
+    pub fn alloc(&mut self, len: u32, max_bytes: u64) -> Option<Range> {
         let len = len.max(1);
         if let Some(r) = self.take_free(len) {
             return Some(r);
         }
-        // Grow: double, or more when one allocation needs it; the tail becomes free.
         let needed = self.capacity as u64 + len as u64;
-        let mut new_cap = (self.capacity as u64 * 2).max(needed);
         let max_elems = max_bytes / self.element_bytes;
         if needed > max_elems || needed > u32::MAX as u64 {
             return None;
         }
-        new_cap = new_cap.min(max_elems).min(u32::MAX as u64);
-        let new = create(device, self.label, new_cap * self.element_bytes, self.usage);
-        encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
-        // The old buffer stays alive while recorded commands use it (wgpu reference counts it).
-        self.buffer = new;
+        let new_cap = (self.capacity as u64 * 2)
+            .max(needed)
+            .min(max_elems)
+            .min(u32::MAX as u64);
         let old_cap = self.capacity;
         self.capacity = new_cap as u32;
         self.release(Range {
@@ -105,7 +90,7 @@ impl Pool {
     }
 
     /// Returns `r` once every GPU task up to serial `last_used` has completed (see
-    /// [`Pool::collect`]).
+    /// [`Ledger::collect`]).
     pub fn free_after(&mut self, r: Range, last_used: u64) {
         self.used -= r.len as u64;
         self.pending.push((last_used, r));
@@ -145,6 +130,85 @@ impl Pool {
     }
 }
 
+/// A growable GPU buffer carved into ranges (first fit, coalescing frees) by its [`Ledger`].
+pub(crate) struct Pool {
+    label: &'static str,
+    usage: wgpu::BufferUsages,
+    buffer: wgpu::Buffer,
+    ledger: Ledger,
+}
+
+impl Pool {
+    /// An empty pool whose elements are `element_bytes` each.
+    pub fn new(device: &wgpu::Device, label: &'static str, element_bytes: u64) -> Self {
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let ledger = Ledger::new(element_bytes, 16);
+        Pool {
+            label,
+            usage,
+            buffer: create(device, label, ledger.capacity as u64 * element_bytes, usage),
+            ledger,
+        }
+    }
+
+    /// The buffer (changes when the pool grows: bind it after allocating).
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// The bookkeeping, to simulate allocations on a copy of it.
+    pub fn ledger(&self) -> &Ledger {
+        &self.ledger
+    }
+
+    /// Bytes handed out or waiting to be released.
+    pub fn used_bytes(&self) -> u64 {
+        self.ledger.used_bytes()
+    }
+
+    /// Bytes of the buffer not handed out.
+    pub fn reserve_bytes(&self) -> u64 {
+        self.buffer.size() - self.used_bytes().min(self.buffer.size())
+    }
+
+    /// `len` elements (at least 1), growing the buffer (copying its contents inside `encoder`)
+    /// when no free range fits. Fails only when the pool would exceed `max_bytes`, exactly when
+    /// [`Ledger::alloc`] on a copy of [`Pool::ledger`] does.
+    pub fn alloc(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        len: u32,
+        max_bytes: u64,
+    ) -> Option<Range> {
+        let old_cap = self.ledger.capacity();
+        let r = self.ledger.alloc(len, max_bytes)?;
+        if self.ledger.capacity() != old_cap {
+            let bytes = self.ledger.capacity() as u64 * self.ledger.element_bytes;
+            let new = create(device, self.label, bytes, self.usage);
+            encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
+            // The old buffer stays alive while recorded commands use it (wgpu reference counts
+            // it).
+            self.buffer = new;
+        }
+        Some(r)
+    }
+
+    /// Returns `r` once every GPU task up to serial `last_used` has completed (see
+    /// [`Pool::collect`]).
+    pub fn free_after(&mut self, r: Range, last_used: u64) {
+        self.ledger.free_after(r, last_used);
+    }
+
+    /// Releases pending ranges whose last user is older than `oldest_in_flight`.
+    pub fn collect(&mut self, oldest_in_flight: u64) {
+        self.ledger.collect(oldest_in_flight);
+    }
+}
+
+/// A pool buffer of `size` bytes (at least 256).
 fn create(
     device: &wgpu::Device,
     label: &str,
@@ -191,6 +255,90 @@ mod tests {
         assert_eq!(p.buffer().size(), size);
         assert!(d.start + d.len <= size as u32 / 16);
         assert!(p.alloc(&g.device, &mut enc, 1 << 20, 1024).is_none());
+        g.queue.submit([enc.finish()]);
+    }
+
+    /// One call on a pool, as the plan and the record phase make them.
+    #[derive(Clone, Copy)]
+    enum Op {
+        Alloc(u32, u64),
+        /// Frees the `n`th range handed out so far, last used by task `serial`.
+        Free(usize, u64),
+        Collect(u64),
+    }
+
+    /// The plan simulates a task's allocations on a copy of the ledger; the record phase then
+    /// makes them on the pool. The copy must predict every range, every refusal, the growth and
+    /// the used bytes exactly, also after frees wait for in-flight tasks and are collected (else
+    /// the record phase could fail after the plan accepted the task).
+    #[test]
+    fn a_copy_of_the_ledger_predicts_the_pool_exactly() {
+        use Op::*;
+        let g = gpu();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let mut pool = Pool::new(&g.device, "test pool", 16);
+        let ops = [
+            Alloc(10, u64::MAX),
+            Alloc(100, u64::MAX), // grows past doubling
+            Alloc(5, u64::MAX),
+            Free(1, 7),
+            Alloc(50, u64::MAX), // the pending range is not reused yet: grows
+            Collect(7),          // task 7 may still be in flight
+            Alloc(60, u64::MAX),
+            Collect(8),
+            Alloc(90, u64::MAX), // reuses the collected hole
+            Free(0, 9),
+            Free(2, 9),
+            Collect(10),
+            Alloc(15, u64::MAX),
+            Alloc(1 << 20, 1 << 16), // past the limit: refused, nothing changes
+            Alloc(0, u64::MAX),      // at least one element
+            Alloc(100, 400 * 16),    // doubling would pass the limit: grows to it
+        ];
+        let mut predicted = pool.ledger().clone();
+        let (mut real, mut sim) = (Vec::new(), Vec::new());
+        for (i, op) in ops.into_iter().enumerate() {
+            match op {
+                Alloc(len, max) => {
+                    let size = pool.buffer().size();
+                    let r = pool.alloc(&g.device, &mut enc, len, max);
+                    let s = predicted.alloc(len, max);
+                    assert_eq!(r, s, "op {i}: the range");
+                    if r.is_none() {
+                        assert_eq!(
+                            pool.buffer().size(),
+                            size,
+                            "op {i}: a refusal grows nothing"
+                        );
+                    }
+                    real.push(r);
+                    sim.push(s);
+                }
+                Free(n, serial) => {
+                    pool.free_after(real[n].unwrap(), serial);
+                    predicted.free_after(sim[n].unwrap(), serial);
+                }
+                Collect(oldest) => {
+                    pool.collect(oldest);
+                    predicted.collect(oldest);
+                }
+            }
+            assert_eq!(pool.ledger(), &predicted, "op {i}: the bookkeeping");
+            assert_eq!(
+                pool.buffer().size(),
+                (predicted.capacity() as u64 * 16).max(256),
+                "op {i}: the buffer follows the predicted capacity"
+            );
+            assert_eq!(pool.used_bytes(), predicted.used_bytes(), "op {i}");
+        }
+        // The refusal and the growth limited to the limit happened (the sequence covers them).
+        let at = |start, len| Some(Range { start, len });
+        assert_eq!(real[1], at(10, 100));
+        assert_eq!(real[3], at(115, 50));
+        assert_eq!(real[5], at(10, 90));
+        assert_eq!(real[6], at(100, 15));
+        assert_eq!(real[7], None);
+        assert_eq!(predicted.capacity(), 400);
         g.queue.submit([enc.finish()]);
     }
 }

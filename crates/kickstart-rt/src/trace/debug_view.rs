@@ -64,6 +64,39 @@ fn debug_view_shader(format_name: &str) -> ReflectedShader {
     )
 }
 
+/// A primary-ray debug view the plan resolved: the view the shader writes (its code) over a
+/// viewport of `x, y, width, height` pixels that one dispatch covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct DebugView {
+    code: u32,
+    viewport: (u32, u32, u32, u32),
+    pixels: u32,
+}
+
+impl DebugView {
+    /// The view of `kind` over `viewport`: `None` for a kind this pass does not write (the
+    /// task is unsupported), an error for a viewport of more pixels than one dispatch covers.
+    pub fn new(kind: DebugOutputType, viewport: (u32, u32, u32, u32)) -> Result<Option<Self>> {
+        let code = match kind {
+            DebugOutputType::HitT => 1,
+            DebugOutputType::Barycentrics => 2,
+            DebugOutputType::RandomMeshColor => 3,
+            DebugOutputType::RandomTileColor => 4,
+            DebugOutputType::DirectLightingCache => 5,
+            _ => return Ok(None),
+        };
+        let (_, _, w, h) = viewport;
+        let Ok(pixels) = u32::try_from(w as u64 * h as u64) else {
+            return Err(Error::input(TASK, "viewport", viewport, "too many pixels"));
+        };
+        Ok(Some(DebugView {
+            code,
+            viewport,
+            pixels,
+        }))
+    }
+}
+
 /// The primary-ray debug view pass (`debug view`); pipelines are created per output format on
 /// first use.
 #[derive(Default)]
@@ -111,9 +144,9 @@ impl DebugViewPass {
         }
     }
 
-    /// Records the primary-ray view of `view` into `output` (a storage view of `format`) over
-    /// `viewport` = (x, y, width, height) pixels. `kind` is `HitT`, `Barycentrics` or
-    /// `RandomMeshColor`; primary rays see instances with `VISIBLE_IN_RT`.
+    /// Records the primary-ray debug view `debug` (resolved by the plan: [`DebugView::new`]) of
+    /// `view` into `output` (a storage view of `format`); primary rays see instances with
+    /// `VISIBLE_IN_RT`.
     #[allow(clippy::too_many_arguments)] // one argument per input of the view
     pub fn record(
         &mut self,
@@ -121,34 +154,15 @@ impl DebugViewPass {
         scene: &SceneBuffers<'_>,
         output: &wgpu::TextureView,
         format: wgpu::TextureFormat,
-        viewport: (u32, u32, u32, u32),
+        debug: DebugView,
         view: &ViewInfo,
-        kind: DebugOutputType,
         (cache, bilinear): (&crate::cache::DirectLightingCache, bool),
-    ) -> Result<()> {
-        let kind_code = match kind {
-            DebugOutputType::HitT => 1,
-            DebugOutputType::Barycentrics => 2,
-            DebugOutputType::RandomMeshColor => 3,
-            DebugOutputType::RandomTileColor => 4,
-            DebugOutputType::DirectLightingCache => 5,
-            other => {
-                return Err(Error::input(
-                    TASK,
-                    "debug_output_type",
-                    other,
-                    "the primary-ray view writes HitT, Barycentrics, RandomMeshColor, RandomTileColor or DirectLightingCache",
-                ))
-            }
-        };
-        let (x, y, w, h) = viewport;
-        let pixels = w as u64 * h as u64;
+    ) {
+        let (kind_code, pixels) = (debug.code, debug.pixels);
+        let (x, y, w, h) = debug.viewport;
         if pixels == 0 {
-            return Ok(());
+            return;
         }
-        let Ok(pixels) = u32::try_from(pixels) else {
-            return Err(Error::input(TASK, "viewport", viewport, "too many pixels"));
-        };
         let (clip_to_world, eye, ortho, z_origin, z_target) = camera(view);
         let params = rec.uniform(
             "kickstart-rt debug view params",
@@ -165,7 +179,10 @@ impl DebugViewPass {
             },
         );
         let device = rec.device;
-        let pipeline = self.pipeline(device, format)?;
+        // validate::render_task admits only WRITABLE_OUTPUT_FORMATS, which all have WGSL names.
+        let pipeline = self
+            .pipeline(device, format)
+            .expect("a validated output format has a pipeline");
         let scene_group = scene.bind_group(rec.device, &pipeline.pipeline);
         let io_group = pipeline.bind_resources(
             device,
@@ -188,7 +205,6 @@ impl DebugViewPass {
             &[&scene_group, &io_group, &cache_group],
             pixels.div_ceil(WORKGROUP_SIZE),
         );
-        Ok(())
     }
 }
 
@@ -286,17 +302,16 @@ mod tests {
         let mut pass = DebugViewPass::new();
         let cache = crate::cache::DirectLightingCache::new(&testing::gpu().device, 64);
         testing::run(|rec| {
+            let debug = DebugView::new(kind, (VX, VY, W, H)).unwrap().unwrap();
             pass.record(
                 rec,
                 &scene.buffers(),
                 &view_tex,
                 format,
-                (VX, VY, W, H),
+                debug,
                 v,
-                kind,
                 (&cache, true),
-            )
-            .unwrap();
+            );
         });
         let texel = format.block_copy_size(None).unwrap();
         let row = (TW * texel).div_ceil(256) * 256;
@@ -525,38 +540,15 @@ mod tests {
             assert!((c[0] - 5.0).abs() < 0.05, "{format:?}: {c:?}");
         }
         let g = testing::gpu();
-        let tex = g.device.create_texture(&wgpu::TextureDescriptor {
-            label: None,
-            size: wgpu::Extent3d {
-                width: 4,
-                height: 4,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::R32Float,
-            usage: wgpu::TextureUsages::STORAGE_BINDING,
-            view_formats: &[],
-        });
-        let tv = tex.create_view(&Default::default());
         let mut pass = DebugViewPass::new();
         // Every writable output format compiles (also on the minimal device).
         pass.prepare(&g.device);
         assert_eq!(pass.pipelines.len(), crate::WRITABLE_OUTPUT_FORMATS.len());
-        let cache = crate::cache::DirectLightingCache::new(&g.device, 64);
-        testing::run(|rec| {
-            let r = pass.record(
-                rec,
-                &scene.buffers(),
-                &tv,
-                wgpu::TextureFormat::R32Float,
-                (0, 0, 4, 4),
-                &v,
-                DebugOutputType::Normal,
-                (&cache, true),
-            );
-            assert!(r.is_err());
-        });
+        // A view this pass does not write is no debug view (the task is unsupported).
+        assert_eq!(
+            DebugView::new(DebugOutputType::Normal, (0, 0, 4, 4)),
+            Ok(None)
+        );
+        assert!(DebugView::new(DebugOutputType::HitT, (0, 0, 1 << 16, 1 << 16)).is_err());
     }
 }

@@ -126,7 +126,8 @@ struct Pipeline {
 }
 
 /// What one trace task asks of its pass.
-struct Job<'a> {
+#[derive(Clone, Copy)]
+pub(crate) struct Job<'a> {
     kind: TraceKind,
     common: &'a TraceTaskCommon,
     out0: &'a TextureInput,
@@ -173,18 +174,6 @@ impl TracePasses {
             library: ShaderLibrary::builtin(),
             pipelines: Vec::new(),
         }
-    }
-
-    /// Whether this module records `task` with its default output (debug views go elsewhere).
-    pub fn handles(task: &RenderTask) -> bool {
-        matches!(
-            task,
-            RenderTask::TraceAmbientOcclusion(_)
-                | RenderTask::TraceSpecular(_)
-                | RenderTask::TraceDiffuse(_)
-                | RenderTask::TraceShadow(_)
-                | RenderTask::TraceMultiShadow(_)
-        )
     }
 
     /// Creates the pipelines of every kind for the common output formats (Rgba16Float, and
@@ -253,16 +242,22 @@ impl TracePasses {
         Ok(self.pipelines.len() - 1)
     }
 
-    /// Records `task` (validated by the caller; [`Self::handles`] must be true). `cache` are the
+    /// Records a trace task the plan resolved ([`Self::job`], [`Self::check`]). `cache` are the
     /// lighting cache's sampling bindings by name (`DirectLightingCache::sample_resources`).
     pub fn record(
         &mut self,
         rec: &mut Recorder<'_>,
         scene: &SceneBuffers<'_>,
         cache: &[(&str, wgpu::BindingResource<'_>)],
-        task: &RenderTask,
-    ) -> Result<()> {
-        let job = match task {
+        job: &Job<'_>,
+    ) {
+        self.record_job(rec, scene, cache, job)
+    }
+
+    /// The job of `task`: which pass records it, with what; `None` for a task this module does
+    /// not record with its default output (debug views go elsewhere).
+    pub fn job(task: &RenderTask) -> Option<Job<'_>> {
+        Some(match task {
             RenderTask::TraceSpecular(t) => Job {
                 kind: TraceKind::Specular,
                 common: &t.common,
@@ -321,11 +316,24 @@ impl TracePasses {
                 demodulate: false,
                 disney: false,
             },
-            other => {
-                return Err(Error::Unsupported { task: other.name() });
-            }
-        };
-        self.record_job(rec, scene, cache, &job)
+            _ => return None,
+        })
+    }
+
+    /// Refuses a job whose viewport has more tiles than one dispatch can run (the plan's
+    /// check, so that recording it cannot fail).
+    pub fn check(job: &Job<'_>) -> Result<()> {
+        let vp = GBufferInputs::of_trace(job.common, job.out0).viewport;
+        let half = job.common.half_resolution_mode != HalfResolutionMode::Off;
+        match traced_tiles(vp.width, vp.height, half) {
+            Some(_) => Ok(()),
+            None => Err(Error::input(
+                job.kind.label(),
+                "common.viewport",
+                vp,
+                "too many pixels",
+            )),
+        }
     }
 
     fn record_job(
@@ -334,24 +342,21 @@ impl TracePasses {
         scene: &SceneBuffers<'_>,
         cache: &[(&str, wgpu::BindingResource<'_>)],
         job: &Job<'_>,
-    ) -> Result<()> {
+    ) {
         let c = job.common;
         let formats = (
             job.out0.texture().format(),
             job.out1.map(|t| t.texture().format()),
         );
-        let index = self.pipeline(rec.device, job.kind, formats)?;
+        // validate::render_task admits only WRITABLE_OUTPUT_FORMATS, which all have WGSL names.
+        let index = self
+            .pipeline(rec.device, job.kind, formats)
+            .expect("a validated output format has a pipeline");
         let inputs = GBufferInputs::of_trace(c, job.out0);
         let vp = inputs.viewport;
         let half = c.half_resolution_mode != HalfResolutionMode::Off;
-        let Some(tiles) = traced_tiles(vp.width, vp.height, half) else {
-            return Err(Error::input(
-                job.kind.label(),
-                "common.viewport",
-                vp,
-                "too many pixels",
-            ));
-        };
+        let tiles = traced_tiles(vp.width, vp.height, half)
+            .expect("the plan checked the viewport's tiles (TracePasses::check)");
         let params = trace_params(job);
         let gb_params = rec.uniform("kickstart-rt g-buffer params", &inputs.params());
         let tp = rec.uniform("kickstart-rt trace params", &params);
@@ -378,7 +383,6 @@ impl TracePasses {
             groups.push(&cache_group);
         }
         rec.dispatch(job.kind.label(), &p.pipeline, &groups, tiles);
-        Ok(())
     }
 }
 

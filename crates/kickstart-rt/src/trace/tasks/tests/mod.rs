@@ -135,7 +135,8 @@ fn run(scene: &TestScene, tasks: &[RenderTask]) {
     let mut passes = TracePasses::new(&g.device, &g.queue);
     testing::run(|rec| {
         for t in tasks {
-            passes.record(rec, &scene.buffers(), &[], t).unwrap();
+            let job = TracePasses::job(t).expect("a trace task");
+            passes.record(rec, &scene.buffers(), &[], &job);
         }
     });
 }

@@ -36,7 +36,8 @@ fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
     ];
     testing::run(|rec| {
         for t in tasks {
-            passes.record(rec, &scene.buffers(), &entries, t).unwrap();
+            let job = TracePasses::job(t).expect("a trace task");
+            passes.record(rec, &scene.buffers(), &entries, &job);
         }
     });
 }
