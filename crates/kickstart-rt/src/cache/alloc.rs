@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use super::{inject::Injector, transfer::Transferer, CacheParams};
 use crate::error::{Error, Result};
 use crate::gpu::buffers::storage;
-use crate::gpu::layout::{storage_entry, uniform_entry};
+use crate::gpu::reflect::{ReflectedLayout, ShaderReflection};
 use crate::gpu::Recorder;
 use crate::scene::pool::{Pool, Range};
 
@@ -90,7 +90,9 @@ struct AllocReadback {
 }
 
 struct Pipelines {
-    layout: wgpu::BindGroupLayout,
+    /// The passes' one group, as the shader declares it (one layout for the four entry points,
+    /// so one bind group serves them all).
+    layout: ReflectedLayout,
     insert: wgpu::ComputePipeline,
     count: wgpu::ComputePipeline,
     allocate: wgpu::ComputePipeline,
@@ -347,25 +349,19 @@ impl DirectLightingCache {
     fn pipelines(&mut self) -> &Pipelines {
         let device = &self.device;
         self.pipelines.get_or_insert_with(|| {
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("kickstart-rt cache allocation"),
-                entries: &[
-                    storage_entry(0, true),
-                    storage_entry(1, false),
-                    storage_entry(2, false),
-                    storage_entry(3, false),
-                    storage_entry(4, false),
-                    uniform_entry(5),
-                ],
-            });
+            let source = alloc_wgsl();
+            let reflection = ShaderReflection::new(&source)
+                .unwrap_or_else(|e| panic!("cache allocation: composed WGSL is invalid: {e}"));
+            let layout =
+                ReflectedLayout::new(device, "kickstart-rt cache allocation", &reflection, 0);
             let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("kickstart-rt cache allocation"),
-                bind_group_layouts: &[Some(&layout)],
+                bind_group_layouts: &[Some(layout.layout())],
                 immediate_size: 0,
             });
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("kickstart-rt cache allocation"),
-                source: wgpu::ShaderSource::Wgsl(alloc_wgsl().into()),
+                source: wgpu::ShaderSource::Wgsl(source.as_str().into()),
             });
             let make = |entry: &str| {
                 device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -568,18 +564,17 @@ impl DirectLightingCache {
                     pad: 0,
                 },
             );
-            let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("kickstart-rt cache allocation"),
-                layout: &layout,
-                entries: &[
-                    entry(0, triangles),
-                    entry(1, &meta),
-                    entry(2, &surfels),
-                    entry(3, &scratch),
-                    entry(4, &state),
-                    entry(5, &params),
+            let bg = layout.bind_group(
+                &self.device,
+                &[
+                    ("triangles", triangles.as_entire_binding()),
+                    ("meta_words", meta.as_entire_binding()),
+                    ("surfels", surfels.as_entire_binding()),
+                    ("scratch", scratch.as_entire_binding()),
+                    ("state", state.as_entire_binding()),
+                    ("params", params.as_entire_binding()),
                 ],
-            });
+            );
             let words = 4 + 13 * j.tri_count as u64 + 2 * hash_size as u64;
             rec.encoder.clear_buffer(&scratch, 0, Some(words * 4));
             let corners = (3 * j.tri_count).div_ceil(64);
@@ -734,13 +729,6 @@ fn upload(
         usage: wgpu::BufferUsages::COPY_SRC,
     });
     encoder.copy_buffer_to_buffer(&src, 0, dst, offset, words.len() as u64 * 4);
-}
-
-fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: buffer.as_entire_binding(),
-    }
 }
 
 /// Inserts a free range, merged with its neighbours.

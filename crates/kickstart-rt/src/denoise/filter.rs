@@ -21,7 +21,7 @@ use bytemuck::{Pod, Zeroable};
 use super::history::{self, Histories, History};
 use super::signal::{wgsl_format, Kind, SignalSet};
 use crate::gpu::buffers::placeholder_texture;
-use crate::gpu::layout::{float_texture_entry, storage_entry, uniform_entry};
+use crate::gpu::reflect::{ReflectedLayout, ShaderReflection};
 use crate::gpu::shader::compute_pipeline_with_layouts;
 use crate::gpu::Recorder;
 use crate::handles::DenoisingContextHandle;
@@ -135,46 +135,17 @@ impl<'a> Job<'a> {
     }
 }
 
-fn layout(
-    device: &wgpu::Device,
-    label: &str,
-    entries: &[wgpu::BindGroupLayoutEntry],
-) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some(label),
-        entries,
-    })
-}
-
-fn bind(
-    device: &wgpu::Device,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    resources: &[wgpu::BindingResource<'_>],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
-        .iter()
-        .enumerate()
-        .map(|(i, r)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: r.clone(),
-        })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &entries,
-    })
-}
-
 /// What every denoiser binds the same way: the bind group layouts of the passes and the
 /// placeholders bound where a pass has nothing (created on first use).
 pub(super) struct Shared {
     gbuffer: GBufferBinder,
-    temporal_inputs: wgpu::BindGroupLayout,
-    temporal_buffers: wgpu::BindGroupLayout,
-    atrous_params: wgpu::BindGroupLayout,
-    atrous_buffers: wgpu::BindGroupLayout,
+    /// Groups 1 and 2 of the temporal pass and 0 and 1 of the à-trous iterations, as the
+    /// shaders declare them (the same for every signal set: a single-signal pass leaves its
+    /// second signal's bindings unused).
+    temporal_inputs: ReflectedLayout,
+    temporal_buffers: ReflectedLayout,
+    atrous_params: ReflectedLayout,
+    atrous_buffers: ReflectedLayout,
     /// Bound where a pass has no texture (no motion vectors, one signal).
     placeholder_texture: wgpu::TextureView,
     /// Bound where a pass has no second signal: one to read, one to write (a dispatch may not
@@ -185,44 +156,24 @@ pub(super) struct Shared {
 impl Shared {
     pub fn new(device: &wgpu::Device) -> Self {
         let gbuffer = GBufferBinder::new(device);
-        let temporal_inputs = layout(
-            device,
-            "kickstart-rt denoise temporal inputs",
-            &[
-                uniform_entry(0),
-                float_texture_entry(1),
-                float_texture_entry(2),
-                float_texture_entry(3),
-            ],
-        );
-        let temporal_buffers = layout(
+        // Any signal set declares the same bindings; a one-signal radiance set stands for all.
+        let set = SignalSet::of(crate::tasks::SignalType::Diffuse);
+        let temporal = ShaderReflection::new(&temporal_wgsl(set))
+            .unwrap_or_else(|e| panic!("denoise temporal: composed WGSL is invalid: {e}"));
+        let atrous = ShaderReflection::new(&atrous_wgsl(set, None))
+            .unwrap_or_else(|e| panic!("denoise a-trous: composed WGSL is invalid: {e}"));
+        let temporal_inputs =
+            ReflectedLayout::new(device, "kickstart-rt denoise temporal inputs", &temporal, 1);
+        let temporal_buffers = ReflectedLayout::new(
             device,
             "kickstart-rt denoise temporal buffers",
-            &[
-                storage_entry(0, true),
-                storage_entry(1, false),
-                storage_entry(2, true),
-                storage_entry(3, true),
-                storage_entry(4, false),
-                storage_entry(5, false),
-            ],
+            &temporal,
+            2,
         );
-        let atrous_params = layout(
-            device,
-            "kickstart-rt denoise a-trous params",
-            &[uniform_entry(0), uniform_entry(1)],
-        );
-        let atrous_buffers = layout(
-            device,
-            "kickstart-rt denoise a-trous buffers",
-            &[
-                storage_entry(0, true),
-                storage_entry(1, true),
-                storage_entry(2, true),
-                storage_entry(3, false),
-                storage_entry(4, false),
-            ],
-        );
+        let atrous_params =
+            ReflectedLayout::new(device, "kickstart-rt denoise a-trous params", &atrous, 0);
+        let atrous_buffers =
+            ReflectedLayout::new(device, "kickstart-rt denoise a-trous buffers", &atrous, 1);
         let placeholder_texture = placeholder_texture(device, "kickstart-rt denoise placeholder");
         let placeholder_buffer = || {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -263,7 +214,7 @@ struct SetPipelines {
     /// layout (group 2) and the pipeline.
     last: Vec<(
         Vec<wgpu::TextureFormat>,
-        wgpu::BindGroupLayout,
+        ReflectedLayout,
         wgpu::ComputePipeline,
     )>,
 }
@@ -273,7 +224,7 @@ struct SetPipelines {
 struct Chain {
     signal: usize,
     atrous: wgpu::ComputePipeline,
-    out_layout: wgpu::BindGroupLayout,
+    out_layout: ReflectedLayout,
     last: wgpu::ComputePipeline,
 }
 
@@ -294,8 +245,8 @@ impl Pipelines {
                 "main",
                 &[
                     shared.gbuffer.layout(),
-                    &shared.temporal_inputs,
-                    &shared.temporal_buffers,
+                    shared.temporal_inputs.layout(),
+                    shared.temporal_buffers.layout(),
                 ],
             ),
             atrous: compute_pipeline_with_layouts(
@@ -303,7 +254,10 @@ impl Pipelines {
                 "kickstart-rt denoise a-trous",
                 &atrous_wgsl(set, None),
                 "main",
-                &[&shared.atrous_params, &shared.atrous_buffers],
+                &[
+                    shared.atrous_params.layout(),
+                    shared.atrous_buffers.layout(),
+                ],
             ),
             last: Vec::new(),
         })
@@ -317,7 +271,7 @@ impl Pipelines {
         shared: &Shared,
         set: SignalSet,
         formats: &[wgpu::TextureFormat],
-    ) -> Option<(wgpu::BindGroupLayout, wgpu::ComputePipeline)> {
+    ) -> Option<(ReflectedLayout, wgpu::ComputePipeline)> {
         if formats.iter().any(|f| wgsl_format(*f).is_none()) {
             return None;
         }
@@ -325,27 +279,21 @@ impl Pipelines {
         if let Some((_, l, p)) = sp.last.iter().find(|(f, _, _)| f == formats) {
             return Some((l.clone(), p.clone()));
         }
-        let entries: Vec<wgpu::BindGroupLayoutEntry> = formats
-            .iter()
-            .enumerate()
-            .map(|(k, format)| wgpu::BindGroupLayoutEntry {
-                binding: k as u32,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: *format,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                },
-                count: None,
-            })
-            .collect();
-        let out_layout = layout(device, "kickstart-rt denoise output", &entries);
+        let source = atrous_wgsl(set, Some(formats));
+        let reflection = ShaderReflection::new(&source)
+            .unwrap_or_else(|e| panic!("denoise a-trous (last): composed WGSL is invalid: {e}"));
+        let out_layout =
+            ReflectedLayout::new(device, "kickstart-rt denoise output", &reflection, 2);
         let pipeline = compute_pipeline_with_layouts(
             device,
             "kickstart-rt denoise a-trous (last, output)",
-            &atrous_wgsl(set, Some(formats)),
+            &source,
             "main",
-            &[&shared.atrous_params, &shared.atrous_buffers, &out_layout],
+            &[
+                shared.atrous_params.layout(),
+                shared.atrous_buffers.layout(),
+                out_layout.layout(),
+            ],
         );
         sp.last
             .push((formats.to_vec(), out_layout.clone(), pipeline.clone()));
@@ -599,30 +547,27 @@ fn record_temporal(
     let g0 = shared
         .gbuffer
         .bind_group(device, inputs.gbuffer_params, inputs.gbuffer);
-    let g1 = bind(
+    let view = wgpu::BindingResource::TextureView;
+    let g1 = shared.temporal_inputs.bind_group(
         device,
-        "kickstart-rt denoise temporal inputs",
-        &shared.temporal_inputs,
         &[
-            frame.params.as_entire_binding(),
-            wgpu::BindingResource::TextureView(inputs.motion),
-            wgpu::BindingResource::TextureView(job.inputs[0]),
-            wgpu::BindingResource::TextureView(&input1),
+            ("dp", frame.params.as_entire_binding()),
+            ("dn_motion", view(inputs.motion)),
+            ("dn_input0", view(job.inputs[0])),
+            ("dn_input1", view(&input1)),
         ],
     );
     let hist_prev1 = second(&h.history[prv], false);
     let hist_cur1 = second(&h.history[cur], true);
-    let g2 = bind(
+    let g2 = shared.temporal_buffers.bind_group(
         device,
-        "kickstart-rt denoise temporal buffers",
-        &shared.temporal_buffers,
         &[
-            h.guides[prv].as_entire_binding(),
-            h.guides[cur].as_entire_binding(),
-            h.history[prv][0].as_entire_binding(),
-            hist_prev1.as_entire_binding(),
-            h.history[cur][0].as_entire_binding(),
-            hist_cur1.as_entire_binding(),
+            ("guide_prev", h.guides[prv].as_entire_binding()),
+            ("guide_cur", h.guides[cur].as_entire_binding()),
+            ("hist_prev0", h.history[prv][0].as_entire_binding()),
+            ("hist_prev1", hist_prev1.as_entire_binding()),
+            ("hist_cur0", h.history[cur][0].as_entire_binding()),
+            ("hist_cur1", hist_cur1.as_entire_binding()),
         ],
     );
     rec.dispatch_2d("denoise temporal", temporal, &[&g0, &g1, &g2], frame.groups);
@@ -642,11 +587,12 @@ fn record_atrous(
     let device = rec.device;
     let s = chain.signal;
     let [read_placeholder, write_placeholder] = &shared.placeholder_buffers;
-    let outputs = bind(
+    let outputs = chain.out_layout.bind_group(
         device,
-        "kickstart-rt denoise output",
-        &chain.out_layout,
-        &[wgpu::BindingResource::TextureView(job.outputs[s])],
+        &[(
+            "dn_out0",
+            wgpu::BindingResource::TextureView(job.outputs[s]),
+        )],
     );
     let mut src = h.history[frame.cur][s].clone();
     for it in 0..iterations {
@@ -659,22 +605,21 @@ fn record_atrous(
                 pad: [0; 2],
             },
         );
-        let a0 = bind(
+        let a0 = shared.atrous_params.bind_group(
             device,
-            "kickstart-rt denoise a-trous params",
-            &shared.atrous_params,
-            &[frame.params.as_entire_binding(), step.as_entire_binding()],
-        );
-        let a1 = bind(
-            device,
-            "kickstart-rt denoise a-trous buffers",
-            &shared.atrous_buffers,
             &[
-                h.guides[frame.cur].as_entire_binding(),
-                src.as_entire_binding(),
-                read_placeholder.as_entire_binding(),
-                dst.as_entire_binding(),
-                write_placeholder.as_entire_binding(),
+                ("dp", frame.params.as_entire_binding()),
+                ("ap", step.as_entire_binding()),
+            ],
+        );
+        let a1 = shared.atrous_buffers.bind_group(
+            device,
+            &[
+                ("guide", h.guides[frame.cur].as_entire_binding()),
+                ("src0", src.as_entire_binding()),
+                ("src1", read_placeholder.as_entire_binding()),
+                ("dst0", dst.as_entire_binding()),
+                ("dst1", write_placeholder.as_entire_binding()),
             ],
         );
         if it + 1 == iterations {

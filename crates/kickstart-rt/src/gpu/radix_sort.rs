@@ -305,6 +305,32 @@ mod tests {
     use super::*;
     use crate::gpu::testing;
 
+    /// Both shaders composed and validated with naga without a device; the uniform and the
+    /// constants the Rust side mirrors checked against them.
+    #[test]
+    fn the_shaders_validate_and_match_the_rust_side() {
+        use crate::gpu::compose::compose;
+        use crate::gpu::wgsl_check::{assert_wgsl_layout, const_u32, validate};
+        let sort = validate("gpu/radix_sort", &compose(&["gpu/radix_sort"], &[]));
+        assert_wgsl_layout!(
+            sort,
+            "Params",
+            Params {
+                count,
+                shift,
+                bits,
+                nblocks
+            }
+        );
+        assert_eq!(const_u32(&sort, "RADIX"), RADIX);
+        assert_eq!(const_u32(&sort, "SUMMING_MAX_BLOCKS"), SUMMING_MAX_BLOCKS);
+        let small = validate(
+            "gpu/radix_sort_small",
+            &compose(&["gpu/radix_sort_small"], &[]),
+        );
+        assert_eq!(const_u32(&small, "SMALL_N"), SMALL_SORT_MAX);
+    }
+
     /// Deterministic xorshift generator (tests need no `rand`).
     struct Rng(u64);
     impl Rng {

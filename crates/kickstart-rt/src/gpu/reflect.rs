@@ -229,6 +229,7 @@ pub(crate) fn named_entries<'a>(
 /// An explicit bind group layout made from the bindings a shader declares in one group, and
 /// bind groups for it by the shader's names: for passes whose layouts are shared or explicit
 /// (the traversal's own SPIR-V needs them), so no Rust table repeats the shader's bindings.
+#[derive(Clone)]
 pub(crate) struct ReflectedLayout {
     /// The layout and its binding numbers.
     pub layout: super::layout::BoundLayout,
@@ -280,6 +281,11 @@ impl ReflectedLayout {
             bindings,
             label,
         }
+    }
+
+    /// The bind group layout.
+    pub fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layout.layout
     }
 
     /// This layout as a pipeline's group.

@@ -259,6 +259,30 @@ mod tests {
     use crate::gpu::testing::{buffer, buffer_with, gpu, read_back, run, Rng};
     use glam::{Affine3A, Quat, Vec3};
 
+    /// The pass composed and validated with naga without a device; its uniform, its component
+    /// rows and its workgroup size checked against the WGSL.
+    #[test]
+    fn the_shader_validates_and_matches_the_rust_side() {
+        use crate::gpu::compose::compose;
+        use crate::gpu::wgsl_check::{assert_wgsl_layout, const_u32, storage_stride, validate};
+        let module = validate("scene/ingest", &compose(&["scene/ingest"], &[]));
+        assert_wgsl_layout!(
+            module,
+            "Params",
+            Params {
+                tri_total,
+                component_count,
+                counter_base,
+                pad
+            }
+        );
+        assert_eq!(
+            storage_stride(&module, "components") as usize,
+            ROW_WORDS * 4
+        );
+        assert_eq!(const_u32(&module, "WG"), WORKGROUP);
+    }
+
     /// Sentinel of untouched output words.
     const SENTINEL: u32 = 0xdead_beef;
 

@@ -200,6 +200,19 @@ mod tests {
     use crate::gpu::testing::{buffer_with, gpu, read_back, run, Rng};
     use glam::{Affine3A, Quat, Vec3};
 
+    /// The passes composed and validated with naga without a device; the constants the Rust side
+    /// sizes dispatches and the TLAS by checked against the WGSL.
+    #[test]
+    fn the_shader_validates_and_matches_the_rust_side() {
+        use crate::gpu::compose::compose;
+        use crate::gpu::wgsl_check::{const_u32, validate};
+        let max_refs = MAX_REFS_PER_INSTANCE.to_string();
+        let source = compose(&["scene/prims"], &[("MAX_REFS", &max_refs)]);
+        let module = validate("scene/prims", &source);
+        assert_eq!(const_u32(&module, "WG"), WORKGROUP);
+        assert_eq!(const_u32(&module, "MAX_REFS"), MAX_REFS_PER_INSTANCE);
+    }
+
     /// Sentinel of untouched output words.
     const SENTINEL: u32 = 0xdead_beef;
 

@@ -14,6 +14,48 @@ mod collapse;
 mod hploc;
 mod range_refit;
 
+/// The builder's shader (the clustered climb and the LBVH it imports) composed and validated with
+/// naga without a device; its uniform and the constants the Rust side mirrors checked against it.
+#[test]
+fn the_shader_validates_and_matches_the_rust_side() {
+    use crate::gpu::compose::compose;
+    use crate::gpu::wgsl_check::{assert_wgsl_layout, const_u32, validate};
+    let module = validate("scene/lbvh/hploc", &compose(&["scene/lbvh/hploc"], &[]));
+    assert_wgsl_layout!(
+        module,
+        "Params",
+        Params {
+            count,
+            aabb_base,
+            node_base,
+            order_base,
+            topo_base,
+            bounds_base,
+            flags,
+            max_leaf,
+            key_bits,
+            centroid_base,
+            pad => "pad1",
+            tri_src_base,
+            tri_dst_base,
+            ingest_row_count,
+            ingest_counter,
+        }
+    );
+    assert_eq!(const_u32(&module, "WG"), WORKGROUP);
+    assert_eq!(const_u32(&module, "HP_WG"), HPLOC_WORKGROUP);
+    assert_eq!(
+        const_u32(&module, "FLAG_PRIMITIVE_REFS"),
+        FLAG_PRIMITIVE_REFS
+    );
+    assert_eq!(const_u32(&module, "FLAG_BOUNDS_OUT"), FLAG_BOUNDS_OUT);
+    assert_eq!(const_u32(&module, "FLAG_SORTED_BOXES"), FLAG_SORTED_BOXES);
+    assert_eq!(
+        const_u32(&module, "REFIT_INGEST_ROWS") as usize,
+        REFIT_INGEST_ROWS
+    );
+}
+
 /// A primitive box (min, max) as the AABB input holds it.
 type Aabb = ([f32; 3], [f32; 3]);
 
