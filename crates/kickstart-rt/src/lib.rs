@@ -1,8 +1,4 @@
-//! # kickstart-rt
-//!
-//! Ray-traced reflections, diffuse GI, ambient occlusion and shadows for game engines on wgpu,
-//! from the G-buffer the engine already renders — on any GPU wgpu runs on (all ray tracing is
-//! WGSL compute; no ray-tracing hardware needed).
+#![doc = include_str!("../README.md")]
 //!
 //! ## Execution model
 //!
@@ -14,32 +10,6 @@
 //!    and copies into the engine's `CommandEncoder`. It never submits and never waits.
 //! 4. After the GPU has run the submission, [`ExecuteContext::mark_gpu_task_completed`].
 //!    [`InitSettings::supported_working_sets`] bounds how many built tasks may be outstanding.
-//!
-//! ```no_run
-//! # fn frame(device: &wgpu::Device, queue: &wgpu::Queue, vertices: wgpu::Buffer) -> kickstart_rt::Result<()> {
-//! use kickstart_rt::*;
-//! let ctx = ExecuteContext::new(device, queue, InitSettings::default())?;
-//! let geometry = ctx.create_geometry_handle();
-//! let mut container = ctx.create_task_container();
-//! container.schedule_bvh_task(GeometryTask {
-//!     operation: TaskOperation::Register,
-//!     handle: geometry,
-//!     input: GeometryInput {
-//!         name: "triangle".into(),
-//!         components: vec![GeometryComponent {
-//!             vertex_buffer: VertexBufferInput { buffer: vertices, offset: 0, stride: 12, count: 3, format: VertexFormat::Float32x3 },
-//!             index_buffer: None, transform: None, index_range: None,
-//!         }],
-//!         ..Default::default()
-//!     },
-//! });
-//! let mut encoder = device.create_command_encoder(&Default::default());
-//! let task = ctx.build_gpu_task(container, &mut encoder)?;
-//! queue.submit([encoder.finish()]);
-//! // …once the GPU has executed it (a fence, or queue.on_submitted_work_done):
-//! ctx.mark_gpu_task_completed(task)?;
-//! # Ok(()) }
-//! ```
 //!
 //! ## Status of this version
 //!

@@ -10,12 +10,12 @@ use crate::version::Version;
 /// slot index, 25 inclusion mask, 26 flags (bit 0: live and participating in the TLAS).
 pub const INSTANCE_RECORD_SIZE: u64 = INSTANCE_RECORD_BYTES;
 
-/// Settings of [`ExecuteContext::new`].
+/// Settings of [`ExecuteContext::new`](crate::ExecuteContext::new).
 #[derive(Clone)]
 pub struct InitSettings {
     /// GPU tasks that may be built and not yet marked complete at once (the reference's
     /// `supportedWorkingsets`): typically tasks per frame × frames in flight. Building one more
-    /// returns [`Error::WorkingSetsExhausted`] at once. ≥ 1; default 4.
+    /// returns [`Error::WorkingSetsExhausted`](crate::Error::WorkingSetsExhausted) at once. ≥ 1; default 4.
     pub supported_working_sets: u32,
     /// The SDK version the application was built against; leave at the default.
     pub version: Version,
@@ -24,7 +24,7 @@ pub struct InitSettings {
     /// Least severe message delivered.
     pub min_log_severity: Severity,
     /// Measure every SDK pass with GPU timestamp queries (read them with
-    /// [`ExecuteContext::wait_for_gpu_timings`]). Needs `Features::TIMESTAMP_QUERY` on the
+    /// [`ExecuteContext::wait_for_gpu_timings`](crate::ExecuteContext::wait_for_gpu_timings)). Needs `Features::TIMESTAMP_QUERY` on the
     /// device; without it a warning is logged and timing stays off. Default off.
     pub gpu_timing: bool,
     /// Initial size of the direct lighting cache's surfel pool, bytes (16 per surfel; default
