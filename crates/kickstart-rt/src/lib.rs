@@ -153,6 +153,7 @@ pub use device::{
     optional_features, optional_features_supported, required_features, required_limits,
 };
 pub use error::{Error, HandleKind, Result};
+pub use gpu::compose::{compose_shader, shader_modules, ComposeError};
 pub use handles::{DenoisingContextHandle, GeometryHandle, GpuTaskHandle, InstanceHandle};
 pub use logging::{LogCallback, Severity};
 pub use tasks::*;

@@ -3,18 +3,22 @@
 //! `VK_KHR_pipeline_executable_properties` — for when no profiler reads Vulkan shaders.
 //!
 //! ```text
-//! shader-stats [--entry NAME]... [--device N] [--out DIR] [--unchecked] FILE.wgsl [FILE.wgsl ...]
+//! shader-stats [--entry NAME]... [--param NAME=VALUE]... [--device N] [--out DIR] [--unchecked]
+//!     SHADER [SHADER ...]
 //! ```
 //!
-//! The files are concatenated with `"\n"` in the order given, as the SDK assembles a pass, e.g.
-//! the ray batch pass:
+//! A SHADER ending in `.wgsl` is a file read as it is; any other is a module of the SDK (its path
+//! under `crates/kickstart-rt/shaders/` without `.wgsl`), composed with its imports and the
+//! `--param` values exactly as the SDK composes its passes (`kickstart_rt::compose_shader`).
+//! Files come first, then the composed modules, joined with `"\n"`. E.g. the ray batch pass and
+//! the LBVH's climb:
 //!
 //! ```sh
+//! cargo run --release -p kickstart-rt-peer-vulkan --bin shader-stats -- trace/rays
 //! cargo run --release -p kickstart-rt-peer-vulkan --bin shader-stats -- \
-//!     crates/kickstart-rt/shaders/scene_types.wgsl crates/kickstart-rt/shaders/traverse.wgsl \
-//!     crates/kickstart-rt/shaders/trace_rays.wgsl
+//!     scene/lbvh/hploc --entry lbvh_climb --out out/stats
 //! cargo run --release -p kickstart-rt-peer-vulkan --bin shader-stats -- \
-//!     crates/kickstart-rt/shaders/lbvh.wgsl --entry lbvh_climb --out out/stats
+//!     trace/ao --param GBUFFER_GROUP=1 --param OUTPUT0_FORMAT=rgba16float
 //! ```
 //!
 //! The WGSL is parsed and validated by naga 30 and written as SPIR-V the way wgpu 30's Vulkan
@@ -61,13 +65,16 @@ use compile::{EntryModule, Source};
 use vulkan::{api_string, default_device, Compiled, StatValue, Vk};
 
 const USAGE: &str = "\
-usage: shader-stats [--entry NAME]... [--device N] [--out DIR] [--unchecked] FILE.wgsl [FILE.wgsl ...]
+usage: shader-stats [--entry NAME]... [--param NAME=VALUE]... [--device N] [--out DIR] [--unchecked]
+                    SHADER [SHADER ...]
 
-Compiles the WGSL compute entry points of FILE.wgsl... (concatenated with \"\\n\" in this order)
-to SPIR-V as wgpu 30 does, creates Vulkan compute pipelines with statistics capture, and prints
+Compiles the WGSL compute entry points of the SHADERs (a SHADER ending in .wgsl is a file; any
+other is a module of the SDK, e.g. trace/rays, composed with its imports and the --param values
+as the SDK does; files first, joined with \"\\n\") to SPIR-V as wgpu 30 does, creates Vulkan compute pipelines with statistics capture, and prints
 what the driver reports through VK_KHR_pipeline_executable_properties.
 
   --entry NAME   only this compute entry point (repeatable; default: all of them)
+  --param N=V    a parameter of the SDK's modules (repeatable), e.g. OUTPUT0_FORMAT=r32float
   --device N     the Vulkan physical device of index N (default: the first discrete or
                  integrated GPU, else device 0)
   --out DIR      write internal representations (<entry>-<n>-<name>.txt, .bin when binary)
@@ -83,6 +90,8 @@ struct Args {
     device: Option<usize>,
     out: Option<PathBuf>,
     unchecked: bool,
+    /// `--param NAME=VALUE` of the composed modules.
+    params: Vec<(String, String)>,
     files: Vec<String>,
 }
 
@@ -124,12 +133,19 @@ fn parse_args(argv: &[String]) -> Result<Args, Result<(), String>> {
             }
             "--out" => args.out = Some(value(&mut i, flag, inline).map_err(Err)?.into()),
             "--unchecked" if inline.is_none() => args.unchecked = true,
+            "--param" => {
+                let v = value(&mut i, flag, inline).map_err(Err)?;
+                let Some((name, value)) = v.split_once('=') else {
+                    return Err(Err(format!("--param wants NAME=VALUE, not `{v}`")));
+                };
+                args.params.push((name.to_string(), value.to_string()));
+            }
             _ => return Err(Err(format!("unknown option `{a}`"))),
         }
         i += 1;
     }
     if args.files.is_empty() {
-        return Err(Err("no WGSL file given".to_string()));
+        return Err(Err("no WGSL file or module given".to_string()));
     }
     Ok(args)
 }
@@ -206,9 +222,22 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> Result<(), Failure> {
     // WGSL → naga IR, entry points and layouts, all before Vulkan: shader errors need no GPU.
     let mut parts = Vec::with_capacity(args.files.len());
-    for f in &args.files {
+    let (files, modules): (Vec<&String>, Vec<&String>) =
+        args.files.iter().partition(|f| f.ends_with(".wgsl"));
+    for f in files {
         let text = std::fs::read_to_string(f).map_err(|e| format!("cannot read {f}: {e}"))?;
         parts.push((f.clone(), text));
+    }
+    if !modules.is_empty() {
+        let roots: Vec<&str> = modules.iter().map(|m| m.as_str()).collect();
+        let params: Vec<(&str, &str)> = args
+            .params
+            .iter()
+            .map(|(n, v)| (n.as_str(), v.as_str()))
+            .collect();
+        let text = kickstart_rt::compose_shader(&roots, &params)
+            .map_err(|e| format!("{}: {e}", roots.join(" + ")))?;
+        parts.push((roots.join(" + "), text));
     }
     let source = Source::concat(&parts);
     let (module, info) = compile::parse_and_validate(&source)
@@ -500,6 +529,9 @@ mod tests {
             "1",
             "--out=o",
             "--unchecked",
+            "--param",
+            "A=1",
+            "--param=B=rgba16float",
             "b.wgsl",
         ]))
         .expect("valid");
@@ -510,6 +542,7 @@ mod tests {
                 device: Some(1),
                 out: Some("o".into()),
                 unchecked: true,
+                params: vec![("A".into(), "1".into()), ("B".into(), "rgba16float".into())],
                 files: argv(&["a.wgsl", "b.wgsl"]),
             }
         );

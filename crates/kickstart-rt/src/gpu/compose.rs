@@ -20,9 +20,9 @@
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 
-/// Why a shader could not be composed.
+/// Why a shader could not be composed ([`compose_shader`]).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub(crate) enum ComposeError {
+pub enum ComposeError {
     /// A root or an import names no module of the library.
     #[error("no shader module `{module}` (imported by `{by}`)")]
     UnknownModule {
@@ -98,7 +98,6 @@ impl ShaderLibrary {
     }
 
     /// The names of every module.
-    #[cfg_attr(not(test), allow(dead_code))]
     pub fn names(&self) -> impl Iterator<Item = &'static str> + '_ {
         self.modules.keys().copied()
     }
@@ -251,6 +250,27 @@ fn is_identifier(s: &str) -> bool {
         .next()
         .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
         && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+/// The names of the SDK's WGSL modules (each file under the crate's `shaders/` folder, by its path
+/// without `.wgsl`, e.g. `trace/ao`), for tools that inspect or compile the SDK's shaders outside
+/// it (driver statistics, browser checks).
+pub fn shader_modules() -> Vec<&'static str> {
+    ShaderLibrary::builtin().names().collect()
+}
+
+/// One WGSL shader made of the SDK's modules `roots` and every module they import (each once,
+/// imports first), with the modules' declared parameters given in `params` (`{{NAME}}` in a
+/// module's text; see the `#param` lines at the top of each module). This is how the SDK makes
+/// each of its pipelines; tools use it to compile the same text.
+///
+/// ```
+/// let wgsl = kickstart_rt::compose_shader(&["trace/rays"], &[]).unwrap();
+/// assert!(wgsl.contains("fn main"));
+/// assert!(kickstart_rt::compose_shader(&["trace/ao"], &[]).is_err()); // needs its parameters
+/// ```
+pub fn compose_shader(roots: &[&str], params: &[(&str, &str)]) -> Result<String, ComposeError> {
+    ShaderLibrary::builtin().compose(roots, params)
 }
 
 /// The composed shader of the SDK's modules `roots` with `params` (see

@@ -504,25 +504,11 @@ pub fn write_spirv(
 mod tests {
     use super::*;
 
-    /// lbvh.wgsl as the SDK compiles it: after digit_histogram.wgsl, centroid_bounds.wgsl,
-    /// triangle_box.wgsl and ingest_decode.wgsl, whose helpers it uses.
+    /// The LBVH module as the SDK composes it (with the digit counting, centroid bounds,
+    /// triangle boxes and vertex decoding it imports).
     fn lbvh() -> Source {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../kickstart-rt/shaders/");
-        let parts: Vec<(String, String)> = [
-            "digit_histogram.wgsl",
-            "centroid_bounds.wgsl",
-            "triangle_box.wgsl",
-            "ingest_decode.wgsl",
-            "lbvh.wgsl",
-        ]
-        .iter()
-        .map(|name| {
-            let path = format!("{dir}{name}");
-            let text = std::fs::read_to_string(&path).expect("the shader is in the workspace");
-            (path, text)
-        })
-        .collect();
-        Source::concat(&parts)
+        let text = kickstart_rt::compose_shader(&["scene/lbvh/lbvh"], &[]).expect("composes");
+        Source::concat(&[("scene/lbvh/lbvh".to_string(), text)])
     }
 
     /// `(group, WGSL binding, Vulkan binding, kind)` of entry point `ep`, and its workgroup
