@@ -17,6 +17,7 @@ mod render;
 mod renderer;
 mod scene;
 mod sdk_glue;
+mod shaders;
 #[cfg(test)]
 mod testing;
 mod view;
@@ -44,6 +45,13 @@ struct Cli {
 enum Command {
     /// Print the adapter, backend, and the features/limits the SDK needs or can use.
     Info,
+    /// List every WGSL shader the SDK can create (each variant, as composed); with --dump, write
+    /// each to DIR/<variant>.wgsl with an index.txt (no GPU needed).
+    Shaders {
+        /// Folder to write the shaders into.
+        #[arg(long)]
+        dump: Option<PathBuf>,
+    },
     /// Render a scene with the rasteriser and the SDK's effects and write PNG images: `final.png`
     /// and each channel (`direct`, `specular`, `diffuse`, `ao`, `shadow`, raw and `-denoised`),
     /// then `cpu-reference.png` (traced on the CPU reference BVH) and the GPU debug views
@@ -468,6 +476,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info => gpu::info(),
+        Command::Shaders { dump } => shaders::run(dump.as_deref()),
         Command::Render {
             size,
             out,

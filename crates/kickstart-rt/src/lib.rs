@@ -147,7 +147,8 @@ pub use allocations::ResourceAllocations;
 pub use cache::{CacheAllocation, CacheLevel};
 pub use container::TaskContainer;
 pub use context::{
-    DroppedTriangles, ExecuteContext, InitSettings, RecordedTaskCounts, INSTANCE_RECORD_SIZE,
+    shader_variants, DroppedTriangles, ExecuteContext, InitSettings, RecordedTaskCounts,
+    ShaderVariant, INSTANCE_RECORD_SIZE,
 };
 pub use device::{
     optional_features, optional_features_supported, required_features, required_limits,

@@ -6,8 +6,8 @@
 // constant bounds (their arrays stay in registers) and kind switches fold away. The pass composes
 // beside this module one of denoise/record_rgba (radiance) or denoise/record_scalar (occlusion,
 // shadows), which define the signal record `DnRecord` and its accessors, and one of
-// denoise/output/* (none, one or two output textures), which define DN_LAST (the last à-trous
-// iteration, which writes the output textures) and dn_write_output.
+// denoise/output/* (none, or the one output texture of a chain), which define DN_LAST (the last
+// à-trous iteration, which writes the output texture) and dn_write_output.
 //
 // Per-pixel buffers are indexed by viewport-relative pixel, row-major with the viewport's width.
 // - guide (vec4<u32>): world position xyz (f32 bits); w = octahedral normal (12 + 12 bits) and

@@ -42,6 +42,11 @@ pub(crate) struct AllocJob {
     pub initial: glam::Vec4,
 }
 
+/// The WGSL of the allocation passes, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    vec![("cache allocation".into(), alloc_wgsl())]
+}
+
 /// The WGSL of the allocation passes (entry points `insert`, `count`, `allocate`, `write`).
 fn alloc_wgsl() -> String {
     crate::gpu::compose::compose(&["cache/alloc"], &[])

@@ -76,6 +76,24 @@ fn inject_shader(depth_format: bool) -> ReflectedShader {
     ReflectedShader::compose(&["cache/inject", depth], &super::sample_params(1, false))
 }
 
+/// The WGSL of the injection (both depth inputs) and resolve passes, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    let inject = |depth_format: bool| {
+        (
+            format!("injection (depth format: {depth_format})"),
+            inject_shader(depth_format).source().to_string(),
+        )
+    };
+    vec![
+        inject(true),
+        inject(false),
+        (
+            "injection resolve".into(),
+            resolve_shader().source().to_string(),
+        ),
+    ]
+}
+
 /// The resolve pass's shader.
 fn resolve_shader() -> ReflectedShader {
     ReflectedShader::compose(&["cache/resolve"], &[])

@@ -9,6 +9,14 @@ use bytemuck::{Pod, Zeroable};
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 
+/// The WGSL of the transfer pass, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    vec![(
+        "light transfer".into(),
+        transfer_shader().source().to_string(),
+    )]
+}
+
 /// The transfer pass's shader (the sampling module at group 0, its surfels writable).
 fn transfer_shader() -> ReflectedShader {
     ReflectedShader::compose(&["cache/transfer"], &super::sample_params(0, true))

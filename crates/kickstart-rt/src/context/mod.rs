@@ -11,6 +11,7 @@ mod plan;
 mod record;
 mod reserve;
 mod settings;
+mod shaders;
 mod state;
 mod validate;
 
@@ -31,6 +32,7 @@ use crate::timing::{GpuTimings, TimingReadback};
 use effects::Effects;
 use record::Frame;
 pub use settings::{DroppedTriangles, InitSettings, RecordedTaskCounts, INSTANCE_RECORD_SIZE};
+pub use shaders::{shader_variants, ShaderVariant};
 use state::{DenoisingSlot, GeometrySlot, InstanceSlot, State, WorkingSet};
 
 static NEXT_CONTEXT_ID: AtomicU32 = AtomicU32::new(1);

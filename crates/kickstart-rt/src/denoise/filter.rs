@@ -195,28 +195,76 @@ impl Shared {
     }
 }
 
+/// Every signal type a denoising context can filter.
+const SIGNAL_TYPES: [SignalType; 6] = [
+    SignalType::Specular,
+    SignalType::Diffuse,
+    SignalType::SpecularAndDiffuse,
+    SignalType::DiffuseOcclusion,
+    SignalType::Shadow,
+    SignalType::MultiShadow,
+];
+
+/// The WGSL of every pipeline a context of `signal_type` can use, each once (label, source,
+/// temporal?): the set's temporal and à-trous passes, and per à-trous chain its iterations and
+/// its last iteration for every writable output format.
+fn variants(signal_type: SignalType) -> Vec<(String, String, bool)> {
+    let set = SignalSet::of(signal_type);
+    let mut out = vec![
+        (
+            format!("temporal {}", set.label()),
+            temporal_wgsl(set),
+            true,
+        ),
+        (
+            format!("a-trous {}", set.label()),
+            atrous_wgsl(set, None),
+            false,
+        ),
+    ];
+    for (_, chain) in set.atrous_chains() {
+        out.push((
+            format!("a-trous {}", chain.label()),
+            atrous_wgsl(chain, None),
+            false,
+        ));
+        for f in crate::WRITABLE_OUTPUT_FORMATS {
+            let label = format!("a-trous {} (last, {f:?})", chain.label());
+            out.push((label, atrous_wgsl(chain, Some(f)), false));
+        }
+    }
+    out
+}
+
+/// The WGSL of every denoiser pass the SDK can create, each once, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    let mut seen = std::collections::BTreeSet::new();
+    SIGNAL_TYPES
+        .iter()
+        .flat_map(|&st| variants(st))
+        .filter(|(label, _, _)| seen.insert(label.clone()))
+        .map(|(label, source, _)| (format!("denoise {label}"), source))
+        .collect()
+}
+
 /// The WGSL of the temporal pass of `set` (the G-buffer module at group 0).
 fn temporal_wgsl(set: SignalSet) -> String {
     set.compose(&["denoise/temporal"], None, &[("GBUFFER_GROUP", "0")])
 }
 
-/// The WGSL of an à-trous iteration of `set`; `outputs`: the last iteration's, writing textures
-/// of those formats (see [`SignalSet::compose`]).
-fn atrous_wgsl(set: SignalSet, outputs: Option<&[wgpu::TextureFormat]>) -> String {
-    set.compose(&["denoise/atrous"], outputs, &[])
+/// The WGSL of an à-trous iteration of `set`; `output`: the last iteration's, writing a texture
+/// of that format (see [`SignalSet::compose`]).
+fn atrous_wgsl(set: SignalSet, output: Option<wgpu::TextureFormat>) -> String {
+    set.compose(&["denoise/atrous"], output, &[])
 }
 
 /// The pipelines of one signal set.
 struct SetPipelines {
     temporal: wgpu::ComputePipeline,
     atrous: wgpu::ComputePipeline,
-    /// The last à-trous iteration per output formats (one per signal): the output textures'
-    /// layout (group 2) and the pipeline.
-    last: Vec<(
-        Vec<wgpu::TextureFormat>,
-        ReflectedLayout,
-        wgpu::ComputePipeline,
-    )>,
+    /// The last à-trous iteration per output format: the output texture's layout (group 2) and
+    /// the pipeline.
+    last: Vec<(wgpu::TextureFormat, ReflectedLayout, wgpu::ComputePipeline)>,
 }
 
 /// The à-trous chain of one signal: its pipelines (a single-signal set; see
@@ -263,23 +311,21 @@ impl Pipelines {
         })
     }
 
-    /// The last à-trous iteration of `set` writing textures of `formats` (one per signal; each
-    /// one of the writable output formats): its output layout and pipeline.
+    /// The last à-trous iteration of the one-signal chain `set` writing a texture of `format`
+    /// (one of the writable output formats): its output layout and pipeline.
     fn last(
         &mut self,
         device: &wgpu::Device,
         shared: &Shared,
         set: SignalSet,
-        formats: &[wgpu::TextureFormat],
+        format: wgpu::TextureFormat,
     ) -> Option<(ReflectedLayout, wgpu::ComputePipeline)> {
-        if formats.iter().any(|f| wgsl_format(*f).is_none()) {
-            return None;
-        }
+        wgsl_format(format)?;
         let sp = self.set(device, shared, set);
-        if let Some((_, l, p)) = sp.last.iter().find(|(f, _, _)| f == formats) {
+        if let Some((_, l, p)) = sp.last.iter().find(|(f, _, _)| *f == format) {
             return Some((l.clone(), p.clone()));
         }
-        let source = atrous_wgsl(set, Some(formats));
+        let source = atrous_wgsl(set, Some(format));
         let reflection = ShaderReflection::new(&source)
             .unwrap_or_else(|e| panic!("denoise a-trous (last): composed WGSL is invalid: {e}"));
         let out_layout =
@@ -295,8 +341,7 @@ impl Pipelines {
                 out_layout.layout(),
             ],
         );
-        sp.last
-            .push((formats.to_vec(), out_layout.clone(), pipeline.clone()));
+        sp.last.push((format, out_layout.clone(), pipeline.clone()));
         Some((out_layout, pipeline))
     }
 
@@ -312,7 +357,7 @@ impl Pipelines {
         let mut chains = Vec::new();
         for (s, chain_set) in set.atrous_chains() {
             let format = job.outputs[s].texture().format();
-            let (out_layout, last) = self.last(device, shared, chain_set, &[format])?;
+            let (out_layout, last) = self.last(device, shared, chain_set, format)?;
             let atrous = self.set(device, shared, chain_set).atrous.clone();
             chains.push(Chain {
                 signal: s,
@@ -375,7 +420,7 @@ impl Filter {
             let _ = self.pipelines.set(device, shared, set);
             for (_, chain) in set.atrous_chains() {
                 for f in crate::WRITABLE_OUTPUT_FORMATS {
-                    let _ = self.pipelines.last(device, shared, chain, &[f]);
+                    let _ = self.pipelines.last(device, shared, chain, f);
                 }
             }
         }

@@ -16,6 +16,7 @@
 //! Input and output may be the same texture: no pass reads the input and writes the output.
 
 mod filter;
+pub(crate) use filter::shader_variants;
 pub(crate) mod history;
 mod occlusion;
 mod radiance;

@@ -48,6 +48,15 @@ impl SignalSet {
         }
     }
 
+    /// The set's kinds joined with `+` (e.g. `Specular+Diffuse`), for labels.
+    pub fn label(self) -> String {
+        let names: Vec<String> = self.kinds[..self.count]
+            .iter()
+            .map(|k| format!("{k:?}"))
+            .collect();
+        names.join("+")
+    }
+
     fn scalar(self) -> bool {
         self.kinds[..self.count].iter().all(|k| k.scalar())
     }
@@ -71,12 +80,13 @@ impl SignalSet {
     }
 
     /// The WGSL of a pass of this set: the modules `roots` (the pass) composed with the set's
-    /// constants (`denoise/signals`), its record layout and (`outputs`: the last à-trous
-    /// iteration) the output textures of group 2, and the pass's own `params`.
+    /// constants (`denoise/signals`), its record layout and (`output`: the last à-trous
+    /// iteration of a one-signal chain) the output texture of group 2, and the pass's own
+    /// `params`.
     pub fn compose(
         self,
         roots: &[&str],
-        outputs: Option<&[wgpu::TextureFormat]>,
+        output: Option<wgpu::TextureFormat>,
         params: &[(&str, &str)],
     ) -> String {
         let record = if self.scalar() {
@@ -85,15 +95,11 @@ impl SignalSet {
             "denoise/record_rgba"
         };
         // Formats are checked before any pipeline is made; the fallback is never used.
-        let name = |k: usize| {
-            outputs
-                .and_then(|f| f.get(k))
-                .map(|&f| wgsl_format(f).unwrap_or("rgba16float"))
-        };
-        let output = match outputs.map_or(0, <[_]>::len) {
-            0 => "denoise/output/none",
-            1 => "denoise/output/one",
-            _ => "denoise/output/two",
+        let format = output.map(|f| wgsl_format(f).unwrap_or("rgba16float"));
+        let output = if format.is_some() {
+            "denoise/output/one"
+        } else {
+            "denoise/output/none"
         };
         let constants = [
             self.count.to_string(),
@@ -105,8 +111,7 @@ impl SignalSet {
             ("DN_KIND0", &constants[1]),
             ("DN_KIND1", &constants[2]),
         ];
-        all.extend(name(0).map(|f| ("DN_OUTPUT0_FORMAT", f)));
-        all.extend(name(1).map(|f| ("DN_OUTPUT1_FORMAT", f)));
+        all.extend(format.map(|f| ("DN_OUTPUT0_FORMAT", f)));
         all.extend_from_slice(params);
         let mut modules = vec![record, output];
         modules.extend_from_slice(roots);

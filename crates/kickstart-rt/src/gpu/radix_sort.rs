@@ -50,6 +50,19 @@ struct Params {
     nblocks: u32,
 }
 
+/// The WGSL of the sort's two shaders, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    ["gpu/radix_sort", "gpu/radix_sort_small"]
+        .iter()
+        .map(|&m| {
+            (
+                m.to_string(),
+                ReflectedShader::compose(&[m], &[]).source().to_string(),
+            )
+        })
+        .collect()
+}
+
 /// Entries of the `hist` buffer for `nblocks` blocks: RADIX rows of per-block counts, then the
 /// RADIX row totals.
 fn hist_len(nblocks: u32) -> u32 {

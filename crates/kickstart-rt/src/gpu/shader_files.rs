@@ -23,7 +23,6 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "denoise/common",
     "denoise/output/none",
     "denoise/output/one",
-    "denoise/output/two",
     "denoise/record_rgba",
     "denoise/record_scalar",
     "denoise/signals",

@@ -56,6 +56,12 @@ struct Params {
     pad: u32,
 }
 
+/// The WGSL of the ingestion pass, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    let shader = ReflectedShader::compose(&["scene/ingest"], &[]);
+    vec![("scene/ingest".into(), shader.source().to_string())]
+}
+
 impl Ingest {
     /// Creates the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {

@@ -30,6 +30,13 @@ pub(crate) struct Prims {
     no_bounds: wgpu::Buffer,
 }
 
+/// The WGSL of the per-primitive passes, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    let max_refs = MAX_REFS_PER_INSTANCE.to_string();
+    let shader = ReflectedShader::compose(&["scene/prims"], &[("MAX_REFS", &max_refs)]);
+    vec![("scene/prims".into(), shader.source().to_string())]
+}
+
 impl Prims {
     /// Creates the pipelines.
     pub fn new(device: &wgpu::Device) -> Self {

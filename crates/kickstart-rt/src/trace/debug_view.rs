@@ -97,6 +97,20 @@ impl DebugView {
     }
 }
 
+/// The WGSL of the debug view pass for every writable output format, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    crate::WRITABLE_OUTPUT_FORMATS
+        .iter()
+        .filter_map(|&f| {
+            let name = wgsl_format(f)?;
+            Some((
+                format!("debug view ({f:?})"),
+                debug_view_shader(name).source().to_string(),
+            ))
+        })
+        .collect()
+}
+
 /// The primary-ray debug view pass (`debug view`); pipelines are created per output format on
 /// first use.
 #[derive(Default)]

@@ -23,6 +23,14 @@ fn trace_rays_shader() -> ReflectedShader {
     ReflectedShader::compose(&["trace/rays"], &[])
 }
 
+/// The WGSL of the ray batch pass, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    vec![(
+        "trace rays".into(),
+        trace_rays_shader().source().to_string(),
+    )]
+}
+
 /// `size` bytes of a buffer from a byte offset, as a binding.
 fn range((buffer, offset): (&wgpu::Buffer, u64), size: NonZeroU64) -> wgpu::BindingResource<'_> {
     wgpu::BindingResource::Buffer(wgpu::BufferBinding {

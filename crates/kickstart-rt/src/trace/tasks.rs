@@ -514,6 +514,43 @@ fn trace_params(job: &Job<'_>) -> TraceParams {
 #[cfg(test)]
 mod tests;
 
+/// Every trace pass kind.
+const KINDS: [TraceKind; 5] = [
+    TraceKind::AmbientOcclusion,
+    TraceKind::Shadow,
+    TraceKind::MultiShadow,
+    TraceKind::Specular,
+    TraceKind::Diffuse,
+];
+
+/// The second outputs a pass of `kind` can write (`TracePasses::record`): the specular's
+/// demodulation output (when demodulating), the multi-shadow's `output1`.
+fn second_outputs(kind: TraceKind) -> Vec<Option<wgpu::TextureFormat>> {
+    let writable = WRITABLE_OUTPUT_FORMATS.map(Some);
+    match kind {
+        TraceKind::AmbientOcclusion | TraceKind::Shadow | TraceKind::Diffuse => vec![None],
+        TraceKind::MultiShadow => writable.to_vec(),
+        TraceKind::Specular => [None].into_iter().chain(writable).collect(),
+    }
+}
+
+/// The WGSL of every trace pass the SDK can create (kind × output formats), labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    let library = ShaderLibrary::builtin();
+    let mut out = Vec::new();
+    for kind in KINDS {
+        for f0 in WRITABLE_OUTPUT_FORMATS {
+            for f1 in second_outputs(kind) {
+                // Every writable format has a WGSL name, so this cannot fail.
+                if let Ok((source, _)) = trace_wgsl(&library, kind, (f0, f1)) {
+                    out.push((format!("{} ({f0:?}, {f1:?})", kind.label()), source));
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod wgsl_tests {
     //! Every pass variant `TracePasses` can create, validated with naga without a device, and
@@ -521,25 +558,6 @@ mod wgsl_tests {
     use super::*;
     use crate::gpu::wgsl_check::{assert_wgsl_layout, validate};
     use wgpu::TextureFormat as F;
-
-    const KINDS: [TraceKind; 5] = [
-        TraceKind::AmbientOcclusion,
-        TraceKind::Shadow,
-        TraceKind::MultiShadow,
-        TraceKind::Specular,
-        TraceKind::Diffuse,
-    ];
-
-    /// The second outputs a pass of `kind` can write (`TracePasses::record`): the specular's
-    /// demodulation output (when demodulating), the multi-shadow's `output1`.
-    fn second_outputs(kind: TraceKind) -> Vec<Option<F>> {
-        let writable = WRITABLE_OUTPUT_FORMATS.map(Some);
-        match kind {
-            TraceKind::AmbientOcclusion | TraceKind::Shadow | TraceKind::Diffuse => vec![None],
-            TraceKind::MultiShadow => writable.to_vec(),
-            TraceKind::Specular => [None].into_iter().chain(writable).collect(),
-        }
-    }
 
     #[test]
     fn every_trace_task_variant_validates_and_matches_the_rust_layouts() {

@@ -7,15 +7,6 @@ use super::*;
 use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
 use std::collections::BTreeSet;
 
-const SIGNAL_TYPES: [SignalType; 6] = [
-    SignalType::Specular,
-    SignalType::Diffuse,
-    SignalType::SpecularAndDiffuse,
-    SignalType::DiffuseOcclusion,
-    SignalType::Shadow,
-    SignalType::MultiShadow,
-];
-
 /// Asserts the layouts a temporal pass of a context of `signal_type` shares with the Rust side.
 fn check_temporal(module: &naga::Module, signal_type: SignalType) {
     assert_denoise_params(module);
@@ -73,29 +64,6 @@ fn assert_denoise_params(module: &naga::Module) {
             base_radius,
         }
     );
-}
-
-/// The WGSL of every pipeline a context of `signal_type` can use, each once (label, source,
-/// temporal?): the set's temporal and à-trous passes, and per à-trous chain its iterations and
-/// its last iteration for every writable output format.
-fn variants(signal_type: SignalType) -> Vec<(String, String, bool)> {
-    let set = SignalSet::of(signal_type);
-    let mut out = vec![
-        (format!("temporal {set:?}"), temporal_wgsl(set), true),
-        (format!("a-trous {set:?}"), atrous_wgsl(set, None), false),
-    ];
-    for (_, chain) in set.atrous_chains() {
-        out.push((
-            format!("a-trous {chain:?}"),
-            atrous_wgsl(chain, None),
-            false,
-        ));
-        for f in crate::WRITABLE_OUTPUT_FORMATS {
-            let label = format!("a-trous {chain:?} (last, {f:?})");
-            out.push((label, atrous_wgsl(chain, Some(&[f])), false));
-        }
-    }
-    out
 }
 
 #[test]

@@ -348,6 +348,12 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
     }
 }
 
+/// The WGSL of the builder's passes, labelled.
+pub(crate) fn shader_variants() -> Vec<(String, String)> {
+    let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
+    vec![("scene/lbvh".into(), shader.source().to_string())]
+}
+
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
