@@ -43,7 +43,9 @@ const RT_LEAF_BIT: u32 = 0x80000000u;
 const RT_FIRST_MASK: u32 = 0x0fffffffu;
 const RT_NO_INDEX: u32 = 0xffffffffu;
 // Largest finite f32: stands in for ∞ (WGSL lets implementations assume no infinities).
-const RT_FLT_MAX: f32 = 3.40282347e38;
+// The largest finite f32, written exactly (a decimal literal above it is out of range for
+// stricter WGSL compilers).
+const RT_FLT_MAX: f32 = 0x1.fffffep+127f;
 // 1 + 2γ (Ize 2013), as the CPU's slab test: widens the far distance so rounding never culls a
 // box that a grazing ray touches.
 const RT_FAR_WIDEN: f32 = 1.0000004;

@@ -131,7 +131,7 @@ fn tr_next(r: ptr<function, TrRng>) -> f32 {
     let d = (*r).dim;
     (*r).dim = d + 1u;
     if tp.mode.y == 0u {
-        let h = tr_hash(d * 0x68bc21ebu ^ tp.misc.w * 0x02e5be93u);
+        let h = tr_hash((d * 0x68bc21ebu) ^ (tp.misc.w * 0x02e5be93u));
         let shift = vec2<u32>(h & 63u, (h >> 6u) & 63u);
         let at = ((*r).texel + shift) % vec2<u32>(TR_BN_SIZE);
         let v = textureLoad(tr_blue_noise, at, 0).x;

@@ -96,7 +96,7 @@ const PARENT_LOCAL_BIT: u32 = 0x40000000u;
 const PARENT_INDEX_MASK: u32 = 0x0fffffffu;
 // Empty box while climbing: the largest finite floats, so a union with it is exact for every
 // finite coordinate. Written out as the documented (+1e30, -1e30).
-const BIG: f32 = 3.40282347e38;
+const BIG: f32 = 0x1.fffffep+127f; // the largest finite f32
 const EMPTY_OUT: f32 = 1e30;
 const BOXES_AT: u32 = 8u;
 // SAH constants of the collapse decision: the CPU builder's (src/cpu/bvh.rs), so the GPU tree's
@@ -861,7 +861,7 @@ fn wg_pyramid_box(slot: u32) -> Box {
 
 // First slot of level `level` of the block's pyramid.
 fn wg_level_slot(level: u32) -> u32 {
-    return 2u * WG - (2u * WG >> level);
+    return 2u * WG - ((2u * WG) >> level);
 }
 
 // The union of leaf boxes [a, b] (a <= b), positions relative to the block, from the block's
