@@ -79,8 +79,10 @@ pub const VIEW_SIZE: Default2<&str> = Default2 {
     cpu: "640x360",
 };
 /// `--frames` of `render`: enough for the lighting cache and the denoisers to settle on a GPU;
-/// on a CPU device fewer, so a first render takes about a minute.
-pub const RENDER_FRAMES: Default2<u32> = Default2 { gpu: 32, cpu: 8 };
+/// on a CPU device three, so that a first render, pipelines compiled included, takes well under
+/// a minute on two busy cores. With Mesa's shader cache cold, lavapipe spends about 7 s on each
+/// 640×360 frame of every effect (about 2 s with the cache warm), after about 14 s of start-up.
+pub const RENDER_FRAMES: Default2<u32> = Default2 { gpu: 32, cpu: 3 };
 /// `--size` of `quality` and `bench`.
 pub const MEASURE_SIZE: Default2<&str> = Default2 {
     gpu: "1920x1080",
@@ -121,7 +123,7 @@ mod tests {
         r.pick(None, RENDER_FRAMES, "{v} frames", "--frames");
         assert_eq!(
             r.notice(&cpu).as_deref(),
-            Some("software Vulkan (llvmpipe): 640x360, 8 frames; --size/--frames to change")
+            Some("software Vulkan (llvmpipe): 640x360, 3 frames; --size/--frames to change")
         );
         // Every option given: nothing to say.
         let mut r = Resolver::new(true);

@@ -76,7 +76,7 @@ enum Command {
         #[arg(long, allow_hyphen_values = true)]
         camera: Option<String>,
         /// Frames to run before writing the images (the lighting cache and the denoisers settle
-        /// over them) [default: 32; 8 on a CPU device].
+        /// over them) [default: 32; 3 on a CPU device].
         #[arg(long)]
         frames: Option<u32>,
         /// Effects, comma-separated, each NAME or NAME=on|off, applied in order to all on:
