@@ -36,7 +36,7 @@ mod tree_work;
 use harness::Bench;
 pub use peer::PeerKind;
 use profile as prof;
-use report::{print_scene, Report};
+use report::{print_scene, Report, TlasReport};
 use scenes::{bench_scene, bench_tlas};
 
 /// Scenes benchmarked when no `--scene` is given.
@@ -127,6 +127,36 @@ fn attempt<T>(errors: &mut Vec<String>, what: &str, f: impl FnOnce() -> AnyResul
             None
         }
     }
+}
+
+/// Builds and refits a TLAS over each of `counts` instances, printing each result (above
+/// `bar`, which counts them).
+fn tlas_sweep(bench: &Bench, counts: &[u32], bar: &indicatif::ProgressBar) -> Vec<TlasReport> {
+    let mut out = Vec::with_capacity(counts.len());
+    for &count in counts {
+        bar.set_message(format!("bench TLAS {count}"));
+        let t = bench_tlas(bench, count);
+        bar.inc(1);
+        bar.suspend(|| {
+            let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
+            println!(
+                "  {:>7} instances  build {}  refit {}",
+                count,
+                opt(&t.build),
+                opt(&t.refit)
+            );
+            for p in [&t.build_profile, &t.refit_profile] {
+                if !p.is_empty() {
+                    println!("    profile    {}", prof::show(p));
+                }
+            }
+            for e in &t.errors {
+                println!("    failed: {e}");
+            }
+        });
+        out.push(t);
+    }
+    out
 }
 
 /// `ksrt bench`.
@@ -246,29 +276,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             &TLAS_INSTANCE_COUNTS
         };
     bar.set_length((names.len() + tlas_counts.len()) as u64);
-    for &count in tlas_counts {
-        bar.set_message(format!("bench TLAS {count}"));
-        let t = bench_tlas(&bench, count);
-        bar.inc(1);
-        bar.suspend(|| {
-            let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
-            println!(
-                "  {:>7} instances  build {}  refit {}",
-                count,
-                opt(&t.build),
-                opt(&t.refit)
-            );
-            for p in [&t.build_profile, &t.refit_profile] {
-                if !p.is_empty() {
-                    println!("    profile    {}", prof::show(p));
-                }
-            }
-            for e in &t.errors {
-                println!("    failed: {e}");
-            }
-        });
-        report.tlas.push(t);
-    }
+    report.tlas = tlas_sweep(&bench, tlas_counts, &bar);
     bar.finish_and_clear();
     extras::run(
         &bench,

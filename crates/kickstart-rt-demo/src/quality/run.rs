@@ -264,30 +264,13 @@ pub fn run(
     ropts.seed = opts.seed;
     let mut r = Renderer::new(device, queue, scene, &ropts)?;
     r.sdk.roughness_override = Some(SPECULAR_ROUGHNESS);
-    // Warm the cache where the pan starts; the denoisers' history of these frames is dropped.
-    let bar = progress::bar(
-        opts.progress,
-        opts.warmup.into(),
-        "warming the cache",
-        "frames",
-    );
-    for _ in 0..opts.warmup {
-        r.render_frame(device, queue, camera, false)?;
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
+    warm_up(device, queue, &mut r, camera, opts)?;
     let bar = progress::bar(
         opts.progress,
         u64::from(opts.frames) * u64::from(opts.reference_samples),
         "reference samples",
         "samples",
     );
-    r.sdk.freeze_cache = true;
-    r.cut();
-    if let Some(dir) = &opts.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("--out {}: cannot create: {e}", dir.display()))?;
-    }
     let o = &r.sdk.outputs;
     let has_shadow = r.sdk.produced().shadow.0;
     let mut sums = vec![
@@ -372,6 +355,35 @@ pub fn run(
     }
     bar.finish_and_clear();
     Ok(all)
+}
+
+/// Warms the lighting cache where the pan starts (the denoisers' history of these frames is
+/// dropped), freezes it and makes the strips' folder.
+fn warm_up(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    r: &mut Renderer,
+    camera: &Camera,
+    opts: &QualityOptions,
+) -> AnyResult<()> {
+    let bar = progress::bar(
+        opts.progress,
+        opts.warmup.into(),
+        "warming the cache",
+        "frames",
+    );
+    for _ in 0..opts.warmup {
+        r.render_frame(device, queue, camera, false)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    r.sdk.freeze_cache = true;
+    r.cut();
+    if let Some(dir) = &opts.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("--out {}: cannot create: {e}", dir.display()))?;
+    }
+    Ok(())
 }
 
 /// Traces frame `f`'s `samples` reference samples on the last frame's G-buffer into `sums`

@@ -137,15 +137,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             stack.push((child, world));
         }
     }
-    // A light without a range reaches everywhere: the scene's size, windowed, is as far.
-    let reach = scene.size() * 2.0;
-    for light in &mut scene.lights {
-        if let Light::Point { range, .. } | Light::Spot { range, .. } = light {
-            if !range.is_finite() || *range <= 0.0 {
-                *range = reach;
-            }
-        }
-    }
+    bound_light_ranges(&mut scene);
     if scene.instances.is_empty() && skipped > 0 {
         return Err(err(format!(
             "no triangles to render: all {skipped} primitive(s) the scene uses are points or lines (or lack positions)"
@@ -445,6 +437,19 @@ fn fan_to_list(s: &[u32]) -> Vec<u32> {
         out.extend([s[k + 1], s[k + 2], s[0]]);
     }
     out
+}
+
+/// Gives every point and spot light without a range (glTF: infinite) one: twice the scene's size,
+/// past which the windowed falloff has nothing left to light.
+fn bound_light_ranges(scene: &mut Scene) {
+    let reach = scene.size() * 2.0;
+    for light in &mut scene.lights {
+        if let Light::Point { range, .. } | Light::Spot { range, .. } = light {
+            if !range.is_finite() || *range <= 0.0 {
+                *range = reach;
+            }
+        }
+    }
 }
 
 /// A `KHR_lights_punctual` light placed by its node's `world` transform (it shines along its
