@@ -87,6 +87,16 @@ impl Probe {
         Some((h.t, self.normals[h.primitive as usize].dot(dir) < 0.0))
     }
 
+    /// The median distance from `eye` to the surfaces 64 rays meet (0 when none does): how much
+    /// space is around it.
+    fn typical_distance(&self, eye: Vec3) -> f32 {
+        let mut hits: Vec<f32> = sphere_directions(64)
+            .filter_map(|d| self.cast(eye, d).map(|(t, _)| t))
+            .collect();
+        hits.sort_by(f32::total_cmp);
+        hits.get(hits.len() / 2).copied().unwrap_or(0.0)
+    }
+
     /// Fraction of 64 rays from `eye` that meet a front side no nearer than `min_distance`: near
     /// 1 inside an enclosed room, low outside (rays escape) and inside solid furniture or walls
     /// (they meet back sides or are blocked at once).
@@ -101,9 +111,9 @@ impl Probe {
 
 impl Scene {
     /// A camera inside the scene when it is an enclosed interior: of eyes spread over the bounds
-    /// at standing heights, the one whose surroundings face it most ([`Probe::enclosure`]) when
-    /// that is at least [`ENCLOSED`], looking a little downwards along its longest view of a
-    /// surface's front. `None` for an object or an open scene: no point sees mostly front faces
+    /// at standing heights, the one whose surroundings face it most ([`Probe::enclosure`], at
+    /// least [`ENCLOSED`]; ties to the one with the most space around it), looking a little downwards along its
+    /// longest view of a surface's front. `None` for an object or an open scene: no point sees mostly front faces
     /// (around an object, rays escape or meet its inside's back faces).
     pub fn interior_camera(&self) -> Option<Camera> {
         if self.instances.is_empty() {
@@ -114,21 +124,24 @@ impl Scene {
         let extent = hi - lo;
         // Clear of the nearest surface by a little: not inside a wall or a table.
         let clearance = self.size() * 0.01;
-        let mut best: Option<(f32, Vec3)> = None;
+        // The most enclosed eye; of those equally enclosed, the one with the most space around
+        // it (the largest typical distance to its surfaces): a room's middle, not a corner.
+        let mut best: Option<((f32, f32), Vec3)> = None;
         let steps = [0.5, 0.3, 0.7, 0.1, 0.9];
         for (fx, fz) in steps.iter().flat_map(|&x| steps.map(|z| (x, z))) {
             for fy in [0.5, 0.35, 0.65] {
                 let eye = lo + extent * Vec3::new(fx, fy, fz);
-                let score = probe.enclosure(eye, clearance);
-                if best.is_none_or(|(s, _)| score > s) {
-                    best = Some((score, eye));
+                let enclosure = probe.enclosure(eye, clearance);
+                if enclosure < ENCLOSED {
+                    continue;
+                }
+                let key = (enclosure, probe.typical_distance(eye));
+                if best.is_none_or(|(k, _)| key > k) {
+                    best = Some((key, eye));
                 }
             }
         }
-        let (score, eye) = best?;
-        if score < ENCLOSED {
-            return None;
-        }
+        let ((_, typical), eye) = best?;
         // A little downwards, along the farthest surface seen from its front (escaping rays count
         // as nothing, so an open side is not looked out of): the most of the room.
         let dir = (0..16)
@@ -140,13 +153,7 @@ impl Scene {
             })
             .max_by(|a, b| a.1.total_cmp(&b.1))?
             .0;
-        // The target at the room's typical distance from the eye (the median of the probe's
-        // hits), which [`Self::light_the_view`] lights for.
-        let mut hits: Vec<f32> = sphere_directions(64)
-            .filter_map(|d| probe.cast(eye, d).map(|(t, _)| t))
-            .collect();
-        hits.sort_by(f32::total_cmp);
-        let typical = hits.get(hits.len() / 2).copied().unwrap_or(clearance);
+        // The target at the room's typical distance, which [`Self::light_the_view`] lights.
         Some(Camera {
             eye,
             at: eye + dir * typical.max(clearance),
