@@ -3,10 +3,6 @@
 
 use kickstart_rt as ksrt;
 
-use crate::gpu;
-use crate::scene::{Camera, Scene};
-use crate::AnyResult;
-
 /// A debug view `--debug-view` names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum DebugView {
@@ -24,6 +20,15 @@ pub enum DebugView {
 }
 
 impl DebugView {
+    /// Every view, in the order `ksrt render` writes them.
+    pub const ALL: [DebugView; 5] = [
+        DebugView::MeshColor,
+        DebugView::HitT,
+        DebugView::Barycentrics,
+        DebugView::Cache,
+        DebugView::Tiles,
+    ];
+
     /// The name in the output file (`debug-<name>.png`).
     pub fn name(self) -> &'static str {
         match self {
@@ -35,7 +40,8 @@ impl DebugView {
         }
     }
 
-    fn output_type(self) -> ksrt::DebugOutputType {
+    /// The SDK's debug output type of this view.
+    pub fn output_type(self) -> ksrt::DebugOutputType {
         match self {
             DebugView::HitT => ksrt::DebugOutputType::HitT,
             DebugView::Barycentrics => ksrt::DebugOutputType::Barycentrics,
@@ -44,128 +50,6 @@ impl DebugView {
             DebugView::Tiles => ksrt::DebugOutputType::RandomTileColor,
         }
     }
-}
-
-/// Registers `scene`, builds its BVHs and traces `view` from `camera` into a `width`×`height`
-/// image, returned as RGBA `f32` texels, rows top to bottom.
-pub fn trace(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    scene: &Scene,
-    camera: &Camera,
-    view: DebugView,
-    (width, height): (u32, u32),
-) -> AnyResult<Vec<[f32; 4]>> {
-    let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
-    let uploads = gpu::upload_scene(device, scene);
-    let mut c = ctx.create_task_container();
-    gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);
-    // Every BLAS in this one task, so the trace below sees the whole scene.
-    c.schedule_bvh_task(ksrt::BvhBuildTask {
-        max_blas_build_count: (uploads.len() as u32).max(1),
-        build_tlas: true,
-        ..Default::default()
-    });
-
-    let size = wgpu::Extent3d {
-        width,
-        height,
-        depth_or_array_layers: 1,
-    };
-    let texture = |label, format, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
-    let output = texture(
-        "ksrt debug view",
-        wgpu::TextureFormat::Rgba32Float,
-        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-    );
-    // The debug views trace primary rays from the view and read no G-buffer, but the task needs
-    // depth and normal inputs, of the output's size (the viewport must fit every texture).
-    let depth = texture(
-        "ksrt unused depth",
-        wgpu::TextureFormat::R32Float,
-        wgpu::TextureUsages::TEXTURE_BINDING,
-    );
-    let normal = texture(
-        "ksrt unused normals",
-        wgpu::TextureFormat::Rgba8Unorm,
-        wgpu::TextureUsages::TEXTURE_BINDING,
-    );
-    let scene_size = scene.size();
-    let (world_to_view, view_to_clip) = camera.matrices(
-        width as f32 / height as f32,
-        scene_size * 1e-4,
-        scene_size * 10.0,
-    );
-    let mut common = ksrt::TraceTaskCommon::new(
-        ksrt::DepthInput {
-            texture: depth.create_view(&Default::default()),
-            depth_type: ksrt::DepthType::RClipSpace,
-        },
-        ksrt::NormalInput {
-            texture: normal.create_view(&Default::default()),
-            normal_type: ksrt::NormalType::RgbNormalizedVector,
-            normal_to_world: glam::Mat4::IDENTITY,
-        },
-    );
-    common.view = ksrt::ViewInfo {
-        world_to_view,
-        view_to_clip,
-        prev_world_to_view: world_to_view,
-        prev_view_to_clip: view_to_clip,
-        jitter: glam::Vec2::ZERO,
-    };
-    common.debug_parameters.debug_output_type = view.output_type();
-    c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
-        ksrt::TraceAmbientOcclusionTask {
-            common,
-            output: output.create_view(&Default::default()),
-            ao_radius: scene_size,
-        },
-    ));
-
-    // Rows of a texture copy are padded to 256 bytes.
-    let row = width as u64 * 16;
-    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64)
-        * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64;
-    let readback = gpu::readback_buffer(device, padded * height as u64);
-    let task = gpu::submit(&ctx, device, queue, c, |encoder| {
-        encoder.copy_texture_to_buffer(
-            output.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(padded as u32),
-                    rows_per_image: None,
-                },
-            },
-            size,
-        );
-    })?;
-    gpu::complete(&ctx, device, task)?;
-    let bytes = gpu::map_read(device, &readback)?;
-    let mut texels = Vec::with_capacity(width as usize * height as usize);
-    for y in 0..height as usize {
-        let start = y * padded as usize;
-        // The mapped copy has no alignment guarantee for f32: read texels unaligned.
-        texels.extend(
-            bytes[start..start + row as usize]
-                .chunks_exact(16)
-                .map(bytemuck::pod_read_unaligned::<[f32; 4]>),
-        );
-    }
-    Ok(texels)
 }
 
 /// Turns the task's output into an 8-bit image. Hit-t is normalised to the range of distances in
@@ -205,6 +89,133 @@ pub fn to_image(view: DebugView, texels: &[[f32; 4]], width: u32, height: u32) -
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gpu;
+    use crate::scene::{Camera, Scene};
+    use crate::AnyResult;
+
+    /// Registers `scene` with a new context, builds its BVHs and traces `view` from `camera` into a
+    /// `width`×`height` image, returned as RGBA `f32` texels, rows top to bottom. The context never
+    /// injects, so the lighting cache's view shows each instance's initial tile colour (black):
+    /// `ksrt render` traces its views on the lit render's context instead ([`crate::lit`]).
+    pub fn trace(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+        camera: &Camera,
+        view: DebugView,
+        (width, height): (u32, u32),
+    ) -> AnyResult<Vec<[f32; 4]>> {
+        let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
+        let uploads = gpu::upload_scene(device, scene);
+        let mut c = ctx.create_task_container();
+        gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);
+        // Every BLAS in this one task, so the trace below sees the whole scene.
+        c.schedule_bvh_task(ksrt::BvhBuildTask {
+            max_blas_build_count: (uploads.len() as u32).max(1),
+            build_tlas: true,
+            ..Default::default()
+        });
+
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let texture = |label, format, usage| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let output = texture(
+            "ksrt debug view",
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
+        // The debug views trace primary rays from the view and read no G-buffer, but the task needs
+        // depth and normal inputs, of the output's size (the viewport must fit every texture).
+        let depth = texture(
+            "ksrt unused depth",
+            wgpu::TextureFormat::R32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let normal = texture(
+            "ksrt unused normals",
+            wgpu::TextureFormat::Rgba8Unorm,
+            wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let scene_size = scene.size();
+        let (world_to_view, view_to_clip) = camera.matrices(
+            width as f32 / height as f32,
+            scene_size * 1e-4,
+            scene_size * 10.0,
+        );
+        let mut common = ksrt::TraceTaskCommon::new(
+            ksrt::DepthInput {
+                texture: depth.create_view(&Default::default()),
+                depth_type: ksrt::DepthType::RClipSpace,
+            },
+            ksrt::NormalInput {
+                texture: normal.create_view(&Default::default()),
+                normal_type: ksrt::NormalType::RgbNormalizedVector,
+                normal_to_world: glam::Mat4::IDENTITY,
+            },
+        );
+        common.view = ksrt::ViewInfo {
+            world_to_view,
+            view_to_clip,
+            prev_world_to_view: world_to_view,
+            prev_view_to_clip: view_to_clip,
+            jitter: glam::Vec2::ZERO,
+        };
+        common.debug_parameters.debug_output_type = view.output_type();
+        c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
+            ksrt::TraceAmbientOcclusionTask {
+                common,
+                output: output.create_view(&Default::default()),
+                ao_radius: scene_size,
+            },
+        ));
+
+        // Rows of a texture copy are padded to 256 bytes.
+        let row = width as u64 * 16;
+        let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64)
+            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64;
+        let readback = gpu::readback_buffer(device, padded * height as u64);
+        let task = gpu::submit(&ctx, device, queue, c, |encoder| {
+            encoder.copy_texture_to_buffer(
+                output.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &readback,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(padded as u32),
+                        rows_per_image: None,
+                    },
+                },
+                size,
+            );
+        })?;
+        gpu::complete(&ctx, device, task)?;
+        let bytes = gpu::map_read(device, &readback)?;
+        let mut texels = Vec::with_capacity(width as usize * height as usize);
+        for y in 0..height as usize {
+            let start = y * padded as usize;
+            // The mapped copy has no alignment guarantee for f32: read texels unaligned.
+            texels.extend(
+                bytes[start..start + row as usize]
+                    .chunks_exact(16)
+                    .map(bytemuck::pod_read_unaligned::<[f32; 4]>),
+            );
+        }
+        Ok(texels)
+    }
 
     #[test]
     fn hit_t_maps_near_to_white_far_to_dark_and_misses_to_black() {

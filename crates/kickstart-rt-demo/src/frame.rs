@@ -436,18 +436,9 @@ impl SdkFrame {
     ) -> ksrt::Result<Vec<ksrt::GpuTaskHandle>> {
         let mut handles: Vec<ksrt::GpuTaskHandle> =
             self.record_frame(encoder, inputs)?.into_iter().collect();
-        if let (Some(debug), Some(mut common)) = (self.debug_view, self.debug_common.take()) {
-            common.debug_parameters.debug_output_type = debug;
-            let mut c = self.ctx.create_task_container();
-            c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
-                ksrt::TraceAmbientOcclusionTask {
-                    common,
-                    output: self.outputs.debug.create_view(&Default::default()),
-                    ao_radius: self.ao_radius(),
-                },
-            ));
-            match self.ctx.build_gpu_task(c, encoder) {
-                Ok(h) => handles.push(h),
+        if let Some(debug) = self.debug_view {
+            match self.record_debug_view(encoder, debug) {
+                Ok(h) => handles.extend(h),
                 Err(ksrt::Error::Unsupported { .. }) => {
                     log::warn!("kickstart-rt does not support the debug view {debug:?} yet: off");
                     self.debug_view = None;
@@ -456,6 +447,30 @@ impl SdkFrame {
             }
         }
         Ok(handles)
+    }
+
+    /// Records the debug view `debug` alone, traced into `outputs.debug` on this context with the
+    /// last recorded frame's view: the lighting cache it reads is the one this context's frames
+    /// injected (a fresh context's cache holds only the instances' initial tile colour, black).
+    /// `Ok(None)` before any frame was recorded.
+    pub fn record_debug_view(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        debug: ksrt::DebugOutputType,
+    ) -> ksrt::Result<Option<ksrt::GpuTaskHandle>> {
+        let Some(mut common) = self.debug_common.clone() else {
+            return Ok(None);
+        };
+        common.debug_parameters.debug_output_type = debug;
+        let mut c = self.ctx.create_task_container();
+        c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
+            ksrt::TraceAmbientOcclusionTask {
+                common,
+                output: self.outputs.debug.create_view(&Default::default()),
+                ao_radius: self.ao_radius(),
+            },
+        ));
+        self.ctx.build_gpu_task(c, encoder).map(Some)
     }
 
     /// Records the trace tasks of `inputs` alone (no injection, no denoisers, no debug view)

@@ -393,6 +393,7 @@ mod tests {
                 progress: false,
                 gpu_timing: false,
                 frames_in_flight: 3,
+                debug_views: Vec::new(),
             },
         )
         .expect("render");
@@ -420,6 +421,7 @@ mod tests {
                 progress: false,
                 gpu_timing: false,
                 frames_in_flight: 4,
+                debug_views: Vec::new(),
             },
         );
         assert!(bad

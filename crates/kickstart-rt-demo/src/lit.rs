@@ -6,6 +6,7 @@ use std::path::Path;
 
 use kickstart_rt as ksrt;
 
+use crate::debug_view::DebugView;
 use crate::frame::Effects;
 use crate::readback::{read_texture, to_hdr, to_png, Encoding, Texels};
 use crate::renderer::{Renderer, RendererOptions};
@@ -33,6 +34,9 @@ pub struct LitOptions {
     /// Frames the CPU may record ahead of the GPU (1..=3; 1 waits for each frame before the
     /// next), see [`crate::frames_in_flight`].
     pub frames_in_flight: u32,
+    /// SDK debug views traced after the last frame on the same context (so the lighting
+    /// cache's view shows what the frames injected), into [`LitResult::debug`].
+    pub debug_views: Vec<DebugView>,
 }
 
 /// One image of the render: its file stem, texels and how to display them.
@@ -58,6 +62,10 @@ pub struct LitResult {
     pub timings: Vec<ksrt::GpuTimings>,
     /// Every frame's CPU costs: `build_gpu_task`, recording, submit, waits for the GPU.
     pub frames: Vec<crate::frames_in_flight::FrameRecord>,
+    /// Each of [`LitOptions::debug_views`] with its texels, in the order asked.
+    pub debug: Vec<(DebugView, Texels)>,
+    /// The SDK's GPU memory after the last frame, bytes.
+    pub sdk_bytes: u64,
 }
 
 impl LitResult {
@@ -82,20 +90,16 @@ pub fn render(
     ropts.gpu_timing = opts.gpu_timing;
     let depth = crate::frames_in_flight::check_depth(opts.frames_in_flight)?;
     ropts.frames_in_flight = opts.frames_in_flight;
+    // A batch render waits for its frames anyway: only the pipelines its effects use.
+    ropts.prepare_pipelines = false;
     let mut renderer = Renderer::new(device, queue, scene, &ropts)?;
     let frames = opts.frames.max(1);
-    let bar = if opts.progress {
-        let bar = indicatif::ProgressBar::new(frames as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "{msg} [{bar:40}] {pos}/{len} frames ({elapsed}, eta {eta})",
-        ) {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar.set_message(format!("rendering {}", scene.name));
-        bar
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    let bar = crate::progress::bar(
+        opts.progress,
+        frames as u64,
+        format!("rendering {}", scene.name),
+        "frames",
+    );
     let looped = crate::frames_in_flight::run(
         &mut renderer,
         device,
@@ -109,8 +113,53 @@ pub fn render(
         || bar.inc(1),
     )?;
     bar.finish_and_clear();
-    let timings = looped.timings;
+    let (channels, missing) = read_channels(device, queue, &renderer)?;
+    let debug = trace_debug_views(
+        device,
+        queue,
+        &mut renderer,
+        (&opts.debug_views, opts.progress),
+    )?;
+    Ok(LitResult {
+        channels,
+        missing,
+        refused: renderer.sdk.refused.iter().copied().collect(),
+        timings: looped.timings,
+        frames: looped.records,
+        debug,
+        sdk_bytes: renderer.sdk.ctx.resource_allocations().total(),
+    })
+}
 
+/// Traces each of `views` on `renderer`'s context from its last frame, one GPU task each, with a
+/// progress bar (several seconds each on software Vulkan).
+fn trace_debug_views(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    renderer: &mut Renderer,
+    (views, show): (&[DebugView], bool),
+) -> AnyResult<Vec<(DebugView, Texels)>> {
+    let bar = crate::progress::bar(show, views.len() as u64, "debug views", "views");
+    let mut out = Vec::with_capacity(views.len());
+    for &view in views {
+        bar.set_message(format!("debug view {}", view.name()));
+        out.push((
+            view,
+            renderer.trace_debug_view(device, queue, view.output_type())?,
+        ));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(out)
+}
+
+/// The final image, the direct light and every SDK channel the last frame produced, read back;
+/// and the names of the channels it did not produce.
+fn read_channels(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    renderer: &Renderer,
+) -> AnyResult<(Vec<Channel>, Vec<&'static str>)> {
     let read = |t: &wgpu::Texture| read_texture(device, queue, t);
     let mut channels = vec![
         Channel {
@@ -188,13 +237,7 @@ pub fn render(
             missing.push(den);
         }
     }
-    Ok(LitResult {
-        channels,
-        missing,
-        refused: renderer.sdk.refused.iter().copied().collect(),
-        timings,
-        frames: looped.records,
-    })
+    Ok((channels, missing))
 }
 
 /// Writes every channel of `result` into `out` as `<name>.png`, and `<name>.exr` (linear) when

@@ -1,8 +1,12 @@
 //! `ksrt`: the kickstart-rt demo, renderer and benchmark tool. It uses only the SDK's public API.
 
 mod bench;
+mod cmd_render;
 mod composite;
 mod debug_view;
+mod defaults;
+#[cfg(test)]
+mod first_view_tests;
 mod frame;
 mod frames_in_flight;
 #[cfg(test)]
@@ -10,6 +14,7 @@ mod golden;
 mod gpu;
 mod lit;
 mod obvhs_peer;
+mod progress;
 mod quality;
 mod raster;
 mod readback;
@@ -58,9 +63,9 @@ enum Command {
     /// `debug-<view>.png` (only the one asked for with --debug-view). Prints the GPU time of each
     /// SDK pass.
     Render {
-        /// Image size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "1280x720")]
-        size: String,
+        /// Image size, WIDTHxHEIGHT [default: 1280x720; 640x360 on a CPU device].
+        #[arg(long)]
+        size: Option<String>,
         /// Output folder.
         #[arg(long, default_value = "out")]
         out: PathBuf,
@@ -79,9 +84,9 @@ enum Command {
         #[arg(long, allow_hyphen_values = true)]
         camera: Option<String>,
         /// Frames to run before writing the images (the lighting cache and the denoisers settle
-        /// over them).
-        #[arg(long, default_value_t = 32)]
-        frames: u32,
+        /// over them) [default: 32; 3 on a CPU device].
+        #[arg(long)]
+        frames: Option<u32>,
         /// Effects, comma-separated, each NAME or NAME=on|off, applied in order to all on:
         /// specular, diffuse, ao, shadow, denoise, lidar, or all/none (e.g. `none,ao`).
         #[arg(long, default_value = "all")]
@@ -113,9 +118,9 @@ enum Command {
         /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
         #[arg(long)]
         scenes: Option<PathBuf>,
-        /// Window size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "1280x720")]
-        size: String,
+        /// Window size, WIDTHxHEIGHT [default: 1280x720; 640x360 on a CPU device].
+        #[arg(long)]
+        size: Option<String>,
         /// Effects at start (as for `render`).
         #[arg(long, default_value = "all")]
         effects: String,
@@ -142,22 +147,23 @@ enum Command {
         /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
         #[arg(long)]
         scenes: Option<PathBuf>,
-        /// Image size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "1920x1080")]
-        size: String,
+        /// Image size, WIDTHxHEIGHT [default: 1920x1080; 320x180 on a CPU device].
+        #[arg(long)]
+        size: Option<String>,
         /// Start camera (as for `render`) [default: the issue's for apartment and dragon, else
         /// the file's or one framing the scene].
         #[arg(long, allow_hyphen_values = true)]
         camera: Option<String>,
-        /// Measured frames along the pan.
-        #[arg(long, default_value_t = 32)]
-        frames: u32,
-        /// Frames warming the lighting cache before it is frozen.
-        #[arg(long, default_value_t = 64)]
-        warmup: u32,
-        /// Samples per pixel of each frame's reference.
-        #[arg(long, default_value_t = 2048)]
-        reference_samples: u32,
+        /// Measured frames along the pan [default: 32; 4 on a CPU device].
+        #[arg(long)]
+        frames: Option<u32>,
+        /// Frames warming the lighting cache before it is frozen [default: 64; 8 on a CPU
+        /// device].
+        #[arg(long)]
+        warmup: Option<u32>,
+        /// Samples per pixel of each frame's reference [default: 2048; 64 on a CPU device].
+        #[arg(long)]
+        reference_samples: Option<u32>,
         /// Yaw of the whole pan, degrees.
         #[arg(long, default_value_t = 8.0, allow_hyphen_values = true)]
         pan_degrees: f32,
@@ -189,12 +195,14 @@ enum Command {
         /// issue's for dragon and apartment, else the file's or one framing the scene].
         #[arg(long, allow_hyphen_values = true)]
         camera: Option<String>,
-        /// Timed repetitions of each measurement, after one warm-up.
-        #[arg(long, default_value_t = 5)]
-        iterations: u32,
-        /// Size of the ray batches' image, WIDTHxHEIGHT.
-        #[arg(long, default_value = "1920x1080")]
-        size: String,
+        /// Timed repetitions of each measurement, after one warm-up [default: 5; 1 on a CPU
+        /// device].
+        #[arg(long)]
+        iterations: Option<u32>,
+        /// Size of the ray batches' image, WIDTHxHEIGHT [default: 1920x1080; 320x180 on a CPU
+        /// device].
+        #[arg(long)]
+        size: Option<String>,
         /// Only time the denoisers (every task and method, synthetic inputs at --size).
         #[arg(long)]
         denoisers: bool,
@@ -220,181 +228,59 @@ pub(crate) fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
     Ok((w, h))
 }
 
-/// `ksrt render`'s options.
-struct RenderArgs {
-    size: String,
-    out: PathBuf,
-    debug_view: Option<debug_view::DebugView>,
-    scene: String,
-    scenes: Option<PathBuf>,
-    camera: Option<String>,
-    frames: u32,
-    effects: String,
-    seed: u32,
-    hdr: bool,
-    no_reference: bool,
-    json: Option<PathBuf>,
-    frames_in_flight: u32,
-}
-
-fn render(args: RenderArgs) -> AnyResult<()> {
-    let RenderArgs {
-        size,
-        out,
-        debug_view,
-        scene: scene_name,
-        scenes,
-        camera,
-        frames,
-        effects,
-        seed,
-        hdr,
-        no_reference,
-        json,
-        frames_in_flight,
-    } = args;
-    let scene_name = scene_name.as_str();
-    let (width, height) = parse_size(&size)?;
-    let effects = frame::Effects::parse(&effects)?;
-    frames_in_flight::check_depth(frames_in_flight)?;
-    if frames == 0 {
-        return Err("--frames 0: render at least one frame".into());
-    }
-    let camera = camera.as_deref().map(scene::parse_camera).transpose()?;
-    let start = std::time::Instant::now();
-    let scene = scene::load(scene_name, &scene::scenes_dir(scenes))?;
-    log::info!(
-        "loaded {scene_name} ({} triangles) in {:.2} s",
-        scene.triangle_count(),
-        start.elapsed().as_secs_f64()
-    );
-    // The benchmark cameras of the issue frame the dragon and the apartment interior well.
-    let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(scene_name)));
-    let adapter = gpu::adapter()?;
-    let (device, queue) = gpu::device(&adapter)?;
-    let start = std::time::Instant::now();
-    let result = lit::render(
-        &device,
-        &queue,
-        &scene,
-        &camera,
-        &lit::LitOptions {
-            size: (width, height),
-            frames,
-            effects,
-            seed,
-            progress: true,
-            gpu_timing: true,
-            frames_in_flight,
-        },
-    )?;
-    let written = lit::write(&result, &out, hdr)?;
-    println!(
-        "wrote {} images to {} ({width}x{height}, {frames} frames in {:.2} s): {}",
-        written.len(),
-        out.display(),
-        start.elapsed().as_secs_f64(),
-        result
-            .channels
-            .iter()
-            .map(|c| c.name)
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
-    if !result.refused.is_empty() {
-        println!(
-            "this kickstart-rt refuses {:?} as unsupported: not rendered",
-            result.refused
-        );
-    }
-    if !result.missing.is_empty() {
-        println!(
-            "not written (effect off or unsupported): {}",
-            result.missing.join(", ")
-        );
-    }
-    if result.timings.is_empty() {
-        println!("no SDK GPU timings (no SDK pass ran, or the device has no timestamp queries)");
-    } else {
-        print!("{}", lit::timing_table(&result.timings));
-    }
-    // The first frames compile pipelines and fill the lighting cache: left out of the summary.
-    let fif = frames_in_flight::summarise(frames_in_flight, &result.frames, (frames / 4) as usize);
-    print!(
-        "CPU per frame, {frames_in_flight} frame(s) in flight (medians of the last {} frames):\n{}",
-        fif.frames,
-        frames_in_flight::table(std::slice::from_ref(&fif))
-    );
-    if let Some(path) = &json {
-        let mut value = lit::timing_json(&scene.name, (width, height), frames, &result.timings);
-        value["frames_in_flight"] = serde_json::json!({"summary": fif, "frames": result.frames});
-        std::fs::write(path, serde_json::to_string_pretty(&value)?)
-            .map_err(|e| format!("--json {}: {e}", path.display()))?;
-        println!("wrote {}", path.display());
-    }
-    if no_reference {
-        return Ok(());
-    }
-    // Without --debug-view: the CPU reference image and every GPU debug view.
-    let views = match debug_view {
-        Some(v) => vec![v],
-        None => {
-            render::render(
-                &device,
-                &queue,
-                &scene,
-                &render::RenderOptions {
-                    width,
-                    height,
-                    out: out.clone(),
-                    camera,
-                },
-            )?;
-            vec![
-                debug_view::DebugView::MeshColor,
-                debug_view::DebugView::HitT,
-                debug_view::DebugView::Barycentrics,
-            ]
-        }
-    };
-    for view in views {
-        let start = std::time::Instant::now();
-        let texels = debug_view::trace(&device, &queue, &scene, &camera, view, (width, height))?;
-        let image = debug_view::to_image(view, &texels, width, height);
-        std::fs::create_dir_all(&out)
-            .map_err(|e| format!("--out {}: cannot create: {e}", out.display()))?;
-        let path = out.join(format!("debug-{}.png", view.name()));
-        image.save(&path)?;
-        println!(
-            "wrote {} ({width}x{height}, GPU BVH build and primary rays through kickstart-rt, {:.2} s)",
-            path.display(),
-            start.elapsed().as_secs_f64()
-        );
-    }
-    Ok(())
-}
-
-/// `ksrt quality`'s options.
+/// `ksrt quality`'s options; `None`: the default for the adapter ([`defaults`]).
 struct QualityArgs {
     scene: String,
     scenes: Option<PathBuf>,
-    size: String,
+    size: Option<String>,
     camera: Option<String>,
+    frames: Option<u32>,
+    warmup: Option<u32>,
+    reference_samples: Option<u32>,
     opts: quality::run::QualityOptions,
     json: Option<PathBuf>,
 }
 
 fn quality_command(args: QualityArgs) -> AnyResult<()> {
     let mut opts = args.opts;
-    opts.size = parse_size(&args.size)?;
     let camera = args
         .camera
         .as_deref()
         .map(scene::parse_camera)
         .transpose()?;
-    let scene = scene::load(&args.scene, &scene::scenes_dir(args.scenes))?;
-    let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(&args.scene)));
     let adapter = gpu::adapter()?;
+    let info = adapter.get_info();
+    let mut picked = defaults::Resolver::new(defaults::is_software(&info));
+    let size = picked.pick(
+        args.size.as_deref(),
+        defaults::MEASURE_SIZE,
+        "{v}",
+        "--size",
+    );
+    opts.size = parse_size(size)?;
+    opts.frames = picked.pick(
+        args.frames,
+        defaults::QUALITY_FRAMES,
+        "{v} frames",
+        "--frames",
+    );
+    opts.warmup = picked.pick(
+        args.warmup,
+        defaults::QUALITY_WARMUP,
+        "{v} warm-up frames",
+        "--warmup",
+    );
+    opts.reference_samples = picked.pick(
+        args.reference_samples,
+        defaults::QUALITY_SAMPLES,
+        "{v} spp",
+        "--reference-samples",
+    );
+    if let Some(notice) = picked.notice(&info) {
+        eprintln!("{notice}");
+    }
+    let scene = cmd_render::load_scene(&args.scene, args.scenes)?;
+    let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(&args.scene)));
     let (device, queue) = gpu::device(&adapter)?;
     println!(
         "ksrt quality: {} at {}x{}, {} frames panning {}°, cache warmed {} frames then frozen, \
@@ -446,28 +332,58 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
     Ok(())
 }
 
-fn bench_command(
+/// `ksrt bench`'s options; `None`: the default for the adapter ([`defaults`]).
+struct BenchArgs {
     scenes: Option<PathBuf>,
     names: Vec<String>,
     json: Option<PathBuf>,
     camera: Option<String>,
-    iterations: u32,
-    size: &str,
-    (extras, peer): (bench::extras::ExtraArgs, Option<bench::PeerKind>),
-) -> AnyResult<()> {
-    if let (Some(dir), Some(json)) = (&extras.plots, &extras.plots_from) {
+    iterations: Option<u32>,
+    size: Option<String>,
+    denoisers: bool,
+    extras: bench::extras::ExtraArgs,
+    peer: Option<bench::PeerKind>,
+}
+
+fn bench_command(args: BenchArgs) -> AnyResult<()> {
+    if let (Some(dir), Some(json)) = (&args.extras.plots, &args.extras.plots_from) {
         // Charts of an earlier run: no GPU, no measurement.
         return bench::extras::plots_from_json(json, dir);
     }
+    let info = gpu::adapter()?.get_info();
+    let mut picked = defaults::Resolver::new(defaults::is_software(&info));
+    let size = picked.pick(
+        args.size.as_deref(),
+        defaults::MEASURE_SIZE,
+        "{v}",
+        "--size",
+    );
+    let size = parse_size(size)?;
+    let iterations = picked.pick(
+        args.iterations,
+        defaults::BENCH_ITERATIONS,
+        "{v} iteration(s)",
+        "--iterations",
+    );
+    if let Some(notice) = picked.notice(&info) {
+        eprintln!("{notice}");
+    }
+    if args.denoisers {
+        return bench::denoise::run(size, iterations, args.json.as_deref());
+    }
     bench::run(bench::BenchOptions {
-        scenes_dir: scene::scenes_dir(scenes),
-        scenes: names,
-        json,
-        camera: camera.as_deref().map(scene::parse_camera).transpose()?,
+        scenes_dir: scene::scenes_dir(args.scenes),
+        scenes: args.names,
+        json: args.json,
+        camera: args
+            .camera
+            .as_deref()
+            .map(scene::parse_camera)
+            .transpose()?,
         iterations,
-        size: parse_size(size)?,
-        extras,
-        peer,
+        size,
+        extras: args.extras,
+        peer: args.peer,
     })
 }
 
@@ -491,7 +407,7 @@ fn main() {
             no_reference,
             json,
             frames_in_flight,
-        } => render(RenderArgs {
+        } => cmd_render::run(cmd_render::RenderArgs {
             size,
             out,
             debug_view,
@@ -541,44 +457,43 @@ fn main() {
             scenes,
             size,
             camera,
+            frames,
+            warmup,
+            reference_samples,
             opts: quality::run::QualityOptions {
                 size: (0, 0),
-                frames,
-                warmup,
-                reference_samples,
+                frames: 0,
+                warmup: 0,
+                reference_samples: 0,
                 pan_degrees,
                 seed,
                 out: Some(out),
                 images,
+                progress: true,
             },
             json,
         }),
         Command::Bench {
-            json,
-            iterations,
-            size,
-            denoisers: true,
-            ..
-        } => parse_size(&size).and_then(|s| bench::denoise::run(s, iterations, json.as_deref())),
-        Command::Bench {
             scenes,
             scene,
             json,
             camera,
             iterations,
             size,
+            denoisers,
             extras,
             peer,
-            ..
-        } => bench_command(
+        } => bench_command(BenchArgs {
             scenes,
-            scene,
+            names: scene,
             json,
             camera,
             iterations,
-            &size,
-            (extras, peer),
-        ),
+            size,
+            denoisers,
+            extras,
+            peer,
+        }),
     };
     if let Err(e) = result {
         eprintln!("ksrt: {e}");

@@ -1,11 +1,10 @@
-//! The CPU reference image of `ksrt render`: the scene registered with the SDK, and the view
-//! traced with the SDK's public CPU reference BVH (`kickstart_rt::cpu`): primary rays, a sun with
+//! The CPU reference image of `ksrt render`: the view traced with the SDK's public CPU reference
+//! BVH (`kickstart_rt::cpu`): primary rays, a sun with
 //! ray-traced hard shadows, each mesh its colour. It stands beside the GPU debug views until the
 //! lighting cache and the trace tasks make lit GPU images; it is labelled as such in the file name
 //! and the output.
 
 use glam::Vec3;
-use kickstart_rt as ksrt;
 use kickstart_rt::cpu::{CpuBvh, Ray};
 
 use crate::scene::{Camera, Scene};
@@ -24,32 +23,19 @@ pub struct RenderOptions {
     pub camera: Camera,
 }
 
-/// Registers `scene` with the SDK and writes `cpu-reference.png`, traced on the CPU.
-pub fn render(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    scene: &Scene,
-    opts: &RenderOptions,
-) -> AnyResult<()> {
-    let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
-    let uploads = crate::gpu::upload_scene(device, scene);
-    let mut c = ctx.create_task_container();
-    crate::gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);
-    ctx.invoke_gpu_task(c)?;
-    device.poll(wgpu::PollType::wait_indefinitely())?;
-    println!(
-        "registered {} meshes, {} instances ({} triangles) with kickstart-rt; SDK memory {} bytes",
-        scene.meshes.len(),
-        scene.instances.len(),
-        scene.triangle_count(),
-        ctx.resource_allocations().total()
-    );
-
+/// Writes `cpu-reference.png`: `scene` traced on the CPU from `opts.camera`, a progress bar
+/// counting rows when `progress` (the reference takes seconds to minutes on two cores).
+pub fn render(scene: &Scene, opts: &RenderOptions, progress: bool) -> AnyResult<()> {
     let start = std::time::Instant::now();
-    let image = trace_cpu_reference(scene, &opts.camera, opts.width, opts.height);
-    std::fs::create_dir_all(&opts.out)?;
+    let bar = crate::progress::bar(progress, u64::from(opts.height), "CPU reference", "rows");
+    let image = trace_cpu_reference(scene, &opts.camera, (opts.width, opts.height), &bar);
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&opts.out)
+        .map_err(|e| format!("--out {}: cannot create: {e}", opts.out.display()))?;
     let path = opts.out.join("cpu-reference.png");
-    image.save(&path)?;
+    image
+        .save(&path)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
     println!(
         "wrote {} ({}x{}, traced on the CPU reference BVH in {:.2} s: direct sunlight without the SDK, to compare the lit images with)",
         path.display(),
@@ -60,7 +46,12 @@ pub fn render(
     Ok(())
 }
 
-fn trace_cpu_reference(scene: &Scene, camera: &Camera, width: u32, height: u32) -> image::RgbImage {
+fn trace_cpu_reference(
+    scene: &Scene,
+    camera: &Camera,
+    (width, height): (u32, u32),
+    bar: &indicatif::ProgressBar,
+) -> image::RgbImage {
     let (tris, owner) = scene.world_triangles();
     let bvh = CpuBvh::build(&tris);
     let eye = camera.eye;
@@ -96,6 +87,7 @@ fn trace_cpu_reference(scene: &Scene, camera: &Camera, width: u32, height: u32) 
         let jobs: Vec<_> = (0..threads as u32)
             .map(|k| {
                 let (bvh, tris, owner, shading_normal) = (&bvh, &tris, &owner, &shading_normal);
+                let bar = bar.clone();
                 s.spawn(move || {
                     let mut out = Vec::new();
                     for y in (k..height).step_by(threads) {
@@ -147,6 +139,7 @@ fn trace_cpu_reference(scene: &Scene, camera: &Camera, width: u32, height: u32) 
                             })
                             .collect();
                         out.push((y, row));
+                        bar.inc(1);
                     }
                     out
                 })

@@ -30,10 +30,15 @@ pub struct RendererOptions {
     /// Frames the caller keeps in flight (1..=3): the SDK context is made to allow two GPU
     /// tasks (the frame's and the debug view's) per frame in flight.
     pub frames_in_flight: u32,
+    /// Create every SDK pipeline up front (`prepare_pipelines`), so that no frame stalls on a
+    /// compile (the viewer). Off, each is created when a task first needs it: a batch render
+    /// then compiles only what its effects use (most of its start-up on software Vulkan).
+    pub prepare_pipelines: bool,
 }
 
 impl RendererOptions {
-    /// Defaults for `size`: every effect, seed 0, a 128² lidar view, no timing, sRGB RGBA8.
+    /// Defaults for `size`: every effect, seed 0, a 128² lidar view, no timing, sRGB RGBA8,
+    /// pipelines created up front.
     pub fn new(size: (u32, u32)) -> Self {
         RendererOptions {
             size,
@@ -43,6 +48,7 @@ impl RendererOptions {
             gpu_timing: false,
             ldr_format: wgpu::TextureFormat::Rgba8UnormSrgb,
             frames_in_flight: 1,
+            prepare_pipelines: true,
         }
     }
 }
@@ -117,7 +123,9 @@ impl Renderer {
         ));
         ctx.invoke_gpu_task(c)?;
         device.poll(wgpu::PollType::wait_indefinitely())?;
-        ctx.prepare_pipelines();
+        if opts.prepare_pipelines {
+            ctx.prepare_pipelines();
+        }
         let raster = GpuScene::new(device, queue, scene, &uploads);
         let size = (opts.size.0.max(1), opts.size.1.max(1));
         let main = ViewTargets::new(device, &raster, size);
@@ -259,6 +267,27 @@ impl Renderer {
             discard_history: false,
         };
         Ok(self.sdk.record_traces(encoder, &inputs, sample)?)
+    }
+
+    /// Traces the SDK debug view `debug` from the last frame's camera on this renderer's context
+    /// (whose lighting cache the frames filled), waits for it and reads `sdk.outputs.debug` back.
+    /// The composite and the other outputs keep the last frame.
+    pub fn trace_debug_view(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        debug: ksrt::DebugOutputType,
+    ) -> AnyResult<crate::readback::Texels> {
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("ksrt debug view"),
+        });
+        let task = self
+            .sdk
+            .record_debug_view(&mut encoder, debug)?
+            .ok_or("trace_debug_view: no frame has been rendered yet")?;
+        queue.submit([encoder.finish()]);
+        self.finish(device, &[task], false)?;
+        crate::readback::read_texture(device, queue, &self.sdk.outputs.debug)
     }
 
     /// Records, submits and waits for one frame, then marks its SDK task complete; returns the

@@ -23,6 +23,7 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::composite::Show;
+use crate::defaults::Resolver;
 use crate::frame::{Effects, EFFECT_NAMES};
 use crate::renderer::{Renderer, RendererOptions};
 use crate::scene::{Camera, Scene};
@@ -34,8 +35,8 @@ pub struct ViewArgs {
     pub scene: String,
     /// Scenes folder.
     pub scenes_dir: PathBuf,
-    /// Window size, `WIDTHxHEIGHT`.
-    pub size: String,
+    /// Window size, `WIDTHxHEIGHT` (`None`: the adapter's default, [`crate::defaults`]).
+    pub size: Option<String>,
     /// Effects at start (`--effects`).
     pub effects: String,
     /// Start camera (`--camera`).
@@ -120,16 +121,31 @@ struct App {
 
 /// Runs the viewer until the window closes (or `--frames` frames were drawn).
 pub fn run(args: ViewArgs) -> AnyResult<()> {
-    let size = crate::parse_size(&args.size)?;
+    let size = match &args.size {
+        Some(size) => crate::parse_size(size)?,
+        None => {
+            // The window's own adapter comes later, from its surface; the default one is the
+            // same device wherever there is only one (a CPU device is no one's second choice).
+            let info = crate::gpu::adapter()?.get_info();
+            let mut picked = Resolver::new(crate::defaults::is_software(&info));
+            let size = picked.pick(None, crate::defaults::VIEW_SIZE, "{v}", "--size");
+            if let Some(notice) = picked.notice(&info) {
+                eprintln!("{notice}");
+            }
+            crate::parse_size(size)?
+        }
+    };
     let effects = Effects::parse(&args.effects)?;
     let start = args
         .camera
         .as_deref()
         .map(crate::scene::parse_camera)
         .transpose()?;
-    let scene = crate::scene::load(&args.scene, &args.scenes_dir)?;
+    let mut scene = crate::progress::with_spinner(true, format!("loading {}", args.scene), || {
+        crate::scene::load(&args.scene, &args.scenes_dir)
+    })?;
     let fly = FlyCamera::from_camera(
-        &scene.camera_or_default(start.or_else(|| crate::bench::issue_camera(&args.scene))),
+        &scene.prepare_view(start.or_else(|| crate::bench::issue_camera(&args.scene))),
     );
     let event_loop = EventLoop::new().map_err(|e| {
         format!("ksrt view: cannot open a window ({e}); is there a display (DISPLAY, or Xvfb)?")
@@ -137,7 +153,7 @@ pub fn run(args: ViewArgs) -> AnyResult<()> {
     event_loop.set_control_flow(ControlFlow::Poll);
     let mut app = App {
         args: ViewArgs {
-            size: format!("{}x{}", size.0, size.1),
+            size: Some(format!("{}x{}", size.0, size.1)),
             ..args
         },
         scene,
@@ -164,7 +180,7 @@ pub fn run(args: ViewArgs) -> AnyResult<()> {
 
 impl App {
     fn init(&mut self, event_loop: &ActiveEventLoop) -> AnyResult<Gpu> {
-        let (w, h) = crate::parse_size(&self.args.size)?;
+        let (w, h) = crate::parse_size(self.args.size.as_deref().unwrap_or_default())?;
         let attributes = Window::default_attributes()
             .with_title(format!("ksrt — {}", self.scene.name))
             .with_inner_size(winit::dpi::PhysicalSize::new(w, h));

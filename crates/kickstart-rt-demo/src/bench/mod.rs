@@ -36,7 +36,7 @@ mod tree_work;
 use harness::Bench;
 pub use peer::PeerKind;
 use profile as prof;
-use report::{print_scene, Report};
+use report::{print_scene, Report, TlasReport};
 use scenes::{bench_scene, bench_tlas};
 
 /// Scenes benchmarked when no `--scene` is given.
@@ -129,6 +129,36 @@ fn attempt<T>(errors: &mut Vec<String>, what: &str, f: impl FnOnce() -> AnyResul
     }
 }
 
+/// Builds and refits a TLAS over each of `counts` instances, printing each result (above
+/// `bar`, which counts them).
+fn tlas_sweep(bench: &Bench, counts: &[u32], bar: &indicatif::ProgressBar) -> Vec<TlasReport> {
+    let mut out = Vec::with_capacity(counts.len());
+    for &count in counts {
+        bar.set_message(format!("bench TLAS {count}"));
+        let t = bench_tlas(bench, count);
+        bar.inc(1);
+        bar.suspend(|| {
+            let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
+            println!(
+                "  {:>7} instances  build {}  refit {}",
+                count,
+                opt(&t.build),
+                opt(&t.refit)
+            );
+            for p in [&t.build_profile, &t.refit_profile] {
+                if !p.is_empty() {
+                    println!("    profile    {}", prof::show(p));
+                }
+            }
+            for e in &t.errors {
+                println!("    failed: {e}");
+            }
+        });
+        out.push(t);
+    }
+    out
+}
+
 /// `ksrt bench`.
 pub fn run(opts: BenchOptions) -> AnyResult<()> {
     if opts.iterations == 0 {
@@ -151,7 +181,9 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
     let mut scenes = Vec::new();
     for name in &names {
         let start = std::time::Instant::now();
-        let loaded = scene::load(name, &opts.scenes_dir)?;
+        let loaded = crate::progress::with_spinner(true, format!("loading {name}"), || {
+            scene::load(name, &opts.scenes_dir)
+        })?;
         scenes.push(if opts.extras.flatten {
             loaded.flattened()?
         } else {
@@ -203,7 +235,15 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         tlas: Vec::new(),
         extras: Default::default(),
     };
+    // One step per scene and per TLAS size: each takes seconds to minutes on software Vulkan.
+    let bar = crate::progress::bar(
+        true,
+        (names.len() + TLAS_INSTANCE_COUNTS.len()) as u64,
+        "bench",
+        "steps",
+    );
     for (name, scene) in names.iter().zip(&scenes) {
+        bar.set_message(format!("bench {name}"));
         let camera = opts
             .camera
             .or_else(|| issue_camera(name))
@@ -217,38 +257,27 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             peer.as_mut(),
             opts.extras.tree_work,
         );
-        print_scene(&r, opts.size);
-        if let Some(p) = &r.peer {
-            peer::print(p);
-        }
+        bar.suspend(|| {
+            print_scene(&r, opts.size);
+            if let Some(p) = &r.peer {
+                peer::print(p);
+            }
+        });
+        bar.inc(1);
         report.scenes.push(r);
     }
     let tlas_counts: &[u32] =
         if opts.extras.skip_scenes || !extras::Section::Tlas.runs_in(&opts.extras.sections) {
             &[]
         } else {
-            println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
+            bar.suspend(|| {
+                println!("\nTLAS (instances of an 80-triangle sphere, random transforms):");
+            });
             &TLAS_INSTANCE_COUNTS
         };
-    for &count in tlas_counts {
-        let t = bench_tlas(&bench, count);
-        let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
-        println!(
-            "  {:>7} instances  build {}  refit {}",
-            count,
-            opt(&t.build),
-            opt(&t.refit)
-        );
-        for p in [&t.build_profile, &t.refit_profile] {
-            if !p.is_empty() {
-                println!("    profile    {}", prof::show(p));
-            }
-        }
-        for e in &t.errors {
-            println!("    failed: {e}");
-        }
-        report.tlas.push(t);
-    }
+    bar.set_length((names.len() + tlas_counts.len()) as u64);
+    report.tlas = tlas_sweep(&bench, tlas_counts, &bar);
+    bar.finish_and_clear();
     extras::run(
         &bench,
         &opts.scenes_dir,

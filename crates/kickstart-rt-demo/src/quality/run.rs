@@ -22,6 +22,7 @@ use glam::{Quat, Vec3};
 use super::accumulate::{Accumulator, SampleKind};
 use super::metrics::{self, Srgb8};
 use crate::frame::Effects;
+use crate::progress;
 use crate::readback::read_texture;
 use crate::renderer::{Renderer, RendererOptions};
 use crate::scene::{Camera, Scene};
@@ -64,6 +65,8 @@ pub struct QualityOptions {
     pub out: Option<PathBuf>,
     /// Which strips to write.
     pub images: Images,
+    /// Progress bars on stderr for the warm-up and the reference samples.
+    pub progress: bool,
 }
 
 /// One signal the yardstick measures.
@@ -261,16 +264,13 @@ pub fn run(
     ropts.seed = opts.seed;
     let mut r = Renderer::new(device, queue, scene, &ropts)?;
     r.sdk.roughness_override = Some(SPECULAR_ROUGHNESS);
-    // Warm the cache where the pan starts; the denoisers' history of these frames is dropped.
-    for _ in 0..opts.warmup {
-        r.render_frame(device, queue, camera, false)?;
-    }
-    r.sdk.freeze_cache = true;
-    r.cut();
-    if let Some(dir) = &opts.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("--out {}: cannot create: {e}", dir.display()))?;
-    }
+    warm_up(device, queue, &mut r, camera, opts)?;
+    let bar = progress::bar(
+        opts.progress,
+        u64::from(opts.frames) * u64::from(opts.reference_samples),
+        "reference samples",
+        "samples",
+    );
     let o = &r.sdk.outputs;
     let has_shadow = r.sdk.produced().shadow.0;
     let mut sums = vec![
@@ -332,26 +332,14 @@ pub fn run(
             });
         }
         // The reference: the same traces on this frame's G-buffer, white noise per sample.
-        let mut encoder = device.create_command_encoder(&Default::default());
-        for (_, acc) in &sums {
-            acc.clear(&mut encoder);
-        }
-        let mut pending = Vec::new();
-        for k in 0..opts.reference_samples {
-            let sample = 0x8000_0000u32
-                .wrapping_add(f.wrapping_mul(opts.reference_samples))
-                .wrapping_add(k);
-            pending.extend(r.record_traces(&mut encoder, sample)?);
-            for (_, acc) in &sums {
-                acc.add(&mut encoder);
-            }
-            if (k + 1) % SAMPLES_PER_SUBMIT == 0 || k + 1 == opts.reference_samples {
-                queue.submit([encoder.finish()]);
-                r.finish(device, &pending, false)?;
-                pending.clear();
-                encoder = device.create_command_encoder(&Default::default());
-            }
-        }
+        accumulate_reference(
+            device,
+            queue,
+            &mut r,
+            (f, opts.reference_samples),
+            &sums,
+            &bar,
+        )?;
         for ((signal, acc), t) in sums.iter().zip(triples.iter_mut()) {
             debug_assert_eq!(*signal, t.signal);
             t.reference = acc.mean(device, queue)?;
@@ -362,10 +350,74 @@ pub fn run(
             _ => None,
         };
         let scores = score_frame(f, opts.size, &triples, strips)?;
-        on_frame(&scores);
+        bar.suspend(|| on_frame(&scores));
         all.push(scores);
     }
+    bar.finish_and_clear();
     Ok(all)
+}
+
+/// Warms the lighting cache where the pan starts (the denoisers' history of these frames is
+/// dropped), freezes it and makes the strips' folder.
+fn warm_up(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    r: &mut Renderer,
+    camera: &Camera,
+    opts: &QualityOptions,
+) -> AnyResult<()> {
+    let bar = progress::bar(
+        opts.progress,
+        opts.warmup.into(),
+        "warming the cache",
+        "frames",
+    );
+    for _ in 0..opts.warmup {
+        r.render_frame(device, queue, camera, false)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    r.sdk.freeze_cache = true;
+    r.cut();
+    if let Some(dir) = &opts.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("--out {}: cannot create: {e}", dir.display()))?;
+    }
+    Ok(())
+}
+
+/// Traces frame `f`'s `samples` reference samples on the last frame's G-buffer into `sums`
+/// (cleared first), submitting every [`SAMPLES_PER_SUBMIT`], and counts them on `bar`.
+fn accumulate_reference(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    r: &mut Renderer,
+    (f, samples): (u32, u32),
+    sums: &[(Signal, Accumulator)],
+    bar: &indicatif::ProgressBar,
+) -> AnyResult<()> {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    for (_, acc) in sums {
+        acc.clear(&mut encoder);
+    }
+    let mut pending = Vec::new();
+    for k in 0..samples {
+        let sample = 0x8000_0000u32
+            .wrapping_add(f.wrapping_mul(samples))
+            .wrapping_add(k);
+        pending.extend(r.record_traces(&mut encoder, sample)?);
+        for (_, acc) in sums {
+            acc.add(&mut encoder);
+        }
+        if (k + 1) % SAMPLES_PER_SUBMIT == 0 || k + 1 == samples {
+            queue.submit([encoder.finish()]);
+            r.finish(device, &pending, false)?;
+            pending.clear();
+            encoder = device.create_command_encoder(&Default::default());
+            bar.set_position(u64::from(f) * u64::from(samples) + u64::from(k + 1));
+        }
+    }
+    Ok(())
 }
 
 /// The report's table: one line per frame, noisy → denoised PSNR and FLIP per signal.
@@ -430,6 +482,7 @@ mod tests {
             seed: 0,
             out: None,
             images: Images::None,
+            progress: false,
         };
         for (frames, samples) in [(0, 1), (1, 0)] {
             let opts = QualityOptions {
@@ -466,6 +519,7 @@ mod tests {
             seed: 1,
             out: Some(dir.clone()),
             images: Images::Last,
+            progress: false,
         };
         let frames = run(device, queue, &scene, &camera, &opts, |_| {}).expect("quality run");
         assert_eq!(frames.len(), 6);

@@ -121,6 +121,8 @@ fn hdr_channels_are_written_as_linear_exr() {
         refused: vec![],
         timings: vec![],
         frames: vec![],
+        debug: vec![],
+        sdk_bytes: 0,
     };
     let dir = testing::temp_dir("exr");
     let written = crate::lit::write(&result, &dir, true).expect("write");

@@ -120,3 +120,45 @@ fn obj_mtl_colours_emission_roughness_and_diffuse_map_are_loaded() {
     assert_eq!(floor.uvs.len(), 3);
     assert!(floor.uvs.contains(&[1.0, 0.0]));
 }
+
+/// A glTF file's `KHR_lights_punctual` lights are loaded, placed by their node, and light the
+/// view instead of the defaults.
+#[test]
+fn gltf_punctual_lights_are_loaded_and_kept() {
+    let dir = testing::temp_dir("gltf-lights");
+    let plain = std::fs::read_to_string(testing::textured_gltf(&dir)).expect("read");
+    let with_light = plain
+        .replace(
+            r#""scenes": [{"nodes": [0, 1]}],"#,
+            r#""extensionsUsed": ["KHR_lights_punctual"],
+  "extensions": {"KHR_lights_punctual": {"lights": [{"type": "point", "color": [1, 0.5, 0.25], "intensity": 4}]}},
+  "scenes": [{"nodes": [0, 1, 2]}],"#,
+        )
+        .replace(
+            r#""scale": [0.3, 1, 0.3]}
+  ],"#,
+            r#""scale": [0.3, 1, 0.3]},
+    {"translation": [0, 2, 0.5], "extensions": {"KHR_lights_punctual": {"light": 0}}}
+  ],"#,
+        );
+    assert_ne!(
+        plain, with_light,
+        "the test scene's JSON changed: update this test"
+    );
+    let path = dir.join("lit.gltf");
+    std::fs::write(&path, with_light).expect("write");
+    let mut scene = load_file(&path).expect("load");
+    let [Light::Point {
+        position,
+        intensity,
+        range,
+    }] = scene.lights[..]
+    else {
+        panic!("lights: {:?}", scene.lights);
+    };
+    assert_eq!(position, Vec3::new(0.0, 2.0, 0.5));
+    assert_eq!(intensity, Vec3::new(4.0, 2.0, 1.0));
+    assert!(range.is_finite() && range > 0.0);
+    scene.prepare_view(None);
+    assert_eq!(scene.lights.len(), 1, "the file's light, no defaults");
+}

@@ -1,6 +1,6 @@
 //! glTF 2.0 (`.gltf` + buffers, `.glb`) loading: the default scene's node hierarchy, every
 //! triangle primitive as a mesh, one instance per node that uses it, base colour factors, and the
-//! first perspective camera.
+//! first perspective camera, and the `KHR_lights_punctual` lights.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -9,7 +9,8 @@ use glam::{Affine3A, Mat4, Vec3};
 use gltf::mesh::Mode;
 
 use super::{
-    check_indices, compute_normals, Camera, Instance, Material, Mesh, Scene, SceneError, Texture,
+    check_indices, compute_normals, Camera, Instance, Light, Material, Mesh, Scene, SceneError,
+    Texture,
 };
 
 /// Loads a `.gltf` or `.glb` file.
@@ -129,10 +130,14 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
                 }
             }
         }
+        if let Some(light) = node.light() {
+            scene.lights.push(punctual_light(&light, world));
+        }
         for child in node.children().collect::<Vec<_>>().into_iter().rev() {
             stack.push((child, world));
         }
     }
+    bound_light_ranges(&mut scene);
     if scene.instances.is_empty() && skipped > 0 {
         return Err(err(format!(
             "no triangles to render: all {skipped} primitive(s) the scene uses are points or lines (or lack positions)"
@@ -432,6 +437,56 @@ fn fan_to_list(s: &[u32]) -> Vec<u32> {
         out.extend([s[k + 1], s[k + 2], s[0]]);
     }
     out
+}
+
+/// Gives every point and spot light without a range (glTF: infinite) one: twice the scene's size,
+/// past which the windowed falloff has nothing left to light.
+fn bound_light_ranges(scene: &mut Scene) {
+    let reach = scene.size() * 2.0;
+    for light in &mut scene.lights {
+        if let Light::Point { range, .. } | Light::Spot { range, .. } = light {
+            if !range.is_finite() || *range <= 0.0 {
+                *range = reach;
+            }
+        }
+    }
+}
+
+/// A `KHR_lights_punctual` light placed by its node's `world` transform (it shines along its
+/// local −Z). glTF's photometric units (lux, candela) are taken as the rasteriser's irradiance
+/// and radiant intensity at exposure 1, so a file lit for a physically based viewer looks about
+/// as bright here.
+fn punctual_light(light: &gltf::khr_lights_punctual::Light, world: Affine3A) -> Light {
+    use gltf::khr_lights_punctual::Kind;
+    let colour = Vec3::from(light.color()) * light.intensity().max(0.0);
+    let position = world.transform_point3(Vec3::ZERO);
+    let direction = world
+        .transform_vector3(Vec3::NEG_Z)
+        .normalize_or(Vec3::NEG_Y);
+    let range = light.range().unwrap_or(f32::INFINITY);
+    match light.kind() {
+        Kind::Directional => Light::Sun {
+            direction,
+            irradiance: colour,
+            angular_diameter: 0.0093,
+        },
+        Kind::Point => Light::Point {
+            position,
+            intensity: colour,
+            range,
+        },
+        Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => Light::Spot {
+            position,
+            direction,
+            intensity: colour,
+            range,
+            inner_angle: inner_cone_angle,
+            outer_angle: outer_cone_angle,
+        },
+    }
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 //! [`Mesh`] and one instance per [`Instance`], so a glTF mesh used by several nodes is built once.
 
 pub mod builtin;
+mod framing;
 mod gltf;
 mod obj;
 
@@ -329,7 +330,9 @@ pub struct Scene {
     pub camera: Option<Camera>,
     /// Decoded textures the materials index.
     pub textures: Vec<Texture>,
-    /// The scene's lights; empty: [`Scene::lights_or_default`] adds a sun.
+    /// The scene's lights (glTF `KHR_lights_punctual`, the built-in scenes'); empty:
+    /// [`Scene::lights_or_default`] adds a sun, and [`Scene::light_the_view`] a light at the
+    /// camera.
     pub lights: Vec<Light>,
 }
 
@@ -427,8 +430,8 @@ impl Scene {
         (hi - lo).length().max(f32::MIN_POSITIVE)
     }
 
-    /// A camera that frames the whole scene: looking at the centre of the bounds from the front
-    /// (+Z) and above, far enough that the bounding sphere fits the 50° vertical field of view.
+    /// A camera that frames the whole scene from outside: looking at the centre of the bounds
+    /// from the front (+Z) and above, far enough that the bounding sphere fits the 50° vertical field of view.
     pub fn default_camera(&self) -> Camera {
         let (lo, hi) = self.bounds();
         let centre = (lo + hi) * 0.5;
@@ -458,11 +461,10 @@ impl Scene {
         }]
     }
 
-    /// The camera to render with: `override_camera`, else the file's, else [`Self::default_camera`].
+    /// The camera to render with: `override_camera`, else the file's, else one inside an
+    /// enclosed interior, else one framing the scene from outside ([`Self::view_camera`]).
     pub fn camera_or_default(&self, override_camera: Option<Camera>) -> Camera {
-        override_camera
-            .or(self.camera)
-            .unwrap_or_else(|| self.default_camera())
+        override_camera.unwrap_or_else(|| self.view_camera())
     }
 }
 
