@@ -8,6 +8,7 @@
 // browser considers the page loaded (asynchronous WebGPU work outlives `--dump-dom`).
 //
 // Usage: node .ci/browser-shaders.mjs DIR [--browser PATH] [--timeout SECONDS]
+//                                          [--skip-pipeline ENTRY]...
 // Exit status: 0 when every shader compiles, 1 when one does not (each failure printed with the
 // compiler's messages), 2 when the browser gives no WebGPU adapter or never reports.
 
@@ -29,6 +30,10 @@ const option = (name, fallback) => {
 };
 const browser = option("--browser", "/usr/bin/chromium-headless-shell");
 const timeoutSeconds = Number(option("--timeout", "600"));
+// Pipelines not built (`--skip-pipeline NAME`, repeatable: a shader's name skips all of its
+// entry points, an entry point's name that one), for pipelines the browser's software backend
+// cannot build; their module is still compiled and validated.
+const skipPipelines = args.flatMap((a, i) => (a === "--skip-pipeline" ? [args[i + 1]] : []));
 
 // index.txt: "file<TAB>variant name" per line.
 const shaders = readFileSync(join(dir, "index.txt"), "utf8")
@@ -51,6 +56,7 @@ try {
   await post("/adapter", { vendor: info.vendor, architecture: info.architecture,
                            description: info.description });
   const shaders = await (await fetch("/shaders.json")).json();
+  const skip = await (await fetch("/skip.json")).json();
   for (const s of shaders) {
     const code = await (await fetch("/shader/" + encodeURIComponent(s.file))).text();
     const result = { name: s.name, file: s.file, messages: [], pipelines: [] };
@@ -63,6 +69,11 @@ try {
     const entries = [...code.matchAll(/@compute[^]*?fn\\s+([A-Za-z_][A-Za-z0-9_]*)\\s*\\(/g)]
       .map((m) => m[1]);
     for (const entryPoint of entries) {
+      if (skip.includes(entryPoint) || skip.includes(s.name)) {
+        result.pipelines.push({ entryPoint, ok: true, skipped: true });
+        continue;
+      }
+      await post("/progress", { name: s.name, entryPoint });
       try {
         await device.createComputePipelineAsync({
           layout: "auto", compute: { module, entryPoint }, label: s.name + " " + entryPoint });
@@ -82,6 +93,7 @@ try {
 </script>`;
 
 let reported = 0;
+let lastProgress = "nothing yet";
 let failed = 0;
 const started = Date.now();
 let finish;
@@ -94,6 +106,8 @@ const server = createServer((req, res) => {
     const url = decodeURIComponent(req.url);
     if (req.method === "GET" && url === "/") {
       res.writeHead(200, { "content-type": "text/html" }).end(page);
+    } else if (req.method === "GET" && url === "/skip.json") {
+      res.writeHead(200, { "content-type": "application/json" }).end(JSON.stringify(skipPipelines));
     } else if (req.method === "GET" && url === "/shaders.json") {
       res.writeHead(200, { "content-type": "application/json" }).end(JSON.stringify(shaders));
     } else if (req.method === "GET" && url.startsWith("/shader/")) {
@@ -114,14 +128,22 @@ const server = createServer((req, res) => {
         const bad = data.pipelines.filter((p) => !p.ok);
         const ok = errors.length === 0 && bad.length === 0 && data.pipelines.length > 0;
         if (!ok) failed += 1;
-        console.log(`${ok ? "ok  " : "FAIL"} ${data.name} (${data.pipelines.length} entry points)`);
+        const skipped = data.pipelines.filter((p) => p.skipped).map((p) => p.entryPoint);
+        const what =
+          `${data.pipelines.length} entry points` +
+          (skipped.length > 0 ? `; pipeline not built: ${skipped.join(", ")}` : "");
+        console.log(`${ok ? "ok  " : "FAIL"} ${data.name} (${what})`);
         for (const m of data.messages) console.log(`       ${m}`);
         for (const p of bad) console.log(`       ${p.entryPoint}: ${p.error}`);
         if (data.pipelines.length === 0) console.log("       no compute entry point found");
       } else if (url === "/done") {
         finish(failed === 0 && reported === shaders.length ? 0 : 1);
+      } else if (url === "/progress") {
+        lastProgress = `${data.name}: creating the pipeline of ${data.entryPoint}`;
       } else if (url === "/fatal") {
-        console.error(`browser-shaders: ${data.error}`);
+        console.error(
+          `browser-shaders: ${data.error} (after ${reported} of ${shaders.length} shaders; last: ${lastProgress})`,
+        );
         finish(2);
       }
     } else {
@@ -141,6 +163,9 @@ server.listen(0, "127.0.0.1", () => {
       "--enable-unsafe-webgpu",
       "--use-webgpu-adapter=swiftshader",
       "--disable-gpu-sandbox",
+      // SwiftShader compiles the largest shaders (the BVH builder) for longer than the GPU
+      // process's hang watchdog allows, which then kills the GPU process mid-compile.
+      "--disable-gpu-watchdog",
       "--disable-background-networking",
       "--disable-component-update",
       "--no-first-run",
@@ -164,7 +189,11 @@ server.listen(0, "127.0.0.1", () => {
   finished.then((status) => {
     clearTimeout(timer);
     const seconds = ((Date.now() - started) / 1000).toFixed(1);
-    console.log(`browser-shaders: ${shaders.length - failed} of ${shaders.length} shaders compile (${seconds} s)`);
+    console.log(
+      `browser-shaders: ${reported - failed} of ${shaders.length} shaders compile, ` +
+        `${failed} fail, ${shaders.length - reported} not reached (${seconds} s)`,
+    );
+    if (status === 2) console.log(`browser-shaders: the browser's last messages:\n${stderr}`);
     chrome.kill("SIGKILL");
     server.close();
     rmSync(profile, { recursive: true, force: true });
