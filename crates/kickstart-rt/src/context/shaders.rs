@@ -63,7 +63,7 @@ mod tests {
         // 2 sort + 3 scene + 4 cache + 1 rays + 4 debug views + 48 trace tasks + the denoisers.
         assert!(variants.len() > 62, "{} variants", variants.len());
         for module in crate::shader_modules() {
-            let header = format!("// ---- module {module} ----\n");
+            let header = crate::gpu::compose::module_header(module);
             assert!(
                 variants.iter().any(|v| v.wgsl.contains(&header)),
                 "no shader composes the module {module}"

@@ -124,9 +124,7 @@ impl ShaderLibrary {
                 });
             }
             declared.extend_from_slice(&module.params);
-            text.push_str("// ---- module ");
-            text.push_str(name);
-            text.push_str(" ----\n");
+            text.push_str(&module_header(name));
             text.push_str(&module.fill(name, params)?);
         }
         if let Some(&(unused, _)) = params.iter().find(|(n, _)| !declared.contains(n)) {
@@ -242,6 +240,12 @@ impl Module<'_> {
         out.push_str(rest);
         Ok(out)
     }
+}
+
+/// The comment line that starts module `name` in a composed shader (where naga's messages and a
+/// reader find which module a line came from).
+pub(crate) fn module_header(name: &str) -> String {
+    format!("// ---- module {name} ----\n")
 }
 
 /// Whether `s` is a parameter name: ASCII letters, digits and `_`, not starting with a digit.

@@ -199,13 +199,13 @@ fn storage_format(format: naga::StorageFormat) -> Option<wgpu::TextureFormat> {
 ///
 /// When a binding has no resource of its name (a programming error: the pass's tests record
 /// it); `label` names the pass.
-pub(crate) fn named_entries<'a>(
+pub(crate) fn named_entries<'a, 'b>(
     label: &str,
-    bindings: &[ShaderBinding],
+    bindings: impl IntoIterator<Item = &'b ShaderBinding>,
     resources: &[(&str, wgpu::BindingResource<'a>)],
 ) -> Vec<wgpu::BindGroupEntry<'a>> {
     bindings
-        .iter()
+        .into_iter()
         .map(|b| {
             let resource = resources
                 .iter()
@@ -418,16 +418,12 @@ impl ReflectedPipeline {
         group: u32,
         resources: &[(&str, wgpu::BindingResource<'_>)],
     ) -> wgpu::BindGroup {
-        let group_bindings: Vec<ShaderBinding> = self
-            .bindings
-            .iter()
-            .filter(|b| b.group == group)
-            .cloned()
-            .collect();
+        // Called per dispatch: the group's bindings are filtered in place, not copied.
+        let group_bindings = self.bindings.iter().filter(|b| b.group == group);
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(label),
             layout: &self.pipeline.get_bind_group_layout(group),
-            entries: &named_entries(self.label, &group_bindings, resources),
+            entries: &named_entries(self.label, group_bindings, resources),
         })
     }
 }
