@@ -67,6 +67,17 @@ mod tests {
     }
 
     #[test]
+    fn a_dump_folder_that_cannot_be_made_is_an_error_naming_it() {
+        // A regular file where the folder should be: creating the folder fails.
+        let file = std::env::temp_dir().join(format!("ksrt-shaders-file-{}", std::process::id()));
+        std::fs::write(&file, b"not a folder").unwrap();
+        let err = run(Some(&file)).unwrap_err().to_string();
+        std::fs::remove_file(&file).unwrap();
+        assert!(err.starts_with("cannot create "), "{err}");
+        assert!(err.contains(&file.display().to_string()), "{err}");
+    }
+
+    #[test]
     fn the_dump_writes_every_variant_as_composed_and_an_index() {
         let dir = std::env::temp_dir().join(format!("ksrt-shaders-{}", std::process::id()));
         run(Some(&dir)).unwrap();
