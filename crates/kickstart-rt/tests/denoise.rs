@@ -672,6 +672,142 @@ fn checkerboard_input_is_resolved_to_every_pixel() {
     }
 }
 
+/// The traced pixel of each block in frame `phase` of a block mode, as documented on
+/// `HalfResolutionMode` (written out here, not taken from the SDK).
+fn block_traced_pixel(block: u32, phase: u32) -> (u32, u32) {
+    const TWO: [(u32, u32); 4] = [(0, 0), (1, 1), (1, 0), (0, 1)];
+    // The 4×4 Bayer matrix's pixel of value k.
+    const BAYER: [[u32; 4]; 4] = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]];
+    if block == 2 {
+        return TWO[(phase % 4) as usize];
+    }
+    let k = phase % 16;
+    for (y, row) in BAYER.iter().enumerate() {
+        for (x, &v) in row.iter().enumerate() {
+            if v == k {
+                return (x as u32, y as u32);
+            }
+        }
+    }
+    unreachable!()
+}
+
+fn block_mode(block: u32, phase: u32) -> HalfResolutionMode {
+    if block == 2 {
+        HalfResolutionMode::OnePer2x2 { phase }
+    } else {
+        HalfResolutionMode::OnePer4x4 { phase }
+    }
+}
+
+/// `img` with every pixel a block mode does not trace in `phase` replaced by garbage (which
+/// the denoiser must never read).
+fn keep_traced(img: &[Vec4], block: u32, phase: u32) -> Vec<Vec4> {
+    let t = block_traced_pixel(block, phase);
+    img.iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
+            if (x % block, y % block) == t {
+                *v
+            } else {
+                Vec4::new(1000.0, -50.0, f32::NAN, 3.0)
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn block_modes_reconstruct_a_uniform_signal_exactly_at_every_pixel() {
+    // A noiseless uniform signal traced at one pixel per block: the filtered grid is uniform,
+    // and the upsample must give that value to every pixel with a surface, from the first frame
+    // on (no untraced pixel left unwritten, no garbage read), whatever the phase.
+    let g = static_gbuffer();
+    let flat = reference_image(&g, |_| Vec3::new(0.5, 0.25, 0.125));
+    for block in [2, 4] {
+        let mut h = Harness::new(SignalType::Diffuse, DenoisingMethod::Fast);
+        for phase in 0..6 {
+            h.half_resolution_mode = block_mode(block, phase);
+            let input = keep_traced(&flat, block, phase);
+            let out = h
+                .frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue)
+                .remove(0);
+            for (i, s) in g.surfaces.iter().enumerate() {
+                if s.is_none() {
+                    continue;
+                }
+                let e = (out[i] - flat[i]).truncate().abs().max_element();
+                assert!(
+                    e < 2e-3,
+                    "{block}×{block} phase {phase}: pixel {i} is {} for {}",
+                    out[i],
+                    flat[i]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn block_modes_are_reconstructed_to_every_pixel_with_edges_kept() {
+    let g = static_gbuffer();
+    let r = reference_image(&g, reference);
+    for (block, min_gain) in [(2, 15.0), (4, 11.0)] {
+        let mut h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
+        let mut rng = Rng(23);
+        let mut out = Vec::new();
+        let mut noisy_psnr = 0.0;
+        // 16 frames: every pixel of a 4×4 block traced once.
+        for phase in 0..16 {
+            h.half_resolution_mode = block_mode(block, phase);
+            let input = noisy(&r, &mut rng);
+            noisy_psnr = psnr(&g, &input, &r);
+            out = h
+                .frame(
+                    &g,
+                    &[keep_traced(&input, block, phase)],
+                    Motion::Matrices,
+                    DenoiseMode::Continue,
+                )
+                .remove(0);
+        }
+        let p = psnr(&g, &out, &r);
+        let edges = edge_pixels(&g, &r, 0.25);
+        let edge_err = edges
+            .iter()
+            .map(|&i| (out[i].truncate() - r[i].truncate()).abs().max_element())
+            .sum::<f32>()
+            / edges.len() as f32;
+        let surfaces: Vec<usize> = (0..out.len())
+            .filter(|&i| g.surfaces[i].is_some())
+            .collect();
+        let far = surfaces
+            .iter()
+            .filter(|&&i| (out[i] - r[i]).truncate().abs().max_element() >= 0.25)
+            .count();
+        eprintln!(
+            "{block}×{block}: {p:.2} dB (noisy full-rate input {noisy_psnr:.2} dB), edge error \
+             {edge_err:.4}, {far} of {} pixels off by 0.25",
+            surfaces.len()
+        );
+        assert!(
+            out.iter().all(|v| v.is_finite()),
+            "{block}×{block}: garbage read"
+        );
+        assert!(p > noisy_psnr + min_gain, "{block}×{block}: {p:.2} dB");
+        // Guided by the G-buffer, the upsample keeps the steps across depth and normal edges
+        // (a plain bilinear upsample of a 4×4 grid smears them over 4 pixels).
+        assert!(
+            edge_err < 0.1,
+            "{block}×{block}: edges blurred, mean error {edge_err:.4}"
+        );
+        assert!(
+            far * 100 < surfaces.len(),
+            "{block}×{block}: {far} pixels off by 0.25"
+        );
+    }
+}
+
 #[test]
 fn multi_shadow_denoises_the_packed_visibility() {
     // The multi-shadow format read by the denoiser: R = visibility in [0, 1], G = hit distance.

@@ -68,10 +68,10 @@ fn dn_variance_estimate(s: u32, p: vec2<i32>, centre: DnGuide, dist: f32) -> f32
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
             let q = p + vec2<i32>(dx, dy);
-            if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
+            if !dn_in_grid(q) {
                 continue;
             }
-            let j = u32(q.y) * dp.viewport.z + u32(q.x);
+            let j = dn_index(vec2<u32>(q));
             let g = dn_unpack_guide(guide[j]);
             if !g.valid || abs(dot(centre.normal, g.position - centre.position)) > 0.02 * dist {
                 continue;
@@ -141,17 +141,17 @@ struct DnAcc {
     vsum: f32,
 }
 
-// Index of the tap `o` (in steps) of pixel `p`, clamped into the viewport (taps outside are
+// Index of the tap `o` (in steps) of grid pixel `p`, clamped into the grid (taps outside are
 // dropped by dn_tap).
 fn dn_tap_index(p: vec2<i32>, o: vec2<i32>, step: i32) -> u32 {
-    let q = clamp(p + o * step, vec2<i32>(0), vec2<i32>(dp.viewport.zw) - vec2<i32>(1));
-    return u32(q.y) * dp.viewport.z + u32(q.x);
+    let q = clamp(p + o * step, vec2<i32>(0), vec2<i32>(dp.grid.xy) - vec2<i32>(1));
+    return dn_index(vec2<u32>(q));
 }
 
 // Adds the tap `o` (guide `g`, record `h`) of the centre `c`.
 fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnRecord) -> DnAcc {
     let q = c.p + o * step;
-    if q.x < 0 || q.y < 0 || q.x >= i32(dp.viewport.z) || q.y >= i32(dp.viewport.w) {
+    if !dn_in_grid(q) {
         return acc;
     }
     let gq = dn_unpack_guide(g);
@@ -189,7 +189,7 @@ const LOG2E: f32 = 1.4426950408889634;
 // output texture.
 fn dn_emit(s: u32, i: u32, p: vec2<u32>, value: vec4<f32>, z: f32, len: f32) {
     if DN_LAST {
-        dn_write_output(s, p + dp.viewport.xy, value);
+        dn_write_output(s, dn_texel(p), value);
     } else {
         dn_dst(s, i, dn_pack_signal(value, z, len));
     }
@@ -197,11 +197,11 @@ fn dn_emit(s: u32, i: u32, p: vec2<u32>, value: vec4<f32>, z: f32, len: f32) {
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
+    if gid.x >= dp.grid.x || gid.y >= dp.grid.y {
         return;
     }
     let p = vec2<i32>(gid.xy);
-    let i = gid.y * dp.viewport.z + gid.x;
+    let i = dn_index(gid.xy);
     let gp = dn_unpack_guide(guide[i]);
     if !gp.valid {
         // No surface: the accumulated input passes through.
@@ -213,7 +213,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let dist = max(dn_view_distance(gp.position), 1e-6);
     let step = i32(ap.step);
-    let stepf = f32(ap.step);
+    // Tap distances in viewport pixels (a grid pixel spans a block in a block mode), which the
+    // radii and the plane tolerance are in.
+    let stepf = f32(ap.step * dp.grid.z);
     // Tap distances of the 3×3 pattern: edge and corner.
     let d_edge = stepf;
     let d_corner = stepf * 1.4142135;

@@ -9,7 +9,10 @@
 // denoise/output/* (none, or the one output texture of a chain), which define DN_LAST (the last
 // à-trous iteration, which writes the output texture) and dn_write_output.
 //
-// Per-pixel buffers are indexed by viewport-relative pixel, row-major with the viewport's width.
+// The passes work on a grid of pixels: the viewport, or in a block mode (one traced pixel per
+// 2×2 or 4×4 block, HalfResolutionMode::OnePer*) one pixel per block, the block's traced one
+// (dn_texel); the upsample pass then writes every viewport pixel from that grid. Per-pixel
+// buffers are indexed by grid pixel, row-major with the grid's width.
 // - guide (vec4<u32>): world position xyz (f32 bits); w = octahedral normal (12 + 12 bits) and
 //   roughness (8 bits), or DN_INVALID where the G-buffer holds no surface.
 // - signal (DnRecord, history and filter intermediates): the value (rgb or scalar), the hit
@@ -49,6 +52,11 @@ struct DenoiseParams {
     checkerboard: u32,
     // Base radius of the spatial filter, pixels.
     base_radius: f32,
+    // xy: the grid's size; z: pixels per grid pixel along each axis (the block size, 1 but in
+    // a block mode).
+    grid: vec4<u32>,
+    // xy: this frame's traced pixel of each block, zw: the previous frame's (block modes).
+    lattice: vec4<u32>,
 }
 
 const DN_INVALID: u32 = 0xffffffffu;
@@ -127,7 +135,32 @@ fn dn_unpack_guide(g: vec4<u32>) -> DnGuide {
 }
 
 fn dn_pixel_count() -> u32 {
-    return dp.viewport.z * dp.viewport.w;
+    return dp.grid.x * dp.grid.y;
+}
+
+// Whether grid pixel `p` exists.
+fn dn_in_grid(p: vec2<i32>) -> bool {
+    return p.x >= 0 && p.y >= 0 && p.x < i32(dp.grid.x) && p.y < i32(dp.grid.y);
+}
+
+// Row-major buffer index of grid pixel `p` (inside the grid).
+fn dn_index(p: vec2<u32>) -> u32 {
+    return p.y * dp.grid.x + p.x;
+}
+
+// Viewport-relative pixel of grid pixel `g`: itself, or the traced pixel of block `g` (which
+// may lie past the viewport in its last column or row: see dn_texel_inside).
+fn dn_grid_pixel(g: vec2<u32>) -> vec2<u32> {
+    return g * dp.grid.z + dp.lattice.xy;
+}
+
+fn dn_texel_inside(g: vec2<u32>) -> bool {
+    return all(dn_grid_pixel(g) < dp.viewport.zw);
+}
+
+// Texel of grid pixel `g`.
+fn dn_texel(g: vec2<u32>) -> vec2<u32> {
+    return dp.viewport.xy + dn_grid_pixel(g);
 }
 
 // Distance of `p` from this frame's camera (along the view direction when orthographic).

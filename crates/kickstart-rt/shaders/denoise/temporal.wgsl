@@ -1,6 +1,7 @@
 // kickstart-rt denoisers, pass 1: temporal accumulation.
 //
-// Per viewport pixel: decodes the G-buffer (with the camera jitter) into this frame's guide,
+// Per grid pixel (see denoise/common.wgsl): decodes the G-buffer (with the camera jitter) into
+// this frame's guide,
 // reads the noisy signal(s) (checkerboard: untraced pixels are rebuilt from their four traced
 // neighbours, weighted by geometric similarity), reprojects into the previous frame (motion
 // vectors of either type, or the previous matrices), keeps the bilinear taps whose surface
@@ -31,7 +32,7 @@ const CLAMP_SIGMAS: f32 = 2.0;
 
 // The workgroup's 8×8 pixels and a 1-pixel border of the decoded input (dn_load_input), loaded
 // once per workgroup (100 loads for 64 pixels instead of 9 per pixel) for the 3×3 neighbourhood
-// statistics; dn_tile_ok: inside the viewport and traced.
+// statistics; dn_tile_ok: inside the grid and traced.
 const DN_TILE: u32 = 10u;
 var<workgroup> dn_tile: array<array<vec4<f32>, 100>, DN_SIGNALS>;
 var<workgroup> dn_tile_ok: array<u32, 100>;
@@ -80,16 +81,12 @@ fn dn_traced(p: vec2<u32>) -> bool {
     return ((p.x + p.y) & 1u) == dp.checkerboard - 1u;
 }
 
-fn dn_in_viewport(p: vec2<i32>) -> bool {
-    return p.x >= 0 && p.y >= 0 && p.x < i32(dp.viewport.z) && p.y < i32(dp.viewport.w);
-}
-
 // The signal at viewport-relative pixel `p`; checkerboard holes are filled from the traced
 // 4-neighbours, weighted by how well their surface matches (`pos`, `n`; `valid` false: plain
 // average).
 fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) -> vec4<f32> {
     if dn_traced(p) {
-        return dn_load_input(s, p + dp.viewport.xy);
+        return dn_load_input(s, dn_texel(p));
     }
     var sum = vec4<f32>(0.0);
     var wsum = 0.0;
@@ -99,7 +96,7 @@ fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) ->
     let dist = max(dn_view_distance(pos), 1e-6);
     for (var k = 0; k < 4; k++) {
         let q = vec2<i32>(p) + offsets[k];
-        if !dn_in_viewport(q) {
+        if !dn_in_grid(q) {
             continue;
         }
         let texel = vec2<u32>(q) + dp.viewport.xy;
@@ -122,14 +119,14 @@ fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) ->
     return any_sum / max(any_count, 1.0);
 }
 
-// Row-major index of viewport pixel `q` clamped into the viewport.
+// Row-major index of grid pixel `q` clamped into the grid.
 fn dn_clamped_index(q: vec2<i32>) -> u32 {
-    let c = clamp(q, vec2<i32>(0), vec2<i32>(dp.viewport.zw) - vec2<i32>(1));
-    return u32(c.y) * dp.viewport.z + u32(c.x);
+    let c = clamp(q, vec2<i32>(0), vec2<i32>(dp.grid.xy) - vec2<i32>(1));
+    return dn_index(vec2<u32>(c));
 }
 
 // Weight of the previous frame's pixel `q` (guide `g`, bilinear weight `bw`) for this pixel's
-// history: 0 outside the viewport or where it shows another surface.
+// history: 0 outside the grid or where it shows another surface.
 fn dn_history_weight(
     q: vec2<i32>,
     g: vec4<u32>,
@@ -138,7 +135,7 @@ fn dn_history_weight(
     n: vec3<f32>,
     pred: vec3<f32>,
 ) -> f32 {
-    if !dn_in_viewport(q) {
+    if !dn_in_grid(q) {
         return 0.0;
     }
     let gq = dn_unpack_guide(g);
@@ -179,13 +176,13 @@ fn dn_fill_tile(wg: vec2<u32>, lid: u32) {
     for (var t = lid; t < DN_TILE * DN_TILE; t += 64u) {
         let q = origin + vec2<i32>(i32(t % DN_TILE), i32(t / DN_TILE));
         var ok = false;
-        if dn_in_viewport(q) {
-            ok = dn_traced(vec2<u32>(q));
+        if dn_in_grid(q) {
+            ok = dn_traced(vec2<u32>(q)) && dn_texel_inside(vec2<u32>(q));
         }
         dn_tile_ok[t] = select(0u, 1u, ok);
         if ok {
             for (var s = 0u; s < DN_SIGNALS; s++) {
-                dn_tile[s][t] = dn_load_input(s, vec2<u32>(q) + dp.viewport.xy);
+                dn_tile[s][t] = dn_load_input(s, dn_texel(vec2<u32>(q)));
             }
         }
     }
@@ -200,12 +197,20 @@ fn main(
 ) {
     dn_fill_tile(wg.xy, lindex);
     workgroupBarrier();
-    if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
+    if gid.x >= dp.grid.x || gid.y >= dp.grid.y {
         return;
     }
     let p = gid.xy;
-    let i = p.y * dp.viewport.z + p.x;
-    let texel = p + dp.viewport.xy;
+    let i = dn_index(p);
+    if !dn_texel_inside(p) {
+        // A block whose traced pixel lies past the viewport this frame: nothing traced.
+        guide_cur[i] = vec4<u32>(DN_INVALID);
+        for (var s = 0u; s < DN_SIGNALS; s++) {
+            dn_store_hist(s, i, dn_pack_signal(vec4<f32>(0.0), 0.0, 0.0));
+        }
+        return;
+    }
+    let texel = dn_texel(p);
 
     // gb_surface unprojects the jittered depth where it was sampled (trace/gbuffer.wgsl).
     let surf = gb_surface(texel);
@@ -222,13 +227,14 @@ fn main(
     }
     guide_cur[i] = dn_pack_guide(pos, n, gb_roughness(texel));
 
-    // Where this surface was in the previous frame (continuous viewport pixel coordinates).
+    // Where this surface was in the previous frame (continuous viewport pixel coordinates),
+    // then on the previous frame's grid (below).
     var prev_xy: vec2<f32>;
     var pred = pos;
     let size = vec2<f32>(dp.viewport.zw);
     if dp.motion_type == 1u {
         let m = textureLoad(dn_motion, texel, 0).xy * dp.motion_scale.xy;
-        let uv = (vec2<f32>(p) + 0.5 - dp.jitter.xy) / size;
+        let uv = (vec2<f32>(dn_grid_pixel(p)) + 0.5 - dp.jitter.xy) / size;
         prev_xy = (uv + m) * size + dp.jitter.zw;
     } else {
         if dp.motion_type == 2u {
@@ -245,6 +251,8 @@ fn main(
     // previous guides and history records are loaded before any is used (indices clamped into
     // the viewport; unusable taps get weight 0), so that their latencies overlap.
     let use_history = dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6));
+    // The previous grid's pixel g covered viewport pixel g · block + its traced pixel.
+    prev_xy = (prev_xy - 0.5 - vec2<f32>(dp.lattice.zw)) / f32(dp.grid.z) + 0.5;
     let base_f = select(vec2<f32>(0.0), floor(prev_xy - 0.5), use_history);
     let f = prev_xy - 0.5 - base_f;
     let base = vec2<i32>(base_f);

@@ -17,7 +17,7 @@ struct TrLight {
 }
 
 struct TraceParams {
-    // x: half-resolution mode (0 off, 1 checkerboard, 2 inverted), y: generator (0 blue noise,
+    // x: traced-pixel mode (tr_mode), y: generator (0 blue noise,
     // 1 xorshift), z: frame index, w: flags (TR_FLAG_*).
     mode: vec4<u32>,
     // x: max ray length (FLT_MAX for ∞), y: AO radius, z: t_min relative to the view distance.
@@ -59,14 +59,33 @@ fn tr_flag(f: u32) -> bool {
 // (src/trace/tasks.rs, `traced_tiles`).
 const TR_TILE: u32 = 8u;
 
-// The grid of traced pixels: the viewport, or its half-width in a checkerboard mode (a grid
-// column then stands for a pair of viewport columns).
+// The traced-pixel mode (HalfResolutionMode::shader_code): bits 0-7 the mode (0 off,
+// 1 checkerboard, 2 inverted, 3 one pixel per block), 8-15 the block size, 16-31 the traced
+// pixel of each block (x, y).
+fn tr_mode() -> u32 {
+    return tp.mode.x & 0xffu;
+}
+
+fn tr_block() -> u32 {
+    return (tp.mode.x >> 8u) & 0xffu;
+}
+
+// The grid of traced pixels: the viewport, its half-width in a checkerboard mode (a grid column
+// then stands for a pair of viewport columns), or one pixel per block.
 fn tr_grid() -> vec2<u32> {
-    let w = gb.viewport.z;
-    if tp.mode.x == 0u {
-        return vec2<u32>(w, gb.viewport.w);
+    let size = gb.viewport.zw;
+    switch tr_mode() {
+        case 0u: {
+            return size;
+        }
+        case 3u: {
+            let b = tr_block();
+            return (size + vec2<u32>(b - 1u)) / b;
+        }
+        default: {
+            return vec2<u32>((size.x + 1u) / 2u, size.y);
+        }
     }
-    return vec2<u32>((w + 1u) / 2u, gb.viewport.w);
 }
 
 struct TrPixel {
@@ -76,8 +95,9 @@ struct TrPixel {
 
 // The texel of invocation i (tile i / 64, row-major over the grid's tiles; pixel i % 64
 // row-major in the tile). Checkerboard traces viewport-relative (x + y) even, inverted traces
-// (x + y) odd; the other pixels are not written. `valid` is false for a tile's invocations past
-// the grid's right or bottom edge.
+// (x + y) odd; a block mode traces its pixel of each block; the other pixels are not written.
+// `valid` is false for a tile's invocations past the grid's right or bottom edge, and for a
+// block's traced pixel past the viewport's.
 fn tr_pixel(i: u32) -> TrPixel {
     let grid = tr_grid();
     let tiles_x = (grid.x + TR_TILE - 1u) / TR_TILE;
@@ -87,14 +107,21 @@ fn tr_pixel(i: u32) -> TrPixel {
                       (tile / tiles_x) * TR_TILE + lane / TR_TILE);
     var p: TrPixel;
     p.valid = g.x < grid.x && g.y < grid.y;
-    if tp.mode.x == 0u {
+    let mode = tr_mode();
+    if mode == 0u {
         p.texel = gb.viewport.xy + g;
         return p;
     }
-    let phase = (g.y + tp.mode.x - 1u) & 1u;
-    let x = 2u * g.x + phase;
-    p.texel = vec2<u32>(gb.viewport.x + x, gb.viewport.y + g.y);
-    p.valid = p.valid && x < gb.viewport.z;
+    var v: vec2<u32>;
+    if mode == 3u {
+        let offset = vec2<u32>((tp.mode.x >> 16u) & 0xffu, tp.mode.x >> 24u);
+        v = g * tr_block() + offset;
+    } else {
+        let phase = (g.y + mode - 1u) & 1u;
+        v = vec2<u32>(2u * g.x + phase, g.y);
+    }
+    p.texel = gb.viewport.xy + v;
+    p.valid = p.valid && all(v < gb.viewport.zw);
     return p;
 }
 

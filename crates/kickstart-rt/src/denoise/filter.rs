@@ -79,6 +79,8 @@ struct DenoiseParams {
     discard_history: u32,
     checkerboard: u32,
     base_radius: f32,
+    grid: [u32; 4],
+    lattice: [u32; 4],
 }
 
 #[repr(C)]
@@ -146,6 +148,8 @@ pub(super) struct Shared {
     temporal_buffers: ReflectedLayout,
     atrous_params: ReflectedLayout,
     atrous_buffers: ReflectedLayout,
+    /// Group 1 of the upsample pass (block modes).
+    upsample_inputs: ReflectedLayout,
     /// Bound where a pass has no texture (no motion vectors, one signal).
     placeholder_texture: wgpu::TextureView,
     /// Bound where a pass has no second signal: one to read, one to write (a dispatch may not
@@ -174,6 +178,10 @@ impl Shared {
             ReflectedLayout::new(device, "kickstart-rt denoise a-trous params", &atrous, 0);
         let atrous_buffers =
             ReflectedLayout::new(device, "kickstart-rt denoise a-trous buffers", &atrous, 1);
+        let upsample = ShaderReflection::new(&upsample_wgsl(set, wgpu::TextureFormat::Rgba16Float))
+            .unwrap_or_else(|e| panic!("denoise upsample: composed WGSL is invalid: {e}"));
+        let upsample_inputs =
+            ReflectedLayout::new(device, "kickstart-rt denoise upsample inputs", &upsample, 1);
         let placeholder_texture = placeholder_texture(device, "kickstart-rt denoise placeholder");
         let placeholder_buffer = || {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -189,6 +197,7 @@ impl Shared {
             temporal_buffers,
             atrous_params,
             atrous_buffers,
+            upsample_inputs,
             placeholder_texture,
             placeholder_buffers: [placeholder_buffer(), placeholder_buffer()],
         }
@@ -205,32 +214,42 @@ const SIGNAL_TYPES: [SignalType; 6] = [
     SignalType::MultiShadow,
 ];
 
+/// Which pass a shader variant is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    Temporal,
+    Atrous,
+    Upsample,
+}
+
 /// The WGSL of every pipeline a context of `signal_type` can use, each once (label, source,
-/// temporal?): the set's temporal and à-trous passes, and per à-trous chain its iterations and
-/// its last iteration for every writable output format.
-fn variants(signal_type: SignalType) -> Vec<(String, String, bool)> {
+/// pass): the set's temporal and à-trous passes, and per à-trous chain its iterations, its last
+/// iteration and its upsample pass for every writable output format.
+fn variants(signal_type: SignalType) -> Vec<(String, String, Pass)> {
     let set = SignalSet::of(signal_type);
     let mut out = vec![
         (
             format!("temporal {}", set.label()),
             temporal_wgsl(set),
-            true,
+            Pass::Temporal,
         ),
         (
             format!("a-trous {}", set.label()),
             atrous_wgsl(set, None),
-            false,
+            Pass::Atrous,
         ),
     ];
     for (_, chain) in set.atrous_chains() {
         out.push((
             format!("a-trous {}", chain.label()),
             atrous_wgsl(chain, None),
-            false,
+            Pass::Atrous,
         ));
         for f in crate::WRITABLE_OUTPUT_FORMATS {
             let label = format!("a-trous {} (last, {f:?})", chain.label());
-            out.push((label, atrous_wgsl(chain, Some(f)), false));
+            out.push((label, atrous_wgsl(chain, Some(f)), Pass::Atrous));
+            let label = format!("upsample {} ({f:?})", chain.label());
+            out.push((label, upsample_wgsl(chain, f), Pass::Upsample));
         }
     }
     out
@@ -258,6 +277,16 @@ fn atrous_wgsl(set: SignalSet, output: Option<wgpu::TextureFormat>) -> String {
     set.compose(&["denoise/atrous"], output, &[])
 }
 
+/// The WGSL of the upsample pass of the one-signal chain `set` writing a texture of `format`
+/// (the G-buffer module at group 0).
+fn upsample_wgsl(set: SignalSet, format: wgpu::TextureFormat) -> String {
+    set.compose(
+        &["denoise/upsample"],
+        Some(format),
+        &[("GBUFFER_GROUP", "0")],
+    )
+}
+
 /// The pipelines of one signal set.
 struct SetPipelines {
     temporal: wgpu::ComputePipeline,
@@ -265,6 +294,9 @@ struct SetPipelines {
     /// The last à-trous iteration per output format: the output texture's layout (group 2) and
     /// the pipeline.
     last: Vec<(wgpu::TextureFormat, ReflectedLayout, wgpu::ComputePipeline)>,
+    /// The upsample pass per output format (block modes; its group 2 is the last iteration's
+    /// output layout of the same format).
+    upsample: Vec<(wgpu::TextureFormat, wgpu::ComputePipeline)>,
 }
 
 /// The à-trous chain of one signal: its pipelines (a single-signal set; see
@@ -274,6 +306,7 @@ struct Chain {
     atrous: wgpu::ComputePipeline,
     out_layout: ReflectedLayout,
     last: wgpu::ComputePipeline,
+    upsample: wgpu::ComputePipeline,
 }
 
 /// The pipelines of the signal sets a denoiser has used (created on first use).
@@ -308,6 +341,7 @@ impl Pipelines {
                 ],
             ),
             last: Vec::new(),
+            upsample: Vec::new(),
         })
     }
 
@@ -345,6 +379,35 @@ impl Pipelines {
         Some((out_layout, pipeline))
     }
 
+    /// The upsample pass of the one-signal chain `set` writing a texture of `format` (one of
+    /// the writable output formats), whose output layout is `out_layout`.
+    fn upsample(
+        &mut self,
+        device: &wgpu::Device,
+        shared: &Shared,
+        set: SignalSet,
+        format: wgpu::TextureFormat,
+        out_layout: &ReflectedLayout,
+    ) -> wgpu::ComputePipeline {
+        let sp = self.set(device, shared, set);
+        if let Some((_, p)) = sp.upsample.iter().find(|(f, _)| *f == format) {
+            return p.clone();
+        }
+        let pipeline = compute_pipeline_with_layouts(
+            device,
+            "kickstart-rt denoise upsample",
+            &upsample_wgsl(set, format),
+            "main",
+            &[
+                shared.gbuffer.layout(),
+                shared.upsample_inputs.layout(),
+                out_layout.layout(),
+            ],
+        );
+        sp.upsample.push((format, pipeline.clone()));
+        pipeline
+    }
+
     /// The à-trous chain of each signal of `set` writing `job`'s outputs;
     /// `None` where an output format has no pipeline (validation admits writable formats only).
     fn chains(
@@ -358,12 +421,14 @@ impl Pipelines {
         for (s, chain_set) in set.atrous_chains() {
             let format = job.outputs[s].texture().format();
             let (out_layout, last) = self.last(device, shared, chain_set, format)?;
+            let upsample = self.upsample(device, shared, chain_set, format, &out_layout);
             let atrous = self.set(device, shared, chain_set).atrous.clone();
             chains.push(Chain {
                 signal: s,
                 atrous,
                 out_layout,
                 last,
+                upsample,
             });
         }
         Some(chains)
@@ -420,7 +485,11 @@ impl Filter {
             let _ = self.pipelines.set(device, shared, set);
             for (_, chain) in set.atrous_chains() {
                 for f in crate::WRITABLE_OUTPUT_FORMATS {
-                    let _ = self.pipelines.last(device, shared, chain, f);
+                    if let Some((out_layout, _)) = self.pipelines.last(device, shared, chain, f) {
+                        let _ = self
+                            .pipelines
+                            .upsample(device, shared, chain, f, &out_layout);
+                    }
                 }
             }
         }
@@ -461,9 +530,10 @@ fn record_frame(
     let (params, motion_texture) = frame_params(shared, h, job, vp, settings);
     let params = rec.uniform("kickstart-rt denoise params", &params);
     let gb_params = rec.uniform("kickstart-rt denoise g-buffer", &inputs.params());
+    let (grid_w, grid_h) = grid_size(vp, c.half_resolution_mode);
     let frame = Frame {
         params: &params,
-        groups: (vp.width.div_ceil(TILE), vp.height.div_ceil(TILE)),
+        groups: (grid_w.div_ceil(TILE), grid_h.div_ceil(TILE)),
         cur: (h.frame % 2) as usize,
     };
 
@@ -477,15 +547,30 @@ fn record_frame(
     };
     record_temporal(rec, shared, h, job, &frame, &temporal_inputs, temporal);
     // 2. À-trous iterations, per signal: history → temp[0] → temp[1] → … → the output texture
-    // (the last iteration writes it).
+    // (the last iteration writes it; in a block mode the upsample pass does, from the grid).
+    let upsample = (c.half_resolution_mode.block_size() > 1).then(|| UpsampleInputs {
+        gbuffer: &inputs,
+        gbuffer_params: &gb_params,
+        viewport_groups: (vp.width.div_ceil(TILE), vp.height.div_ceil(TILE)),
+    });
     for chain in chains {
-        record_atrous(rec, shared, h, job, &frame, chain, settings.iterations);
+        record_atrous(
+            rec,
+            shared,
+            h,
+            job,
+            &frame,
+            chain,
+            settings.iterations,
+            upsample.as_ref(),
+        );
     }
     rec.scope = previous_scope;
 
     h.frame += 1;
     h.last_viewport = Some(vp);
     h.prev_jitter = c.view.jitter;
+    h.prev_mode = c.half_resolution_mode;
     h.last_used = serial;
 }
 
@@ -521,7 +606,12 @@ fn frame_params(
     let resized = h
         .last_viewport
         .is_some_and(|l| l.width != vp.width || l.height != vp.height);
-    let discard = c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized;
+    let mode = c.half_resolution_mode;
+    let regridded = h.prev_mode.block_size() != mode.block_size();
+    let discard = c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized || regridded;
+    let (grid_w, grid_h) = grid_size(vp, mode);
+    let (x, y) = mode.traced_pixel();
+    let (prev_x, prev_y) = h.prev_mode.traced_pixel();
 
     let cam = CameraFrame::new(c.view.world_to_view, c.view.view_to_clip);
     let prev = CameraFrame::new(c.view.prev_world_to_view, c.view.prev_view_to_clip);
@@ -556,14 +646,23 @@ fn frame_params(
         motion_type,
         max_history: settings.max_history,
         discard_history: discard as u32,
-        checkerboard: match c.half_resolution_mode {
-            HalfResolutionMode::Off => 0,
+        checkerboard: match mode {
             HalfResolutionMode::Checkerboard => 1,
             HalfResolutionMode::CheckerboardInverted => 2,
+            _ => 0,
         },
         base_radius: settings.base_radius,
+        grid: [grid_w, grid_h, mode.block_size(), 0],
+        lattice: [x, y, prev_x, prev_y],
     };
     (params, motion_texture)
+}
+
+/// The grid the passes work on (see `shaders/denoise/common.wgsl`): the viewport, or one pixel
+/// per block in a block mode (the checkerboard modes fill their holes at full resolution).
+fn grid_size(vp: Viewport, mode: HalfResolutionMode) -> (u32, u32) {
+    let b = mode.block_size();
+    (vp.width.div_ceil(b), vp.height.div_ceil(b))
 }
 
 /// The temporal pass: decodes the G-buffer into this frame's guide and accumulates each signal
@@ -618,8 +717,18 @@ fn record_temporal(
     rec.dispatch_2d("denoise temporal", temporal, &[&g0, &g1, &g2], frame.groups);
 }
 
+/// What the upsample pass of a block mode reads besides the filtered grid.
+struct UpsampleInputs<'a> {
+    gbuffer: &'a GBufferInputs<'a>,
+    gbuffer_params: &'a wgpu::Buffer,
+    /// Workgroups covering the viewport (the other passes cover the grid).
+    viewport_groups: (u32, u32),
+}
+
 /// The à-trous chain of one signal: `iterations` dispatches from this frame's history through
-/// the ping-pong buffers, the last writing the signal's output texture.
+/// the ping-pong buffers, the last writing the signal's output texture — or, with `upsample`
+/// (a block mode), the upsample pass writing it from the last iteration's grid.
+#[allow(clippy::too_many_arguments)]
 fn record_atrous(
     rec: &mut Recorder<'_>,
     shared: &Shared,
@@ -628,6 +737,7 @@ fn record_atrous(
     frame: &Frame<'_>,
     chain: &Chain,
     iterations: u32,
+    upsample: Option<&UpsampleInputs<'_>>,
 ) {
     let device = rec.device;
     let s = chain.signal;
@@ -667,7 +777,7 @@ fn record_atrous(
                 ("dst1", write_placeholder.as_entire_binding()),
             ],
         );
-        if it + 1 == iterations {
+        if it + 1 == iterations && upsample.is_none() {
             rec.dispatch_2d(
                 "denoise a-trous + output",
                 &chain.last,
@@ -678,6 +788,25 @@ fn record_atrous(
             rec.dispatch_2d("denoise a-trous", &chain.atrous, &[&a0, &a1], frame.groups);
         }
         src = dst;
+    }
+    if let Some(up) = upsample {
+        let g0 = shared
+            .gbuffer
+            .bind_group(device, up.gbuffer_params, up.gbuffer);
+        let g1 = shared.upsample_inputs.bind_group(
+            device,
+            &[
+                ("dp", frame.params.as_entire_binding()),
+                ("guide", h.guides[frame.cur].as_entire_binding()),
+                ("src0", src.as_entire_binding()),
+            ],
+        );
+        rec.dispatch_2d(
+            "denoise upsample",
+            &chain.upsample,
+            &[&g0, &g1, &outputs],
+            up.viewport_groups,
+        );
     }
 }
 

@@ -55,6 +55,9 @@ pub(crate) struct History {
     pub last_viewport: Option<Viewport>,
     /// The previous frame's camera jitter, pixels.
     pub prev_jitter: glam::Vec2,
+    /// The previous frame's traced-pixel mode: its grid (block size) must match this frame's
+    /// for the history to be read, and its traced pixel places the history's grid pixels.
+    pub prev_mode: crate::tasks::HalfResolutionMode,
     /// Serial of the last GPU task that used it.
     pub last_used: u64,
 }
@@ -96,6 +99,7 @@ impl History {
             frame: 0,
             last_viewport: None,
             prev_jitter: glam::Vec2::ZERO,
+            prev_mode: Default::default(),
             last_used: 0,
         }
     }

@@ -27,6 +27,7 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "denoise/record_scalar",
     "denoise/signals",
     "denoise/temporal",
+    "denoise/upsample",
     "gpu/digit_histogram",
     "gpu/radix_sort",
     "gpu/radix_sort_small",

@@ -184,16 +184,127 @@ impl Default for RayOffset {
     }
 }
 
-/// Checkerboard half-resolution tracing.
+/// Which pixels a trace task traces, and how its denoiser reconstructs the others.
+///
+/// The checkerboard modes are the reference's: half the pixels traced, the denoiser fills the
+/// others from their traced neighbours at full resolution. The block modes trace one pixel per
+/// 2×2 or 4×4 block (a quarter or a sixteenth of the rays): the denoiser filters at that
+/// reduced resolution and upsamples its result to every pixel, guided by the G-buffer (normals
+/// and depth, so that edges stay sharp), which also makes it cheaper. In every mode the trace
+/// writes only the pixels it traces.
+///
+/// Give a trace task and the denoise task that reads its output the same mode. Advance
+/// `phase` every frame (the frame index will do): it moves the traced pixel through the block,
+/// so that the temporal accumulation sees every pixel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum HalfResolutionMode {
     /// Full resolution.
     #[default]
     Off,
-    /// Trace the even checkerboard cells.
+    /// Trace the even checkerboard cells (viewport-relative `(x + y)` even).
     Checkerboard,
     /// Trace the odd checkerboard cells.
     CheckerboardInverted,
+    /// One pixel per 2×2 block: the pixel `phase % 4` of the sequence (0, 0), (1, 1), (1, 0),
+    /// (0, 1) within each block (viewport-relative).
+    OnePer2x2 {
+        /// Which pixel of each block (modulo 4).
+        phase: u32,
+    },
+    /// One pixel per 4×4 block: the pixel `phase % 16` of a 4×4 ordered-dither (Bayer)
+    /// sequence within each block, which spreads consecutive phases across the block.
+    OnePer4x4 {
+        /// Which pixel of each block (modulo 16).
+        phase: u32,
+    },
+}
+
+/// The pixels of a 2×2 block in the order [`HalfResolutionMode::OnePer2x2`] traces them.
+const BLOCK2_ORDER: [(u32, u32); 4] = [(0, 0), (1, 1), (1, 0), (0, 1)];
+
+/// The pixels of a 4×4 block in the order [`HalfResolutionMode::OnePer4x4`] traces them: the
+/// pixel of Bayer-matrix value k is the k-th.
+const BLOCK4_ORDER: [(u32, u32); 16] = [
+    (0, 0),
+    (2, 2),
+    (2, 0),
+    (0, 2),
+    (1, 1),
+    (3, 3),
+    (3, 1),
+    (1, 3),
+    (1, 0),
+    (3, 2),
+    (3, 0),
+    (1, 2),
+    (0, 1),
+    (2, 3),
+    (2, 1),
+    (0, 3),
+];
+
+impl HalfResolutionMode {
+    /// Side of the pixel block one ray stands for: 2 or 4 in the block modes, 1 otherwise (the
+    /// checkerboard modes trace every other pixel of a full-resolution grid).
+    pub fn block_size(self) -> u32 {
+        match self {
+            HalfResolutionMode::OnePer2x2 { .. } => 2,
+            HalfResolutionMode::OnePer4x4 { .. } => 4,
+            _ => 1,
+        }
+    }
+
+    /// The traced pixel of each block, relative to the block's top-left pixel ((0, 0) outside
+    /// the block modes).
+    pub fn traced_pixel(self) -> (u32, u32) {
+        match self {
+            HalfResolutionMode::OnePer2x2 { phase } => BLOCK2_ORDER[(phase % 4) as usize],
+            HalfResolutionMode::OnePer4x4 { phase } => BLOCK4_ORDER[(phase % 16) as usize],
+            _ => (0, 0),
+        }
+    }
+
+    /// Whether viewport-relative pixel `(x, y)` is traced in this mode.
+    pub fn is_traced(self, x: u32, y: u32) -> bool {
+        match self {
+            HalfResolutionMode::Off => true,
+            HalfResolutionMode::Checkerboard => (x + y) % 2 == 0,
+            HalfResolutionMode::CheckerboardInverted => (x + y) % 2 == 1,
+            _ => {
+                let b = self.block_size();
+                (x % b, y % b) == self.traced_pixel()
+            }
+        }
+    }
+
+    /// The mode as the trace and denoise shaders read it: bits 0–7 the mode (0 off,
+    /// 1 checkerboard, 2 inverted, 3 block), 8–15 the block size, 16–23 and 24–31 the traced
+    /// pixel's x and y in the block.
+    pub(crate) fn shader_code(self) -> u32 {
+        let (x, y) = self.traced_pixel();
+        let mode = match self {
+            HalfResolutionMode::Off => 0,
+            HalfResolutionMode::Checkerboard => 1,
+            HalfResolutionMode::CheckerboardInverted => 2,
+            _ => 3,
+        };
+        mode | (self.block_size() << 8) | (x << 16) | (y << 24)
+    }
+
+    /// The size of the grid of traced pixels for a `width` × `height` viewport: the viewport,
+    /// its half-width in a checkerboard mode, one pixel per block in a block mode.
+    pub(crate) fn traced_grid(self, width: u32, height: u32) -> (u32, u32) {
+        match self {
+            HalfResolutionMode::Off => (width, height),
+            HalfResolutionMode::Checkerboard | HalfResolutionMode::CheckerboardInverted => {
+                (width.div_ceil(2), height)
+            }
+            _ => {
+                let b = self.block_size();
+                (width.div_ceil(b), height.div_ceil(b))
+            }
+        }
+    }
 }
 
 /// Debug output of the trace tasks.

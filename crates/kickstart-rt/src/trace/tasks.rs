@@ -29,12 +29,12 @@ const WORKGROUP_SIZE: u32 = 64;
 /// Side of the square pixel tile one workgroup traces (`TR_TILE` of `trace/common.wgsl`).
 const TILE: u32 = 8;
 
-/// Workgroups a trace dispatch needs: one per tile of the traced grid (the viewport, or its
-/// half-width in a checkerboard mode). `None` when the tiles' invocations would not fit a u32
-/// (the shader indexes them with one).
-fn traced_tiles(width: u32, height: u32, half: bool) -> Option<u32> {
-    let grid_w = if half { width.div_ceil(2) } else { width };
-    let tiles = u64::from(grid_w.div_ceil(TILE)) * u64::from(height.div_ceil(TILE));
+/// Workgroups a trace dispatch needs: one per tile of the traced grid (the viewport, its
+/// half-width in a checkerboard mode, a pixel per block in a block mode). `None` when the
+/// tiles' invocations would not fit a u32 (the shader indexes them with one).
+fn traced_tiles(width: u32, height: u32, mode: HalfResolutionMode) -> Option<u32> {
+    let (grid_w, grid_h) = mode.traced_grid(width, height);
+    let tiles = u64::from(grid_w.div_ceil(TILE)) * u64::from(grid_h.div_ceil(TILE));
     u32::try_from(tiles * u64::from(WORKGROUP_SIZE))
         .ok()
         .map(|_| tiles as u32)
@@ -324,8 +324,7 @@ impl TracePasses {
     /// check, so that recording it cannot fail).
     pub fn check(job: &Job<'_>) -> Result<()> {
         let vp = GBufferInputs::of_trace(job.common, job.out0).viewport;
-        let half = job.common.half_resolution_mode != HalfResolutionMode::Off;
-        match traced_tiles(vp.width, vp.height, half) {
+        match traced_tiles(vp.width, vp.height, job.common.half_resolution_mode) {
             Some(_) => Ok(()),
             None => Err(Error::input(
                 job.kind.label(),
@@ -354,8 +353,7 @@ impl TracePasses {
             .expect("a validated output format has a pipeline");
         let inputs = GBufferInputs::of_trace(c, job.out0);
         let vp = inputs.viewport;
-        let half = c.half_resolution_mode != HalfResolutionMode::Off;
-        let tiles = traced_tiles(vp.width, vp.height, half)
+        let tiles = traced_tiles(vp.width, vp.height, c.half_resolution_mode)
             .expect("the plan checked the viewport's tiles (TracePasses::check)");
         let params = trace_params(job);
         let gb_params = rec.uniform("kickstart-rt g-buffer params", &inputs.params());
@@ -467,11 +465,7 @@ fn trace_params(job: &Job<'_>) -> TraceParams {
     let o = &c.ray_offset;
     TraceParams {
         mode: [
-            match c.half_resolution_mode {
-                HalfResolutionMode::Off => 0,
-                HalfResolutionMode::Checkerboard => 1,
-                HalfResolutionMode::CheckerboardInverted => 2,
-            },
+            c.half_resolution_mode.shader_code(),
             match c.debug_parameters.random_number_generator {
                 RandomNumberGenerator::BlueNoise => 0,
                 RandomNumberGenerator::Xorshift => 1,

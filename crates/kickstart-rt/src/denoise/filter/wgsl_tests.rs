@@ -20,6 +20,19 @@ fn check_temporal(module: &naga::Module, signal_type: SignalType) {
     }
 }
 
+/// Asserts the layouts an upsample pass of a context of `signal_type` shares with the Rust
+/// side.
+fn check_upsample(module: &naga::Module, signal_type: SignalType) {
+    assert_denoise_params(module);
+    crate::trace::gbuffer::assert_wgsl_layout(module);
+    let record = history::signal_record_bytes(signal_type);
+    assert_eq!(storage_stride(module, "src0") as u64, record);
+    assert_eq!(
+        storage_stride(module, "guide") as u64,
+        history::RECORD_BYTES
+    );
+}
+
 /// Asserts the layouts an à-trous pass of a context of `signal_type` shares with the Rust side.
 fn check_atrous(module: &naga::Module, signal_type: SignalType) {
     assert_denoise_params(module);
@@ -62,6 +75,8 @@ fn assert_denoise_params(module: &naga::Module) {
             discard_history,
             checkerboard,
             base_radius,
+            grid,
+            lattice,
         }
     );
 }
@@ -84,23 +99,23 @@ fn every_denoiser_variant_validates_and_matches_the_rust_layouts() {
     let mut seen = BTreeSet::new();
     for d in &denoisers {
         for &st in d.signal_types {
-            for (label, source, temporal) in variants(st) {
+            for (label, source, pass) in variants(st) {
                 if !seen.insert(source.clone()) {
                     continue; // the same pipeline as another set's (a chain of one signal)
                 }
                 let module = validate(&label, &source);
                 assert!(module.entry_points.iter().any(|e| e.name == "main"));
-                if temporal {
-                    check_temporal(&module, st);
-                } else {
-                    check_atrous(&module, st);
+                match pass {
+                    Pass::Temporal => check_temporal(&module, st),
+                    Pass::Atrous => check_atrous(&module, st),
+                    Pass::Upsample => check_upsample(&module, st),
                 }
             }
         }
     }
-    // Per signal set: temporal, à-trous; per single-signal chain: 4 last iterations (the
-    // SpecularAndDiffuse chains are the Specular and Diffuse sets' own).
-    assert_eq!(seen.len(), 6 * 2 + 5 * 4);
+    // Per signal set: temporal, à-trous; per single-signal chain: 4 last iterations and 4
+    // upsample passes (the SpecularAndDiffuse chains are the Specular and Diffuse sets' own).
+    assert_eq!(seen.len(), 6 * 2 + 5 * 4 * 2);
     // Formats without a WGSL name get no pipeline.
     assert_eq!(wgsl_format(wgpu::TextureFormat::Rgba8Unorm), None);
 }

@@ -131,7 +131,7 @@ fn noise_is_reproducible_for_a_frame_index() {
 }
 
 #[test]
-fn checkerboard_modes_write_exactly_their_pixels_and_the_mask_skips() {
+fn reduced_rate_modes_write_exactly_their_pixels_and_the_mask_skips() {
     let scene = TestScene::single(square(1, 0.0, 50.0));
     // Viewport at an odd x offset: the pattern is viewport-relative.
     let vp = Viewport {
@@ -144,6 +144,13 @@ fn checkerboard_modes_write_exactly_their_pixels_and_the_mask_skips() {
         HalfResolutionMode::Off,
         HalfResolutionMode::Checkerboard,
         HalfResolutionMode::CheckerboardInverted,
+        HalfResolutionMode::OnePer2x2 { phase: 0 },
+        HalfResolutionMode::OnePer2x2 { phase: 1 },
+        HalfResolutionMode::OnePer2x2 { phase: 6 },
+        HalfResolutionMode::OnePer4x4 { phase: 1 },
+        // (3, 3) in each 4×4 block: the last block column and row (x, y = 20 of 21 × 13 → 12)
+        // have no traced pixel inside the viewport.
+        HalfResolutionMode::OnePer4x4 { phase: 5 },
     ] {
         let out = output(N, N, -5.0);
         let mut c = common(gbuffer(N, N, floor), Vec3::new(0.0, 3.0, 0.0));
@@ -168,13 +175,22 @@ fn checkerboard_modes_write_exactly_their_pixels_and_the_mask_skips() {
             for x in 0..N {
                 let inside =
                     (vp.x..vp.x + vp.width).contains(&x) && (vp.y..vp.y + vp.height).contains(&y);
-                let parity = (x - vp.x.min(x) + y - vp.y.min(y)) % 2;
+                let (rx, ry) = (x - vp.x.min(x), y - vp.y.min(y));
+                let parity = (rx + ry) % 2;
+                // The documented sequences: 2×2 (0,0) (1,1) (1,0) (0,1); 4×4 phase 1 is (2,2),
+                // phase 5 (3,3).
                 let traced = inside
                     && x != 10
                     && match mode {
                         HalfResolutionMode::Off => true,
                         HalfResolutionMode::Checkerboard => parity == 0,
                         HalfResolutionMode::CheckerboardInverted => parity == 1,
+                        HalfResolutionMode::OnePer2x2 { phase: 0 } => (rx % 2, ry % 2) == (0, 0),
+                        HalfResolutionMode::OnePer2x2 { phase: 1 } => (rx % 2, ry % 2) == (1, 1),
+                        HalfResolutionMode::OnePer2x2 { phase: 6 } => (rx % 2, ry % 2) == (1, 0),
+                        HalfResolutionMode::OnePer4x4 { phase: 1 } => (rx % 4, ry % 4) == (2, 2),
+                        HalfResolutionMode::OnePer4x4 { phase: 5 } => (rx % 4, ry % 4) == (3, 3),
+                        _ => unreachable!(),
                     };
                 let want = if traced { 1.0 } else { -5.0 };
                 assert_eq!(img[(y * N + x) as usize][0], want, "{mode:?} at {x},{y}");

@@ -31,13 +31,21 @@ fn every_pipeline_compiles_including_prepared_ones() {
 
 #[test]
 fn a_dispatch_has_one_workgroup_per_tile_of_the_traced_grid() {
-    // 21 × 13 pixels: 3 × 2 tiles of 8; checkerboard traces a grid of 11 × 13, 2 × 2 tiles.
-    assert_eq!(traced_tiles(21, 13, false), Some(6));
-    assert_eq!(traced_tiles(21, 13, true), Some(4));
-    assert_eq!(traced_tiles(1920, 1080, false), Some(240 * 135));
-    assert_eq!(traced_tiles(8, 8, false), Some(1));
-    assert_eq!(traced_tiles(0, 8, false), Some(0));
+    use crate::HalfResolutionMode::{Checkerboard, Off, OnePer2x2, OnePer4x4};
+    // 21 × 13 pixels: 3 × 2 tiles of 8; checkerboard traces a grid of 11 × 13, 2 × 2 tiles;
+    // one per 2×2 a grid of 11 × 7 (2 × 1 tiles), one per 4×4 6 × 4 (1 tile).
+    assert_eq!(traced_tiles(21, 13, Off), Some(6));
+    assert_eq!(traced_tiles(21, 13, Checkerboard), Some(4));
+    assert_eq!(traced_tiles(21, 13, OnePer2x2 { phase: 3 }), Some(2));
+    assert_eq!(traced_tiles(21, 13, OnePer4x4 { phase: 9 }), Some(1));
+    assert_eq!(traced_tiles(1920, 1080, Off), Some(240 * 135));
+    assert_eq!(
+        traced_tiles(1920, 1080, OnePer2x2 { phase: 0 }),
+        Some(120 * 68)
+    );
+    assert_eq!(traced_tiles(8, 8, Off), Some(1));
+    assert_eq!(traced_tiles(0, 8, Off), Some(0));
     // 2^16 × 2^16 pixels need 2^32 invocations: more than the shader's u32 index holds.
-    assert_eq!(traced_tiles(65_536, 65_536, false), None);
-    assert_eq!(traced_tiles(65_536, 65_528, false), Some(8192 * 8191));
+    assert_eq!(traced_tiles(65_536, 65_536, Off), None);
+    assert_eq!(traced_tiles(65_536, 65_528, Off), Some(8192 * 8191));
 }
