@@ -35,6 +35,8 @@ pub struct RenderArgs {
     pub json: Option<PathBuf>,
     /// `--frames-in-flight N`.
     pub frames_in_flight: u32,
+    /// `--preset`.
+    pub preset: kickstart_rt::Preset,
 }
 
 /// Loads `--scene` under a spinner (a big file takes seconds) and logs how long it took.
@@ -97,6 +99,7 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
             frames,
             effects,
             seed: args.seed,
+            preset: args.preset,
             progress: true,
             gpu_timing: true,
             frames_in_flight: args.frames_in_flight,
@@ -112,9 +115,10 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
     );
     let written = lit::write(&result, &args.out, args.hdr)?;
     println!(
-        "wrote {} images to {} ({width}x{height}, {frames} frames in {:.2} s): {}",
+        "wrote {} images to {} ({width}x{height}, {frames} frames, preset {}, in {:.2} s): {}",
         written.len(),
         args.out.display(),
+        args.preset.name(),
         start.elapsed().as_secs_f64(),
         result
             .channels
@@ -189,6 +193,7 @@ fn report(
     if let Some(path) = &args.json {
         let mut value = lit::timing_json(scene_name, size, frames, &result.timings);
         value["frames_in_flight"] = serde_json::json!({"summary": fif, "frames": result.frames});
+        value["preset"] = serde_json::json!(args.preset.name());
         std::fs::write(path, serde_json::to_string_pretty(&value)?)
             .map_err(|e| format!("--json {}: {e}", path.display()))?;
         println!("wrote {}", path.display());

@@ -32,6 +32,7 @@ fn render(
         scene,
         camera,
         &LitOptions {
+            preset: kickstart_rt::Preset::Quality,
             size,
             frames,
             effects: Effects::default(),

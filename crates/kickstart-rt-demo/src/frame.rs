@@ -267,6 +267,9 @@ pub struct SdkFrame {
     traces_only: Option<u32>,
     /// When set, the shadow is traced for several lights ([`Self::set_multi_shadow`]).
     multi_shadow: Option<MultiShadow>,
+    /// Rays per pixel of each effect and the denoising method (set before the first frame: the
+    /// denoising contexts are made with its method).
+    pub preset: ksrt::Preset,
 }
 
 /// The multi-light shadow of [`SdkFrame::set_multi_shadow`]: its extra lights and the packed
@@ -340,6 +343,7 @@ impl SdkFrame {
             roughness_override: None,
             traces_only: None,
             multi_shadow: None,
+            preset: ksrt::Preset::Quality,
         }
     }
 
@@ -418,7 +422,7 @@ impl SdkFrame {
                 max_width: self.size.0,
                 max_height: self.size.1,
                 signal_type: signal,
-                method: Default::default(),
+                method: self.preset.denoising_method(),
             })?;
         self.denoisers.insert(key, h);
         Ok(h)
@@ -578,10 +582,23 @@ impl SdkFrame {
             common.debug_parameters.random_number_generator = ksrt::RandomNumberGenerator::Xorshift;
             common.debug_parameters.frame_index = sample;
         }
+        // The debug view and the reference's samples trace every pixel; the frame's effects at
+        // the preset's rates (the same mode for each trace and its denoiser).
+        self.debug_common = Some(common.clone());
+        let (preset, traces_only, frame) = (self.preset, self.traces_only, inputs.frame);
+        let rate = move |effect| match traces_only {
+            Some(_) => ksrt::HalfResolutionMode::Off,
+            None => preset.half_resolution_mode(effect, frame),
+        };
+        let at_rate = |effect| {
+            let mut c = common.clone();
+            c.half_resolution_mode = rate(effect);
+            c
+        };
         let o = &self.outputs;
         if self.on(Part::Specular) {
             tasks.push(ksrt::RenderTask::TraceSpecular(ksrt::TraceSpecularTask {
-                common: common.clone(),
+                common: at_rate(ksrt::Effect::Specular),
                 output: view(&o.specular),
                 demodulate_specular: false,
                 demodulation_output: None,
@@ -589,7 +606,7 @@ impl SdkFrame {
         }
         if self.on(Part::Diffuse) {
             tasks.push(ksrt::RenderTask::TraceDiffuse(ksrt::TraceDiffuseTask {
-                common: common.clone(),
+                common: at_rate(ksrt::Effect::Diffuse),
                 output: view(&o.diffuse),
                 diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
             }));
@@ -597,7 +614,7 @@ impl SdkFrame {
         if self.on(Part::Ao) {
             tasks.push(ksrt::RenderTask::TraceAmbientOcclusion(
                 ksrt::TraceAmbientOcclusionTask {
-                    common: common.clone(),
+                    common: at_rate(ksrt::Effect::AmbientOcclusion),
                     output: view(&o.ao),
                     ao_radius: self.ao_radius(),
                 },
@@ -607,7 +624,7 @@ impl SdkFrame {
             match &self.multi_shadow {
                 Some(m) => tasks.push(ksrt::RenderTask::TraceMultiShadow(
                     ksrt::TraceMultiShadowTask {
-                        common: common.clone(),
+                        common: at_rate(ksrt::Effect::Shadow),
                         output0: view(&m.output0),
                         output1: view(&m.output1),
                         lights: std::iter::once(light)
@@ -617,14 +634,13 @@ impl SdkFrame {
                     },
                 )),
                 None => tasks.push(ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
-                    common: common.clone(),
+                    common: at_rate(ksrt::Effect::Shadow),
                     output: view(&o.shadow),
                     light,
                     enable_first_hit_and_end_search: true,
                 })),
             }
         }
-        self.debug_common = Some(common.clone());
         let mode = if inputs.discard_history {
             ksrt::DenoiseMode::DiscardHistory
         } else {
@@ -635,7 +651,7 @@ impl SdkFrame {
             motion_type: ksrt::MotionType::RgViewSpace,
             scale: Vec3::ONE,
         };
-        let denoise_common = |context| ksrt::DenoiseTaskCommon {
+        let denoise_common = |context, effect| ksrt::DenoiseTaskCommon {
             context,
             viewport: None,
             depth: depth(main),
@@ -643,7 +659,7 @@ impl SdkFrame {
             roughness: roughness.clone(),
             motion: Some(motion.clone()),
             view: sdk_view,
-            half_resolution_mode: ksrt::HalfResolutionMode::Off,
+            half_resolution_mode: rate(effect),
             mode,
         };
         if self.on(Part::DenoiseSpecularDiffuse) {
@@ -656,7 +672,10 @@ impl SdkFrame {
                 view(&o.diffuse_denoised),
             );
             if spec && diff {
-                let c = denoise_common(self.denoiser(ksrt::SignalType::SpecularAndDiffuse)?);
+                let c = denoise_common(
+                    self.denoiser(ksrt::SignalType::SpecularAndDiffuse)?,
+                    ksrt::Effect::Diffuse,
+                );
                 tasks.push(ksrt::RenderTask::DenoiseSpecularAndDiffuse(
                     ksrt::DenoiseSpecularAndDiffuseTask {
                         common: c,
@@ -667,7 +686,10 @@ impl SdkFrame {
                     },
                 ));
             } else if spec {
-                let c = denoise_common(self.denoiser(ksrt::SignalType::Specular)?);
+                let c = denoise_common(
+                    self.denoiser(ksrt::SignalType::Specular)?,
+                    ksrt::Effect::Specular,
+                );
                 tasks.push(ksrt::RenderTask::DenoiseSpecular(
                     ksrt::DenoiseSpecularTask {
                         common: c,
@@ -676,7 +698,10 @@ impl SdkFrame {
                     },
                 ));
             } else {
-                let c = denoise_common(self.denoiser(ksrt::SignalType::Diffuse)?);
+                let c = denoise_common(
+                    self.denoiser(ksrt::SignalType::Diffuse)?,
+                    ksrt::Effect::Diffuse,
+                );
                 tasks.push(ksrt::RenderTask::DenoiseDiffuse(ksrt::DenoiseDiffuseTask {
                     common: c,
                     input: id,
@@ -685,7 +710,10 @@ impl SdkFrame {
             }
         }
         if self.on(Part::DenoiseAo) {
-            let c = denoise_common(self.denoiser(ksrt::SignalType::DiffuseOcclusion)?);
+            let c = denoise_common(
+                self.denoiser(ksrt::SignalType::DiffuseOcclusion)?,
+                ksrt::Effect::AmbientOcclusion,
+            );
             tasks.push(ksrt::RenderTask::DenoiseDiffuseOcclusion(
                 ksrt::DenoiseDiffuseOcclusionTask {
                     common: c,
@@ -696,7 +724,10 @@ impl SdkFrame {
         }
         if self.on(Part::DenoiseShadow) {
             if self.multi_shadow.is_some() {
-                let c = denoise_common(self.denoiser(ksrt::SignalType::MultiShadow)?);
+                let c = denoise_common(
+                    self.denoiser(ksrt::SignalType::MultiShadow)?,
+                    ksrt::Effect::Shadow,
+                );
                 if let Some(m) = &self.multi_shadow {
                     tasks.push(ksrt::RenderTask::DenoiseMultiShadow(
                         ksrt::DenoiseMultiShadowTask {
@@ -708,7 +739,10 @@ impl SdkFrame {
                     ));
                 }
             } else {
-                let c = denoise_common(self.denoiser(ksrt::SignalType::Shadow)?);
+                let c = denoise_common(
+                    self.denoiser(ksrt::SignalType::Shadow)?,
+                    ksrt::Effect::Shadow,
+                );
                 tasks.push(ksrt::RenderTask::DenoiseShadow(ksrt::DenoiseShadowTask {
                     common: c,
                     input: view(&self.outputs.shadow),

@@ -386,6 +386,7 @@ mod tests {
             &scene,
             &camera,
             &crate::lit::LitOptions {
+                preset: kickstart_rt::Preset::Quality,
                 size: (32, 32),
                 frames: 6,
                 effects: crate::frame::Effects::parse("none,ao").unwrap(),
@@ -414,6 +415,7 @@ mod tests {
             &scene,
             &camera,
             &crate::lit::LitOptions {
+                preset: kickstart_rt::Preset::Quality,
                 size: (8, 8),
                 frames: 1,
                 effects: Default::default(),

@@ -161,6 +161,7 @@ fn render(scene: &Scene, camera: &Camera, size: (u32, u32), frames: u32) -> LitR
         scene,
         camera,
         &LitOptions {
+            preset: kickstart_rt::Preset::Quality,
             size,
             frames,
             effects: Effects::default(),

@@ -27,6 +27,8 @@ pub struct LitOptions {
     pub effects: Effects,
     /// Noise seed.
     pub seed: u32,
+    /// Rays per pixel of each effect and the denoising method.
+    pub preset: kickstart_rt::Preset,
     /// Show a progress bar.
     pub progress: bool,
     /// Measure the SDK's passes on the last frame.
@@ -87,6 +89,7 @@ pub fn render(
     let mut ropts = RendererOptions::new(opts.size);
     ropts.effects = opts.effects;
     ropts.seed = opts.seed;
+    ropts.preset = opts.preset;
     ropts.gpu_timing = opts.gpu_timing;
     let depth = crate::frames_in_flight::check_depth(opts.frames_in_flight)?;
     ropts.frames_in_flight = opts.frames_in_flight;

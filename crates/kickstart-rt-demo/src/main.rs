@@ -108,6 +108,11 @@ enum Command {
         /// frame N back are printed and in --json.
         #[arg(long, default_value_t = 1)]
         frames_in_flight: u32,
+        /// Rays per pixel and denoiser: quality (every pixel, the high-quality denoiser),
+        /// balanced (one ray per 2×2 pixels for every effect, the fast denoiser) or performance
+        /// (one per 4×4 for reflections, GI and AO, per 2×2 for shadows; the fast denoiser).
+        #[arg(long, default_value = "quality")]
+        preset: kickstart_rt::Preset,
     },
     /// Open a window on a scene: fly with WASD/QE and the mouse (hold the left button), toggle
     /// effects with 1–6, cycle debug views with V; SDK timings in the title bar.
@@ -407,6 +412,7 @@ fn main() {
             no_reference,
             json,
             frames_in_flight,
+            preset,
         } => cmd_render::run(cmd_render::RenderArgs {
             size,
             out,
@@ -421,6 +427,7 @@ fn main() {
             no_reference,
             json,
             frames_in_flight,
+            preset,
         }),
         Command::View {
             scene,

@@ -34,11 +34,13 @@ pub struct RendererOptions {
     /// compile (the viewer). Off, each is created when a task first needs it: a batch render
     /// then compiles only what its effects use (most of its start-up on software Vulkan).
     pub prepare_pipelines: bool,
+    /// Rays per pixel of each effect and the denoising method.
+    pub preset: ksrt::Preset,
 }
 
 impl RendererOptions {
     /// Defaults for `size`: every effect, seed 0, a 128² lidar view, no timing, sRGB RGBA8,
-    /// pipelines created up front.
+    /// pipelines created up front, the quality preset (every pixel traced).
     pub fn new(size: (u32, u32)) -> Self {
         RendererOptions {
             size,
@@ -49,6 +51,7 @@ impl RendererOptions {
             ldr_format: wgpu::TextureFormat::Rgba8UnormSrgb,
             frames_in_flight: 1,
             prepare_pipelines: true,
+            preset: ksrt::Preset::Quality,
         }
     }
 }
@@ -131,7 +134,7 @@ impl Renderer {
         let main = ViewTargets::new(device, &raster, size);
         let lidar_size = opts.lidar_size.max(1);
         let lidar = ViewTargets::new(device, &raster, (lidar_size, lidar_size));
-        let sdk = SdkFrame::new(
+        let mut sdk = SdkFrame::new(
             device,
             ctx,
             size,
@@ -140,6 +143,7 @@ impl Renderer {
             raster.scene_size,
             opts.seed,
         );
+        sdk.preset = opts.preset;
         let target = |format, label| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),

@@ -2,8 +2,10 @@
 
 mod bvh;
 mod denoising;
+mod preset;
 mod render;
 
 pub use bvh::*;
 pub use denoising::*;
+pub use preset::*;
 pub use render::*;
