@@ -604,14 +604,23 @@ impl SdkFrame {
                 demodulation_output: None,
             }));
         }
+        // With GI on, AO comes from the diffuse rays (one traversal for both) where both
+        // trace the same pixels.
+        let ao_from_diffuse = self.on(Part::Ao)
+            && self.on(Part::Diffuse)
+            && rate(ksrt::Effect::AmbientOcclusion) == rate(ksrt::Effect::Diffuse);
         if self.on(Part::Diffuse) {
             tasks.push(ksrt::RenderTask::TraceDiffuse(ksrt::TraceDiffuseTask {
                 common: at_rate(ksrt::Effect::Diffuse),
                 output: view(&o.diffuse),
                 diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
+                ambient_occlusion: ao_from_diffuse.then(|| ksrt::DiffuseAmbientOcclusion {
+                    output: view(&o.ao),
+                    ao_radius: self.ao_radius(),
+                }),
             }));
         }
-        if self.on(Part::Ao) {
+        if self.on(Part::Ao) && !ao_from_diffuse {
             tasks.push(ksrt::RenderTask::TraceAmbientOcclusion(
                 ksrt::TraceAmbientOcclusionTask {
                     common: at_rate(ksrt::Effect::AmbientOcclusion),

@@ -242,6 +242,7 @@ impl Gpu {
             common: common.clone(),
             output: v(&o.diffuse),
             diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
+            ambient_occlusion: None,
         }));
         c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
             ksrt::TraceAmbientOcclusionTask {

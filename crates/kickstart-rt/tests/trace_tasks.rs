@@ -71,6 +71,7 @@ fn furnace_inside_a_uniform_cache_gives_l_for_specular_and_diffuse_at_every_roug
                         common,
                         output: diff.clone(),
                         diffuse_brdf: DiffuseBrdf::Lambertian,
+                        ambient_occlusion: None,
                     }),
                 ],
             );
@@ -142,6 +143,7 @@ fn furnace_with_normalised_disney_matches_its_albedo() {
                     common,
                     output: out.clone(),
                     diffuse_brdf: DiffuseBrdf::NormalizedDisney,
+                    ambient_occlusion: None,
                 })],
             );
             for v in read_rgba32(&out) {
@@ -275,6 +277,7 @@ fn four_coloured_scene_keeps_each_meshs_colour_near_it() {
                 common,
                 output: out.clone(),
                 diffuse_brdf: DiffuseBrdf::Lambertian,
+                ambient_occlusion: None,
             })],
         );
         for (i, v) in read_rgba32(&out).iter().enumerate() {

@@ -475,6 +475,41 @@ fn row_viewport() {
 }
 
 #[test]
+fn row_diffuse_ambient_occlusion() {
+    let task = |ao: DiffuseAmbientOcclusion| {
+        RenderTask::TraceDiffuse(TraceDiffuseTask {
+            ambient_occlusion: Some(ao),
+            ..TraceDiffuseTask::new(common(16, 16), output(16, 16))
+        })
+    };
+    let name = "TraceDiffuseTask";
+    render_row(
+        task(DiffuseAmbientOcclusion {
+            output: output(16, 16),
+            ao_radius: 0.0,
+        }),
+        name,
+        "ambient_occlusion.ao_radius",
+    );
+    render_row(
+        task(DiffuseAmbientOcclusion {
+            output: texture(F::Rgba8Unorm, 16, 16, U::STORAGE_BINDING),
+            ao_radius: 1.0,
+        }),
+        name,
+        "ambient_occlusion.output",
+    );
+    render_row(
+        task(DiffuseAmbientOcclusion {
+            output: output(8, 8),
+            ao_radius: 1.0,
+        }),
+        name,
+        "viewport",
+    );
+}
+
+#[test]
 fn row_demodulation_output() {
     let t = TraceSpecularTask {
         common: common(16, 16),

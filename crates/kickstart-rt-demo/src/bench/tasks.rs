@@ -153,6 +153,7 @@ pub(super) fn trace_tasks(
                     common: c.clone(),
                     output: radiance2.clone(),
                     diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
+                    ambient_occlusion: None,
                 }),
             ),
             (

@@ -38,6 +38,7 @@ const TR_FLAG_BILINEAR: u32 = 4u;
 const TR_FLAG_DEMODULATE: u32 = 8u;
 const TR_FLAG_FIRST_HIT: u32 = 16u;
 const TR_FLAG_DISNEY: u32 = 32u;
+const TR_FLAG_AO: u32 = 64u;
 
 const TR_PI: f32 = 3.14159265358979;
 // Size of the blue-noise tile (src/trace/sampling.rs BLUE_NOISE_SIZE).

@@ -4,9 +4,13 @@
 // src/cache/mod.rs), or from the engine's direct lighting texture where the hit is visible in it;
 // a miss reads the environment map.
 //
-// The demodulation output is declared only when the task has one (a pipeline must not reference
-// a binding its layout lacks): the pass composes one of trace/demodulation/none or
-// trace/demodulation/texture beside this module, defining tr_store_demodulation.
+// The diffuse pass can also write ambient occlusion from its own rays (TR_FLAG_AO: the hit
+// distance within the AO radius, in the AO task's format), one traversal for both effects.
+//
+// A second output (the specular's demodulation factor, the diffuse's AO) is declared only when
+// the task has one (a pipeline must not reference a binding its layout lacks): the pass composes
+// one of trace/second_output/none or trace/second_output/texture beside this module, defining
+// tr_store_second.
 
 #import trace/common
 #import cache/sample
@@ -24,6 +28,7 @@ const TR_DIRECT_LIGHTING_TOLERANCE: f32 = 0.01;
 struct TrTraced {
     radiance: vec3<f32>,
     t: f32,
+    hit: bool,
 }
 
 // Radiance arriving at `origin` from direction `dir` and the hit distance (the miss distance on
@@ -31,7 +36,8 @@ struct TrTraced {
 fn tr_incoming(origin: vec3<f32>, dir: vec3<f32>, t_min: f32) -> TrTraced {
     var r: TrTraced;
     let hit = rt_closest_hit(RtRay(origin, t_min, dir, tp.lengths.x), tp.misc.z);
-    if hit.hit == 0u {
+    r.hit = hit.hit != 0u;
+    if !r.hit {
         r.radiance = tr_environment(dir);
         r.t = min(tp.lengths.x, TR_MISS_DISTANCE);
         return r;
@@ -102,7 +108,7 @@ fn specular(
     if !s.valid {
         textureStore(out0, px.texel, vec4<f32>(0.0));
         if tr_flag(TR_FLAG_DEMODULATE) {
-            tr_store_demodulation(px.texel, vec4<f32>(0.0));
+            tr_store_second(px.texel, vec4<f32>(0.0));
         }
         return;
     }
@@ -131,7 +137,7 @@ fn specular(
     if tr_flag(TR_FLAG_DEMODULATE) {
         let albedo = tr_specular_albedo(gb_specular(px.texel).xyz, v.z, roughness);
         radiance = radiance / max(albedo, vec3<f32>(1e-3));
-        tr_store_demodulation(px.texel, vec4<f32>(albedo, 1.0));
+        tr_store_second(px.texel, vec4<f32>(albedo, 1.0));
     }
     textureStore(out0, px.texel, vec4<f32>(radiance, traced.t));
 }
@@ -160,6 +166,9 @@ fn diffuse(
     let s = gb_surface(px.texel);
     if !s.valid {
         textureStore(out0, px.texel, vec4<f32>(0.0));
+        if tr_flag(TR_FLAG_AO) {
+            tr_store_second(px.texel, vec4<f32>(1.0));
+        }
         return;
     }
     var rng = tr_rng(px.texel);
@@ -167,6 +176,16 @@ fn diffuse(
     let dir = tr_cosine(s.normal, u);
     let origin = tr_origin(s.position, s.normal, s.view_distance);
     let traced = tr_incoming(origin, dir, tr_t_min(s.view_distance));
+    if tr_flag(TR_FLAG_AO) {
+        // The AO task's output for this cosine-weighted ray: the hit distance over the radius,
+        // 1 where nothing is hit within it (trace/ao.wgsl).
+        let radius = tp.lengths.y;
+        var ao = 1.0;
+        if traced.hit && traced.t <= radius {
+            ao = clamp(traced.t / radius, 0.0, 1.0);
+        }
+        tr_store_second(px.texel, vec4<f32>(ao));
+    }
     var radiance = traced.radiance;
     if tr_flag(TR_FLAG_DISNEY) {
         let n_dot_v = clamp(dot(s.normal, s.to_eye), 1e-4, 1.0);

@@ -43,11 +43,11 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "trace/ao",
     "trace/common",
     "trace/debug_view",
-    "trace/demodulation/none",
-    "trace/demodulation/texture",
     "trace/gbuffer",
     "trace/radiance",
     "trace/rays",
+    "trace/second_output/none",
+    "trace/second_output/texture",
     "trace/shadow",
 ];
 

@@ -268,7 +268,7 @@ impl HalfResolutionMode {
     pub fn is_traced(self, x: u32, y: u32) -> bool {
         match self {
             HalfResolutionMode::Off => true,
-            HalfResolutionMode::Checkerboard => (x + y) % 2 == 0,
+            HalfResolutionMode::Checkerboard => (x + y).is_multiple_of(2),
             HalfResolutionMode::CheckerboardInverted => (x + y) % 2 == 1,
             _ => {
                 let b = self.block_size();
@@ -510,6 +510,37 @@ pub struct TraceDiffuseTask {
     pub output: TextureInput,
     /// BRDF for ray sampling.
     pub diffuse_brdf: DiffuseBrdf,
+    /// Also write ambient occlusion from the same rays, instead of tracing a
+    /// [`TraceAmbientOcclusionTask`]: one traversal for both effects.
+    pub ambient_occlusion: Option<DiffuseAmbientOcclusion>,
+}
+
+impl TraceDiffuseTask {
+    /// A Lambertian diffuse task without ambient occlusion.
+    pub fn new(common: TraceTaskCommon, output: TextureInput) -> Self {
+        TraceDiffuseTask {
+            common,
+            output,
+            diffuse_brdf: DiffuseBrdf::Lambertian,
+            ambient_occlusion: None,
+        }
+    }
+}
+
+/// Ambient occlusion written by a [`TraceDiffuseTask`] from its own rays.
+///
+/// The diffuse rays are cosine-weighted, as the AO task's are, so the output is what a
+/// [`TraceAmbientOcclusionTask`] with the same inputs and `ao_radius` writes (hit distance /
+/// `ao_radius`, 1 where nothing is hit within it) and its denoiser reads it the same way. Its
+/// noise is the diffuse signal's (the same rays), and with
+/// [`DiffuseBrdf::NormalizedDisney`] the rays are still cosine-weighted (Disney only reweights
+/// their radiance). Costs one extra texture write per pixel instead of a traversal.
+#[derive(Debug, Clone)]
+pub struct DiffuseAmbientOcclusion {
+    /// Hit distance / `ao_radius` (1 when nothing within it).
+    pub output: TextureInput,
+    /// Occlusion radius, world units (> 0).
+    pub ao_radius: f32,
 }
 
 /// Ambient occlusion.

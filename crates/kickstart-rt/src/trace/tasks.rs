@@ -101,6 +101,7 @@ const FLAG_BILINEAR: u32 = 4;
 const FLAG_DEMODULATE: u32 = 8;
 const FLAG_FIRST_HIT: u32 = 16;
 const FLAG_DISNEY: u32 = 32;
+const FLAG_AO: u32 = 64;
 
 /// The WGSL storage format name of a writable output format.
 fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
@@ -137,6 +138,8 @@ pub(crate) struct Job<'a> {
     first_hit: bool,
     demodulate: bool,
     disney: bool,
+    /// The diffuse pass writes ambient occlusion (`out1`) from its own rays.
+    ambient_occlusion: bool,
 }
 
 /// The trace-task passes of one context.
@@ -189,6 +192,8 @@ impl TracePasses {
             (TraceKind::Specular, F::Rgba16Float, None),
             (TraceKind::Specular, F::Rgba16Float, Some(F::Rgba16Float)),
             (TraceKind::Diffuse, F::Rgba16Float, None),
+            (TraceKind::Diffuse, F::Rgba16Float, Some(F::Rgba16Float)),
+            (TraceKind::Diffuse, F::Rgba16Float, Some(F::R32Float)),
         ] {
             // Every format listed has a WGSL name, so this cannot fail.
             let _ = self.pipeline(device, kind, (f0, f1));
@@ -271,17 +276,19 @@ impl TracePasses {
                 first_hit: false,
                 demodulate: t.demodulate_specular,
                 disney: false,
+                ambient_occlusion: false,
             },
             RenderTask::TraceDiffuse(t) => Job {
                 kind: TraceKind::Diffuse,
                 common: &t.common,
                 out0: &t.output,
-                out1: None,
-                ao_radius: 0.0,
+                out1: t.ambient_occlusion.as_ref().map(|a| &a.output),
+                ao_radius: t.ambient_occlusion.as_ref().map_or(0.0, |a| a.ao_radius),
                 lights: &[],
                 first_hit: false,
                 demodulate: false,
                 disney: t.diffuse_brdf == DiffuseBrdf::NormalizedDisney,
+                ambient_occlusion: t.ambient_occlusion.is_some(),
             },
             RenderTask::TraceAmbientOcclusion(t) => Job {
                 kind: TraceKind::AmbientOcclusion,
@@ -293,6 +300,7 @@ impl TracePasses {
                 first_hit: false,
                 demodulate: false,
                 disney: false,
+                ambient_occlusion: false,
             },
             RenderTask::TraceShadow(t) => Job {
                 kind: TraceKind::Shadow,
@@ -304,6 +312,7 @@ impl TracePasses {
                 first_hit: t.enable_first_hit_and_end_search,
                 demodulate: false,
                 disney: false,
+                ambient_occlusion: false,
             },
             RenderTask::TraceMultiShadow(t) => Job {
                 kind: TraceKind::MultiShadow,
@@ -315,6 +324,7 @@ impl TracePasses {
                 first_hit: t.enable_first_hit_and_end_search,
                 demodulate: false,
                 disney: false,
+                ambient_occlusion: false,
             },
             _ => return None,
         })
@@ -422,9 +432,9 @@ fn trace_wgsl(
             let roots: &[&str] = match f1 {
                 Some(f) => {
                     params.push(("OUTPUT1_FORMAT", f));
-                    &["trace/radiance", "trace/demodulation/texture"]
+                    &["trace/radiance", "trace/second_output/texture"]
                 }
-                None => &["trace/radiance", "trace/demodulation/none"],
+                None => &["trace/radiance", "trace/second_output/none"],
             };
             let entry = if kind == TraceKind::Specular {
                 "specular"
@@ -461,6 +471,9 @@ fn trace_params(job: &Job<'_>) -> TraceParams {
     }
     if job.disney {
         flags |= FLAG_DISNEY;
+    }
+    if job.ambient_occlusion {
+        flags |= FLAG_AO;
     }
     let o = &c.ray_offset;
     TraceParams {
@@ -518,13 +531,14 @@ const KINDS: [TraceKind; 5] = [
 ];
 
 /// The second outputs a pass of `kind` can write (`TracePasses::record`): the specular's
-/// demodulation output (when demodulating), the multi-shadow's `output1`.
+/// demodulation output (when demodulating), the diffuse's ambient occlusion, the multi-shadow's
+/// `output1`.
 fn second_outputs(kind: TraceKind) -> Vec<Option<wgpu::TextureFormat>> {
     let writable = WRITABLE_OUTPUT_FORMATS.map(Some);
     match kind {
-        TraceKind::AmbientOcclusion | TraceKind::Shadow | TraceKind::Diffuse => vec![None],
+        TraceKind::AmbientOcclusion | TraceKind::Shadow => vec![None],
         TraceKind::MultiShadow => writable.to_vec(),
-        TraceKind::Specular => [None].into_iter().chain(writable).collect(),
+        TraceKind::Specular | TraceKind::Diffuse => [None].into_iter().chain(writable).collect(),
     }
 }
 
@@ -585,8 +599,8 @@ mod wgsl_tests {
                 }
             }
         }
-        // 4 formats × (AO, shadow, diffuse: 1; multi-shadow: 4; specular: 5 second outputs).
-        assert_eq!(variants, 48);
+        // 4 formats × (AO, shadow: 1; multi-shadow: 4; specular, diffuse: 5 second outputs).
+        assert_eq!(variants, 64);
         // A format without a WGSL name is refused before any WGSL is made.
         for formats in [(F::Rgba8Unorm, None), (F::R32Float, Some(F::Rgba8Unorm))] {
             assert!(trace_wgsl(&library, TraceKind::MultiShadow, formats).is_err());

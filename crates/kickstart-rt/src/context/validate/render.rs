@@ -432,7 +432,7 @@ pub(crate) fn render_task(task: &RenderTask, limits: &wgpu::Limits) -> Result<()
         )),
         RenderTask::DirectLightTransfer(_) => Ok(()),
         RenderTask::TraceSpecular(t) => specular(name, t),
-        RenderTask::TraceDiffuse(t) => trace_common(name, &t.common, ("output", &t.output)),
+        RenderTask::TraceDiffuse(t) => diffuse(name, t),
         RenderTask::TraceAmbientOcclusion(t) => {
             trace_common(name, &t.common, ("output", &t.output))?;
             if !t.ao_radius.is_finite() || t.ao_radius <= 0.0 {
@@ -546,6 +546,31 @@ fn specular(name: &'static str, t: &TraceSpecularTask) -> Result<()> {
         )),
         (None, false) => Ok(()),
     }
+}
+
+fn diffuse(name: &'static str, t: &TraceDiffuseTask) -> Result<()> {
+    trace_common(name, &t.common, ("output", &t.output))?;
+    let Some(ao) = &t.ambient_occlusion else {
+        return Ok(());
+    };
+    writable(name, "ambient_occlusion.output", &ao.output)?;
+    viewport(
+        name,
+        t.common.viewport,
+        &[
+            ("output", &t.output),
+            ("ambient_occlusion.output", &ao.output),
+        ],
+    )?;
+    if !ao.ao_radius.is_finite() || ao.ao_radius <= 0.0 {
+        return Err(Error::input(
+            name,
+            "ambient_occlusion.ao_radius",
+            ao.ao_radius,
+            "must be finite and > 0 (world units)",
+        ));
+    }
+    Ok(())
 }
 
 fn multi_shadow(name: &'static str, t: &TraceMultiShadowTask) -> Result<()> {

@@ -56,6 +56,7 @@ fn diffuse(c: TraceTaskCommon, out: &TextureInput, brdf: DiffuseBrdf) -> RenderT
         common: c,
         output: out.clone(),
         diffuse_brdf: brdf,
+        ambient_occlusion: None,
     })
 }
 
@@ -458,5 +459,60 @@ fn direct_lighting_is_used_where_the_hit_is_visible_in_it() {
     assert!(
         from_screen > 100 && from_cache > 5,
         "{from_screen} on screen, {from_cache} off"
+    );
+}
+
+/// Ambient occlusion written by the diffuse pass from its own rays: in front of a wall at
+/// distance d (radius R, c = d / R) it matches the AO task's closed form (mean 2c − c²,
+/// occluded fraction 1 − c²; see the AO tests), and every pixel's AO is the diffuse output's own
+/// hit distance over the radius (1 beyond it): the same rays.
+#[test]
+fn diffuse_writes_ambient_occlusion_from_its_own_rays() {
+    let (d, radius) = (0.3f32, 1.0f32);
+    let wall = square(2, -d, 20.0);
+    let colours = vec![vec![Vec3::ONE; wall.len()]];
+    let scene = TestScene::single(wall);
+    let g = |x: u32, y: u32| {
+        let f = |i: u32| -0.5 + (i as f32 + 0.5) / N as f32;
+        Some((Vec3::new(f(x), f(y), 0.0), Vec3::NEG_Z))
+    };
+    let c = d / radius;
+    let (mut sum, mut occluded, mut n) = (0.0f64, 0usize, 0usize);
+    for frame in 0..12 {
+        let (out, ao) = (output(N, N, -5.0), output(N, N, -5.0));
+        let mut cm = common(gbuffer(N, N, g), Vec3::new(0.0, 0.0, 2.0));
+        cm.debug_parameters.frame_index = frame;
+        let task = RenderTask::TraceDiffuse(TraceDiffuseTask {
+            ambient_occlusion: Some(DiffuseAmbientOcclusion {
+                output: ao.clone(),
+                ao_radius: radius,
+            }),
+            ..TraceDiffuseTask::new(cm, out.clone())
+        });
+        run_cached(&scene, &colours, &[task]);
+        let (radiance, ao) = (read(&out), read(&ao));
+        for (i, (r, a)) in radiance.iter().zip(&ao).enumerate() {
+            let t = r[3];
+            let want = if t <= radius { t / radius } else { 1.0 };
+            assert!(
+                (a[0] - want).abs() < 1e-5,
+                "frame {frame} texel {i}: AO {} for a hit at {t}",
+                a[0]
+            );
+            sum += a[0] as f64;
+            occluded += (a[0] < 1.0) as usize;
+            n += 1;
+        }
+    }
+    let mean = sum / n as f64;
+    let frac = occluded as f64 / n as f64;
+    let want = (2.0 * c - c * c) as f64;
+    assert!(
+        (mean - want).abs() < 0.01,
+        "mean {mean}, closed form {want}"
+    );
+    assert!(
+        (frac - (1.0 - c * c) as f64).abs() < 0.01,
+        "occluded fraction {frac}"
     );
 }
