@@ -2,7 +2,8 @@
 // `step` pixels apart) over the temporally accumulated signal(s).
 //
 // Tap weights: B-spline kernel × normal (exponent grows as roughness falls) × plane distance
-// (depth edges) × luminance against the estimated noise (SVGF: |Δl| / (σ_l·√variance)) × a
+// (depth edges) × luminance against the estimated noise of both pixels (SVGF-like:
+// |Δl| / (σ_l·√(variance_p + variance_q)), symmetric so that a sparse signal keeps its energy) × a
 // Gaussian of the pixel distance whose radius follows the signal: specular roughness, hit
 // distance (contact detail keeps a small radius), the shadow's occluder distance (penumbra
 // width) and the history length (converged pixels need less blur).
@@ -128,7 +129,6 @@ struct DnCentre {
     z_corner: f32,
     r_edge: f32,
     r_corner: f32,
-    l_fac: f32,
     n_exp: f32,
     lum: f32,
     variance: f32,
@@ -167,18 +167,26 @@ fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnR
     let kernel = select(0.125, 0.0625, corner);
     let plane = abs(dot(c.normal, gq.position - c.position));
     let v = dn_value(h);
-    var var_q = c.variance;
-    if ap.first == 0u {
-        var_q = dn_rec_z(h);
+    let lum = dn_luminance(v.xyz);
+    // The tap's own noise variance: the propagated one, or in the first iteration its temporal
+    // estimate (second moment − mean², over the history length).
+    var var_q = dn_rec_z(h);
+    if ap.first != 0u {
+        var_q = max(var_q - lum * lum, 0.0) / max(dn_rec_len(h), 1.0);
     }
-    let dl = abs(dn_luminance(v.xyz) - c.lum);
-    let e = -plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * log2(cos_n) - dl * c.l_fac
+    // The luminance weight is symmetric (the noise of both values): a rare bright sample and
+    // its dark neighbours take from each other alike, so a sparse signal's energy spreads
+    // instead of staying in the few pixels that caught it (a weight of the centre's noise alone
+    // lets every dark pixel refuse the bright one, and the energy is lost).
+    let l_fac = LOG2E / (SIGMA_L * sqrt(c.variance + var_q) + 1e-4 + 0.01 * max(abs(lum), abs(c.lum)));
+    let dl = abs(lum - c.lum);
+    let e = -plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * log2(cos_n) - dl * l_fac
         + select(c.r_edge, c.r_corner, corner);
     let w = kernel * exp2(e);
     var r = acc;
     r.sum += w * v;
     r.wsum += w;
-    r.vsum += w * w * var_q;
+    r.vsum += w * w * select(var_q, c.variance, ap.first != 0u);
     return r;
 }
 
@@ -228,8 +236,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var lum_c: array<f32, DN_SIGNALS>;
     var len_c: array<f32, DN_SIGNALS>;
     var n_exp: array<f32, DN_SIGNALS>;
-    // log2 factor of the luminance weight exp(-|Δl| / (σ_l √var + ε)).
-    var l_fac: array<f32, DN_SIGNALS>;
     // log2 of the distance weight exp(-d² / (2 r²)) at an edge and a corner tap.
     var r_edge: array<f32, DN_SIGNALS>;
     var r_corner: array<f32, DN_SIGNALS>;
@@ -247,7 +253,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let r2 = LOG2E / (2.0 * radius * radius);
         r_edge[s] = -d_edge * d_edge * r2;
         r_corner[s] = -d_corner * d_corner * r2;
-        l_fac[s] = LOG2E / (SIGMA_L * sqrt(var_c[s]) + 1e-4 + 0.01 * abs(lum_c[s]));
         n_exp[s] = 64.0;
         if dn_kind(s) == DN_KIND_SPECULAR {
             n_exp[s] = mix(256.0, 32.0, gp.roughness);
@@ -275,7 +280,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     c.z_corner = z_corner;
     c.r_edge = r_edge[0];
     c.r_corner = r_corner[0];
-    c.l_fac = l_fac[0];
     c.n_exp = n_exp[0];
     c.lum = lum_c[0];
     c.variance = var_c[0];

@@ -1,12 +1,12 @@
 // kickstart-rt denoisers, pass 1: temporal accumulation.
 //
 // Per grid pixel (see denoise/common.wgsl): decodes the G-buffer (with the camera jitter) into
-// this frame's guide,
-// reads the noisy signal(s) (checkerboard: untraced pixels are rebuilt from their four traced
-// neighbours, weighted by geometric similarity), reprojects into the previous frame (motion
+// this frame's guide, reads the noisy signal(s) (checkerboard: untraced pixels are rebuilt from
+// their four traced neighbours, weighted by geometric similarity), reprojects into the previous frame (motion
 // vectors of either type, or the previous matrices), keeps the bilinear taps whose surface
 // matches (normal and plane distance; disocclusion drops the history), clamps the history to
-// the current neighbourhood's mean ± γσ (ghosting), and blends: the history length grows by one
+// the current neighbourhood's mean ± γσ, σ the wider of the neighbourhood's and of the pixel's
+// own history's spread (ghosting), and blends: the history length grows by one
 // up to max_history and the new sample weighs 1 / length. The history holds the accumulated raw
 // signal (never the spatially filtered one), so the spatial filter cannot blur it over time.
 //
@@ -36,8 +36,6 @@ const CLAMP_SIGMAS: f32 = 2.0;
 const DN_TILE: u32 = 10u;
 var<workgroup> dn_tile: array<array<vec4<f32>, 100>, DN_SIGNALS>;
 var<workgroup> dn_tile_ok: array<u32, 100>;
-// History length from which the pixel's own sample spread (its moments) is trusted.
-const TEMPORAL_SPREAD_FRAMES: f32 = 4.0;
 
 // The noisy input of signal `s` at `texel` as (rgb, hit distance); scalar signals repeat their
 // value in rgb. Occlusion: normalised hit distance (1 = open). Shadow: visibility 1 where the
@@ -301,8 +299,6 @@ fn main(
         var m1 = vec4<f32>(0.0);
         var m2 = vec4<f32>(0.0);
         var cnt = 0.0;
-        var m1_nc = vec4<f32>(0.0);
-        var m2_nc = vec4<f32>(0.0);
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let t = (lid.y + u32(1 + dy)) * DN_TILE + lid.x + u32(1 + dx);
@@ -313,10 +309,6 @@ fn main(
                 m1 += v;
                 m2 += v * v;
                 cnt += 1.0;
-                if dx != 0 || dy != 0 {
-                    m1_nc += v;
-                    m2_nc += v * v;
-                }
             }
         }
         let mean = m1 / max(cnt, 1.0);
@@ -339,27 +331,21 @@ fn main(
                 + w3 * dn_rec_len(hd)) * inv;
         }
         // The spread of the samples this pixel has seen (its luminance moments over the
-        // history), once a few frames back it. A 3×3 neighbourhood of a sparse 1-spp signal
-        // (dark radiance with rare bright hits, a penumbra's 0/1 visibility) is often all alike,
-        // so its spread alone would call the rare samples the mean is made of outliers and
-        // clamp them away: a darkening bias that grows with every frame of history.
-        let temporal = hist_len >= TEMPORAL_SPREAD_FRAMES;
+        // history). A 3×3 neighbourhood of a sparse 1-spp signal (dark radiance with rare
+        // bright hits, a penumbra's 0/1 visibility) is often all alike, so its spread alone
+        // would call the rare samples the mean is made of outliers and clamp them away: a
+        // darkening bias that grows with every frame of history.
+        //
+        // No sample is clamped as a firefly here: a threshold from the neighbourhood or the
+        // history rejects every sample of a sparse signal (bounce light through a small window:
+        // most pixels' history is 0, so each bright sample looks like a firefly and the signal
+        // is lost whole). A lone bright sample is spread by the à-trous filter instead, whose
+        // luminance weight is symmetric in the noise of both pixels, and fades into the history:
+        // its energy is kept.
         var sigma_t = 0.0;
-        if temporal {
+        if hist_len >= 1.0 {
             let hl = dn_luminance(hist.xyz);
             sigma_t = sqrt(max(hist_m2 - hl * hl, 0.0));
-        }
-        if (kind == DN_KIND_SPECULAR || kind == DN_KIND_DIFFUSE) && cnt > 2.0 && temporal {
-            // Fireflies: a sample far above all its neighbours and far above what this pixel's
-            // history has seen is clamped (not before the history can tell: early frames keep
-            // their samples, whose weight fades as 1 / length).
-            let cn = cnt - select(0.0, 1.0, dn_traced(p));
-            let mean_nc = m1_nc / max(cn, 1.0);
-            let sigma_nc = sqrt(max(m2_nc / max(cn, 1.0) - mean_nc * mean_nc, vec4<f32>(0.0)));
-            let hi_spatial = mean_nc + 4.0 * sigma_nc + 0.1 * abs(mean_nc);
-            let hi_temporal = hist + vec4<f32>(4.0 * sigma_t) + 0.1 * abs(hist);
-            let hi = max(hi_spatial, hi_temporal);
-            cur = vec4<f32>(min(cur.xyz, hi.xyz), cur.w);
         }
         if wsum > 1e-3 {
             // Ghosting: the history may not leave the range the current neighbourhood and the

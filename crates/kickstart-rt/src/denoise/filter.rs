@@ -3,13 +3,16 @@
 //! 1. **temporal** (`shaders/denoise/temporal.wgsl`): G-buffer decode into a compact guide,
 //!    checkerboard resolve, reprojection (motion vectors of either type with their scale, or the
 //!    previous matrices when there are none; camera jitter compensated), disocclusion from plane
-//!    distance and normal, per-pixel history length, history clamping against ghosting, firefly
-//!    clamping, accumulation of the raw signal and of its luminance's second moment;
+//!    distance and normal, per-pixel history length, history clamping against ghosting,
+//!    accumulation of the raw signal and of its luminance's second moment;
 //! 2. **à-trous** (`shaders/denoise/atrous.wgsl`), 3 (Fast) or 5 (HighQuality) iterations of
 //!    an edge-stopping wavelet filter guided by normal, plane distance and the estimated noise,
 //!    with a radius that follows roughness, hit distance, the occluder distance of a shadow (its
 //!    penumbra width) and the history length; one chain of dispatches per signal, whose last
-//!    iteration writes the signal's output texture.
+//!    iteration writes the signal's output texture;
+//! 3. in a block mode (one traced pixel per 2×2 or 4×4 block), the passes above work on one
+//!    pixel per block and **upsample** (`shaders/denoise/upsample.wgsl`) writes every pixel of
+//!    the output, guided by normals and depth.
 //!
 //! [`Shared`] holds what every denoiser binds the same way (layouts, placeholders); a
 //! [`Filter`] is one denoiser's pipelines and histories.
