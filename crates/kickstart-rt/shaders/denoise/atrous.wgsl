@@ -59,7 +59,8 @@ fn dn_dst(s: u32, i: u32, v: DnRecord) {
 // Noise variance of the accumulated value at pixel `p` (first iteration): the temporal estimate
 // (second moment − mean², / history length), averaged over the 3×3 neighbours of the same
 // surface since one pixel's few samples make a noisy estimate, blended from the 3×3 spatial
-// variance of the values over the first 8 frames (the temporal estimate needs a few frames).
+// variance of the values over the first 8 frames (the temporal estimate needs a few frames;
+// not for shadows, see below).
 fn dn_variance_estimate(s: u32, p: vec2<i32>, centre: DnGuide, dist: f32) -> f32 {
     var m1 = 0.0;
     var m2 = 0.0;
@@ -90,7 +91,14 @@ fn dn_variance_estimate(s: u32, p: vec2<i32>, centre: DnGuide, dist: f32) -> f32
     let k = max(cnt, 1.0);
     m1 /= k;
     let spatial = max(m2 / k - m1 * m1, 0.0);
-    let t = clamp((len / k - 1.0) / 7.0, 0.0, 1.0);
+    var t = clamp((len / k - 1.0) / 7.0, 0.0, 1.0);
+    if dn_kind(s) >= DN_KIND_SHADOW {
+        // A shadow's spatial spread is mostly its edges, not noise: a small light's visibility
+        // is exact at one sample per pixel, and blurring it by its 3×3 spread would soften
+        // every hard edge. Only the temporal spread (a penumbra's samples disagree over
+        // frames) counts as noise.
+        t = 1.0;
+    }
     return mix(spatial, temporal / k, t);
 }
 

@@ -168,6 +168,26 @@ fn dn_reusable(g: DnGuide, pos: vec3<f32>, n: vec3<f32>, pred: vec3<f32>) -> boo
     return plane_ok || abs(dn_prev_view_distance(g.position) - d) < (0.03 / ndv) * d;
 }
 
+// Whether the previous frame's taps (records `h`, weights `w`; 0: unusable) straddle a hard
+// visibility edge: taps that each saw one value all along (their sample spread is small) but
+// disagree. Resampling them would blur the edge by the reprojection's sub-pixel offset every
+// frame, while this frame's sample of a hard shadow is exact: the history is dropped there.
+fn dn_hard_edge(h: array<DnRecord, 4>, w: vec4<f32>) -> bool {
+    var lo = 1e30;
+    var hi = -1e30;
+    var spread = 0.0;
+    for (var k = 0; k < 4; k++) {
+        if w[k] <= 0.0 {
+            continue;
+        }
+        let v = dn_value(h[k]).x;
+        lo = min(lo, v);
+        hi = max(hi, v);
+        spread = max(spread, max(dn_rec_z(h[k]) - v * v, 0.0));
+    }
+    return hi - lo > 0.5 && spread < 0.02;
+}
+
 // Loads the workgroup's tile (every invocation takes part, before any returns).
 fn dn_fill_tile(wg: vec2<u32>, lid: u32) {
     let origin = vec2<i32>(wg * 8u) - vec2<i32>(1);
@@ -299,6 +319,8 @@ fn main(
         var m1 = vec4<f32>(0.0);
         var m2 = vec4<f32>(0.0);
         var cnt = 0.0;
+        var lo = vec4<f32>(1e30);
+        var hi = vec4<f32>(-1e30);
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let t = (lid.y + u32(1 + dy)) * DN_TILE + lid.x + u32(1 + dx);
@@ -309,6 +331,8 @@ fn main(
                 m1 += v;
                 m2 += v * v;
                 cnt += 1.0;
+                lo = min(lo, v);
+                hi = max(hi, v);
             }
         }
         let mean = m1 / max(cnt, 1.0);
@@ -318,12 +342,16 @@ fn main(
         var hist = vec4<f32>(0.0);
         var hist_m2 = 0.0;
         var hist_len = 0.0;
-        if wsum > 1e-3 {
-            let second = s == 1u;
-            let ha = select(h00, h10, second);
-            let hb = select(h01, h11, second);
-            let hc = select(h02, h12, second);
-            let hd = select(h03, h13, second);
+        let second = s == 1u;
+        let ha = select(h00, h10, second);
+        let hb = select(h01, h11, second);
+        let hc = select(h02, h12, second);
+        let hd = select(h03, h13, second);
+        let visibility = kind == DN_KIND_SHADOW || kind == DN_KIND_MULTI_SHADOW;
+        let edge = visibility && dn_hard_edge(array<DnRecord, 4>(ha, hb, hc, hd),
+                                              vec4<f32>(w0, w1, w2, w3));
+        let has_history = wsum > 1e-3 && !edge;
+        if has_history {
             let inv = 1.0 / wsum;
             hist = (w0 * dn_value(ha) + w1 * dn_value(hb) + w2 * dn_value(hc) + w3 * dn_value(hd)) * inv;
             hist_m2 = (w0 * dn_rec_z(ha) + w1 * dn_rec_z(hb) + w2 * dn_rec_z(hc) + w3 * dn_rec_z(hd)) * inv;
@@ -347,7 +375,7 @@ fn main(
             let hl = dn_luminance(hist.xyz);
             sigma_t = sqrt(max(hist_m2 - hl * hl, 0.0));
         }
-        if wsum > 1e-3 {
+        if has_history {
             // Ghosting: the history may not leave the range the current neighbourhood and the
             // pixel's own sample spread allow. The range has a floor too, for the first frames
             // of a sparse signal, when neither spread is known yet.
@@ -356,7 +384,16 @@ fn main(
                 floor += vec4<f32>(0.2);
             }
             let half = CLAMP_SIGMAS * max(sigma, vec4<f32>(sigma_t)) + floor;
-            hist = clamp(hist, mean - half, mean + half);
+            if visibility && cnt > 0.0 {
+                // Visibility: the range of the neighbourhood's samples, widened by the pixel's
+                // own sample spread. Where every neighbour agrees (umbra, or fully lit) the
+                // history takes their value exactly: a shadow that moved leaves no ghost, and a
+                // hard shadow stays as exact as its raw samples.
+                let wide = vec4<f32>(CLAMP_SIGMAS * sigma_t);
+                hist = clamp(hist, lo - wide, hi + wide);
+            } else {
+                hist = clamp(hist, mean - half, mean + half);
+            }
         }
         let len = min(hist_len + 1.0, dp.max_history);
         let alpha = 1.0 / len;
