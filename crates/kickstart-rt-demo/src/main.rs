@@ -72,8 +72,8 @@ enum Command {
         /// A GPU primary-ray debug view instead of the CPU reference image.
         #[arg(long, value_enum)]
         debug_view: Option<debug_view::DebugView>,
-        /// Scene: default, cornell, dragon, apartment, bunny, cornell-obj, cornell-gltf, or a
-        /// path to a .gltf/.glb/.obj file.
+        /// Scene: default, cornell, window-room, dragon, apartment, bunny, cornell-obj,
+        /// cornell-gltf, or a path to a .gltf/.glb/.obj file.
         #[arg(long, default_value = "default")]
         scene: String,
         /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
