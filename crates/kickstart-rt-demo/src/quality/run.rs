@@ -571,4 +571,72 @@ mod tests {
             }
         }
     }
+
+    /// The window room's report at 160×90: 8 frames, 32 reference samples, 2 still frames. Made
+    /// once for the tests that read it.
+    fn window_room_report() -> &'static Report {
+        static REPORT: std::sync::OnceLock<Report> = std::sync::OnceLock::new();
+        REPORT.get_or_init(|| {
+            let (device, queue) = crate::testing::device();
+            let scene = crate::scene::load("window-room", Path::new(".")).expect("built-in scene");
+            let camera = scene.camera_or_default(None);
+            let opts = QualityOptions {
+                size: (160, 90),
+                frames: 8,
+                warmup: 16,
+                reference_samples: 32,
+                pan_degrees: 2.0,
+                still_frames: 2,
+                seed: 3,
+                out: None,
+                images: Images::None,
+                progress: false,
+            };
+            let report = run(device, queue, &scene, &camera, &opts, |_| {}).expect("quality run");
+            for line in super::super::report::summary_lines(&report.summary) {
+                eprintln!("{line}");
+            }
+            if let Some(s) = &report.stability {
+                for line in super::super::report::stability_lines(s) {
+                    eprintln!("{line}");
+                }
+            }
+            report
+        })
+    }
+
+    fn diffuse(s: &Summary) -> &summary::SignalSummary {
+        s.signals
+            .iter()
+            .find(|s| s.signal == "diffuse")
+            .expect("diffuse scored")
+    }
+
+    /// The window room's sparse diffuse GI (about one ray in a hundred reaches the sunlit
+    /// patch): the raw 1-spp trace is unbiased, so over the 8 frames its mean is the reference's.
+    #[test]
+    fn window_room_raw_diffuse_keeps_its_energy() {
+        let mean = diffuse(&window_room_report().summary).mean;
+        let raw = mean.noisy.energy_ratio.expect("the reference has energy");
+        assert!(
+            (0.7..=1.3).contains(&raw),
+            "raw diffuse energy ratio {raw:.3} (frames 0..=7)"
+        );
+    }
+
+    /// The denoised diffuse of the window room after 8 frames keeps the reference's energy: the
+    /// denoiser must not lose the sparse signal.
+    #[test]
+    fn window_room_denoised_diffuse_keeps_its_energy() {
+        let last = diffuse(&window_room_report().summary).last;
+        let denoised = last
+            .denoised
+            .energy_ratio
+            .expect("the reference has energy");
+        assert!(
+            (0.8..=1.2).contains(&denoised),
+            "denoised diffuse energy ratio {denoised:.3} on the last frame (raw {:?})",
+            last.noisy.energy_ratio
+        );
+    }
 }
