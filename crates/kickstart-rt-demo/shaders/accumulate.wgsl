@@ -1,6 +1,7 @@
 // `ksrt quality`'s reference: adds one sample (a trace task's raw output) to a running sum.
 // Mode 0: radiance, rgb summed. Mode 1: a shadow trace's hit distance, summed as visibility
-// (1 where the light is visible, i.e. the distance is negative) in every channel.
+// (1 where the light is visible, i.e. the distance is negative) in every channel. Mode 2: one
+// value in R (AO), summed in every channel.
 
 struct Params {
     width: u32,
@@ -23,6 +24,9 @@ fn accumulate(@builtin(global_invocation_id) id: vec3<u32>) {
     if params.mode == 1u {
         let lit = select(0.0, 1.0, t.x < 0.0);
         v = vec4<f32>(lit, lit, lit, 1.0);
+    } else if params.mode == 2u {
+        let x = select(0.0, t.x, abs(t.x) < 1e30);
+        v = vec4<f32>(x, x, x, 1.0);
     } else {
         // A NaN or infinite sample would poison thousands of others: dropped (counted as 0).
         let finite = all(abs(t.xyz) < vec3<f32>(1e30));

@@ -72,8 +72,8 @@ enum Command {
         /// A GPU primary-ray debug view instead of the CPU reference image.
         #[arg(long, value_enum)]
         debug_view: Option<debug_view::DebugView>,
-        /// Scene: default, cornell, dragon, apartment, bunny, cornell-obj, cornell-gltf, or a
-        /// path to a .gltf/.glb/.obj file.
+        /// Scene: default, cornell, window-room, dragon, apartment, bunny, cornell-obj,
+        /// cornell-gltf, or a path to a .gltf/.glb/.obj file.
         #[arg(long, default_value = "default")]
         scene: String,
         /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
@@ -141,10 +141,13 @@ enum Command {
         screenshot: Option<PathBuf>,
     },
     /// Measure the denoisers: along a slow pan, each frame's 1-spp diffuse, specular (roughness
-    /// 0.3) and shadow traces, raw and denoised, against a converged reference of the same frame
-    /// (the same traces through the frozen lighting cache, averaged over --reference-samples);
-    /// prints PSNR and FLIP per frame on the tone-mapped 8-bit sRGB images (exposure 1, Reinhard,
-    /// sRGB; shadow visibility linear) and writes noisy | denoised | reference strips.
+    /// 0.3), AO and shadow traces, raw and denoised, against a converged reference of the same
+    /// frame (the same traces through the frozen lighting cache, averaged over
+    /// --reference-samples); prints PSNR and FLIP per frame on the tone-mapped 8-bit sRGB images
+    /// (exposure 1, Reinhard, sRGB; AO and shadow visibility linear) and the energy ratio of the
+    /// linear values, a summary (last frame, mean over frames 8..=last), then the flicker of
+    /// --still-frames frames of a still camera against a reference's; writes noisy | denoised |
+    /// reference strips.
     Quality {
         /// Scene (as for `render`).
         #[arg(long, default_value = "apartment")]
@@ -172,6 +175,10 @@ enum Command {
         /// Yaw of the whole pan, degrees.
         #[arg(long, default_value_t = 8.0, allow_hyphen_values = true)]
         pan_degrees: f32,
+        /// Frames held still at the pan's last camera after it, measuring the denoised output's
+        /// flicker (0: none).
+        #[arg(long, default_value_t = 8)]
+        still_frames: u32,
         /// Seed of the measured frames' noise.
         #[arg(long, default_value_t = 0)]
         seed: u32,
@@ -289,7 +296,8 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
     let (device, queue) = gpu::device(&adapter)?;
     println!(
         "ksrt quality: {} at {}x{}, {} frames panning {}°, cache warmed {} frames then frozen, \
-         reference {} spp; scores on 8-bit sRGB (exposure {}, Reinhard; shadow linear)",
+         reference {} spp; scores on 8-bit sRGB (exposure {}, Reinhard; AO and shadow linear), \
+         energy ratios on the linear values",
         scene.name,
         opts.size.0,
         opts.size.1,
@@ -301,16 +309,25 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
     );
     let start = std::time::Instant::now();
     let mut header = false;
-    let frames = quality::run::run(&device, &queue, &scene, &camera, &opts, |f| {
+    let report = quality::run::run(&device, &queue, &scene, &camera, &opts, |f| {
         if !header {
-            println!("{}", quality::run::table_header(&f.signals));
+            println!("{}", quality::report::table_header(&f.signals));
             header = true;
         }
-        println!("{}", quality::run::table_row(f));
+        println!("{}", quality::report::table_row(f));
     })?;
+    for line in quality::report::summary_lines(&report.summary) {
+        println!("{line}");
+    }
+    if let Some(stability) = &report.stability {
+        for line in quality::report::stability_lines(stability) {
+            println!("{line}");
+        }
+    }
     println!(
-        "{} frames in {:.1} s; strips in {}",
-        frames.len(),
+        "{} frames ({} still) in {:.1} s; strips in {}",
+        report.frames.len(),
+        opts.still_frames,
         start.elapsed().as_secs_f64(),
         opts.out
             .as_deref()
@@ -325,10 +342,19 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
             "warmup": opts.warmup,
             "reference_samples": opts.reference_samples,
             "pan_degrees": opts.pan_degrees,
+            "still_frames": opts.still_frames,
             "specular_roughness": quality::run::SPECULAR_ROUGHNESS,
             "exposure": quality::metrics::EXPOSURE,
-            "tone_map": "exposure, Reinhard c/(1+c), sRGB, 8 bit; shadow visibility linear 8 bit",
-            "scores": frames,
+            "tone_map": "exposure, Reinhard c/(1+c), sRGB, 8 bit; \
+                         AO and shadow visibility linear 8 bit",
+            "energy_ratio": "mean linear value (radiance: Rec. 709 luminance) over the \
+                             reference's, over the pixels with a surface; null where the \
+                             reference is ~0",
+            "flicker": "mean over surface pixels of |L_t - L_t-1| of the linear value, \
+                        averaged over the still frames; reference: between two references",
+            "scores": report.frames,
+            "summary": report.summary,
+            "stability": report.stability,
         });
         std::fs::write(path, serde_json::to_string_pretty(&value)?)
             .map_err(|e| format!("--json {}: {e}", path.display()))?;
@@ -455,6 +481,7 @@ fn main() {
             warmup,
             reference_samples,
             pan_degrees,
+            still_frames,
             seed,
             out,
             images,
@@ -473,6 +500,7 @@ fn main() {
                 warmup: 0,
                 reference_samples: 0,
                 pan_degrees,
+                still_frames,
                 seed,
                 out: Some(out),
                 images,

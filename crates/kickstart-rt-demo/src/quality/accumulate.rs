@@ -13,6 +13,8 @@ pub enum SampleKind {
     Radiance,
     /// A shadow trace's hit distance (negative: lit), summed as visibility.
     ShadowHitDistance,
+    /// One value in R (AO), summed in every channel.
+    Scalar,
 }
 
 #[repr(C)]
@@ -55,6 +57,7 @@ impl Accumulator {
             mode: match kind {
                 SampleKind::Radiance => 0,
                 SampleKind::ShadowHitDistance => 1,
+                SampleKind::Scalar => 2,
             },
             _pad: 0,
         };

@@ -1,6 +1,7 @@
 //! The built-in scenes: the default scene of the instance-id bug report (an icosahedron sphere, a
-//! torus knot, a tube and a floor, each its own colour, in a room of a floor and two walls) and the
-//! Cornell box, built in code from the classic Cornell measurements.
+//! torus knot, a tube and a floor, each its own colour, in a room of a floor and two walls), the
+//! Cornell box, built in code from the classic Cornell measurements, and a closed room lit only
+//! by the sun through a small window in its ceiling (the sparse-GI case of issue 32).
 
 use glam::{Affine3A, Vec3};
 
@@ -378,6 +379,109 @@ pub fn cornell_box() -> Scene {
         range: 3.0,
         inner_angle: 0.9,
         outer_angle: 1.5,
+    }];
+    scene
+}
+
+/// The window room's walls, floor and ceiling: x and z in ±[`WINDOW_ROOM_HALF_WIDTH`], y from 0 to
+/// [`WINDOW_ROOM_HEIGHT`].
+pub const WINDOW_ROOM_HALF_WIDTH: f32 = 2.0;
+/// The window room's height.
+pub const WINDOW_ROOM_HEIGHT: f32 = 3.0;
+/// The window room's only opening, a square hole in the ceiling: `[x0, z0, x1, z1]`. 0.9 m × 0.9 m,
+/// about 1/20 of the ceiling.
+pub const WINDOW_ROOM_WINDOW: [f32; 4] = [-0.95, -0.95, -0.05, -0.05];
+/// The way the window room's sun travels (not normalised): steep, so that all of it that
+/// enters through the window lands on the floor, a patch beside the spot below the window.
+pub const WINDOW_ROOM_SUN: Vec3 = Vec3::new(0.35, -1.0, 0.25);
+
+/// A closed room, 4 m × 4 m × 3 m, every face towards the inside, whose only light is the sun
+/// shining through a window of 1/20 of the ceiling onto a patch of the floor; nothing else
+/// lights it (no emission, and declaring the sun keeps the demo from adding its default lights).
+/// The camera, inside, looks down at the sunlit patch with the dim walls behind it; the window
+/// stays out of its view, so every pixel shows a surface. Everything but the patch
+/// is lit only by light bounced off it, which about one diffuse ray in a hundred from the view
+/// reaches: the sparse diffuse GI a denoiser must not lose.
+pub fn window_room() -> Scene {
+    let (w, h) = (WINDOW_ROOM_HALF_WIDTH, WINDOW_ROOM_HEIGHT);
+    let [wx0, wz0, wx1, wz1] = WINDOW_ROOM_WINDOW;
+    let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let face = |quads: &[[Vec3; 4]], facing: Vec3| {
+        let mut m = (Vec::new(), Vec::new());
+        for q in quads {
+            push_quad(&mut m, *q, facing);
+        }
+        m
+    };
+    let ceiling_rect = |x0: f32, z0: f32, x1: f32, z1: f32| {
+        [v(x0, h, z0), v(x1, h, z0), v(x1, h, z1), v(x0, h, z1)]
+    };
+    let white = Vec3::new(0.8, 0.78, 0.75);
+    let parts = vec![
+        (
+            "floor",
+            face(
+                &[[v(-w, 0.0, -w), v(w, 0.0, -w), v(w, 0.0, w), v(-w, 0.0, w)]],
+                Vec3::Y,
+            ),
+            Vec3::new(0.6, 0.45, 0.3),
+            Affine3A::IDENTITY,
+        ),
+        (
+            // Four strips around the window.
+            "ceiling",
+            face(
+                &[
+                    ceiling_rect(-w, -w, w, wz0),
+                    ceiling_rect(-w, wz1, w, w),
+                    ceiling_rect(-w, wz0, wx0, wz1),
+                    ceiling_rect(wx1, wz0, w, wz1),
+                ],
+                Vec3::NEG_Y,
+            ),
+            white,
+            Affine3A::IDENTITY,
+        ),
+        (
+            "walls",
+            {
+                let mut m = face(
+                    &[[v(-w, 0.0, -w), v(w, 0.0, -w), v(w, h, -w), v(-w, h, -w)]],
+                    Vec3::Z,
+                );
+                for (q, facing) in [
+                    (
+                        [v(-w, 0.0, w), v(w, 0.0, w), v(w, h, w), v(-w, h, w)],
+                        Vec3::NEG_Z,
+                    ),
+                    (
+                        [v(-w, 0.0, -w), v(-w, 0.0, w), v(-w, h, w), v(-w, h, -w)],
+                        Vec3::X,
+                    ),
+                    (
+                        [v(w, 0.0, -w), v(w, 0.0, w), v(w, h, w), v(w, h, -w)],
+                        Vec3::NEG_X,
+                    ),
+                ] {
+                    push_quad(&mut m, q, facing);
+                }
+                m
+            },
+            white,
+            Affine3A::IDENTITY,
+        ),
+    ];
+    let mut scene = from_parts("window-room", parts);
+    scene.camera = Some(Camera {
+        eye: Vec3::new(-1.5, 1.7, 1.6),
+        at: Vec3::new(0.6, 0.2, 0.0),
+        up: Vec3::Y,
+        fov_y_deg: 65.0,
+    });
+    scene.lights = vec![Light::Sun {
+        direction: WINDOW_ROOM_SUN.normalize(),
+        irradiance: Vec3::new(6.0, 5.7, 5.2),
+        angular_diameter: 0.0093,
     }];
     scene
 }

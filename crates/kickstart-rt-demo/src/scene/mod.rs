@@ -473,6 +473,7 @@ impl Scene {
 pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("default", None),
     ("cornell", None),
+    ("window-room", None),
     ("dragon", Some("stanford_dragon/dragon_vrip.glb")),
     ("apartment", Some("dream_apartment/dream_apartment.glb")),
     ("bunny", Some("stanford_bunny/bunny.obj")),
@@ -496,6 +497,7 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
     match name_or_path {
         "default" => return Ok(builtin::default_scene()),
         "cornell" => return Ok(builtin::cornell_box()),
+        "window-room" => return Ok(builtin::window_room()),
         _ => {}
     }
     if let Some((name, Some(file))) = SCENE_NAMES.iter().find(|(n, _)| *n == name_or_path) {

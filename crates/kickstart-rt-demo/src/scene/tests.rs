@@ -335,3 +335,113 @@ fn a_flattened_scene_has_the_same_world_triangles_under_one_instance() {
         ]
     );
 }
+
+/// The window room's triangles in world space and a CPU BVH over them.
+fn window_room_bvh(scene: &Scene) -> (Vec<[Vec3; 3]>, kickstart_rt::cpu::CpuBvh) {
+    let tris: Vec<[Vec3; 3]> = scene
+        .instances
+        .iter()
+        .flat_map(|i| scene.meshes[i.mesh].triangles(i.transform))
+        .collect();
+    let bvh = kickstart_rt::cpu::CpuBvh::build(&tris);
+    (tris, bvh)
+}
+
+fn ray(origin: Vec3, dir: Vec3) -> kickstart_rt::cpu::Ray {
+    kickstart_rt::cpu::Ray {
+        origin,
+        dir,
+        t_min: 1e-4,
+        t_max: f32::INFINITY,
+    }
+}
+
+#[test]
+fn window_room_is_lit_only_by_its_sun_and_every_face_looks_inwards() {
+    let scene = load("window-room", Path::new(".")).expect("built-in scene");
+    assert_eq!(scene.name, "window-room");
+    // Its own sun, so the demo adds no default light; nothing glows.
+    assert!(matches!(scene.lights[..], [Light::Sun { .. }]));
+    assert_eq!(scene.lights_or_default(), scene.lights);
+    let mut lit = scene.clone();
+    lit.light_the_view(&scene.camera_or_default(None));
+    assert_eq!(lit.lights, scene.lights);
+    assert!(scene
+        .meshes
+        .iter()
+        .all(|m| m.material.emissive == Vec3::ZERO));
+    let centre = Vec3::new(0.0, builtin::WINDOW_ROOM_HEIGHT / 2.0, 0.0);
+    for m in &scene.meshes {
+        for (p, n) in m.positions.iter().zip(&m.normals) {
+            let (p, n) = (Vec3::from(*p), Vec3::from(*n));
+            assert!(n.dot(centre - p) > 0.0, "{}: {n} at {p} faces out", m.name);
+        }
+    }
+    // The window is about 1/20 of the ceiling.
+    let w = builtin::WINDOW_ROOM_HALF_WIDTH;
+    let ceiling: f32 = mesh_named(&scene, "ceiling")
+        .triangles(glam::Affine3A::IDENTITY)
+        .map(|[a, b, c]| (b - a).cross(c - a).length() / 2.0)
+        .sum();
+    let window = 1.0 - ceiling / (4.0 * w * w);
+    assert!((0.045..=0.055).contains(&window), "window {window}");
+}
+
+#[test]
+fn window_room_is_closed_but_for_the_window_the_sun_shines_through_onto_the_floor() {
+    let scene = builtin::window_room();
+    let (tris, bvh) = window_room_bvh(&scene);
+    let [x0, z0, x1, z1] = builtin::WINDOW_ROOM_WINDOW;
+    let h = builtin::WINDOW_ROOM_HEIGHT;
+    let through_window = |o: Vec3, d: Vec3| {
+        let t = (h - o.y) / d.y;
+        let p = o + d * t;
+        t > 0.0 && (x0..=x1).contains(&p.x) && (z0..=z1).contains(&p.z)
+    };
+    // From inside, every ray meets a surface, except those that leave through the window.
+    let o = Vec3::new(0.3, 1.2, 0.4);
+    let n = 4000;
+    let mut escaped = 0;
+    for k in 0..n {
+        let z = 1.0 - (2.0 * k as f32 + 1.0) / n as f32;
+        let r = (1.0 - z * z).sqrt();
+        let phi = k as f32 * 2.399_963;
+        let d = Vec3::new(r * phi.cos(), z, r * phi.sin());
+        if bvh.closest_hit(&tris, &ray(o, d)).is_none() {
+            assert!(through_window(o, d), "ray {d} escapes through a wall");
+            escaped += 1;
+        }
+    }
+    assert!(escaped > 0, "no ray leaves through the window");
+    // The sun reaches the floor below the window, shifted along its way, and nowhere else.
+    let to_sun = -builtin::WINDOW_ROOM_SUN.normalize();
+    let window_centre = Vec3::new((x0 + x1) / 2.0, h, (z0 + z1) / 2.0);
+    let patch = window_centre - to_sun * (h / to_sun.y);
+    assert!(patch.y.abs() < 1e-4 && patch.x > x1, "{patch}");
+    assert!(bvh.closest_hit(&tris, &ray(patch, to_sun)).is_none());
+    for shade in [Vec3::new(-1.5, 0.0, -1.5), window_centre.with_y(0.0)] {
+        assert!(
+            bvh.closest_hit(&tris, &ray(shade, to_sun)).is_some(),
+            "{shade} sunlit"
+        );
+    }
+    // The camera sees the patch, and only surfaces (no window) in a 16:9 image.
+    let cam = scene.camera_or_default(None);
+    for y in 0..18 {
+        for x in 0..32 {
+            let d = cam.primary_dir(x, y, 32, 18);
+            assert!(
+                bvh.closest_hit(&tris, &ray(cam.eye, d)).is_some(),
+                "pixel {x},{y}"
+            );
+        }
+    }
+    let (fwd, right, up, tan) = cam.basis();
+    let to_patch = (patch - cam.eye).normalize();
+    let along = to_patch.dot(fwd);
+    assert!(
+        to_patch.dot(up).abs() / along < tan * 0.8
+            && to_patch.dot(right).abs() / along < tan * 16.0 / 9.0 * 0.8,
+        "the patch is not well inside the view"
+    );
+}
