@@ -179,6 +179,9 @@ enum Command {
         /// flicker (0: none).
         #[arg(long, default_value_t = 8)]
         still_frames: u32,
+        /// Rays per pixel and denoiser of the measured frames (as for `render`).
+        #[arg(long, default_value = "quality")]
+        preset: kickstart_rt::Preset,
         /// Seed of the measured frames' noise.
         #[arg(long, default_value_t = 0)]
         seed: u32,
@@ -295,12 +298,13 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
     let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(&args.scene)));
     let (device, queue) = gpu::device(&adapter)?;
     println!(
-        "ksrt quality: {} at {}x{}, {} frames panning {}°, cache warmed {} frames then frozen, \
-         reference {} spp; scores on 8-bit sRGB (exposure {}, Reinhard; AO and shadow linear), \
-         energy ratios on the linear values",
+        "ksrt quality: {} at {}x{}, preset {}, {} frames panning {}°, cache warmed {} frames then \
+         frozen, reference {} spp; scores on 8-bit sRGB (exposure {}, Reinhard; AO and shadow \
+         linear), energy ratios on the linear values",
         scene.name,
         opts.size.0,
         opts.size.1,
+        opts.preset.name(),
         opts.frames,
         opts.pan_degrees,
         opts.warmup,
@@ -337,6 +341,7 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
     if let Some(path) = &args.json {
         let value = serde_json::json!({
             "scene": scene.name,
+            "preset": opts.preset.name(),
             "size": [opts.size.0, opts.size.1],
             "frames": opts.frames,
             "warmup": opts.warmup,
@@ -482,6 +487,7 @@ fn main() {
             reference_samples,
             pan_degrees,
             still_frames,
+            preset,
             seed,
             out,
             images,
@@ -505,6 +511,7 @@ fn main() {
                 out: Some(out),
                 images,
                 progress: true,
+                preset,
             },
             json,
         }),

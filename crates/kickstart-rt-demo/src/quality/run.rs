@@ -76,6 +76,9 @@ pub struct QualityOptions {
     pub images: Images,
     /// Progress bars on stderr for the warm-up and the reference samples.
     pub progress: bool,
+    /// Rays per pixel of the measured frames and the denoising method (the reference traces
+    /// every pixel whatever the preset).
+    pub preset: kickstart_rt::Preset,
 }
 
 /// PSNR (dB), FLIP (mean, 0 = identical) and energy ratio of one image against the reference.
@@ -281,6 +284,7 @@ pub fn run(
     let mut ropts = RendererOptions::new(opts.size);
     ropts.effects = Effects::default();
     ropts.seed = opts.seed;
+    ropts.preset = opts.preset;
     let mut r = Renderer::new(device, queue, scene, &ropts)?;
     r.sdk.roughness_override = Some(SPECULAR_ROUGHNESS);
     warm_up(device, queue, &mut r, camera, opts)?;
@@ -470,6 +474,7 @@ mod tests {
             out: None,
             images: Images::None,
             progress: false,
+            preset: kickstart_rt::Preset::Quality,
         };
         for (frames, samples) in [(0, 1), (1, 0)] {
             let opts = QualityOptions {
@@ -509,6 +514,7 @@ mod tests {
             out: Some(dir.clone()),
             images: Images::Last,
             progress: false,
+            preset: kickstart_rt::Preset::Quality,
         };
         let report = run(device, queue, &scene, &camera, &opts, |_| {}).expect("quality run");
         let frames = &report.frames;
@@ -591,6 +597,7 @@ mod tests {
                 out: None,
                 images: Images::None,
                 progress: false,
+                preset: kickstart_rt::Preset::Quality,
             };
             let report = run(device, queue, &scene, &camera, &opts, |_| {}).expect("quality run");
             for line in super::super::report::summary_lines(&report.summary) {
