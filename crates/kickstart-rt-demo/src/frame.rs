@@ -551,9 +551,10 @@ impl SdkFrame {
         let sdk_view = inputs.view.sdk_view();
         let mut tasks = Vec::new();
         if self.on(Part::Injection) {
-            tasks.push(ksrt::RenderTask::DirectLightingInjection(
-                ksrt::DirectLightingInjectionTask::new(depth(main), view(&main.direct), sdk_view),
-            ));
+            let mut t =
+                ksrt::DirectLightingInjectionTask::new(depth(main), view(&main.direct), sdk_view);
+            t.injection_resolution_stride = self.preset.injection_resolution_stride();
+            tasks.push(ksrt::RenderTask::DirectLightingInjection(t));
             if let (true, Some((lidar, lidar_view))) = (self.effects.lidar, inputs.lidar) {
                 let mut t = ksrt::DirectLightingInjectionTask::new(
                     depth(lidar),

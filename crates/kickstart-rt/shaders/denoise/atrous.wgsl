@@ -140,6 +140,8 @@ struct DnCentre {
     n_exp: f32,
     lum: f32,
     variance: f32,
+    // The centre's variance plus the luminance weight's floor (see dn_tap).
+    var_floor: f32,
 }
 
 // Weighted sums of the taps.
@@ -177,16 +179,18 @@ fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnR
     let v = dn_value(h);
     let lum = dn_luminance(v.xyz);
     // The tap's own noise variance: the propagated one, or in the first iteration its temporal
-    // estimate (second moment − mean², over the history length).
+    // estimate (second moment − mean², over the history length; the centre's 3×3 average would
+    // let the dark pixels around a rare bright one refuse it again).
     var var_q = dn_rec_z(h);
     if ap.first != 0u {
         var_q = max(var_q - lum * lum, 0.0) / max(dn_rec_len(h), 1.0);
     }
-    // The luminance weight is symmetric (the noise of both values): a rare bright sample and
-    // its dark neighbours take from each other alike, so a sparse signal's energy spreads
-    // instead of staying in the few pixels that caught it (a weight of the centre's noise alone
-    // lets every dark pixel refuse the bright one, and the energy is lost).
-    let l_fac = LOG2E / (SIGMA_L * sqrt(c.variance + var_q) + 1e-4 + 0.01 * max(abs(lum), abs(c.lum)));
+    // The luminance weight exp(-|Δl| / (σ_l √(var_p + var_q + floor²))) is symmetric in the
+    // noise of both values: a rare bright sample and its dark neighbours take from each other
+    // alike, so a sparse signal's energy spreads instead of staying in the few pixels that
+    // caught it (a weight of the centre's noise alone lets every dark pixel refuse the bright
+    // one, and the energy is lost). One inverseSqrt per tap.
+    let l_fac = (LOG2E / SIGMA_L) * inverseSqrt(c.var_floor + var_q);
     let dl = abs(lum - c.lum);
     let e = -plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * log2(cos_n) - dl * l_fac
         + select(c.r_edge, c.r_corner, corner);
@@ -291,6 +295,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     c.n_exp = n_exp[0];
     c.lum = lum_c[0];
     c.variance = var_c[0];
+    // The floor keeps the weight finite at zero noise: (1e-4 + 1 % of the luminance) / σ_l,
+    // squared, as a variance.
+    let floor = (1e-4 + 0.01 * abs(lum_c[0])) / SIGMA_L;
+    c.var_floor = var_c[0] + floor * floor;
     let j0 = dn_tap_index(p, vec2<i32>(-1, -1), step);
     let j1 = dn_tap_index(p, vec2<i32>(0, -1), step);
     let j2 = dn_tap_index(p, vec2<i32>(1, -1), step);

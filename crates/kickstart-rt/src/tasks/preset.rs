@@ -31,11 +31,14 @@ pub enum Effect {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Preset {
     /// Reflections, GI and AO at one ray per 4×4 pixels, shadows per 2×2 (sharp shadow edges
-    /// need more samples than smooth lighting); the fast denoiser.
+    /// need more samples than smooth lighting); the fast denoiser; lighting injected from one
+    /// pixel per 8×8.
     Performance,
-    /// One ray per 2×2 pixels for every effect; the fast denoiser.
+    /// One ray per 2×2 pixels for every effect; the fast denoiser; lighting injected from one
+    /// pixel per 8×8.
     Balanced,
-    /// One ray per pixel for every effect (the reference's rate); the high-quality denoiser.
+    /// One ray per pixel for every effect (the reference's rate); the high-quality denoiser;
+    /// lighting injected from one pixel per 4×4 (the reference's default).
     Quality,
 }
 
@@ -63,6 +66,17 @@ impl Preset {
         match self {
             Preset::Quality => DenoisingMethod::HighQuality,
             Preset::Performance | Preset::Balanced => DenoisingMethod::Fast,
+        }
+    }
+
+    /// The [`crate::DirectLightingInjectionTask::injection_resolution_stride`] of the main
+    /// view: injection finds each injected pixel's surface with a ray, so its cost falls with
+    /// the square of the stride; the lighting cache averages over many frames, so a sparser
+    /// injection mostly makes it converge over more frames.
+    pub fn injection_resolution_stride(self) -> u32 {
+        match self {
+            Preset::Quality => 4,
+            Preset::Performance | Preset::Balanced => 8,
         }
     }
 
@@ -124,5 +138,10 @@ mod tests {
             Preset::Quality.denoising_method(),
             DenoisingMethod::HighQuality
         );
+        // Every stride is one the injection task accepts, the reference's default at quality.
+        assert_eq!(Preset::Quality.injection_resolution_stride(), 4);
+        for p in Preset::ALL {
+            assert!((1..=8).contains(&p.injection_resolution_stride()));
+        }
     }
 }
