@@ -8,7 +8,8 @@ fn every_pipeline_compiles_including_prepared_ones() {
     let g = testing::gpu();
     let mut passes = TracePasses::new(&g.device, &g.queue);
     passes.prepare(&g.device);
-    assert_eq!(passes.pipelines.len(), 8);
+    // Eight kinds × formats, and the diffuse pass writing AO in two formats.
+    assert_eq!(passes.pipelines.len(), 10);
     for f in crate::WRITABLE_OUTPUT_FORMATS {
         passes
             .pipeline(&g.device, TraceKind::AmbientOcclusion, (f, None))
