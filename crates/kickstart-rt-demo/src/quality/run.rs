@@ -536,11 +536,12 @@ mod tests {
                 continue;
             }
             if s.signal == "ao" {
-                // FLIP rates the denoised AO worse than the 1-spp one here (about 0.07 against
-                // 0.05 at 48², while PSNR gains ~5 dB): the finding is the yardstick's to report,
-                // what this test holds is that it stays small.
+                // FLIP rates the denoised AO worse than the 1-spp one here (about 0.10 against
+                // 0.05 at 48², while PSNR gains ~5 dB; 0.07 before the à-trous weight became
+                // symmetric, which at 1080p scores better): the finding is the yardstick's to
+                // report, what this test holds is that it stays small.
                 assert!(s.denoised.psnr > s.noisy.psnr + 3.0, "{s:?}");
-                assert!(s.denoised.flip < 0.1, "{s:?}");
+                assert!(s.denoised.flip < 0.12, "{s:?}");
                 continue;
             }
             assert!(
