@@ -250,6 +250,54 @@ fn specular_and_diffuse_denoise_both_signals_in_one_task() {
     assert_converges("diffuse of SpecularAndDiffuse", &psnrs[1], noisy[1]);
 }
 
+/// SpecularAndDiffuse filters both signals in shared dispatches (one guide read for both): each
+/// of its outputs must be what the one-signal task makes of the same input, frame after frame
+/// (a dispatch that mixed up the two signals' records or weights would differ).
+#[test]
+fn specular_and_diffuse_task_matches_each_signal_alone() {
+    let g = static_gbuffer();
+    let diffuse = reference_image(&g, reference);
+    let specular = reference_image(&g, |s| {
+        let r = reference(s);
+        Vec3::new(0.3 * r.y, 0.9 * r.z, 1.4 * r.x)
+    });
+    for method in [DenoisingMethod::Fast, DenoisingMethod::HighQuality] {
+        let both = Harness::new(SignalType::SpecularAndDiffuse, method);
+        let alone = [
+            Harness::new(SignalType::Specular, method),
+            Harness::new(SignalType::Diffuse, method),
+        ];
+        let mut rng = Rng(11);
+        for frame in 0..4 {
+            let inputs = [noisy(&specular, &mut rng), noisy(&diffuse, &mut rng)];
+            let out = both.frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
+            for (k, h) in alone.iter().enumerate() {
+                let one = h.frame(&g, &inputs[k..=k], Motion::Matrices, DenoiseMode::Continue);
+                let worst = out[k]
+                    .iter()
+                    .zip(&one[0])
+                    .map(|(a, b)| (*a - *b).abs().max_element())
+                    .fold(0.0f32, f32::max);
+                assert!(
+                    worst <= 1e-3,
+                    "{method:?} frame {frame}: signal {k} of SpecularAndDiffuse differs from the \
+                     one-signal task by {worst}"
+                );
+            }
+            // The two signals differ, so equal outputs above are not one signal twice.
+            let apart = out[0]
+                .iter()
+                .zip(&out[1])
+                .map(|(a, b)| (*a - *b).abs().max_element())
+                .fold(0.0f32, f32::max);
+            assert!(
+                apart > 0.1,
+                "{method:?} frame {frame}: the outputs are alike ({apart})"
+            );
+        }
+    }
+}
+
 #[test]
 fn occlusion_converges() {
     let g = static_gbuffer();

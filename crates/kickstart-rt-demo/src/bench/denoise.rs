@@ -24,6 +24,18 @@ pub struct DenoiserTime {
     pub time: Stats,
     /// Issue 7's target, where it sets one.
     pub target_ms: Option<f64>,
+    /// Each of the task's passes in recording order: its label and median GPU time (the
+    /// profile behind `time`, whose span also counts the gaps between passes).
+    pub passes: Vec<PassTime>,
+}
+
+/// The median GPU time of one pass of a denoise task.
+#[derive(Debug, Clone, Serialize)]
+pub struct PassTime {
+    /// The pass's label (`denoise temporal`, `denoise a-trous`, …).
+    pub pass: String,
+    /// Median over the timed frames, ms.
+    pub median_ms: f64,
 }
 
 /// The `--json` report of `ksrt bench --denoisers`.
@@ -293,23 +305,32 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
             })?;
             let task = inputs.task(handle, signal);
             let name = task.name().to_string();
-            let one = || -> AnyResult<f64> {
+            let one = || -> AnyResult<(f64, Vec<(&'static str, f64)>)> {
                 let mut c = ctx.create_task_container();
                 c.schedule_render_task(task.clone());
                 let t = gpu::submit(&ctx, &device, &queue, c, |_| {})?;
-                let ms = glue::wait_span_ms(&ctx, t, &["denoise"]);
+                let timings = ctx.wait_for_gpu_timings(t);
                 gpu::complete(&ctx, &device, t)?;
-                ms
+                let timings = timings?;
+                let span = glue::span_ms(&timings, &["denoise"])?;
+                let passes = timings
+                    .passes
+                    .iter()
+                    .filter(|p| p.label.starts_with("denoise"))
+                    .map(|p| (p.pass, p.ms))
+                    .collect();
+                Ok((span, passes))
             };
             // Warm-up (clocks up, history accumulated), then the timed frames.
             let start = std::time::Instant::now();
             while start.elapsed() < std::time::Duration::from_millis(500) {
                 one()?;
             }
-            let samples = (0..iterations)
+            let runs = (0..iterations)
                 .map(|_| one())
-                .collect::<AnyResult<Vec<f64>>>()?;
-            let time = Stats::new(samples);
+                .collect::<AnyResult<Vec<_>>>()?;
+            let passes = pass_medians(runs.iter().map(|(_, p)| p.as_slice()));
+            let time = Stats::new(runs.into_iter().map(|(ms, _)| ms).collect());
             println!(
                 "  {name:<32} {method:<12?} median {:.3} ms (min {:.3}, max {:.3}){}",
                 time.median_ms,
@@ -317,11 +338,23 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
                 time.max_ms,
                 target_ms.map_or(String::new(), |t| format!("  target ≤ {t} ms"))
             );
+            let profile: Vec<String> = passes
+                .iter()
+                .map(|p| {
+                    format!(
+                        "{} {:.3}",
+                        p.pass.trim_start_matches("denoise "),
+                        p.median_ms
+                    )
+                })
+                .collect();
+            println!("      passes: {}", profile.join(" | "));
             report.denoisers.push(DenoiserTime {
                 task: name,
                 method: format!("{method:?}"),
                 time,
                 target_ms,
+                passes,
             });
             ctx.destroy_denoising_context_handle(handle)?;
         }
@@ -332,4 +365,23 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
         println!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// Per pass (by position in recording order), the median of its time over `runs` (every run
+/// records the same passes).
+fn pass_medians<'a>(runs: impl Iterator<Item = &'a [(&'static str, f64)]>) -> Vec<PassTime> {
+    let runs: Vec<_> = runs.collect();
+    let Some(first) = runs.first() else {
+        return Vec::new();
+    };
+    (0..first.len())
+        .map(|i| {
+            let mut ms: Vec<f64> = runs.iter().filter_map(|r| r.get(i).map(|p| p.1)).collect();
+            ms.sort_by(f64::total_cmp);
+            PassTime {
+                pass: first[i].0.to_string(),
+                median_ms: ms[ms.len() / 2],
+            }
+        })
+        .collect()
 }
