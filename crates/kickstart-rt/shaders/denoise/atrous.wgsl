@@ -13,14 +13,10 @@
 // Later iterations propagate it (Σ w² var / (Σ w)²). The last iteration (DN_LAST) writes the
 // output textures instead of an intermediate buffer (dn_write_output, defined by the prelude).
 //
-// Two signals (SpecularAndDiffuse) are filtered by one dispatch: each tap's guide is read and
-// decoded once, and its geometry (plane distance, normal cosine) weighs both signals; only the
-// last iteration, which writes a signal's own output texture, runs per signal.
-//
-// Cost: per tap one guide read and decode, per signal one record read, one inverseSqrt and one
-// exp2: the plane, luminance, normal and distance weights are multiplied as one exponential,
-// with their per-pixel factors (reciprocal widths, the distance term of the two tap distances)
-// computed once per pixel, and the normal weight's log from a polynomial (no log2).
+// Cost: per tap one guide and one record read, one log2 (normal weight) and per signal one exp2:
+// the plane, luminance, normal and distance weights are multiplied as one exponential, with
+// their per-pixel factors (reciprocal widths, the distance term of the two tap distances)
+// computed once per pixel.
 //
 // Composed with a record module and an output module (see denoise/common.wgsl).
 
@@ -139,26 +135,20 @@ fn dn_radius(s: u32, value: vec4<f32>, len: f32, roughness: f32, dist: f32) -> f
     return max(r, 0.5);
 }
 
-// Per-pixel constants of one signal's tap weights (see main).
+// Per-pixel constants of the tap weights (see main).
 struct DnCentre {
+    p: vec2<i32>,
+    position: vec3<f32>,
+    normal: vec3<f32>,
     z_edge: f32,
     z_corner: f32,
     r_edge: f32,
     r_corner: f32,
-    // The normal weight's exponent × log2(e) (the tap geometry gives ln of the cosine).
     n_exp: f32,
     lum: f32,
     variance: f32,
     // The centre's variance plus the luminance weight's floor (see dn_tap).
     var_floor: f32,
-}
-
-// What a tap's geometry gives every signal: whether it is usable (inside the grid, a surface,
-// facing the centre's way), its distance from the centre's plane and ln of the normals' cosine.
-struct DnTapGeo {
-    ok: bool,
-    plane: f32,
-    ln_cos: f32,
 }
 
 // Weighted sums of the taps.
@@ -169,42 +159,30 @@ struct DnAcc {
 }
 
 // Index of the tap `o` (in steps) of grid pixel `p`, clamped into the grid (taps outside are
-// dropped by dn_tap_geo).
+// dropped by dn_tap).
 fn dn_tap_index(p: vec2<i32>, o: vec2<i32>, step: i32) -> u32 {
     let q = clamp(p + o * step, vec2<i32>(0), vec2<i32>(dp.grid.xy) - vec2<i32>(1));
     return dn_index(vec2<u32>(q));
 }
 
-// The geometry of the tap `o` (in steps, guide `g`) of the centre at grid pixel `p` (surface
-// `centre`).
-fn dn_tap_geo(p: vec2<i32>, centre: DnGuide, o: vec2<i32>, step: i32, g: vec4<u32>) -> DnTapGeo {
-    var r: DnTapGeo;
-    let gq = dn_unpack_guide(g);
-    if !dn_in_grid(p + o * step) || !gq.valid {
-        return r;
-    }
-    let cos_n = dot(centre.normal, gq.normal);
-    if cos_n <= 0.0 {
-        return r; // pow(0, e) = 0
-    }
-    r.ok = true;
-    r.plane = abs(dot(centre.normal, gq.position - centre.position));
-    // ln(cos) to third order in (cos − 1): within 1 % of ln where the weight cos^32 (the
-    // smallest exponent) is above 1e-5, and far below that weight where it is not. Cheaper than a
-    // log2, which runs on the special-function units beside the exp2 of every tap.
-    let x = cos_n - 1.0;
-    r.ln_cos = x * (1.0 + x * (-0.5 + x * (1.0 / 3.0)));
-    return r;
-}
-
-// Adds the tap (geometry `t`, record `h`; `corner`: a diagonal tap) of one signal of the
-// centre `c`.
-fn dn_tap(acc: DnAcc, c: DnCentre, corner: bool, t: DnTapGeo, h: DnRecord) -> DnAcc {
-    if !t.ok {
+// Adds the tap `o` (guide `g`, record `h`) of the centre `c`.
+fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnRecord) -> DnAcc {
+    let q = c.p + o * step;
+    if !dn_in_grid(q) {
         return acc;
     }
+    let gq = dn_unpack_guide(g);
+    if !gq.valid {
+        return acc;
+    }
+    let cos_n = dot(c.normal, gq.normal);
+    if cos_n <= 0.0 {
+        return acc; // pow(0, e) = 0
+    }
+    let corner = o.x != 0 && o.y != 0;
     // B-spline kernel (0.25, 0.5, 0.25)²: an edge tap 0.125, a corner 0.0625.
     let kernel = select(0.125, 0.0625, corner);
+    let plane = abs(dot(c.normal, gq.position - c.position));
     let v = dn_value(h);
     let lum = dn_luminance(v.xyz);
     // The tap's own noise variance: the propagated one, or in the first iteration its temporal
@@ -221,7 +199,7 @@ fn dn_tap(acc: DnAcc, c: DnCentre, corner: bool, t: DnTapGeo, h: DnRecord) -> Dn
     // one, and the energy is lost). One inverseSqrt per tap.
     let l_fac = (LOG2E / SIGMA_L) * inverseSqrt(c.var_floor + var_q);
     let dl = abs(lum - c.lum);
-    let e = -t.plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * t.ln_cos - dl * l_fac
+    let e = -plane * select(c.z_edge, c.z_corner, corner) + c.n_exp * log2(cos_n) - dl * l_fac
         + select(c.r_edge, c.r_corner, corner);
     let w = kernel * exp2(e);
     var r = acc;
@@ -244,78 +222,6 @@ fn dn_emit(s: u32, i: u32, p: vec2<u32>, value: vec4<f32>, z: f32, len: f32) {
     }
 }
 
-// The per-pixel constants of signal `s` (centre record `h`, noise variance `variance`) at the
-// surface `gp`, `dist` from the camera, with taps `stepf` viewport pixels apart.
-fn dn_centre(s: u32, h: DnRecord, variance: f32, gp: DnGuide, dist: f32, stepf: f32) -> DnCentre {
-    let value = dn_value(h);
-    let lum = dn_luminance(value.xyz);
-    // Tap distances of the 3×3 pattern: edge and corner.
-    let d_edge = stepf;
-    let d_corner = stepf * 1.4142135;
-    let radius = dn_radius(s, value, dn_rec_len(h), gp.roughness, dist);
-    let r2 = LOG2E / (2.0 * radius * radius);
-    var c: DnCentre;
-    // Plane weight exp(-plane / (dist · 0.004 · (1 + d))), as log2 factors per tap distance.
-    c.z_edge = LOG2E / (dist * 0.004 * (1.0 + d_edge));
-    c.z_corner = LOG2E / (dist * 0.004 * (1.0 + d_corner));
-    // log2 of the distance weight exp(-d² / (2 r²)) at an edge and a corner tap.
-    c.r_edge = -d_edge * d_edge * r2;
-    c.r_corner = -d_corner * d_corner * r2;
-    var n_exp = 64.0;
-    if dn_kind(s) == DN_KIND_SPECULAR {
-        n_exp = mix(256.0, 32.0, gp.roughness);
-    }
-    c.n_exp = n_exp * LOG2E;
-    c.lum = lum;
-    c.variance = variance;
-    // The floor keeps the weight finite at zero noise: (1e-4 + 1 % of the luminance) / σ_l,
-    // squared, as a variance.
-    let floor = (1e-4 + 0.01 * abs(lum)) / SIGMA_L;
-    c.var_floor = variance + floor * floor;
-    return c;
-}
-
-// The filtered value of one signal: the centre tap (kernel weight 0.5 × 0.5, every other factor
-// 1) and the eight taps of geometry t0…t7 and records h0…h7, in dn_tap_index's order.
-fn dn_filter(c: DnCentre, centre: vec4<f32>, t0: DnTapGeo, t1: DnTapGeo, t2: DnTapGeo,
-             t3: DnTapGeo, t4: DnTapGeo, t5: DnTapGeo, t6: DnTapGeo, t7: DnTapGeo,
-             h0: DnRecord, h1: DnRecord, h2: DnRecord, h3: DnRecord, h4: DnRecord,
-             h5: DnRecord, h6: DnRecord, h7: DnRecord) -> DnAcc {
-    var acc: DnAcc;
-    acc.sum = 0.25 * centre;
-    acc.wsum = 0.25;
-    acc.vsum = 0.0625 * c.variance;
-    acc = dn_tap(acc, c, true, t0, h0);
-    acc = dn_tap(acc, c, false, t1, h1);
-    acc = dn_tap(acc, c, true, t2, h2);
-    acc = dn_tap(acc, c, false, t3, h3);
-    acc = dn_tap(acc, c, false, t4, h4);
-    acc = dn_tap(acc, c, true, t5, h5);
-    acc = dn_tap(acc, c, false, t6, h6);
-    acc = dn_tap(acc, c, true, t7, h7);
-    return acc;
-}
-
-// The first iteration's noise variance of one signal (centre record `hc`, neighbours' guides
-// g0…g7 and records h0…h7 in dn_tap_index's order, which at step 1 are the 3×3 neighbourhood).
-fn dn_first_variance(s: u32, p: vec2<i32>, gc: vec4<u32>, gp: DnGuide, dist: f32, hc: DnRecord,
-                     g0: vec4<u32>, g1: vec4<u32>, g2: vec4<u32>, g3: vec4<u32>,
-                     g4: vec4<u32>, g5: vec4<u32>, g6: vec4<u32>, g7: vec4<u32>,
-                     h0: DnRecord, h1: DnRecord, h2: DnRecord, h3: DnRecord, h4: DnRecord,
-                     h5: DnRecord, h6: DnRecord, h7: DnRecord) -> f32 {
-    var m: DnMoments;
-    m = dn_moments_add(m, p, gc, hc, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(-1, -1), g0, h0, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(0, -1), g1, h1, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(1, -1), g2, h2, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(-1, 0), g3, h3, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(1, 0), g4, h4, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(-1, 1), g5, h5, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(0, 1), g6, h6, gp.position, gp.normal, dist);
-    m = dn_moments_add(m, p + vec2<i32>(1, 1), g7, h7, gp.position, gp.normal, dist);
-    return dn_variance_estimate(s, m);
-}
-
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= dp.grid.x || gid.y >= dp.grid.y {
@@ -323,8 +229,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let p = vec2<i32>(gid.xy);
     let i = dn_index(gid.xy);
-    let gc = guide[i];
-    let gp = dn_unpack_guide(gc);
+    let gp = dn_unpack_guide(guide[i]);
     if !gp.valid {
         // No surface: the accumulated input passes through.
         for (var s = 0u; s < DN_SIGNALS; s++) {
@@ -338,9 +243,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // Tap distances in viewport pixels (a grid pixel spans a block in a block mode), which the
     // radii and the plane tolerance are in.
     let stepf = f32(ap.step * dp.grid.z);
+    // Tap distances of the 3×3 pattern: edge and corner.
+    let d_edge = stepf;
+    let d_corner = stepf * 1.4142135;
+    // Plane weight exp(-plane / (dist · 0.004 · (1 + d))), as log2 factors per tap distance.
+    let z_edge = LOG2E / (dist * 0.004 * (1.0 + d_edge));
+    let z_corner = LOG2E / (dist * 0.004 * (1.0 + d_corner));
 
     // The eight taps, written out: every guide and record load is issued before any is used
-    // (no arrays, which would live in local memory), so that their latencies overlap.
+    // (no arrays, which would live in local memory), so that their latencies overlap. One
+    // signal per dispatch (SpecularAndDiffuse runs a chain per signal): the records are
+    // signal 0's.
     let j0 = dn_tap_index(p, vec2<i32>(-1, -1), step);
     let j1 = dn_tap_index(p, vec2<i32>(0, -1), step);
     let j2 = dn_tap_index(p, vec2<i32>(1, -1), step);
@@ -366,58 +279,61 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let h6 = src0[j6];
     let h7 = src0[j7];
     let hc = src0[i];
-    // The second signal's records (a one-signal pass folds these away).
-    var k0 = h0;
-    var k1 = h1;
-    var k2 = h2;
-    var k3 = h3;
-    var k4 = h4;
-    var k5 = h5;
-    var k6 = h6;
-    var k7 = h7;
-    var kc = hc;
-    if DN_SIGNALS > 1u {
-        k0 = src1[j0];
-        k1 = src1[j1];
-        k2 = src1[j2];
-        k3 = src1[j3];
-        k4 = src1[j4];
-        k5 = src1[j5];
-        k6 = src1[j6];
-        k7 = src1[j7];
-        kc = src1[i];
+
+    let centre = dn_value(hc);
+    let len_c = dn_rec_len(hc);
+    var var_c = dn_rec_z(hc);
+    if ap.first != 0u {
+        // Step 1: the taps are the 3×3 neighbourhood the noise estimate averages over.
+        var m: DnMoments;
+        m = dn_moments_add(m, p, guide[i], hc, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(-1, -1), g0, h0, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(0, -1), g1, h1, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(1, -1), g2, h2, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(-1, 0), g3, h3, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(1, 0), g4, h4, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(-1, 1), g5, h5, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(0, 1), g6, h6, gp.position, gp.normal, dist);
+        m = dn_moments_add(m, p + vec2<i32>(1, 1), g7, h7, gp.position, gp.normal, dist);
+        var_c = dn_variance_estimate(0u, m);
+    }
+    let lum_c = dn_luminance(centre.xyz);
+    let radius = dn_radius(0u, centre, len_c, gp.roughness, dist);
+    let r2 = LOG2E / (2.0 * radius * radius);
+    var n_exp = 64.0;
+    if dn_kind(0u) == DN_KIND_SPECULAR {
+        n_exp = mix(256.0, 32.0, gp.roughness);
     }
 
-    let t0 = dn_tap_geo(p, gp, vec2<i32>(-1, -1), step, g0);
-    let t1 = dn_tap_geo(p, gp, vec2<i32>(0, -1), step, g1);
-    let t2 = dn_tap_geo(p, gp, vec2<i32>(1, -1), step, g2);
-    let t3 = dn_tap_geo(p, gp, vec2<i32>(-1, 0), step, g3);
-    let t4 = dn_tap_geo(p, gp, vec2<i32>(1, 0), step, g4);
-    let t5 = dn_tap_geo(p, gp, vec2<i32>(-1, 1), step, g5);
-    let t6 = dn_tap_geo(p, gp, vec2<i32>(0, 1), step, g6);
-    let t7 = dn_tap_geo(p, gp, vec2<i32>(1, 1), step, g7);
-
-    for (var s = 0u; s < DN_SIGNALS; s++) {
-        let second = s == 1u;
-        let rc = select(hc, kc, second);
-        let r0 = select(h0, k0, second);
-        let r1 = select(h1, k1, second);
-        let r2 = select(h2, k2, second);
-        let r3 = select(h3, k3, second);
-        let r4 = select(h4, k4, second);
-        let r5 = select(h5, k5, second);
-        let r6 = select(h6, k6, second);
-        let r7 = select(h7, k7, second);
-        var variance = dn_rec_z(rc);
-        if ap.first != 0u {
-            // Step 1: the taps are the 3×3 neighbourhood the noise estimate averages over.
-            variance = dn_first_variance(s, p, gc, gp, dist, rc, g0, g1, g2, g3, g4, g5, g6, g7,
-                                         r0, r1, r2, r3, r4, r5, r6, r7);
-        }
-        let c = dn_centre(s, rc, variance, gp, dist, stepf);
-        let acc = dn_filter(c, dn_value(rc), t0, t1, t2, t3, t4, t5, t6, t7,
-                            r0, r1, r2, r3, r4, r5, r6, r7);
-        let ws = max(acc.wsum, 1e-8);
-        dn_emit(s, i, gid.xy, acc.sum / ws, acc.vsum / (ws * ws), dn_rec_len(rc));
-    }
+    var c: DnCentre;
+    c.p = p;
+    c.position = gp.position;
+    c.normal = gp.normal;
+    c.z_edge = z_edge;
+    c.z_corner = z_corner;
+    // log2 of the distance weight exp(-d² / (2 r²)) at an edge and a corner tap.
+    c.r_edge = -d_edge * d_edge * r2;
+    c.r_corner = -d_corner * d_corner * r2;
+    c.n_exp = n_exp;
+    c.lum = lum_c;
+    c.variance = var_c;
+    // The floor keeps the weight finite at zero noise: (1e-4 + 1 % of the luminance) / σ_l,
+    // squared, as a variance.
+    let floor = (1e-4 + 0.01 * abs(lum_c)) / SIGMA_L;
+    c.var_floor = var_c + floor * floor;
+    // The centre tap: kernel weight 0.5 × 0.5, every other factor 1.
+    var acc: DnAcc;
+    acc.sum = 0.25 * centre;
+    acc.wsum = 0.25;
+    acc.vsum = 0.0625 * var_c;
+    acc = dn_tap(acc, c, vec2<i32>(-1, -1), step, g0, h0);
+    acc = dn_tap(acc, c, vec2<i32>(0, -1), step, g1, h1);
+    acc = dn_tap(acc, c, vec2<i32>(1, -1), step, g2, h2);
+    acc = dn_tap(acc, c, vec2<i32>(-1, 0), step, g3, h3);
+    acc = dn_tap(acc, c, vec2<i32>(1, 0), step, g4, h4);
+    acc = dn_tap(acc, c, vec2<i32>(-1, 1), step, g5, h5);
+    acc = dn_tap(acc, c, vec2<i32>(0, 1), step, g6, h6);
+    acc = dn_tap(acc, c, vec2<i32>(1, 1), step, g7, h7);
+    let ws = max(acc.wsum, 1e-8);
+    dn_emit(0u, i, gid.xy, acc.sum / ws, acc.vsum / (ws * ws), len_c);
 }

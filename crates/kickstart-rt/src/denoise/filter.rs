@@ -506,34 +506,22 @@ impl Filter {
         };
         let device = rec.device;
         let set = SignalSet::of(h.input.signal_type);
-        let pipelines = self.pipelines.set(device, shared, set);
-        let passes = FramePipelines {
-            temporal: pipelines.temporal.clone(),
-            atrous: pipelines.atrous.clone(),
-        };
+        let temporal = self.pipelines.set(device, shared, set).temporal.clone();
         let Some(chains) = self.pipelines.chains(device, shared, set, job) else {
             return; // unreachable: validation admits writable formats only
         };
-        record_frame(rec, shared, h, job, &passes, &chains, serial);
+        record_frame(rec, shared, h, job, &temporal, &chains, serial);
     }
 }
 
-/// The passes of a signal set that run once per frame for all its signals.
-struct FramePipelines {
-    temporal: wgpu::ComputePipeline,
-    /// An à-trous iteration of every signal of the set in one dispatch.
-    atrous: wgpu::ComputePipeline,
-}
-
-/// Records one frame of `job` on its context's history `h`: the temporal pass, the à-trous
-/// iterations of all signals together, then per signal the last iteration writing its output
-/// (or its upsample pass); then advances the history.
+/// Records one frame of `job` on its context's history `h`: the temporal pass, then each
+/// signal's à-trous chain; then advances the history.
 fn record_frame(
     rec: &mut Recorder<'_>,
     shared: &Shared,
     h: &mut History,
     job: &Job<'_>,
-    passes: &FramePipelines,
+    temporal: &wgpu::ComputePipeline,
     chains: &[Chain],
     serial: u64,
 ) {
@@ -560,55 +548,23 @@ fn record_frame(
         gbuffer_params: &gb_params,
         motion: &motion_texture,
     };
-    record_temporal(
-        rec,
-        shared,
-        h,
-        job,
-        &frame,
-        &temporal_inputs,
-        &passes.temporal,
-    );
-    // 2. À-trous iterations: history → temp[0] → temp[1] → … → the output texture (the last
-    // iteration writes it; in a block mode the upsample pass does, from the grid). The
-    // iterations that write no texture filter every signal in one dispatch (their guide is
-    // read once for all); the last runs per signal, which has its own output format.
+    record_temporal(rec, shared, h, job, &frame, &temporal_inputs, temporal);
+    // 2. À-trous iterations, per signal: history → temp[0] → temp[1] → … → the output texture
+    // (the last iteration writes it; in a block mode the upsample pass does, from the grid).
     let upsample = (c.half_resolution_mode.block_size() > 1).then(|| UpsampleInputs {
         gbuffer: &inputs,
         gbuffer_params: &gb_params,
         viewport_groups: (vp.width.div_ceil(TILE), vp.height.div_ceil(TILE)),
     });
-    let together = match (chains.len() > 1, upsample.is_some()) {
-        (false, _) => 0,
-        (true, true) => settings.iterations,
-        (true, false) => settings.iterations - 1,
-    };
-    let signals: Vec<usize> = chains.iter().map(|chain| chain.signal).collect();
-    let history: Vec<wgpu::Buffer> = signals
-        .iter()
-        .map(|&s| h.history[frame.cur][s].clone())
-        .collect();
-    let filtered = record_iterations(
-        rec,
-        shared,
-        h,
-        &frame,
-        &passes.atrous,
-        &signals,
-        0..together,
-        history,
-    );
-    for (chain, src) in chains.iter().zip(filtered) {
-        let rest = together..settings.iterations;
-        record_chain(
+    for chain in chains {
+        record_atrous(
             rec,
             shared,
             h,
             job,
             &frame,
             chain,
-            rest,
-            src,
+            settings.iterations,
             upsample.as_ref(),
         );
     }
@@ -772,108 +728,23 @@ struct UpsampleInputs<'a> {
     viewport_groups: (u32, u32),
 }
 
-/// The uniforms of à-trous iteration `it` (steps 1, 2, 4, …) of the frame.
-fn step_group(
-    rec: &mut Recorder<'_>,
-    shared: &Shared,
-    frame: &Frame<'_>,
-    it: u32,
-) -> wgpu::BindGroup {
-    let step = rec.uniform(
-        "kickstart-rt denoise a-trous step",
-        &StepParams {
-            value: 1 << it,
-            first: (it == 0) as u32,
-            pad: [0; 2],
-        },
-    );
-    shared.atrous_params.bind_group(
-        rec.device,
-        &[
-            ("dp", frame.params.as_entire_binding()),
-            ("ap", step.as_entire_binding()),
-        ],
-    )
-}
-
-/// The buffers of one à-trous dispatch: the guide, the signals' sources `src` and
-/// destinations `dst` (one or two; placeholders stand for a missing second signal).
-fn buffer_group(
-    rec: &Recorder<'_>,
-    shared: &Shared,
-    guide: &wgpu::Buffer,
-    src: &[&wgpu::Buffer],
-    dst: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let [read_placeholder, write_placeholder] = &shared.placeholder_buffers;
-    shared.atrous_buffers.bind_group(
-        rec.device,
-        &[
-            ("guide", guide.as_entire_binding()),
-            ("src0", src[0].as_entire_binding()),
-            (
-                "src1",
-                src.get(1).unwrap_or(&read_placeholder).as_entire_binding(),
-            ),
-            ("dst0", dst[0].as_entire_binding()),
-            (
-                "dst1",
-                dst.get(1).unwrap_or(&write_placeholder).as_entire_binding(),
-            ),
-        ],
-    )
-}
-
-/// À-trous iterations `its` of the signals `signals` together (one dispatch each, `pipeline`
-/// filters them all), from `src` (a buffer per signal) through the ping-pong buffers; returns
-/// the buffers holding the last iteration's result (`src` when `its` is empty).
+/// The à-trous chain of one signal: `iterations` dispatches from this frame's history through
+/// the ping-pong buffers, the last writing the signal's output texture — or, with `upsample`
+/// (a block mode), the upsample pass writing it from the last iteration's grid.
 #[allow(clippy::too_many_arguments)]
-fn record_iterations(
-    rec: &mut Recorder<'_>,
-    shared: &Shared,
-    h: &History,
-    frame: &Frame<'_>,
-    pipeline: &wgpu::ComputePipeline,
-    signals: &[usize],
-    its: std::ops::Range<u32>,
-    mut src: Vec<wgpu::Buffer>,
-) -> Vec<wgpu::Buffer> {
-    for it in its {
-        let dst: Vec<wgpu::Buffer> = signals
-            .iter()
-            .map(|&s| h.temp[(it % 2) as usize][s].clone())
-            .collect();
-        let a0 = step_group(rec, shared, frame, it);
-        let a1 = buffer_group(
-            rec,
-            shared,
-            &h.guides[frame.cur],
-            &src.iter().collect::<Vec<_>>(),
-            &dst.iter().collect::<Vec<_>>(),
-        );
-        rec.dispatch_2d("denoise a-trous", pipeline, &[&a0, &a1], frame.groups);
-        src = dst;
-    }
-    src
-}
-
-/// The rest of one signal's à-trous chain: iterations `its` from `src`, the last writing the
-/// signal's output texture — or, with `upsample` (a block mode), the upsample pass writing it
-/// from the last iteration's grid.
-#[allow(clippy::too_many_arguments)]
-fn record_chain(
+fn record_atrous(
     rec: &mut Recorder<'_>,
     shared: &Shared,
     h: &History,
     job: &Job<'_>,
     frame: &Frame<'_>,
     chain: &Chain,
-    its: std::ops::Range<u32>,
-    mut src: wgpu::Buffer,
+    iterations: u32,
     upsample: Option<&UpsampleInputs<'_>>,
 ) {
     let device = rec.device;
     let s = chain.signal;
+    let [read_placeholder, write_placeholder] = &shared.placeholder_buffers;
     let outputs = chain.out_layout.bind_group(
         device,
         &[(
@@ -881,12 +752,35 @@ fn record_chain(
             wgpu::BindingResource::TextureView(job.outputs[s]),
         )],
     );
-    let last = its.end;
-    for it in its {
+    let mut src = h.history[frame.cur][s].clone();
+    for it in 0..iterations {
         let dst = h.temp[(it % 2) as usize][s].clone();
-        let a0 = step_group(rec, shared, frame, it);
-        let a1 = buffer_group(rec, shared, &h.guides[frame.cur], &[&src], &[&dst]);
-        if it + 1 == last && upsample.is_none() {
+        let step = rec.uniform(
+            "kickstart-rt denoise a-trous step",
+            &StepParams {
+                value: 1 << it,
+                first: (it == 0) as u32,
+                pad: [0; 2],
+            },
+        );
+        let a0 = shared.atrous_params.bind_group(
+            device,
+            &[
+                ("dp", frame.params.as_entire_binding()),
+                ("ap", step.as_entire_binding()),
+            ],
+        );
+        let a1 = shared.atrous_buffers.bind_group(
+            device,
+            &[
+                ("guide", h.guides[frame.cur].as_entire_binding()),
+                ("src0", src.as_entire_binding()),
+                ("src1", read_placeholder.as_entire_binding()),
+                ("dst0", dst.as_entire_binding()),
+                ("dst1", write_placeholder.as_entire_binding()),
+            ],
+        );
+        if it + 1 == iterations && upsample.is_none() {
             rec.dispatch_2d(
                 "denoise a-trous + output",
                 &chain.last,
