@@ -73,16 +73,6 @@ pub fn trace_rays_task(
     }))
 }
 
-/// Waits for the GPU timings of a submitted task and returns the span over the passes whose
-/// labels start with any of `prefixes` (e.g. `["ingest", "blas build"]`), in milliseconds.
-pub fn wait_span_ms(
-    ctx: &ksrt::ExecuteContext,
-    task: ksrt::GpuTaskHandle,
-    prefixes: &[&str],
-) -> AnyResult<f64> {
-    span_ms(&ctx.wait_for_gpu_timings(task)?, prefixes)
-}
-
 /// The span of `timings` over the passes whose labels start with any of `prefixes`, in
 /// milliseconds; an error listing the task's passes when none matches.
 pub fn span_ms(timings: &ksrt::GpuTimings, prefixes: &[&str]) -> AnyResult<f64> {

@@ -9,18 +9,25 @@ use glam::{Affine3A, Mat4, Vec3};
 use gltf::mesh::Mode;
 
 use super::{
-    check_indices, compute_normals, Camera, Instance, Light, Material, Mesh, Scene, SceneError,
-    Texture,
+    check_indices, compute_normals, drop_non_finite_triangles, Camera, Instance, Light, Material,
+    Mesh, Scene, SceneError, Texture,
 };
 
 /// Loads a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let bytes =
         std::fs::read(path).map_err(|e| SceneError::new(path, format!("cannot read: {e}")))?;
-    // The gltf crate validates the JSON and reads accessors through bounds-checked slices, but it
-    // is third-party code fed arbitrary files: a panic inside it must still become an error that
-    // names the file rather than abort `ksrt`.
-    match std::panic::catch_unwind(|| load_bytes(path, &bytes)) {
+    load_from_bytes(path, &bytes)
+}
+
+/// Loads a glTF from its bytes (`path` names it in errors and locates external buffers).
+/// The gltf crate validates the JSON and reads accessors through bounds-checked slices, and
+/// [`check_accessor`] checks every accessor this loader reads before it is read; but the crate
+/// is third-party code fed arbitrary files (its validator indexes arrays a damaged file leaves
+/// empty): a panic inside it must still become an error that names the file rather than abort
+/// `ksrt`.
+pub(super) fn load_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
+    match std::panic::catch_unwind(|| load_bytes(path, bytes)) {
         Ok(r) => r,
         Err(_) => Err(SceneError::new(
             path,
@@ -357,6 +364,49 @@ fn convert_primitive(
         log::warn!("{name}: primitive mode {mode:?} has no triangles; skipped");
         return Ok(None);
     }
+    // The reader assumes each accessor has the type the specification gives its semantic (an
+    // index accessor of floats reaches an `unreachable!`, a position accessor of bytes is
+    // misread): check before reading.
+    use gltf::accessor::{DataType, Dimensions};
+    let typed = |a: &gltf::Accessor, types: &[DataType], dims: Dimensions| {
+        if types.contains(&a.data_type()) && a.dimensions() == dims {
+            Ok(())
+        } else {
+            Err(format!(
+                "{name}: accessor {} holds {:?} {:?}, expected {types:?} {dims:?}",
+                a.index(),
+                a.data_type(),
+                a.dimensions()
+            ))
+        }
+    };
+    for (semantic, accessor) in prim.attributes() {
+        match semantic {
+            gltf::Semantic::Positions | gltf::Semantic::Normals => {
+                typed(&accessor, &[DataType::F32], Dimensions::Vec3)?
+            }
+            gltf::Semantic::TexCoords(_) => typed(
+                &accessor,
+                &[DataType::F32, DataType::U8, DataType::U16],
+                Dimensions::Vec2,
+            )?,
+            _ => {}
+        }
+    }
+    if let Some(accessor) = prim.indices() {
+        typed(
+            &accessor,
+            &[DataType::U8, DataType::U16, DataType::U32],
+            Dimensions::Scalar,
+        )?;
+    }
+    for (semantic, accessor) in prim.attributes() {
+        check_accessor(&accessor, buffers)
+            .map_err(|e| format!("{name}: attribute {semantic:?}: {e}"))?;
+    }
+    if let Some(accessor) = prim.indices() {
+        check_accessor(&accessor, buffers).map_err(|e| format!("{name}: indices: {e}"))?;
+    }
     let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
     let Some(positions) = reader.read_positions() else {
         log::warn!("{name}: no readable POSITION attribute; skipped");
@@ -378,6 +428,7 @@ fn convert_primitive(
         _ => raw,
     };
     check_indices(&name, positions.len(), &indices)?;
+    let indices = drop_non_finite_triangles(&name, &positions, indices);
     let normals = match reader.read_normals() {
         Some(n) => {
             let n: Vec<[f32; 3]> = n.collect();
@@ -414,6 +465,44 @@ fn convert_primitive(
         uvs,
         material: Material::default(),
     }))
+}
+
+/// Checks that `accessor`'s elements lie inside its buffer view and the view inside its buffer,
+/// with checked arithmetic: the gltf crate computes the end of an accessor's data as
+/// `offset + stride · (count − 1) + size` unchecked, which a count of 0 or a huge count
+/// overflows. Sparse accessors and accessors without a view are left to the reader, which
+/// bounds-checks them.
+fn check_accessor(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), String> {
+    let count = accessor.count();
+    if count == 0 {
+        return Err(format!("accessor {} has a count of 0", accessor.index()));
+    }
+    let Some(view) = accessor.view() else {
+        return Ok(());
+    };
+    if accessor.sparse().is_some() {
+        return Ok(());
+    }
+    let size = accessor.size();
+    let stride = view.stride().unwrap_or(size).max(size);
+    let end = (count - 1)
+        .checked_mul(stride)
+        .and_then(|x| x.checked_add(size))
+        .and_then(|x| x.checked_add(accessor.offset()));
+    let buffer_len = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+    let view_end = view.offset().checked_add(view.length());
+    match (end, view_end) {
+        (Some(end), Some(view_end)) if end <= view.length() && view_end <= buffer_len => Ok(()),
+        _ => Err(format!(
+            "accessor {} ({count} elements of {size} bytes, stride {stride}, offset {}) does not \
+             fit its buffer view {} ({} bytes at {} of a {buffer_len}-byte buffer)",
+            accessor.index(),
+            accessor.offset(),
+            view.index(),
+            view.length(),
+            view.offset()
+        )),
+    }
 }
 
 /// Triangle `k` of a strip is `(k, k+1, k+2)`, with every odd one's first two vertices swapped so

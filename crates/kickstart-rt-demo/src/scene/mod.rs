@@ -205,6 +205,32 @@ pub(crate) fn check_indices(
     Ok(())
 }
 
+/// `indices` without the triangles that use a vertex with a non-finite coordinate (NaN or ∞),
+/// which no renderer can place; logs how many were dropped from mesh `name`. Requires indices
+/// in range ([`check_indices`]).
+pub(crate) fn drop_non_finite_triangles(
+    name: &str,
+    positions: &[[f32; 3]],
+    indices: Vec<u32>,
+) -> Vec<u32> {
+    let finite = |i: &u32| positions[*i as usize].iter().all(|c| c.is_finite());
+    if indices.iter().all(finite) {
+        return indices;
+    }
+    let kept: Vec<u32> = indices
+        .chunks_exact(3)
+        .filter(|t| t.iter().all(finite))
+        .flatten()
+        .copied()
+        .collect();
+    log::warn!(
+        "mesh {name:?}: {} of {} triangles use a vertex with a non-finite coordinate; dropped",
+        (indices.len() - kept.len()) / 3,
+        indices.len() / 3
+    );
+    kept
+}
+
 /// Area-weighted vertex normals: each triangle adds its unnormalised cross product (length =
 /// twice its area) to its three vertices, so large faces dominate and slivers barely count.
 /// Vertices no triangle uses (or whose triangles are all degenerate) get +Y, so every normal is
@@ -560,5 +586,7 @@ pub fn load_file(path: &Path) -> Result<Scene, SceneError> {
 
 #[cfg(test)]
 mod asset_tests;
+#[cfg(test)]
+mod fuzz_tests;
 #[cfg(test)]
 mod tests;

@@ -5,7 +5,10 @@ use std::path::Path;
 
 use glam::{Affine3A, Vec3};
 
-use super::{check_indices, compute_normals, Instance, Material, Mesh, Scene, SceneError, Texture};
+use super::{
+    check_indices, compute_normals, drop_non_finite_triangles, Instance, Material, Mesh, Scene,
+    SceneError, Texture,
+};
 
 /// Colour of meshes without a material (or whose MTL file is missing): a light grey, so they
 /// still show shading in the images.
@@ -46,13 +49,14 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
             .collect();
         check_indices(&model.name, positions.len(), &m.indices)
             .map_err(|e| SceneError::new(path, e))?;
+        let indices = drop_non_finite_triangles(&model.name, &positions, m.indices);
         let normals = if m.normals.len() == m.positions.len() {
             m.normals
                 .chunks_exact(3)
                 .map(|n| [n[0], n[1], n[2]])
                 .collect()
         } else {
-            compute_normals(&positions, &m.indices)
+            compute_normals(&positions, &indices)
         };
         let mtl = m.material_id.and_then(|i| materials.get(i));
         let color = mtl
@@ -79,7 +83,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
             name: model.name,
             positions,
             normals,
-            indices: m.indices,
+            indices,
             color,
             uvs,
             material,
