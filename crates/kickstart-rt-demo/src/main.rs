@@ -23,6 +23,7 @@ mod renderer;
 mod scene;
 mod sdk_glue;
 mod shaders;
+mod soak;
 #[cfg(test)]
 mod testing;
 mod view;
@@ -194,6 +195,26 @@ enum Command {
         /// Also write every frame's scores as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
+    },
+    /// Render many frames of every effect while the scene churns (geometries and instances
+    /// registered, updated and destroyed every few frames), fail on any SDK error, and check that
+    /// the SDK's memory comes back once the churn is destroyed; prints what it did and the memory.
+    Soak {
+        /// Scene (as for `render`).
+        #[arg(long, default_value = "default")]
+        scene: String,
+        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        #[arg(long)]
+        scenes: Option<PathBuf>,
+        /// Frames of churn.
+        #[arg(long, default_value_t = 2000)]
+        frames: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "160x90")]
+        size: String,
+        /// Seed of the churn.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
     },
     /// Benchmark BLAS/TLAS builds and refits, BVH quality and ray throughput on the GPU.
     Bench {
@@ -515,6 +536,13 @@ fn main() {
             },
             json,
         }),
+        Command::Soak {
+            scene,
+            scenes,
+            frames,
+            size,
+            seed,
+        } => soak::command(&scene, scenes, frames, &size, seed),
         Command::Bench {
             scenes,
             scene,
