@@ -5,6 +5,7 @@ mod common;
 use common::*;
 use glam::{Affine3A, Mat4, Vec3, Vec4};
 use kickstart_rt::*;
+use proptest::prelude::*;
 use wgpu::{TextureFormat as F, TextureUsages as U};
 
 /// Builds `c`, expects an `InvalidInput` for `field` from `task`, and checks nothing was recorded
@@ -873,6 +874,20 @@ fn refused_task_changes_nothing(
     bad: impl FnOnce(&ExecuteContext) -> RenderTask,
     expected: impl FnOnce(&Error) -> bool,
 ) {
+    refused_changes_nothing(
+        working_sets,
+        |ctx, _, c| c.schedule_render_task(bad(ctx)),
+        expected,
+    );
+}
+
+/// [`refused_task_changes_nothing`] with any bad task: `schedule_bad` adds it to the container
+/// (given the geometry an earlier task registered and built).
+fn refused_changes_nothing(
+    working_sets: u32,
+    schedule_bad: impl FnOnce(&ExecuteContext, GeometryHandle, &mut TaskContainer),
+    expected: impl FnOnce(&Error) -> bool,
+) {
     let ctx = context(working_sets);
     // An earlier task the refused one must not disturb.
     let first = ctx.create_geometry_handle();
@@ -894,7 +909,7 @@ fn refused_task_changes_nothing(
     let before = observe(&ctx, &[first, geometry]);
     let mut c = ctx.create_task_container();
     schedule(&mut c);
-    c.schedule_render_task(bad(&ctx));
+    schedule_bad(&ctx, first, &mut c);
     let mut e = encoder();
     match ctx.build_gpu_task(c, &mut e) {
         Err(err) => assert!(expected(&err), "unexpected error {err:?}"),
@@ -1123,4 +1138,243 @@ fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
     ctx.mark_gpu_task_completed(t).unwrap();
     assert_eq!(ctx.geometry_triangle_count(handles.0).unwrap(), Some(1000));
     assert!(ctx.geometry_is_built(handles.0).unwrap());
+}
+
+/// One field of one task made invalid, for the property test below.
+#[derive(Debug, Clone)]
+enum Bad {
+    TileUnitLength(f32),
+    DirectTileMappingThreshold(f32),
+    VertexStride(u64),
+    VertexOffset(u64),
+    ComponentTransform(usize, f32),
+    IndexOffset(u64),
+    IndexCount(u32),
+    InstanceTransform(usize, f32),
+    InitialTileColor(usize, f32),
+    AoRadius(f32),
+    MaxRayLength(f32),
+    RayOffset(f32),
+    Viewport(u32, u32, u32, u32),
+    InjectionStride(u32),
+    InjectionAverageWindow(f32),
+    DenoiseMotionScale(usize, f32),
+}
+
+/// A float that is not finite.
+fn non_finite() -> impl Strategy<Value = f32> {
+    prop::sample::select(vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY])
+}
+
+/// A float that is not finite or not above 0.
+fn not_positive() -> impl Strategy<Value = f32> {
+    prop_oneof![non_finite(), Just(0.0f32), -1.0e9f32..=0.0]
+}
+
+fn bad_task() -> impl Strategy<Value = Bad> {
+    prop_oneof![
+        not_positive().prop_map(Bad::TileUnitLength),
+        prop_oneof![non_finite(), 1.0001f32..100.0, -100.0f32..-0.0001]
+            .prop_map(Bad::DirectTileMappingThreshold),
+        (0u64..12).prop_map(Bad::VertexStride),
+        (1u64..64).prop_map(|k| Bad::VertexOffset(4 * k)),
+        (0usize..12, non_finite()).prop_map(|(k, v)| Bad::ComponentTransform(k, v)),
+        (1u64..10_000).prop_map(Bad::IndexOffset),
+        prop::sample::select(vec![1u32, 2, 4, 5, 7, 8]).prop_map(Bad::IndexCount),
+        (0usize..12, non_finite()).prop_map(|(k, v)| Bad::InstanceTransform(k, v)),
+        (0usize..4, prop_oneof![non_finite(), -1.0e9f32..-1.0e-6])
+            .prop_map(|(k, v)| Bad::InitialTileColor(k, v)),
+        not_positive().prop_map(Bad::AoRadius),
+        // +∞ is a valid length (rays without a limit).
+        prop_oneof![
+            prop::sample::select(vec![f32::NAN, f32::NEG_INFINITY, 0.0]),
+            -1.0e9f32..=0.0
+        ]
+        .prop_map(Bad::MaxRayLength),
+        non_finite().prop_map(Bad::RayOffset),
+        prop_oneof![
+            (1u32..16, 0u32..16).prop_map(|(x, y)| Bad::Viewport(x, y, 16, 16)),
+            (0u32..16).prop_map(|y| Bad::Viewport(0, y, 0, 8)),
+            (0u32..16).prop_map(|x| Bad::Viewport(x, 0, 8, 0)),
+        ],
+        (9u32..10_000).prop_map(Bad::InjectionStride),
+        prop_oneof![non_finite(), -10.0f32..0.99].prop_map(Bad::InjectionAverageWindow),
+        (0usize..3, non_finite()).prop_map(|(k, v)| Bad::DenoiseMotionScale(k, v)),
+    ]
+}
+
+/// An affine transform with element `k` of its 3×4 matrix set to `v`.
+fn affine_with(k: usize, v: f32) -> Affine3A {
+    let mut cols = Affine3A::IDENTITY.to_cols_array();
+    cols[k] = v;
+    Affine3A::from_cols_array(&cols)
+}
+
+/// Schedules `bad` into `c` (instances of `geometry`, which an earlier task built); returns the
+/// field the refusal must name.
+fn schedule(
+    bad: &Bad,
+    ctx: &ExecuteContext,
+    geometry: GeometryHandle,
+    c: &mut TaskContainer,
+) -> String {
+    let geometry_task = |f: &dyn Fn(&mut GeometryInput)| {
+        let (vb, ib) = quad(1.0);
+        let mut input = geometry_input(vb, Some(ib));
+        f(&mut input);
+        GeometryTask {
+            operation: TaskOperation::Register,
+            handle: ctx.create_geometry_handle(),
+            input,
+        }
+    };
+    let instance_task = |f: &dyn Fn(&mut InstanceInput)| {
+        let mut input = InstanceInput::new(geometry, Affine3A::IDENTITY);
+        f(&mut input);
+        InstanceTask {
+            operation: TaskOperation::Register,
+            handle: ctx.create_instance_handle(),
+            input,
+        }
+    };
+    let component = "input.components[0]";
+    let field = match bad.clone() {
+        Bad::TileUnitLength(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| i.tile_unit_length = v));
+            "input.tile_unit_length".to_string()
+        }
+        Bad::DirectTileMappingThreshold(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| i.direct_tile_mapping_threshold = v));
+            "input.direct_tile_mapping_threshold".to_string()
+        }
+        Bad::VertexStride(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| i.components[0].vertex_buffer.stride = v));
+            format!("{component}.vertex_buffer.stride")
+        }
+        Bad::VertexOffset(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| i.components[0].vertex_buffer.offset = v));
+            format!("{component}.vertex_buffer.offset")
+        }
+        Bad::ComponentTransform(k, v) => {
+            c.schedule_bvh_task(geometry_task(&|i| {
+                i.components[0].transform = Some(affine_with(k, v))
+            }));
+            format!("{component}.transform")
+        }
+        Bad::IndexOffset(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| {
+                if let Some(ib) = i.components[0].index_buffer.as_mut() {
+                    ib.offset = v;
+                }
+            }));
+            format!("{component}.index_buffer.offset")
+        }
+        Bad::IndexCount(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| {
+                if let Some(ib) = i.components[0].index_buffer.as_mut() {
+                    ib.count = v;
+                }
+            }));
+            format!("{component}.index_buffer.count")
+        }
+        Bad::InstanceTransform(k, v) => {
+            c.schedule_bvh_task(instance_task(&|i| i.transform = affine_with(k, v)));
+            "input.transform".to_string()
+        }
+        Bad::InitialTileColor(k, v) => {
+            c.schedule_bvh_task(instance_task(&|i| i.initial_tile_color[k] = v));
+            "input.initial_tile_color".to_string()
+        }
+        _ => {
+            let (task, field) = render_task(bad, ctx);
+            c.schedule_render_task(task);
+            field.to_string()
+        }
+    };
+    field
+}
+
+/// The render task of a render-task `bad` and the field its refusal must name.
+fn render_task(bad: &Bad, ctx: &ExecuteContext) -> (RenderTask, &'static str) {
+    match bad.clone() {
+        Bad::AoRadius(v) => {
+            let mut t = ao_task();
+            t.ao_radius = v;
+            (RenderTask::TraceAmbientOcclusion(t), "ao_radius")
+        }
+        Bad::MaxRayLength(v) => {
+            let mut t = ao_task();
+            t.common.max_ray_length = v;
+            (
+                RenderTask::TraceAmbientOcclusion(t),
+                "common.max_ray_length",
+            )
+        }
+        Bad::RayOffset(v) => {
+            let mut t = ao_task();
+            t.common.ray_offset.cam_distance_linear = v;
+            (
+                RenderTask::TraceAmbientOcclusion(t),
+                "common.ray_offset.cam_distance_linear",
+            )
+        }
+        Bad::Viewport(x, y, width, height) => {
+            let mut t = ao_task();
+            t.common.viewport = Some(Viewport {
+                x,
+                y,
+                width,
+                height,
+            });
+            (RenderTask::TraceAmbientOcclusion(t), "viewport")
+        }
+        Bad::InjectionStride(v) => {
+            let mut t = injection();
+            t.injection_resolution_stride = v;
+            (
+                RenderTask::DirectLightingInjection(t),
+                "injection_resolution_stride",
+            )
+        }
+        Bad::InjectionAverageWindow(v) => {
+            let mut t = injection();
+            t.average_window = v;
+            (RenderTask::DirectLightingInjection(t), "average_window")
+        }
+        Bad::DenoiseMotionScale(k, v) => {
+            let mut common = denoise_common(ctx);
+            let mut scale = Vec3::ONE;
+            scale[k] = v;
+            common.motion = Some(MotionInput {
+                texture: texture(F::Rg32Float, 16, 16, U::TEXTURE_BINDING),
+                motion_type: MotionType::RgViewSpace,
+                scale,
+            });
+            let task = RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+                common,
+                input: texture(F::Rgba16Float, 16, 16, U::TEXTURE_BINDING),
+                output: output(16, 16),
+            });
+            (task, "common.motion.scale")
+        }
+        other => unreachable!("{other:?} is not a render task"),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Random invalid tasks of every kind (geometry, instance, trace, injection, denoise), each
+    /// among valid work in one container: refused with `InvalidInput` naming the bad field, and
+    /// the context exactly as it was (registrations, queued builds, serials, memory); the same
+    /// container without the bad task is then accepted.
+    #[test]
+    fn random_invalid_tasks_are_refused_by_field_and_change_nothing(bad in bad_task()) {
+        let field = std::cell::RefCell::new(String::new());
+        refused_changes_nothing(
+            2,
+            |ctx, geometry, c| *field.borrow_mut() = schedule(&bad, ctx, geometry, c),
+            |e| matches!(e, Error::InvalidInput { field: f, .. } if *f == *field.borrow()),
+        );
+    }
 }
