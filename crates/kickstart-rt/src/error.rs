@@ -78,6 +78,17 @@ pub enum Error {
         /// The device's limit.
         limit: u64,
     },
+    /// The device reported an error while `build_gpu_task` recorded: it was lost (removed,
+    /// reset, or destroyed with `Device::destroy`), ran out of memory, or refused a command. The
+    /// recorded commands must not be submitted, and the context refuses every later task with
+    /// this error: create a new device and context (registering the scene again).
+    #[error("{operation}: the device reported an error, so the context can no longer record ({message}); create a new device and context")]
+    Device {
+        /// The call that saw it.
+        operation: &'static str,
+        /// What the device said.
+        message: String,
+    },
     /// A blocking read-back (tools and tests only) failed.
     #[error("GPU read-back failed: {0}")]
     ReadBack(String),

@@ -727,12 +727,12 @@ fn upload(
     offset: u64,
     words: &[u32],
 ) {
-    use wgpu::util::DeviceExt;
-    let src = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("kickstart-rt cache upload"),
-        contents: bytemuck::cast_slice(words),
-        usage: wgpu::BufferUsages::COPY_SRC,
-    });
+    let src = crate::gpu::buffers::buffer_init(
+        device,
+        "kickstart-rt cache upload",
+        bytemuck::cast_slice(words),
+        wgpu::BufferUsages::COPY_SRC,
+    );
     encoder.copy_buffer_to_buffer(&src, 0, dst, offset, words.len() as u64 * 4);
 }
 

@@ -128,6 +128,7 @@ impl ExecuteContext {
                 dropped_readbacks: Vec::new(),
                 timings: BTreeMap::new(),
                 next_serial: 1,
+                device_error: None,
                 counts: RecordedTaskCounts::default(),
                 cache: crate::cache::DirectLightingCache::new(
                     device,
@@ -499,9 +500,23 @@ impl ExecuteContext {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<GpuTaskHandle> {
         let mut s = self.state();
+        if let Some(message) = &s.device_error {
+            return Err(Error::Device {
+                operation: "build_gpu_task",
+                message: message.clone(),
+            });
+        }
+        // Whatever the device reports while this call runs is this task's error, returned to
+        // the caller, not a panic of wgpu's default error handler (a lost device makes every
+        // later command fail).
+        let scopes = DeviceErrorScopes::push(&self.device);
         // Retiring the work the GPU has finished is not part of this task: it runs whether or
         // not the task is accepted.
         self.collect_invoked(&mut s);
+        if let Some(message) = scopes.pop() {
+            return Err(s.device_lost("build_gpu_task", message));
+        }
+        let scopes = DeviceErrorScopes::push(&self.device);
         if container.context != self.id {
             return Err(Error::input(
                 "TaskContainer",
@@ -543,9 +558,42 @@ impl ExecuteContext {
                 }
             }
         }
+        if let Some(message) = scopes.pop() {
+            return Err(s.device_lost("build_gpu_task", message));
+        }
         s.counts.gpu_tasks += 1;
         s.in_flight.insert(serial, frame.ws);
         Ok(GpuTaskHandle(serial))
+    }
+}
+
+/// Error scopes for every kind of device error, pushed around a call that records; popped,
+/// they say what the device reported inside them.
+struct DeviceErrorScopes([wgpu::ErrorScopeGuard; 3]);
+
+impl DeviceErrorScopes {
+    fn push(device: &wgpu::Device) -> Self {
+        DeviceErrorScopes([
+            device.push_error_scope(wgpu::ErrorFilter::Validation),
+            device.push_error_scope(wgpu::ErrorFilter::OutOfMemory),
+            device.push_error_scope(wgpu::ErrorFilter::Internal),
+        ])
+    }
+
+    /// Pops the scopes (innermost first); the first error any of them caught. On native
+    /// backends the result is known at once; a backend that answers later reports nothing here
+    /// (its errors reach the application's uncaptured-error handler as before).
+    fn pop(self) -> Option<String> {
+        let [validation, oom, internal] = self.0;
+        let mut first = None;
+        for guard in [internal, oom, validation] {
+            let future = std::pin::pin!(guard.pop());
+            let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+            if let std::task::Poll::Ready(Some(e)) = std::future::Future::poll(future, &mut cx) {
+                first.get_or_insert_with(|| e.to_string());
+            }
+        }
+        first
     }
 }
 

@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use super::effects::Effects;
 use super::settings::{DroppedTriangles, RecordedTaskCounts, INSTANCE_RECORD_SIZE};
+use crate::error::Error;
 use crate::handles::*;
 use crate::logging::{Logger, Severity};
 use crate::scene::gpu_scene::{GeometryGpu, GpuScene, PendingBvh};
@@ -89,6 +90,9 @@ pub(super) struct State {
     pub(super) timings: BTreeMap<u64, TimingReadback>,
     pub(super) next_serial: u64,
     pub(super) counts: RecordedTaskCounts,
+    /// What the device reported during a task (see `Error::Device`): once set, every later task
+    /// is refused with it.
+    pub(super) device_error: Option<String>,
     /// The direct lighting cache (sampling contract in `crate::cache`).
     pub(super) cache: crate::cache::DirectLightingCache,
 }
@@ -133,6 +137,13 @@ impl State {
     }
 
     /// Returns a completed task's staging to the pool and starts reading back its counters.
+    /// Records that the device reported `message` during `operation`: this and every later
+    /// task is refused with the returned error.
+    pub(super) fn device_lost(&mut self, operation: &'static str, message: String) -> Error {
+        self.device_error = Some(message.clone());
+        Error::Device { operation, message }
+    }
+
     pub(super) fn retire(&mut self, serial: u64, ws: WorkingSet) {
         self.cache.task_completed(serial);
         for b in ws.staging {

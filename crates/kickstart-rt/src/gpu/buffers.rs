@@ -15,6 +15,30 @@ pub(crate) fn storage(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Bu
     })
 }
 
+/// A buffer of `usage` holding `contents` (padded to 4 bytes, at least 4), written at creation
+/// like wgpu's `create_buffer_init`, which panics where the device is lost (its mapping fails).
+/// Here the contents are then left unwritten: the device's error reaches the error scope of
+/// `build_gpu_task`, which refuses the task.
+pub(crate) fn buffer_init(
+    device: &wgpu::Device,
+    label: &str,
+    contents: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    let size = (contents.len() as u64).div_ceil(4).max(1) * 4;
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage,
+        mapped_at_creation: true,
+    });
+    if let Ok(mut view) = buffer.get_mapped_range_mut(..) {
+        view.slice(..contents.len()).copy_from_slice(contents);
+    }
+    buffer.unmap();
+    buffer
+}
+
 /// Copies `size` bytes of `buffer` to the CPU, waiting for the device.
 pub(crate) fn read_back(
     device: &wgpu::Device,

@@ -2,7 +2,6 @@
 //! [`Recorder`], so GPU timing (timestamp queries around each pass) is one switch.
 
 use bytemuck::Pod;
-use wgpu::util::DeviceExt;
 
 /// Largest workgroup count of one dispatch dimension (WebGPU default limit).
 pub(crate) const MAX_DISPATCH_DIM: u32 = 65535;
@@ -158,12 +157,12 @@ impl<'a> Recorder<'a> {
 
     /// A uniform buffer holding `data` (written at creation: safe to use in this encoder).
     pub fn uniform<T: Pod>(&self, label: &str, data: &T) -> wgpu::Buffer {
-        self.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: bytemuck::bytes_of(data),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
+        crate::gpu::buffers::buffer_init(
+            self.device,
+            label,
+            bytemuck::bytes_of(data),
+            wgpu::BufferUsages::UNIFORM,
+        )
     }
 
     /// A storage buffer initialised with `data` (read-only use; written at creation).
@@ -176,12 +175,12 @@ impl<'a> Recorder<'a> {
         } else {
             data
         };
-        self.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            })
+        crate::gpu::buffers::buffer_init(
+            self.device,
+            label,
+            contents,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )
     }
 }
 

@@ -899,19 +899,17 @@ fn tlas_clustered(refs: u32) -> bool {
 /// A TLAS node buffer holding one root with two empty children: before the first TLAS build,
 /// every ray misses at once (a zeroed node would be a self-referencing inner node).
 fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
-    use wgpu::util::DeviceExt;
     let e = f32::from_bits(0x8000_0000);
     let root: [f32; 16] = [
         1e30, 1e30, 1e30, e, -1e30, -1e30, -1e30, e, 1e30, 1e30, 1e30, 0.0, -1e30, -1e30, -1e30,
         0.0,
     ];
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("kickstart-rt TLAS nodes"),
-        contents: bytemuck::cast_slice(&root),
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-    })
+    crate::gpu::buffers::buffer_init(
+        device,
+        "kickstart-rt TLAS nodes",
+        bytemuck::cast_slice(&root),
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+    )
 }
 
 /// A BLAS as read back: raw nodes (16 floats each) and triangles (12 floats each).

@@ -9,7 +9,6 @@ use super::{
 use crate::gpu::Recorder;
 use crate::scene::ingest::ROW_WORDS;
 use bytemuck::Zeroable;
-use wgpu::util::DeviceExt;
 
 /// Boxes of the box pyramid over `n` boxes (`shaders/scene/lbvh/lbvh.wgsl`, "Range refit"): level 0 (the
 /// boxes), then `ceil(n / 2^L)` a level up to the level of one box.
@@ -211,9 +210,10 @@ impl Lbvh {
 fn ingest_rows(device: &wgpu::Device, rows: &[u32]) -> wgpu::Buffer {
     let mut table = rows.to_vec();
     table.resize(REFIT_INGEST_ROWS * ROW_WORDS, 0);
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("lbvh refit ingest rows"),
-        contents: bytemuck::cast_slice(&table),
-        usage: wgpu::BufferUsages::UNIFORM,
-    })
+    crate::gpu::buffers::buffer_init(
+        device,
+        "lbvh refit ingest rows",
+        bytemuck::cast_slice(&table),
+        wgpu::BufferUsages::UNIFORM,
+    )
 }
