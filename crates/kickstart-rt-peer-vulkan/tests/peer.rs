@@ -1,9 +1,10 @@
 //! The peer on this machine's Vulkan: skipped (Unavailable) without ray tracing, traced with it.
 //!
-//! The tracing tests need a device with ray-tracing pipelines, which CI's software Vulkan (Mesa
-//! 22's lavapipe) lacks: they are `#[ignore]`d, so they are counted as ignored there rather than
-//! as passes, and run with `cargo test -p kickstart-rt-peer-vulkan -- --ignored` on a machine
-//! that has one (Mesa 25's lavapipe, the GPU machine), where a missing device fails them.
+//! The tracing tests need a device with ray-tracing pipelines, which the software Vulkan of CI's
+//! test passes (Mesa 22's lavapipe) lacks: they are `#[ignore]`d there, so they are counted as
+//! ignored rather than as passes. CI runs them in a step of their own on Mesa 25's lavapipe
+//! (`--include-ignored`, `KSRT_REQUIRE_RT_PEER=1`), where a missing device fails them; so does the
+//! GPU machine.
 
 use kickstart_rt_peer_vulkan::{
     BuildPreference, Hit, Instance, Mesh, PeerError, Query, Ray, Timing, VulkanRtPeer,
@@ -61,7 +62,7 @@ fn ray(origin: [f32; 3], dir: [f32; 3], t_min: f32, t_max: f32) -> Ray {
 /// A unit quad (two triangles sharing the diagonal) in z = 0, instanced twice: at z = 0
 /// (index 5) and moved to z = -2 (index 9).
 #[test]
-#[ignore = "needs a Vulkan device with ray-tracing pipelines: run with --ignored there"]
+#[ignore = "needs a ray-tracing Vulkan device: .ci/run runs it on Mesa 25 lavapipe (--include-ignored)"]
 fn traces_our_hit_rules_on_a_quad() {
     let mut peer = peer();
     let positions = [

@@ -490,7 +490,7 @@ mod tests {
     /// lacks, so it is ignored (never counted as a pass there) and run with `--ignored` where one
     /// exists; run so, a missing device fails it.
     #[test]
-    #[ignore = "needs a Vulkan device with ray-tracing pipelines: run with --ignored there"]
+    #[ignore = "needs a ray-tracing Vulkan device: .ci/run runs it on Mesa 25 lavapipe (--include-ignored)"]
     fn peer_agrees_with_our_tracer_on_the_cornell_box() {
         let peer = vkrt::VulkanRtPeer::new(None)
             .unwrap_or_else(|e| panic!("this test needs a ray-tracing Vulkan device: {e}"));
