@@ -568,23 +568,36 @@ impl ExecuteContext {
 }
 
 /// Error scopes for every kind of device error, pushed around a call that records; popped,
-/// they say what the device reported inside them.
-struct DeviceErrorScopes([wgpu::ErrorScopeGuard; 3]);
+/// they say what the device reported inside them. wgpu requires scopes to be popped in reverse
+/// order, also when a call returns early and drops them: the fields are declared innermost
+/// first, and Rust drops fields in declaration order.
+struct DeviceErrorScopes {
+    internal: wgpu::ErrorScopeGuard,
+    oom: wgpu::ErrorScopeGuard,
+    validation: wgpu::ErrorScopeGuard,
+}
 
 impl DeviceErrorScopes {
     fn push(device: &wgpu::Device) -> Self {
-        DeviceErrorScopes([
-            device.push_error_scope(wgpu::ErrorFilter::Validation),
-            device.push_error_scope(wgpu::ErrorFilter::OutOfMemory),
-            device.push_error_scope(wgpu::ErrorFilter::Internal),
-        ])
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        DeviceErrorScopes {
+            internal,
+            oom,
+            validation,
+        }
     }
 
     /// Pops the scopes (innermost first); the first error any of them caught. On native
     /// backends the result is known at once; a backend that answers later reports nothing here
     /// (its errors reach the application's uncaptured-error handler as before).
     fn pop(self) -> Option<String> {
-        let [validation, oom, internal] = self.0;
+        let DeviceErrorScopes {
+            internal,
+            oom,
+            validation,
+        } = self;
         let mut first = None;
         for guard in [internal, oom, validation] {
             let future = std::pin::pin!(guard.pop());
@@ -596,11 +609,3 @@ impl DeviceErrorScopes {
         first
     }
 }
-
-// The threading contract of DESIGN.md, checked by the compiler.
-const _: () = {
-    const fn send_sync<T: Send + Sync>() {}
-    const fn send<T: Send>() {}
-    send_sync::<ExecuteContext>();
-    send::<TaskContainer>();
-};
