@@ -493,9 +493,14 @@ fn device_below_required_limits_is_named() {
 fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
     let ctx = context(2);
     let g = ctx.create_geometry_handle();
+    // The moving instance is not the first: a record read at the wrong stride would then land
+    // in another record (the first one's, which stays at the origin).
+    let still = ctx.create_instance_handle();
     let i = ctx.create_instance_handle();
+    assert_ne!(i.index(), 0);
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
+    register_instance(&mut c, still, g, Affine3A::IDENTITY);
     register_instance(&mut c, i, g, Affine3A::IDENTITY);
     build_submit_complete(&ctx, c);
     let mut peak = 0;
@@ -517,7 +522,14 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
         peak = peak.max(ctx.resource_allocations().staging);
         let table = read_buffer(&ctx.instance_table().unwrap());
         let words: &[f32] = bytemuck::cast_slice(&table);
-        assert_eq!(words[i.index() as usize * 16 + 3], x, "frame {frame}");
+        // Row 0 of the 3×4 object-to-world matrix ends with the x translation.
+        let record = (INSTANCE_RECORD_SIZE / 4) as usize;
+        assert_eq!(words[i.index() as usize * record + 3], x, "frame {frame}");
+        assert_eq!(
+            words[still.index() as usize * record + 3],
+            0.0,
+            "frame {frame}"
+        );
     }
     // Each frame needs one 256-byte buffer; a leak would reach 30 of them.
     assert!(
@@ -525,3 +537,4 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
         "staging grew from {base} to {peak} bytes"
     );
 }
+
