@@ -493,9 +493,14 @@ fn device_below_required_limits_is_named() {
 fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
     let ctx = context(2);
     let g = ctx.create_geometry_handle();
+    // The moving instance is not the first: a record read at the wrong stride would then land
+    // in another record (the first one's, which stays at the origin).
+    let still = ctx.create_instance_handle();
     let i = ctx.create_instance_handle();
+    assert_ne!(i.index(), 0);
     let mut c = ctx.create_task_container();
     register_geometry(&mut c, g, 1.0);
+    register_instance(&mut c, still, g, Affine3A::IDENTITY);
     register_instance(&mut c, i, g, Affine3A::IDENTITY);
     build_submit_complete(&ctx, c);
     let mut peak = 0;
@@ -517,11 +522,219 @@ fn staging_is_recycled_and_every_frame_reaches_the_gpu() {
         peak = peak.max(ctx.resource_allocations().staging);
         let table = read_buffer(&ctx.instance_table().unwrap());
         let words: &[f32] = bytemuck::cast_slice(&table);
-        assert_eq!(words[i.index() as usize * 16 + 3], x, "frame {frame}");
+        // Row 0 of the 3×4 object-to-world matrix ends with the x translation.
+        let record = (INSTANCE_RECORD_SIZE / 4) as usize;
+        assert_eq!(words[i.index() as usize * record + 3], x, "frame {frame}");
+        assert_eq!(
+            words[still.index() as usize * record + 3],
+            0.0,
+            "frame {frame}"
+        );
     }
     // Each frame needs one 256-byte buffer; a leak would reach 30 of them.
     assert!(
         peak <= base + 3 * 256,
         "staging grew from {base} to {peak} bytes"
     );
+}
+
+/// One engine frame of the bounded-memory tests: instance `i` of `g` moved to `x` (an upload
+/// through the working set's staging), the TLAS refit over it, and an AO trace of a small
+/// G-buffer (per-task uniforms and bind groups).
+fn moving_frame(
+    ctx: &ExecuteContext,
+    (g, i): (GeometryHandle, InstanceHandle),
+    x: f32,
+    ao: &TraceAmbientOcclusionTask,
+) -> TaskContainer {
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Update,
+        handle: i,
+        input: InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0))),
+    });
+    c.schedule_bvh_task(BvhBuildTask::default());
+    c.schedule_render_task(RenderTask::TraceAmbientOcclusion(ao.clone()));
+    c
+}
+
+/// A context of `working_sets` with one registered, built quad instance, and the AO task the
+/// frames trace (8×8 pixels looking at the quad).
+fn moving_scene(
+    working_sets: u32,
+) -> (
+    ExecuteContext,
+    (GeometryHandle, InstanceHandle),
+    TraceAmbientOcclusionTask,
+) {
+    let ctx = context(working_sets);
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    register_geometry(&mut c, g, 1.0);
+    register_instance(&mut c, i, g, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let common = trace::gbuffer_common(8, 8, Vec3::new(0.0, 0.0, 3.0), |x, y| {
+        Some((Vec3::new(x as f32 / 8.0, y as f32 / 8.0, 0.0), Vec3::Z))
+    });
+    let ao = TraceAmbientOcclusionTask {
+        common,
+        output: trace::output(8, 8),
+        ao_radius: 1.0,
+    };
+    (ctx, (g, i), ao)
+}
+
+/// An engine that submits frame after frame but never polls the device nor marks a task
+/// complete (a GPU that fell behind, or a lost fence): the SDK accepts as many GPU tasks as it
+/// has working sets, then refuses every further one with `WorkingSetsExhausted` at once (no
+/// stall), and nothing it holds grows: allocations, tasks in flight and recorded work stay what
+/// they were when the working sets filled up. A refused frame applies nothing (its instance
+/// move is not in the table once the GPU catches up), and the context then carries on.
+#[test]
+fn tasks_ahead_of_a_gpu_never_polled_are_refused_and_memory_stays_bounded() {
+    const WORKING_SETS: u32 = 3;
+    const FRAMES: u32 = 200;
+    let (ctx, scene, ao) = moving_scene(WORKING_SETS);
+    let base_tasks = ctx.recorded_task_counts().gpu_tasks;
+    let g = gpu();
+    let mut accepted = Vec::new();
+    let mut full = None;
+    let start = std::time::Instant::now();
+    for frame in 0..FRAMES {
+        let mut e = encoder();
+        match ctx.build_gpu_task(moving_frame(&ctx, scene, frame as f32, &ao), &mut e) {
+            Ok(t) => accepted.push((t, frame)),
+            Err(Error::WorkingSetsExhausted { supported }) => {
+                assert_eq!(supported, WORKING_SETS);
+                // What the SDK held when its working sets filled up: nothing may grow after.
+                let now = (ctx.resource_allocations(), ctx.in_flight_task_count());
+                assert_eq!(*full.get_or_insert(now), now, "frame {frame}");
+            }
+            Err(other) => panic!("frame {frame}: {other:?}"),
+        }
+        // Submitted, never polled: `queue.submit` does not wait.
+        g.queue.submit([e.finish()]);
+    }
+    assert!(
+        start.elapsed().as_secs() < 60,
+        "{FRAMES} builds took {:?}: a build waited for the GPU",
+        start.elapsed()
+    );
+    let frames: Vec<u32> = accepted.iter().map(|(_, f)| *f).collect();
+    assert_eq!(
+        frames,
+        [0, 1, 2],
+        "the first working sets' worth, then refusals"
+    );
+    assert_eq!(
+        ctx.recorded_task_counts().gpu_tasks,
+        base_tasks + u64::from(WORKING_SETS)
+    );
+    let (held, in_flight) = full.expect("the working sets filled up");
+    assert_eq!(in_flight, WORKING_SETS as usize);
+    assert!(held.staging > 0, "each task in flight holds its upload");
+    // The GPU catches up: only the accepted frames reached it.
+    g.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    for (t, _) in &accepted {
+        ctx.mark_gpu_task_completed(*t).unwrap();
+    }
+    let table = read_buffer(&ctx.instance_table().unwrap());
+    let words: &[f32] = bytemuck::cast_slice(&table);
+    let record = (INSTANCE_RECORD_SIZE / 4) as usize;
+    assert_eq!(words[scene.1.index() as usize * record + 3], 2.0);
+    // And the context carries on.
+    build_submit_complete(&ctx, moving_frame(&ctx, scene, 7.0, &ao));
+    let table = read_buffer(&ctx.instance_table().unwrap());
+    let words: &[f32] = bytemuck::cast_slice(&table);
+    assert_eq!(words[scene.1.index() as usize * record + 3], 7.0);
+}
+
+/// An engine that keeps the SDK's working sets full for many frames, waiting for the oldest
+/// frame before it builds the next (what `ksrt`'s loops and a frames-in-flight renderer do):
+/// after the first frames, the memory the SDK holds stops growing; recycled staging is reused,
+/// not added to.
+#[test]
+fn a_full_pipeline_of_frames_runs_in_bounded_memory() {
+    const WORKING_SETS: u32 = 3;
+    const FRAMES: u32 = 150;
+    let (ctx, scene, ao) = moving_scene(WORKING_SETS);
+    let g = gpu();
+    let mut in_flight = std::collections::VecDeque::new();
+    let mut warm = ResourceAllocations::default();
+    let mut peak = ResourceAllocations::default();
+    for frame in 0..FRAMES {
+        if in_flight.len() == WORKING_SETS as usize {
+            g.device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .expect("poll");
+            ctx.mark_gpu_task_completed(in_flight.pop_front().unwrap())
+                .unwrap();
+        }
+        let mut e = encoder();
+        let t = ctx
+            .build_gpu_task(moving_frame(&ctx, scene, frame as f32, &ao), &mut e)
+            .unwrap_or_else(|err| panic!("frame {frame}: {err}"));
+        g.queue.submit([e.finish()]);
+        in_flight.push_back(t);
+        let now = ctx.resource_allocations();
+        let target = if frame < 20 { &mut warm } else { &mut peak };
+        target.staging = target.staging.max(now.staging);
+        target.scratch = target.scratch.max(now.scratch);
+        *target = ResourceAllocations {
+            staging: target.staging,
+            scratch: target.scratch,
+            ..now
+        };
+    }
+    eprintln!("first 20 frames: {warm:?}\nframes 20..{FRAMES}: {peak:?}");
+    assert!(
+        peak.staging <= warm.staging && peak.scratch <= warm.scratch,
+        "grew after the first frames: {warm:?} → {peak:?}"
+    );
+    assert_eq!(
+        ResourceAllocations {
+            staging: 0,
+            scratch: 0,
+            ..peak
+        },
+        ResourceAllocations {
+            staging: 0,
+            scratch: 0,
+            ..warm
+        },
+        "the scene's own memory changed"
+    );
+}
+
+/// `invoke_gpu_task` called in a loop by an application that never polls the device itself:
+/// every call returns at once, each either accepted or refused by name, and no more tasks than
+/// working sets are ever in flight.
+#[test]
+fn invoke_without_polling_never_stalls_nor_exceeds_the_working_sets() {
+    const WORKING_SETS: u32 = 2;
+    let (ctx, scene, ao) = moving_scene(WORKING_SETS);
+    let start = std::time::Instant::now();
+    let (mut accepted, mut refused) = (0, 0);
+    for frame in 0..100 {
+        match ctx.invoke_gpu_task(moving_frame(&ctx, scene, frame as f32, &ao)) {
+            Ok(()) => accepted += 1,
+            Err(Error::WorkingSetsExhausted { supported: 2 }) => refused += 1,
+            Err(other) => panic!("frame {frame}: {other:?}"),
+        }
+        assert!(ctx.in_flight_task_count() <= WORKING_SETS as usize);
+    }
+    assert!(start.elapsed().as_secs() < 60, "{:?}", start.elapsed());
+    assert!(
+        accepted >= WORKING_SETS,
+        "{accepted} accepted, {refused} refused"
+    );
+    gpu()
+        .device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    assert_eq!(ctx.in_flight_task_count(), 0);
 }

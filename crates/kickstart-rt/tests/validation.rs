@@ -952,6 +952,122 @@ fn injection_of_world_positions_in_a_depth_format_is_refused_before_anything_cha
     );
 }
 
+/// An injection whose depth cannot be read as depth or float positions (an integer format) is
+/// refused by the plan, naming the field, before the container's registrations apply.
+#[test]
+fn injection_of_integer_depth_is_refused_before_anything_changes() {
+    refused_task_changes_nothing(
+        2,
+        |_| {
+            let mut t = injection();
+            t.depth.texture = texture(F::R32Uint, 16, 16, U::TEXTURE_BINDING);
+            RenderTask::DirectLightingInjection(t)
+        },
+        invalid("depth.texture"),
+    );
+}
+
+/// Direct lighting in a depth format (it must be a float colour format) is refused by the
+/// plan, naming the field, before anything changes.
+#[test]
+fn injection_of_direct_lighting_in_a_depth_format_is_refused_before_anything_changes() {
+    refused_task_changes_nothing(
+        2,
+        |_| {
+            let mut t = injection();
+            t.direct_lighting = texture(F::Depth32Float, 16, 16, U::TEXTURE_BINDING);
+            RenderTask::DirectLightingInjection(t)
+        },
+        invalid("direct_lighting"),
+    );
+}
+
+/// An injection whose per-pixel accumulation (32 bytes per injected pixel, beside one word
+/// per surfel of the cache) exceeds one storage binding is refused by the plan with the stride
+/// named, on a device that binds the least the SDK supports (128 MiB): nothing changes, and the
+/// same injection at a coarser stride is accepted.
+#[test]
+fn injection_too_large_for_one_binding_is_refused_before_anything_changes() {
+    const LIMIT: u64 = 128 << 20;
+    let (device, queue, ctx) = small_binding_context(LIMIT);
+    let submit = |e: wgpu::CommandEncoder| {
+        queue.submit([e.finish()]);
+        device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    };
+    let encoder = || device.create_command_encoder(&Default::default());
+    let tex = |format, w, h| {
+        device
+            .create_texture(&wgpu::TextureDescriptor {
+                label: None,
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: U::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+            .create_view(&Default::default())
+    };
+    // 2048 × 2040 pixels at stride 1: 4.18 M accumulation slots of 32 bytes (133.7 MB) with
+    // the cache's 1 MiB of surfel words do not fit 128 MiB; at stride 2 a quarter of it does.
+    let (w, h) = (2048, 2040);
+    let injection = |stride| {
+        let mut t = DirectLightingInjectionTask::new(
+            DepthInput {
+                texture: tex(F::R32Float, w, h),
+                depth_type: DepthType::RClipSpace,
+            },
+            tex(F::Rgba16Float, w, h),
+            ViewInfo::default(),
+        );
+        t.injection_resolution_stride = stride;
+        RenderTask::DirectLightingInjection(t)
+    };
+    let geometry = ctx.create_geometry_handle();
+    let c = register_and_build(
+        &ctx,
+        (geometry, ctx.create_instance_handle()),
+        many_triangles(&device, 2),
+    );
+    let mut e = encoder();
+    let earlier = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(earlier).unwrap();
+    let before = observe(&ctx, &[geometry]);
+    let mut c = ctx.create_task_container();
+    c.schedule_render_task(injection(1));
+    let mut e = encoder();
+    match ctx.build_gpu_task(c, &mut e) {
+        Err(Error::InvalidInput {
+            task, field, value, ..
+        }) => {
+            assert_eq!(
+                (task, field.as_str(), value.as_str()),
+                (
+                    "DirectLightingInjectionTask",
+                    "injection_resolution_stride",
+                    "1"
+                )
+            );
+        }
+        other => panic!("expected InvalidInput, got {other:?}"),
+    }
+    submit(e);
+    assert_eq!(observe(&ctx, &[geometry]), before);
+    let mut c = ctx.create_task_container();
+    c.schedule_render_task(injection(2));
+    let mut e = encoder();
+    let t = ctx.build_gpu_task(c, &mut e).expect("stride 2 fits");
+    submit(e);
+    assert_eq!(t.serial(), earlier.serial() + 1);
+    ctx.mark_gpu_task_completed(t).unwrap();
+}
+
 #[test]
 fn refused_for_any_reason_the_context_is_unchanged() {
     // A field rule of a render task.

@@ -32,6 +32,14 @@ struct InjectParams {
 const FIXED_SCALE: f32 = 65536.0;
 const MAX_RADIANCE: f32 = 65504.0;
 
+// Branches on the task's parameters go through this: Mesa's lavapipe 22.x (the CI's Vulkan
+// driver) compiles a specialised copy of a shader at every dispatch whose branches depend on
+// uniform values alone, and keeps each copy as long as the pipeline (see trace/gbuffer.wgsl,
+// gb_branch). XOR with a zero it cannot know keeps the value and the shader unspecialised.
+fn inject_branch(x: u32) -> u32 {
+    return x ^ (textureNumLevels(light_tex) >> 16u);
+}
+
 fn unproject(ndc: vec2<f32>, z: f32) -> vec3<f32> {
     let p = params.clip_to_world * vec4<f32>(ndc, z, 1.0);
     return p.xyz / p.w;
@@ -78,13 +86,13 @@ fn inject(
     );
     let d = inject_load_depth(pixel);
     var goal: vec3<f32>;
-    if params.offset.z == 1u {
+    if inject_branch(params.offset.z) == 1u {
         goal = d.xyz;
     } else {
         goal = unproject(ndc, d.x);
     }
     var origin = params.eye.xyz;
-    if params.grid.w == 1u {
+    if inject_branch(params.grid.w) == 1u {
         origin = unproject(ndc, params.f.x);
     }
     if !rt_is_finite3(goal) || !rt_is_finite3(origin) {

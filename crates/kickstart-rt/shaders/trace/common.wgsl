@@ -49,8 +49,19 @@ const TR_BN_SIZE: u32 = 64u;
 @group(2) @binding(2) var tr_env: texture_2d<f32>;
 @group(2) @binding(3) var tr_direct_lighting: texture_2d<f32>;
 
+// Branches on uniform values go through `tr_branch`: Mesa's lavapipe 22.x (Debian 12, the CI's Vulkan
+// driver) specialises a shader whose `if`s, `switch`es or loop bounds depend on uniform-buffer
+// values alone by compiling a new copy of it for that dispatch, at every dispatch, and frees none
+// of them until the pipeline goes: a trace task then cost an LLVM compile and about 2 MB for the
+// life of the context (`ksrt quality`'s reference samples reached 20 GB; issue 35). XOR with
+// a zero the driver cannot know (a texture's level count is below 2^16) keeps the value the
+// same and the shader unspecialised; on a GPU it is one texture query.
+fn tr_branch(x: u32) -> u32 {
+    return x ^ (textureNumLevels(tr_blue_noise) >> 16u);
+}
+
 fn tr_flag(f: u32) -> bool {
-    return (tp.mode.w & f) != 0u;
+    return (tr_branch(tp.mode.w) & f) != 0u;
 }
 
 // Invocations are mapped to pixels in 8×8 tiles: one workgroup (RT_WORKGROUP_SIZE = 64) traces
@@ -64,11 +75,11 @@ const TR_TILE: u32 = 8u;
 // 1 checkerboard, 2 inverted, 3 one pixel per block), 8-15 the block size, 16-31 the traced
 // pixel of each block (x, y).
 fn tr_mode() -> u32 {
-    return tp.mode.x & 0xffu;
+    return tr_branch(tp.mode.x) & 0xffu;
 }
 
 fn tr_block() -> u32 {
-    return (tp.mode.x >> 8u) & 0xffu;
+    return (tr_branch(tp.mode.x) >> 8u) & 0xffu;
 }
 
 // The grid of traced pixels: the viewport, its half-width in a checkerboard mode (a grid column
@@ -158,7 +169,7 @@ fn tr_rng(texel: vec2<u32>) -> TrRng {
 fn tr_next(r: ptr<function, TrRng>) -> f32 {
     let d = (*r).dim;
     (*r).dim = d + 1u;
-    if tp.mode.y == 0u {
+    if tr_branch(tp.mode.y) == 0u {
         let h = tr_hash((d * 0x68bc21ebu) ^ (tp.misc.w * 0x02e5be93u));
         let shift = vec2<u32>(h & 63u, (h >> 6u) & 63u);
         let at = ((*r).texel + shift) % vec2<u32>(TR_BN_SIZE);
@@ -205,13 +216,14 @@ fn tr_cosine(n: vec3<f32>, u: vec2<f32>) -> vec3<f32> {
 // (Ray Tracing Gems, 2019): an ulp-scaled integer offset far from the origin, a float offset
 // near it. Camera distance: constant + linear·d + quadratic·d² along the normal.
 fn tr_origin(p: vec3<f32>, n: vec3<f32>, view_distance: f32) -> vec3<f32> {
-    if tp.misc.x == 1u {
+    let offset_type = tr_branch(tp.misc.x);
+    if offset_type == 1u {
         let of_i = vec3<i32>(tp.offset_wp.z * n);
         let pi = bitcast<vec3<i32>>(p);
         let moved = bitcast<vec3<f32>>(pi + select(of_i, -of_i, p < vec3<f32>(0.0)));
         return select(moved, p + tp.offset_wp.y * n, abs(p) < vec3<f32>(tp.offset_wp.x));
     }
-    if tp.misc.x == 2u {
+    if offset_type == 2u {
         let d = view_distance;
         return p + n * (tp.offset_cd.x + tp.offset_cd.y * d + tp.offset_cd.z * d * d);
     }

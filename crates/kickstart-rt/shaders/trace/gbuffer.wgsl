@@ -102,6 +102,22 @@ fn gb_unproject(ndc: vec2<f32>, z: f32) -> vec3<f32> {
     return p.xyz / p.w;
 }
 
+// Branches on uniform values go through `gb_branch`: Mesa's lavapipe 22.x (Debian 12, the CI's Vulkan
+// driver) specialises a shader whose `if`s, `switch`es or loop bounds depend on uniform-buffer
+// values alone by compiling a new copy of it for that dispatch, at every dispatch, and frees none
+// of them until the pipeline goes: a trace task then cost an LLVM compile and about 2 MB for the
+// life of the context (`ksrt quality`'s reference samples reached 20 GB; issue 35). XOR with
+// a zero the driver cannot know (a texture's level count is below 2^16) keeps the value the
+// same and the shader unspecialised; on a GPU it is one texture query.
+fn gb_branch(x: u32) -> u32 {
+    return x ^ (textureNumLevels(gb_depth) >> 16u);
+}
+
+// Whether the view is a perspective one (the eye is a point), for a branch (gb_branch).
+fn gb_perspective() -> bool {
+    return bitcast<f32>(gb_branch(bitcast<u32>(gb.eye.w))) > 0.5;
+}
+
 // Standard octahedral decode (Cigolle et al. 2014) of e in [-1, 1]².
 fn gb_oct_decode(e: vec2<f32>) -> vec3<f32> {
     var n = vec3<f32>(e, 1.0 - abs(e.x) - abs(e.y));
@@ -115,7 +131,7 @@ fn gb_oct_decode(e: vec2<f32>) -> vec3<f32> {
 // The normal texel decoded and turned into world space (zero where the texel holds none).
 fn gb_decode_normal(t: vec4<f32>) -> vec3<f32> {
     var n: vec3<f32>;
-    switch gb.normal_type {
+    switch gb_branch(gb.normal_type) {
         case 0u: { n = t.xyz; }
         case 1u: { n = t.xyz * 2.0 - 1.0; }
         case 2u: { n = gb_oct_decode(t.xy); }
@@ -133,7 +149,7 @@ fn gb_decode_normal(t: vec4<f32>) -> vec3<f32> {
 
 // Unit vector from `p` towards the camera.
 fn gb_to_eye(p: vec3<f32>) -> vec3<f32> {
-    if gb.eye.w > 0.5 {
+    if gb_perspective() {
         return normalize(gb.eye.xyz - p);
     }
     return -gb.forward.xyz;
@@ -141,7 +157,7 @@ fn gb_to_eye(p: vec3<f32>) -> vec3<f32> {
 
 // Distance of `p` from the camera (along the view direction for orthographic views).
 fn gb_view_distance(p: vec3<f32>) -> f32 {
-    if gb.eye.w > 0.5 {
+    if gb_perspective() {
         return length(gb.eye.xyz - p);
     }
     return abs(dot(p - gb.eye.xyz, gb.forward.xyz));
@@ -157,7 +173,7 @@ fn gb_surface(texel: vec2<u32>) -> GbSurface {
     var s: GbSurface;
     s.valid = false;
     let d = textureLoad(gb_depth, texel, 0);
-    if gb.depth_type == 0u {
+    if gb_branch(gb.depth_type) == 0u {
         s.position = d.xyz;
     } else {
         if d.x == gb.far_ndc || gb_non_finite(d.x) {
@@ -181,7 +197,7 @@ fn gb_surface(texel: vec2<u32>) -> GbSurface {
 // Roughness at `texel`: the masked texel (or the global value), × multiplier, clamped.
 fn gb_roughness(texel: vec2<u32>) -> f32 {
     var r = gb.global_roughness;
-    if (gb.has_textures & GB_HAS_ROUGHNESS) != 0u {
+    if (gb_branch(gb.has_textures) & GB_HAS_ROUGHNESS) != 0u {
         r = dot(textureLoad(gb_roughness_tex, texel, 0), gb.roughness_mask);
     }
     return clamp(r * gb.roughness_multiplier, gb.min_roughness, gb.max_roughness);
@@ -190,7 +206,7 @@ fn gb_roughness(texel: vec2<u32>) -> f32 {
 // Specular input at `texel`: the texel (RGB specular reflectance F0, A as the engine wrote it),
 // or the global metalness in every channel when no texture is bound.
 fn gb_specular(texel: vec2<u32>) -> vec4<f32> {
-    if (gb.has_textures & GB_HAS_SPECULAR) != 0u {
+    if (gb_branch(gb.has_textures) & GB_HAS_SPECULAR) != 0u {
         return textureLoad(gb_specular_tex, texel, 0);
     }
     return vec4<f32>(gb.global_metalness);
@@ -198,7 +214,7 @@ fn gb_specular(texel: vec2<u32>) -> vec4<f32> {
 
 // False where the input mask's red channel is 0 (the pixel is skipped); true without a mask.
 fn gb_mask(texel: vec2<u32>) -> bool {
-    if (gb.has_textures & GB_HAS_MASK) != 0u {
+    if (gb_branch(gb.has_textures) & GB_HAS_MASK) != 0u {
         return textureLoad(gb_mask_tex, texel, 0).x != 0.0;
     }
     return true;

@@ -23,7 +23,7 @@ struct TrShadowRay {
 fn tr_shadow_ray(l: TrLight, p: vec3<f32>, n: vec3<f32>, u: vec2<f32>) -> TrShadowRay {
     var r: TrShadowRay;
     r.status = 1u;
-    let kind = u32(l.c.y + 0.5);
+    let kind = tr_branch(u32(l.c.y + 0.5));
     let d = tr_disc(u);
     if kind == 0u {
         let to_light = -l.a.xyz;
@@ -116,7 +116,7 @@ fn multi_shadow(
         return;
     }
     let s = gb_surface(px.texel);
-    let count = tp.misc.y;
+    let count = tr_branch(tp.misc.y);
     if !s.valid {
         // No surface: every light visible.
         textureStore(out0, px.texel, vec4<f32>(1.0, -1.0, -1.0, f32(count)));

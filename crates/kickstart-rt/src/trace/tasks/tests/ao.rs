@@ -36,6 +36,40 @@ fn ao_of_an_open_plane_is_one_with_every_offset_and_generator() {
     }
 }
 
+/// What the ray offsets are for: a G-buffer whose positions sit 1 mm below the surface they
+/// show (reconstruction error, here far from the origin: the plane is at y = 1000, where a float
+/// step is 61 µm). Without an offset every ray starts under the plane and hits it at once (AO
+/// ≈ 0: the hit lies past the 0.3 mm t_min); the world-position offset (256 float steps, 16
+/// mm here) and the camera-distance one (about 2.5 mm at 3 m) lift the origin above it, and
+/// the open plane is unoccluded again. The open-plane test above cannot see this: with exact
+/// positions every offset gives 1.
+#[test]
+fn ray_offsets_lift_origins_from_below_the_surface() {
+    const H: f32 = 1000.0;
+    let scene = TestScene::single(square(1, H, 50.0));
+    let below = |x, y| floor(x, y).map(|(p, n)| (p + Vec3::new(0.0, H - 1e-3, 0.0), n));
+    for offset in [
+        RayOffsetType::Disabled,
+        RayOffsetType::WorldPosition,
+        RayOffsetType::CamDistance,
+    ] {
+        let out = output(N, N, -5.0);
+        let mut c = common(gbuffer(N, N, below), Vec3::new(0.0, H + 3.0, 0.0));
+        c.ray_offset.offset_type = offset;
+        run(&scene, &[ao(c, &out, 2.0)]);
+        let values: Vec<f32> = read(&out).iter().map(|v| v[0]).collect();
+        if offset == RayOffsetType::Disabled {
+            // Hit at 1 mm / cos θ: a fraction of the 2 m radius, up to grazing rays.
+            let mean = values.iter().sum::<f32>() / values.len() as f32;
+            assert!(mean < 0.02, "{offset:?}: mean AO {mean}");
+        } else {
+            for (i, v) in values.iter().enumerate() {
+                assert_eq!(*v, 1.0, "{offset:?} texel {i}");
+            }
+        }
+    }
+}
+
 #[test]
 fn ao_inside_a_closed_box_is_near_zero() {
     // A closed box of half-size 0.1; points inside it, random normals; radius 10: every ray hits
