@@ -324,12 +324,12 @@ pub fn run(
         max_geometries: opts.max_geometries,
     };
     let mut report = SoakReport::default();
-    let ctx = |r: &Renderer| r.sdk.ctx.resource_allocations();
+    let allocations = |r: &Renderer| r.sdk.ctx.resource_allocations();
     for _ in 0..QUIET_FRAMES {
         frame(device, queue, &mut renderer, camera, None, 1)?;
     }
     renderer.sdk.ctx.release_device_resources_immediately()?;
-    let baseline = ctx(&renderer);
+    let baseline = allocations(&renderer);
     let mut peak = baseline.total();
     // Two rounds of the same churn (the same seed): per-object memory (vertex copies, BLASes,
     // denoiser histories) must be back at the baseline after each; the pools (lighting cache
@@ -344,7 +344,7 @@ pub fn run(
             churn.frame(device, &renderer.sdk.ctx, &mut c, &mut report)?;
             let max_blas = 1 + churn.rng.below(4) as u32;
             frame(device, queue, &mut renderer, camera, Some(c), max_blas)?;
-            peak = peak.max(ctx(&renderer).total());
+            peak = peak.max(allocations(&renderer).total());
             report.frames += 1;
             progress(round * (opts.frames / 2) + f + 1);
         }
@@ -354,7 +354,7 @@ pub fn run(
             frame(device, queue, &mut renderer, camera, None, 64)?;
         }
         renderer.sdk.ctx.release_device_resources_immediately()?;
-        let a = ctx(&renderer);
+        let a = allocations(&renderer);
         let per_object = |x: &ksrt::ResourceAllocations| (x.vertex_copies, x.blas, x.denoiser);
         if per_object(&a) != per_object(&baseline) {
             return Err(format!(

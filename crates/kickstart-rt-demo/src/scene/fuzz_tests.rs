@@ -60,24 +60,6 @@ fn assert_sound(scene: &Scene) {
     }
 }
 
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in bytes.chunks(3) {
-        let n = (c[0] as u32) << 16
-            | (*c.get(1).unwrap_or(&0) as u32) << 8
-            | *c.get(2).unwrap_or(&0) as u32;
-        for k in 0..4 {
-            if k <= c.len() {
-                out.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
 /// The random choices of one glTF file (see [`gltf_json`]).
 #[derive(Debug, Clone)]
 struct GltfCase {
@@ -164,7 +146,7 @@ fn gltf_json(c: &GltfCase) -> String {
         pb = pos_bytes,
         ib = idx_bytes.max(1),
         bl = bin.len(),
-        data = base64(&bin),
+        data = crate::testing::base64(&bin),
     )
 }
 
