@@ -392,6 +392,8 @@ fn convert_primitive(
             )?,
             _ => {}
         }
+        check_accessor(&accessor, buffers)
+            .map_err(|e| format!("{name}: attribute {semantic:?}: {e}"))?;
     }
     if let Some(accessor) = prim.indices() {
         typed(
@@ -399,12 +401,6 @@ fn convert_primitive(
             &[DataType::U8, DataType::U16, DataType::U32],
             Dimensions::Scalar,
         )?;
-    }
-    for (semantic, accessor) in prim.attributes() {
-        check_accessor(&accessor, buffers)
-            .map_err(|e| format!("{name}: attribute {semantic:?}: {e}"))?;
-    }
-    if let Some(accessor) = prim.indices() {
         check_accessor(&accessor, buffers).map_err(|e| format!("{name}: indices: {e}"))?;
     }
     let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
