@@ -151,7 +151,9 @@ pub use context::{
     ShaderVariant, INSTANCE_RECORD_SIZE,
 };
 pub use device::{
-    optional_features, optional_features_supported, required_features, required_limits,
+    hardware_ray_query_features, hardware_ray_query_limits, optional_features,
+    optional_features_supported, required_features, required_limits, BackendChoice, BackendReport,
+    TraversalBackend,
 };
 pub use error::{Error, HandleKind, Result};
 pub use gpu::compose::{compose_shader, shader_modules, ComposeError};

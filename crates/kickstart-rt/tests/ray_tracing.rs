@@ -11,6 +11,44 @@ use std::sync::{Arc, Mutex};
 
 const VISIBLE: u32 = InstanceInclusionMask::VISIBLE_IN_RT.0;
 
+/// The context traces with the backend the test pass asks for (`KSRT_TEST_BACKEND`), and says
+/// why; an explicit choice the device cannot honour is refused by name.
+#[test]
+fn the_context_reports_the_backend_of_the_test_pass() {
+    let ctx = context(1);
+    let report = ctx.traversal_backend();
+    assert_eq!(report.backend, backend(), "{}", report.reason);
+    assert!(report.reason.contains("Auto"), "{}", report.reason);
+    let g = gpu();
+    let forced = |backend| {
+        ExecuteContext::new(
+            &g.device,
+            &g.queue,
+            InitSettings {
+                backend,
+                ..Default::default()
+            },
+        )
+    };
+    let software = forced(BackendChoice::Software).expect("software is always available");
+    assert_eq!(
+        software.traversal_backend().backend,
+        TraversalBackend::Software
+    );
+    match (backend(), forced(BackendChoice::HardwareRayQuery)) {
+        (TraversalBackend::HardwareRayQuery, Ok(c)) => {
+            assert_eq!(
+                c.traversal_backend().backend,
+                TraversalBackend::HardwareRayQuery
+            )
+        }
+        (TraversalBackend::Software, Err(Error::MissingFeatures(what))) => {
+            assert!(what.contains("EXPERIMENTAL_RAY_QUERY"), "{what}")
+        }
+        (b, r) => panic!("test pass {b}: HardwareRayQuery gave {:?}", r.map(|_| ())),
+    }
+}
+
 /// A random transform: rotation, non-uniform scale (sometimes mirrored), translation.
 fn random_transform(rng: &mut Rng, spread: f32) -> Affine3A {
     let axis = rng.unit();
@@ -447,9 +485,17 @@ fn closed_meshes_have_no_gaps() {
         .zip(&hits)
         .filter(|(_, h)| !h.is_hit())
         .collect();
+    // Our traversal is watertight by construction: not one ray may slip through. The hardware
+    // backend's triangle test is the driver's: Vulkan asks for watertightness, but Mesa 25's
+    // lavapipe lets about 1 in 2,500 of these rays (aimed exactly at shared edges and vertices)
+    // through, so that pass allows 1 in 1,000 and no more.
+    let allowed = match backend() {
+        TraversalBackend::Software => 0,
+        TraversalBackend::HardwareRayQuery => must_hit.len() / 1000,
+    };
     assert!(
-        missed.is_empty(),
-        "{} of {} rays through closed meshes missed, e.g. {:?}",
+        missed.len() <= allowed,
+        "{} of {} rays through closed meshes missed ({allowed} allowed on this backend), e.g. {:?}",
         missed.len(),
         must_hit.len(),
         missed.first()
@@ -481,11 +527,34 @@ fn closed_meshes_have_no_gaps() {
         planar.push(ray(o, d, 0.0, f32::INFINITY));
     }
     let hits = closest(&ctx, &planar);
+    let in_planes = compare(&oracle, &planar, &hits, VISIBLE);
+    // A ray lying in a triangle's plane grazes it everywhere: our traversal decides each the
+    // way the oracle does; the driver (hardware backend) may call any of them a miss, so there
+    // only real mismatches count.
+    if backend() == TraversalBackend::HardwareRayQuery {
+        assert!(
+            in_planes.mismatches.is_empty(),
+            "rays in face planes: {:?}",
+            &in_planes.mismatches[..in_planes.mismatches.len().min(3)]
+        );
+    }
     assert_agrees(
-        &compare(&oracle, &planar, &hits, VISIBLE),
+        &Agreement {
+            edge_grazes: match backend() {
+                TraversalBackend::Software => in_planes.edge_grazes,
+                TraversalBackend::HardwareRayQuery => 0,
+            },
+            ..in_planes
+        },
         "rays in face planes",
     );
-    assert!(hits.iter().filter(|h| h.is_hit()).count() > 50);
+    // Our traversal also hits the faces that in-plane rays meet at their edges; the axis-aligned
+    // quarter (about 44 rays inside the face x = -1) hits on either backend.
+    let least = match backend() {
+        TraversalBackend::Software => 50,
+        TraversalBackend::HardwareRayQuery => 30,
+    };
+    assert!(hits.iter().filter(|h| h.is_hit()).count() > least);
 }
 
 /// A geometry of three components in three vertex formats, with offsets, strides, transforms
@@ -741,7 +810,24 @@ fn refit_equals_rebuild(hint: BuildHint) {
     );
     // The triangle data and instance transforms are bit-identical in both contexts, and the tie
     // rule makes the reported hit independent of the tree: refit and rebuild must agree exactly.
+    // The driver has no tie rule: between coincident triangles its refitted and rebuilt
+    // structures may report either, so on that backend a differing hit must be a tie the oracle
+    // confirms (both triangles hit at that distance), with the same distance.
     for (k, (x, y)) in ha.iter().zip(&hb).enumerate() {
+        if backend() == TraversalBackend::HardwareRayQuery
+            && (x.instance, x.primitive) != (y.instance, y.primitive)
+        {
+            assert!(
+                x.is_hit()
+                    && y.is_hit()
+                    && close(x.t, y.t)
+                    && oracle.hits_at(&rays[k], x.instance, x.primitive, x.t)
+                    && oracle.hits_at(&rays[k], y.instance, y.primitive, y.t),
+                "{hint:?}: ray {k} {:?}: refit {x:?}, rebuild {y:?} (not a tie)",
+                rays[k]
+            );
+            continue;
+        }
         assert_eq!(
             (
                 x.instance,

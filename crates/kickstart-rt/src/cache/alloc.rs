@@ -137,8 +137,13 @@ pub(crate) struct DirectLightingCache {
 }
 
 impl DirectLightingCache {
-    /// An empty cache with a pool of `initial_surfels`.
-    pub fn new(device: &wgpu::Device, encoder_free_init: u32) -> Self {
+    /// An empty cache with a pool of `initial_surfels`, whose injection traces its visibility
+    /// rays with `backend`.
+    pub fn new(
+        device: &wgpu::Device,
+        encoder_free_init: u32,
+        backend: crate::device::TraversalBackend,
+    ) -> Self {
         let limits = device.limits();
         let max_binding = limits
             .max_storage_buffer_binding_size
@@ -183,7 +188,7 @@ impl DirectLightingCache {
             cleared: Vec::new(),
             state_ready: false,
             pipelines: None,
-            injector: Injector::default(),
+            injector: Injector::new(backend),
             transferer: Transferer::default(),
         }
     }
@@ -817,7 +822,8 @@ mod tests {
     #[test]
     fn an_instance_whose_records_do_not_fit_gets_no_cache_and_the_task_goes_on() {
         let g = gpu();
-        let mut cache = DirectLightingCache::new(&g.device, 1024);
+        let mut cache =
+            DirectLightingCache::new(&g.device, 1024, crate::device::TraversalBackend::Software);
         // A binding of 64 KiB: one triangle's records fit, 10 000 triangles' (320 KB) never do.
         cache.max_binding = 64 * 1024;
         let triangles = buffer(4 * 48);

@@ -12,12 +12,13 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use crate::device::TraversalBackend;
 use crate::error::{Error, Result};
 use crate::gpu::buffers::storage;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedPipeline, ReflectedShader};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK};
+use crate::scene::traversal::{self, SceneBuffers};
 use crate::{DepthType, DirectLightingInjectionTask};
 
 const TASK: &str = "DirectLightingInjectionTask";
@@ -55,8 +56,9 @@ struct InjectPipeline {
 }
 
 /// The injection passes and their accumulation buffer.
-#[derive(Default)]
 pub(crate) struct Injector {
+    /// The traversal the visibility rays use.
+    backend: TraversalBackend,
     /// Index 0: a depth-format depth texture; 1: a float texture.
     inject: [Option<InjectPipeline>; 2],
     resolve: Option<ReflectedPipeline>,
@@ -67,13 +69,17 @@ pub(crate) struct Injector {
 
 /// The WGSL of the injection pass reading depth of a depth format (`depth_format`) or a float
 /// texture.
-fn inject_shader(depth_format: bool) -> ReflectedShader {
+fn inject_shader(backend: TraversalBackend, depth_format: bool) -> ReflectedShader {
     let depth = if depth_format {
         "cache/inject_depth/depth_format"
     } else {
         "cache/inject_depth/float_format"
     };
-    ReflectedShader::compose(&["cache/inject", depth], &super::sample_params(1, false))
+    traversal::compose(
+        backend,
+        &["cache/inject", depth],
+        &super::sample_params(1, false),
+    )
 }
 
 /// The WGSL of the injection (both depth inputs) and resolve passes, labelled.
@@ -81,7 +87,9 @@ pub(crate) fn shader_variants() -> Vec<(String, String)> {
     let inject = |depth_format: bool| {
         (
             format!("injection (depth format: {depth_format})"),
-            inject_shader(depth_format).source().to_string(),
+            inject_shader(TraversalBackend::Software, depth_format)
+                .source()
+                .to_string(),
         )
     };
     vec![
@@ -99,9 +107,13 @@ fn resolve_shader() -> ReflectedShader {
     ReflectedShader::compose(&["cache/resolve"], &[])
 }
 
-fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline {
-    let shader = inject_shader(depth_format);
-    let scene = SceneBuffers::layout(device);
+fn inject_pipeline(
+    device: &wgpu::Device,
+    backend: TraversalBackend,
+    depth_format: bool,
+) -> InjectPipeline {
+    let shader = inject_shader(backend, depth_format);
+    let scene = SceneBuffers::layout(device, backend);
     let layout = |label, group| {
         ReflectedLayout::of_entry_point(device, label, shader.reflection(), "inject", group)
     };
@@ -118,7 +130,7 @@ fn inject_pipeline(device: &wgpu::Device, depth_format: bool) -> InjectPipeline 
             "inject",
             &groups,
             wgpu::ShaderRuntimeChecks::checked(),
-            &[TRAVERSAL_STACK],
+            traversal::uninitialized(backend),
         )
     };
     InjectPipeline {
@@ -161,10 +173,22 @@ fn hash(x: u32) -> u32 {
 }
 
 impl Injector {
+    /// No pipelines yet; visibility rays traced with `backend`.
+    pub fn new(backend: TraversalBackend) -> Self {
+        Injector {
+            backend,
+            inject: [None, None],
+            resolve: None,
+            accum: None,
+            tasks: 0,
+        }
+    }
+
     /// Creates the pipelines now.
     pub fn prepare(&mut self, device: &wgpu::Device) {
+        let backend = self.backend;
         for (i, p) in self.inject.iter_mut().enumerate() {
-            p.get_or_insert_with(|| inject_pipeline(device, i == 0));
+            p.get_or_insert_with(|| inject_pipeline(device, backend, i == 0));
         }
         self.resolve(device);
     }
@@ -251,7 +275,9 @@ impl Injector {
             },
         );
         let index = if depth_is_depth { 0 } else { 1 };
-        let p = self.inject[index].get_or_insert_with(|| inject_pipeline(device, depth_is_depth));
+        let backend = self.backend;
+        let p = self.inject[index]
+            .get_or_insert_with(|| inject_pipeline(device, backend, depth_is_depth));
         let [scene_group, cache_group, io_group] =
             inject_groups(device, p, scene, (meta, &accum), &params, task);
         let pipeline = p.pipeline.clone();

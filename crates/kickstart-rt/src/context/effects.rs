@@ -4,6 +4,7 @@
 
 use crate::cache::DirectLightingCache;
 use crate::denoise::{DenoiseJob, Denoisers};
+use crate::device::TraversalBackend;
 use crate::gpu::Recorder;
 use crate::scene::traversal::SceneBuffers;
 use crate::tasks::*;
@@ -35,6 +36,8 @@ pub(super) enum Route<'c> {
 /// The effects' pipelines and history. Pipelines are created on first use, so a context that
 /// never traces never compiles the trace shaders.
 pub(super) struct Effects {
+    /// The traversal every tracing effect is composed with.
+    backend: TraversalBackend,
     rays: Option<RayTracer>,
     debug_views: Option<DebugViewPass>,
     /// Created on first use: they generate the blue-noise tile.
@@ -56,9 +59,10 @@ pub(super) struct Inputs<'a> {
 }
 
 impl Effects {
-    /// No pipelines yet.
-    pub fn new(device: &wgpu::Device) -> Self {
+    /// No pipelines yet; tracing effects will trace with `backend`.
+    pub fn new(device: &wgpu::Device, backend: TraversalBackend) -> Self {
         Effects {
+            backend,
             rays: None,
             debug_views: None,
             traces: None,
@@ -68,23 +72,27 @@ impl Effects {
 
     /// Creates every effect's pipelines now.
     pub fn prepare_pipelines(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
-        self.rays.get_or_insert_with(|| RayTracer::new(device));
+        let backend = self.backend;
+        self.rays
+            .get_or_insert_with(|| RayTracer::new(device, backend));
         self.debug_views(device);
         self.traces(device, queue).prepare(device);
         self.denoisers.prepare_pipelines();
     }
 
     fn debug_views(&mut self, device: &wgpu::Device) -> &mut DebugViewPass {
+        let backend = self.backend;
         self.debug_views.get_or_insert_with(|| {
-            let mut p = DebugViewPass::new();
+            let mut p = DebugViewPass::new(backend);
             p.prepare(device);
             p
         })
     }
 
     fn traces(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> &mut TracePasses {
+        let backend = self.backend;
         self.traces
-            .get_or_insert_with(|| TracePasses::new(device, queue))
+            .get_or_insert_with(|| TracePasses::new(device, queue, backend))
     }
 
     /// Records one render task on the effect its plan routed it to.
@@ -99,7 +107,10 @@ impl Effects {
         match route {
             Route::RayBatch(t) => {
                 rec.scope = "trace rays";
-                let rays = self.rays.get_or_insert_with(|| RayTracer::new(device));
+                let backend = self.backend;
+                let rays = self
+                    .rays
+                    .get_or_insert_with(|| RayTracer::new(device, backend));
                 rays.record(
                     rec,
                     &inputs.scene,

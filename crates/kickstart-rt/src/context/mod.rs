@@ -21,6 +21,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use crate::allocations::ResourceAllocations;
 use crate::container::TaskContainer;
+use crate::device::BackendReport;
 use crate::error::{Error, Result};
 use crate::gpu::recorder::Timestamps;
 use crate::handles::*;
@@ -46,6 +47,8 @@ pub struct ExecuteContext {
     queue: wgpu::Queue,
     working_sets: u32,
     gpu_timing: bool,
+    /// The traversal backend and why it was chosen.
+    backend: BackendReport,
     logger: Logger,
     state: Mutex<State>,
 }
@@ -93,6 +96,14 @@ impl ExecuteContext {
             ));
         }
         crate::device::check_device(device)?;
+        let backend = crate::device::choose_backend(device, settings.backend)?;
+        logger.message(
+            Severity::Info,
+            &format!(
+                "kickstart-rt traces with the {} backend ({})",
+                backend.backend, backend.reason
+            ),
+        );
         let gpu_timing =
             settings.gpu_timing && device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         if settings.gpu_timing && !gpu_timing {
@@ -108,6 +119,7 @@ impl ExecuteContext {
             queue: queue.clone(),
             working_sets: settings.supported_working_sets,
             gpu_timing,
+            backend: backend.clone(),
             logger,
             state: Mutex::new(State {
                 geometries: HandlePool::new(id),
@@ -116,8 +128,8 @@ impl ExecuteContext {
                 in_flight: BTreeMap::new(),
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
-                scene: GpuScene::new(device),
-                effects: Effects::new(device),
+                scene: GpuScene::new(device, backend.backend),
+                effects: Effects::new(device, backend.backend),
                 blas_queue: VecDeque::new(),
                 dead_instance_slots: Vec::new(),
                 dead_geometry_slots: Vec::new(),
@@ -133,6 +145,7 @@ impl ExecuteContext {
                 cache: crate::cache::DirectLightingCache::new(
                     device,
                     (settings.lighting_cache_pool_bytes / 16).min(u32::MAX as u64) as u32,
+                    backend.backend,
                 ),
             }),
         })
@@ -426,6 +439,12 @@ impl ExecuteContext {
         };
         let (nodes, tris) = s.scene.read_back_blas(&self.queue, &d.gpu)?;
         Ok(crate::cpu::BlasReadback::new(nodes, tris))
+    }
+
+    /// The traversal backend every trace of this context uses, and why it was chosen
+    /// ([`InitSettings::backend`] and what the device offers).
+    pub fn traversal_backend(&self) -> &BackendReport {
+        &self.backend
     }
 
     /// Creates every compute pipeline now, so the first frame that needs one does not stall.

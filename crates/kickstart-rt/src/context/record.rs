@@ -94,6 +94,7 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
             .copy_buffer_to_buffer(&s.scene.counters, 0, &dropped.buffer, 0, size);
     }
     update_tlas(frame, s, plan);
+    record_hardware_structures(frame, s);
     register_instances(s, &plan.instances, frame.serial);
     allocate_caches(frame, s);
     for route in &plan.render {
@@ -148,6 +149,9 @@ fn allocate_staged<'c>(
 fn clear_dead_slots(s: &mut State, uploads: &mut Uploads, serial: u64) {
     if !s.dead_geometry_slots.is_empty() {
         for slot in std::mem::take(&mut s.dead_geometry_slots) {
+            if let Some(hw) = s.scene.hardware.as_mut() {
+                hw.remove(slot);
+            }
             uploads.push(
                 &s.scene.geometry_table.buffer,
                 slot as u64 * GEOMETRY_RECORD_SIZE,
@@ -423,6 +427,9 @@ fn build_blases(
                     h.index as u64 * GEOMETRY_RECORD_SIZE,
                     bytemuck::bytes_of(&header),
                 );
+                if let (Some(hw), Some(blas)) = (s.scene.hardware.as_mut(), d.gpu.blas) {
+                    hw.build(h.index, blas.tris.start, d.gpu.triangles, d.allow_update);
+                }
                 if !d.allow_update {
                     // Static geometry: its staged copy is not needed after the build.
                     if let Some(r) = d.gpu.staged.take() {
@@ -435,6 +442,9 @@ fn build_blases(
                 let fused = deferred.remove(&h);
                 s.scene
                     .refit_blas(&mut rec, h.index, &d.gpu, fused.as_ref());
+                if let Some(hw) = s.scene.hardware.as_mut() {
+                    hw.refit(h.index);
+                }
                 s.tlas_refit = true;
             }
             None => continue,
@@ -490,6 +500,9 @@ fn update_tlas(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) {
         };
     let mut records = Uploads::default();
     for (slot, bytes) in std::mem::take(&mut s.pending_records) {
+        if let Some(hw) = s.scene.hardware.as_mut() {
+            hw.set_record(slot, &bytes);
+        }
         records.push(
             &s.scene.instance_table.buffer,
             slot as u64 * INSTANCE_RECORD_SIZE,
@@ -501,6 +514,18 @@ fn update_tlas(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) {
     s.scene.update_tlas(&mut rec, slots, refit);
     s.tlas_rebuild = false;
     s.tlas_refit = false;
+}
+
+/// Step 6b, hardware backend only: the driver's BLASes of the geometries built or refitted in
+/// step 5 (from the triangle pool those builds wrote) and its TLAS over the instance records
+/// step 6 uploaded. The driver's TLAS is rebuilt in every task that changed a BLAS, even when a
+/// `BvhBuildTask` deferred the software TLAS: a driver TLAS must not keep instances of a BLAS
+/// whose triangles moved or were replaced.
+fn record_hardware_structures(frame: &mut Frame<'_>, s: &mut State) {
+    let Some(hw) = s.scene.hardware.as_mut() else {
+        return;
+    };
+    hw.record(frame.encoder, s.scene.triangles.buffer());
 }
 
 /// Instance bookkeeping (after the records are recorded): a new instance, or one given another

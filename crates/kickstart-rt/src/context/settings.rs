@@ -31,6 +31,11 @@ pub struct InitSettings {
     /// 4 MiB). The pool grows by itself when instances need more (their caches are coarse until
     /// then); a size near the scene's need avoids that first coarse frame.
     pub lighting_cache_pool_bytes: u64,
+    /// How rays traverse the scene: the software BVH everywhere, or the GPU's ray-tracing
+    /// hardware where the device was created with ray queries. Default
+    /// [`BackendChoice::Auto`](crate::BackendChoice::Auto); the choice and its reason:
+    /// [`ExecuteContext::traversal_backend`](crate::ExecuteContext::traversal_backend).
+    pub backend: crate::device::BackendChoice,
 }
 
 impl Default for InitSettings {
@@ -42,6 +47,7 @@ impl Default for InitSettings {
             min_log_severity: Severity::Warning,
             gpu_timing: false,
             lighting_cache_pool_bytes: crate::cache::alloc::DEFAULT_INITIAL_SURFELS as u64 * 16,
+            backend: crate::device::BackendChoice::Auto,
         }
     }
 }
@@ -54,6 +60,8 @@ impl std::fmt::Debug for InitSettings {
             .field("log_callback", &self.log_callback.is_some())
             .field("min_log_severity", &self.min_log_severity)
             .field("gpu_timing", &self.gpu_timing)
+            .field("lighting_cache_pool_bytes", &self.lighting_cache_pool_bytes)
+            .field("backend", &self.backend)
             .finish()
     }
 }

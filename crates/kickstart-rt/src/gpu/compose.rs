@@ -6,6 +6,9 @@
 //! line:
 //! - `#import trace/common`: the module needs another one; it is included once per composed
 //!   shader, before the modules that import it, however many import it.
+//! - `enable wgpu_ray_query;` (any WGSL `enable` directive): moved to the top of the composed
+//!   shader, once, since WGSL allows directives only before every declaration and an imported
+//!   module's declarations come first.
 //! - `#param OUTPUT0_FORMAT`: the module has a parameter, written `{{OUTPUT0_FORMAT}}` in its
 //!   text, that every composition including it must give (a bind group number, a texel format, a
 //!   constant). A parameter is one token; where variants differ in code, they are different
@@ -90,6 +93,23 @@ impl ShaderLibrary {
         }
     }
 
+    /// Gives module `name` the text of module `with` (which must exist): every import of
+    /// `name` gets `with`'s code. How a traversal backend stands in for another
+    /// (`scene/traversal`, see `crate::scene::traversal`).
+    ///
+    /// # Panics
+    ///
+    /// When there is no module `with`: the names are the SDK's own constants, so a test of any
+    /// pass composed this way catches it.
+    pub fn substitute(&mut self, name: &'static str, with: &str) {
+        let text = self
+            .modules
+            .get(with)
+            .cloned()
+            .unwrap_or_else(|| panic!("no shader module `{with}` to stand in for `{name}`"));
+        self.modules.insert(name, text);
+    }
+
     /// Replaces (or adds) module `name`: tests stand a simple module in for a real one with the
     /// same interface (e.g. a lighting cache that returns known colours).
     #[cfg_attr(not(test), allow(dead_code))]
@@ -110,6 +130,7 @@ impl ShaderLibrary {
             self.visit(root, "<roots>", &mut Vec::new(), &mut order)?;
         }
         let mut declared = Vec::new();
+        let mut enables: Vec<String> = Vec::new();
         let mut text = String::new();
         for &name in &order {
             let module = self.parse(name)?;
@@ -124,6 +145,11 @@ impl ShaderLibrary {
                 });
             }
             declared.extend_from_slice(&module.params);
+            for e in &module.enables {
+                if !enables.contains(e) {
+                    enables.push(e.clone());
+                }
+            }
             text.push_str(&module_header(name));
             text.push_str(&module.fill(name, params)?);
         }
@@ -133,7 +159,12 @@ impl ShaderLibrary {
                 modules: order.iter().map(|m| m.to_string()).collect(),
             });
         }
-        Ok(text)
+        if enables.is_empty() {
+            return Ok(text);
+        }
+        let mut with_directives: String = enables.iter().map(|e| format!("{e}\n")).collect();
+        with_directives.push_str(&text);
+        Ok(with_directives)
     }
 
     /// Depth-first visit of `name`'s imports; appends each module after its imports.
@@ -173,10 +204,16 @@ impl ShaderLibrary {
         let mut module = Module {
             imports: Vec::new(),
             params: Vec::new(),
+            enables: Vec::new(),
             body: String::with_capacity(source.len()),
         };
         for (i, line) in source.lines().enumerate() {
             let trimmed = line.trim();
+            if trimmed.starts_with("enable ") && trimmed.ends_with(';') {
+                module.enables.push(trimmed.to_string());
+                module.body.push('\n');
+                continue;
+            }
             if !trimmed.starts_with('#') {
                 module.body.push_str(line);
                 module.body.push('\n');
@@ -208,6 +245,8 @@ impl ShaderLibrary {
 struct Module<'a> {
     imports: Vec<&'a str>,
     params: Vec<&'a str>,
+    /// Its `enable` directives (hoisted to the top of the composed shader).
+    enables: Vec<String>,
     body: String,
 }
 

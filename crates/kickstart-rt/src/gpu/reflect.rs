@@ -142,6 +142,9 @@ fn binding_type(kind: ResourceKind, inner: &naga::TypeInner) -> Option<wgpu::Bin
         (ResourceKind::Storage { read_only }, _) => {
             Some(buffer(wgpu::BufferBindingType::Storage { read_only }))
         }
+        (ResourceKind::Handle, &TypeInner::AccelerationStructure { vertex_return }) => {
+            Some(wgpu::BindingType::AccelerationStructure { vertex_return })
+        }
         (
             ResourceKind::Handle,
             &TypeInner::Image {
@@ -323,7 +326,19 @@ impl ReflectedShader {
     /// When the composition or naga's validation fails: the roots and parameters are the SDK's
     /// own per variant, and a CPU-only test of each pass validates every variant it creates.
     pub fn compose(roots: &[&str], params: &[(&str, &str)]) -> Self {
-        let source = super::compose::compose(roots, params);
+        Self::compose_in(&super::compose::ShaderLibrary::builtin(), roots, params)
+    }
+
+    /// As [`ReflectedShader::compose`], from the modules of `library` (the SDK's, with a
+    /// backend's module substituted: see `crate::scene::traversal`).
+    pub fn compose_in(
+        library: &super::compose::ShaderLibrary,
+        roots: &[&str],
+        params: &[(&str, &str)],
+    ) -> Self {
+        let source = library
+            .compose(roots, params)
+            .unwrap_or_else(|e| panic!("composing {roots:?}: {e}"));
         let reflection = ShaderReflection::new(&source)
             .unwrap_or_else(|e| panic!("composed shader {roots:?} is not valid WGSL: {e}"));
         ReflectedShader { source, reflection }

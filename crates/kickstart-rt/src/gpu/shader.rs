@@ -54,7 +54,9 @@ pub(crate) fn compute_pipeline_with_layouts(
 /// `uninitialized` private arrays are not zero-filled at the start of each invocation, where the
 /// device allows it (Vulkan with `Features::PASSTHROUGH_SHADERS`: see [`super::spirv`]); otherwise,
 /// or if that compilation fails, the same pipeline from WGSL; `checks` applies to either. Also
-/// returns whether the pipeline came from our own SPIR-V (see [`spirv_accepted`]).
+/// returns whether the pipeline came from our own SPIR-V (see [`spirv_accepted`]). With no
+/// `uninitialized` array (the hardware backend's passes have no stack) there is nothing to drop:
+/// the pipeline is made from WGSL.
 ///
 /// # Safety
 ///
@@ -72,7 +74,7 @@ pub(crate) unsafe fn traversal_pipeline(
     uninitialized: &[&str],
 ) -> (wgpu::ComputePipeline, bool) {
     let groups: Vec<&wgpu::BindGroupLayout> = layouts.iter().map(|g| g.layout).collect();
-    if spirv_accepted(device) {
+    if spirv_accepted(device) && !uninitialized.is_empty() {
         let bindings: Vec<&[u32]> = layouts.iter().map(|g| g.bindings).collect();
         let request = super::spirv::SpirvRequest {
             entry_point,

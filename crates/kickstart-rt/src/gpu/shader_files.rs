@@ -38,6 +38,7 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "scene/lbvh/lbvh",
     "scene/prims",
     "scene/traversal",
+    "scene/traversal_ray_query",
     "scene/triangle_box",
     "scene/types",
     "trace/ao",

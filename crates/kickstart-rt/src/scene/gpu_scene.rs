@@ -2,7 +2,9 @@
 //! data), the geometry and instance tables, the TLAS, and the passes that fill them. Layouts:
 //! `docs/ray-tracing-core.md`. The context decides *what* to do each task; this module records it.
 
+use crate::device::TraversalBackend;
 use crate::error::{Error, Result};
+use crate::scene::hardware::HardwareScene;
 // Generic buffer helpers live in the gpu layer; re-exported here for the modules that still
 // import them from the scene.
 use crate::gpu::buffers::{read_back, storage, Grown};
@@ -269,10 +271,20 @@ pub(crate) struct GpuScene {
     /// Dropped-triangle counters of this task's ingestions (two per ingestion).
     pub counters: wgpu::Buffer,
     passes: Passes,
+    /// The driver's acceleration structures, on the hardware backend only.
+    pub hardware: Option<HardwareScene>,
 }
 
 impl GpuScene {
-    pub fn new(device: &wgpu::Device) -> Self {
+    /// An empty scene for `backend`.
+    pub fn new(device: &wgpu::Device, backend: TraversalBackend) -> Self {
+        let hardware = backend == TraversalBackend::HardwareRayQuery;
+        // The driver's BLASes are built from the triangle pool.
+        let triangle_usage = if hardware {
+            wgpu::BufferUsages::BLAS_INPUT
+        } else {
+            wgpu::BufferUsages::empty()
+        };
         let limits = device.limits();
         let max_binding = limits
             .max_storage_buffer_binding_size
@@ -282,7 +294,12 @@ impl GpuScene {
             device: device.clone(),
             max_binding,
             staged: Pool::new(device, "kickstart-rt staged triangles", TRIANGLE_BYTES),
-            triangles: Pool::new(device, "kickstart-rt BLAS triangles", TRIANGLE_BYTES),
+            triangles: Pool::with_usage(
+                device,
+                "kickstart-rt BLAS triangles",
+                TRIANGLE_BYTES,
+                triangle_usage,
+            ),
             nodes: Pool::new(device, "kickstart-rt BLAS nodes", NODE_BYTES),
             orders: Pool::new(device, "kickstart-rt BLAS sort orders", 4),
             topologies: Pool::new(device, "kickstart-rt BLAS refit topology", 4),
@@ -309,6 +326,7 @@ impl GpuScene {
             scratch_topology: Grown::default(),
             counters: storage(device, "kickstart-rt ingestion counters", 8),
             passes: Passes::default(),
+            hardware: hardware.then(|| HardwareScene::new(device)),
         }
     }
 
@@ -826,6 +844,7 @@ impl GpuScene {
             geometries: &self.geometry_table.buffer,
             blas_nodes: self.nodes.buffer(),
             triangles: self.triangles.buffer(),
+            tlas: self.hardware.as_ref().map(HardwareScene::tlas),
         }
     }
 

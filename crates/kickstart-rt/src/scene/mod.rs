@@ -2,6 +2,7 @@
 //! `docs/ray-tracing-core.md`.
 
 pub(crate) mod gpu_scene;
+pub(crate) mod hardware;
 pub(crate) mod ingest;
 pub(crate) mod lbvh;
 pub(crate) mod pool;

@@ -141,9 +141,21 @@ pub(crate) struct Pool {
 impl Pool {
     /// An empty pool whose elements are `element_bytes` each.
     pub fn new(device: &wgpu::Device, label: &'static str, element_bytes: u64) -> Self {
+        Self::with_usage(device, label, element_bytes, wgpu::BufferUsages::empty())
+    }
+
+    /// An empty pool whose buffer also has `extra` usage (e.g. `BLAS_INPUT`, for the driver's
+    /// acceleration structures to read).
+    pub fn with_usage(
+        device: &wgpu::Device,
+        label: &'static str,
+        element_bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Self {
         let usage = wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST;
+            | wgpu::BufferUsages::COPY_DST
+            | extra;
         let ledger = Ledger::new(element_bytes, 16);
         Pool {
             label,

@@ -3,18 +3,58 @@
 //! [`crate::gpu::compose`]), and the name of its stack. This is the one seam between the scene and
 //! every tracing pass (ray batches, debug views, trace tasks, the lighting cache's injection), so
 //! another traversal backend can stand in its place: a module of the same name and functions, and
-//! the buffers it binds.
+//! the buffers it binds. The hardware backend is exactly that: `scene/traversal_ray_query`
+//! composed in place of `scene/traversal` ([`library`]), binding the TLAS the driver built.
 
 use std::sync::OnceLock;
 
+use crate::device::TraversalBackend;
+use crate::gpu::compose::ShaderLibrary;
 use crate::gpu::layout::BoundLayout;
 use crate::gpu::reflect::{named_entries, ReflectedShader, ShaderBinding};
 
-/// The `@group(0)` bindings of the traversal module, as it declares them.
-fn scene_bindings() -> &'static [ShaderBinding] {
-    static BINDINGS: OnceLock<Vec<ShaderBinding>> = OnceLock::new();
-    BINDINGS.get_or_init(|| {
-        ReflectedShader::compose(&["scene/traversal"], &[])
+/// The traversal module every tracing pass imports.
+const TRAVERSAL_MODULE: &str = "scene/traversal";
+/// The hardware backend's module of the same interface.
+const RAY_QUERY_MODULE: &str = "scene/traversal_ray_query";
+
+/// The SDK's shader modules with `backend`'s traversal behind `#import scene/traversal`.
+pub(crate) fn library(backend: TraversalBackend) -> ShaderLibrary {
+    let mut library = ShaderLibrary::builtin();
+    if backend == TraversalBackend::HardwareRayQuery {
+        library.substitute(TRAVERSAL_MODULE, RAY_QUERY_MODULE);
+    }
+    library
+}
+
+/// A tracing pass's modules `roots` composed for `backend` (see [`library`]).
+pub(crate) fn compose(
+    backend: TraversalBackend,
+    roots: &[&str],
+    params: &[(&str, &str)],
+) -> ReflectedShader {
+    ReflectedShader::compose_in(&library(backend), roots, params)
+}
+
+/// The private arrays a traversal pass of `backend` never reads before writing (the software
+/// stack, [`TRAVERSAL_STACK`]), whose zero fill its pipeline may drop.
+pub(crate) fn uninitialized(backend: TraversalBackend) -> &'static [&'static str] {
+    match backend {
+        TraversalBackend::Software => &[TRAVERSAL_STACK],
+        TraversalBackend::HardwareRayQuery => &[],
+    }
+}
+
+/// The `@group(0)` bindings of `backend`'s traversal module, as it declares them.
+fn scene_bindings(backend: TraversalBackend) -> &'static [ShaderBinding] {
+    static SOFTWARE: OnceLock<Vec<ShaderBinding>> = OnceLock::new();
+    static HARDWARE: OnceLock<Vec<ShaderBinding>> = OnceLock::new();
+    let cell = match backend {
+        TraversalBackend::Software => &SOFTWARE,
+        TraversalBackend::HardwareRayQuery => &HARDWARE,
+    };
+    cell.get_or_init(|| {
+        compose(backend, &[TRAVERSAL_MODULE], &[])
             .reflection()
             .group_bindings(0)
     })
@@ -34,13 +74,23 @@ pub(crate) struct SceneBuffers<'a> {
     pub blas_nodes: &'a wgpu::Buffer,
     /// Triangle pool (`rt_triangles`).
     pub triangles: &'a wgpu::Buffer,
+    /// The driver's TLAS (`rt_tlas`) on the hardware backend; `None` on the software one.
+    pub tlas: Option<&'a wgpu::Tlas>,
 }
 
 impl SceneBuffers<'_> {
+    /// The backend these buffers are for: the hardware one when they carry a TLAS.
+    pub fn backend(&self) -> TraversalBackend {
+        match self.tlas {
+            Some(_) => TraversalBackend::HardwareRayQuery,
+            None => TraversalBackend::Software,
+        }
+    }
+
     /// The explicit layout of the `@group(0)` scene bindings, as the traversal module declares
     /// them, for pipelines built with explicit layouts.
-    pub fn layout(device: &wgpu::Device) -> BoundLayout {
-        let entries: Vec<_> = scene_bindings()
+    pub fn layout(device: &wgpu::Device, backend: TraversalBackend) -> BoundLayout {
+        let entries: Vec<_> = scene_bindings(backend)
             .iter()
             .map(ShaderBinding::layout_entry)
             .collect();
@@ -54,17 +104,24 @@ impl SceneBuffers<'_> {
         device: &wgpu::Device,
         pipeline: &wgpu::ComputePipeline,
     ) -> wgpu::BindGroup {
-        let resources = [
+        let mut resources = vec![
             ("rt_tlas_nodes", self.tlas_nodes.as_entire_binding()),
             ("rt_instances", self.instances.as_entire_binding()),
             ("rt_geometries", self.geometries.as_entire_binding()),
             ("rt_blas_nodes", self.blas_nodes.as_entire_binding()),
             ("rt_triangles", self.triangles.as_entire_binding()),
         ];
+        if let Some(tlas) = self.tlas {
+            resources.push(("rt_tlas", tlas.as_binding()));
+        }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("kickstart-rt scene"),
             layout: &pipeline.get_bind_group_layout(0),
-            entries: &named_entries("kickstart-rt scene", scene_bindings(), &resources),
+            entries: &named_entries(
+                "kickstart-rt scene",
+                scene_bindings(self.backend()),
+                &resources,
+            ),
         })
     }
 }

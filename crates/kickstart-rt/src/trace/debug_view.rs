@@ -14,9 +14,10 @@
 //! orthographic views).
 
 use crate::camera::camera;
+use crate::device::TraversalBackend;
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
-use crate::scene::traversal::SceneBuffers;
+use crate::scene::traversal::{self, SceneBuffers};
 use crate::{DebugOutputType, Error, InstanceInclusionMask, Result, ViewInfo};
 use bytemuck::{Pod, Zeroable};
 
@@ -54,11 +55,12 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
 }
 
 /// The WGSL of the debug view pass writing the storage format `format_name` (a name
-/// [`wgsl_format`] gives).
-fn debug_view_shader(format_name: &str) -> ReflectedShader {
+/// [`wgsl_format`] gives), tracing with `backend`.
+fn debug_view_shader(backend: TraversalBackend, format_name: &str) -> ReflectedShader {
     // The lighting cache's sampling module at group 2 (the DirectLightingCache view reads it).
     let [group, access] = crate::cache::sample_params(2, false);
-    ReflectedShader::compose(
+    traversal::compose(
+        backend,
         &["trace/debug_view"],
         &[group, access, ("OUTPUT_FORMAT", format_name)],
     )
@@ -105,7 +107,9 @@ pub(crate) fn shader_variants() -> Vec<(String, String)> {
             let name = wgsl_format(f)?;
             Some((
                 format!("debug view ({f:?})"),
-                debug_view_shader(name).source().to_string(),
+                debug_view_shader(TraversalBackend::Software, name)
+                    .source()
+                    .to_string(),
             ))
         })
         .collect()
@@ -113,15 +117,18 @@ pub(crate) fn shader_variants() -> Vec<(String, String)> {
 
 /// The primary-ray debug view pass (`debug view`); pipelines are created per output format on
 /// first use.
-#[derive(Default)]
 pub(crate) struct DebugViewPass {
+    backend: TraversalBackend,
     pipelines: Vec<(wgpu::TextureFormat, ReflectedPipeline)>,
 }
 
 impl DebugViewPass {
-    /// A pass with no pipelines yet.
-    pub fn new() -> Self {
-        Self::default()
+    /// A pass tracing with `backend`, with no pipelines yet.
+    pub fn new(backend: TraversalBackend) -> Self {
+        DebugViewPass {
+            backend,
+            pipelines: Vec::new(),
+        }
     }
 
     /// The pipeline writing `format`, created on first use.
@@ -141,8 +148,11 @@ impl DebugViewPass {
                         "must be one of WRITABLE_OUTPUT_FORMATS",
                     ));
                 };
-                let pipeline =
-                    debug_view_shader(name).pipeline(device, "kickstart-rt debug view", "main");
+                let pipeline = debug_view_shader(self.backend, name).pipeline(
+                    device,
+                    "kickstart-rt debug view",
+                    "main",
+                );
                 self.pipelines.push((format, pipeline));
                 self.pipelines.len() - 1
             }
@@ -249,7 +259,7 @@ mod tests {
             let name = wgsl_format(format).unwrap();
             let module = validate(
                 &format!("debug view ({format:?})"),
-                debug_view_shader(name).source(),
+                debug_view_shader(TraversalBackend::Software, name).source(),
             );
             assert!(module.entry_points.iter().any(|e| e.name == "main"));
             // `pad[0]` carries the shader's `bilinear` flag (see `record`).
@@ -313,8 +323,12 @@ mod tests {
             view_formats: &[],
         });
         let view_tex = tex.create_view(&Default::default());
-        let mut pass = DebugViewPass::new();
-        let cache = crate::cache::DirectLightingCache::new(&testing::gpu().device, 64);
+        let mut pass = DebugViewPass::new(TraversalBackend::Software);
+        let cache = crate::cache::DirectLightingCache::new(
+            &testing::gpu().device,
+            64,
+            TraversalBackend::Software,
+        );
         testing::run(|rec| {
             let debug = DebugView::new(kind, (VX, VY, W, H)).unwrap().unwrap();
             pass.record(
@@ -554,7 +568,7 @@ mod tests {
             assert!((c[0] - 5.0).abs() < 0.05, "{format:?}: {c:?}");
         }
         let g = testing::gpu();
-        let mut pass = DebugViewPass::new();
+        let mut pass = DebugViewPass::new(TraversalBackend::Software);
         // Every writable output format compiles (also on the minimal device).
         pass.prepare(&g.device);
         assert_eq!(pass.pipelines.len(), crate::WRITABLE_OUTPUT_FORMATS.len());

@@ -1,10 +1,11 @@
 //! Ray batches: rays from a buffer are traced through the scene (closest or any hit) and their
 //! hits written to a buffer. Also holds the scene bindings every tracing pass shares.
 
+use crate::device::TraversalBackend;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedShader};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK};
+use crate::scene::traversal::{self, SceneBuffers};
 use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
 
@@ -18,16 +19,18 @@ pub(crate) const RECORD_SIZE: u64 = 32;
 #[allow(unused_imports)] // GpuHit and GpuRay are this module's tests' vocabulary
 pub(crate) use crate::tasks::{GpuHit, GpuRay, RayQuery};
 
-/// The ray batch pass's shader.
-fn trace_rays_shader() -> ReflectedShader {
-    ReflectedShader::compose(&["trace/rays"], &[])
+/// The ray batch pass's shader for `backend`.
+fn trace_rays_shader(backend: TraversalBackend) -> ReflectedShader {
+    traversal::compose(backend, &["trace/rays"], &[])
 }
 
-/// The WGSL of the ray batch pass, labelled.
+/// The WGSL of the ray batch pass (software traversal), labelled.
 pub(crate) fn shader_variants() -> Vec<(String, String)> {
     vec![(
         "trace rays".into(),
-        trace_rays_shader().source().to_string(),
+        trace_rays_shader(TraversalBackend::Software)
+            .source()
+            .to_string(),
     )]
 }
 
@@ -63,9 +66,9 @@ pub(crate) struct RayTracer {
 impl RayTracer {
     /// Creates the pipeline (one for both queries: the query is a uniform, so one bind group
     /// layout serves every batch).
-    pub fn new(device: &wgpu::Device) -> Self {
-        let shader = trace_rays_shader();
-        let scene_layout = SceneBuffers::layout(device);
+    pub fn new(device: &wgpu::Device, backend: TraversalBackend) -> Self {
+        let shader = trace_rays_shader(backend);
+        let scene_layout = SceneBuffers::layout(device, backend);
         let io_layout =
             ReflectedLayout::new(device, "kickstart-rt trace rays io", shader.reflection(), 1);
         let layouts = [scene_layout.group(), io_layout.group()];
@@ -90,7 +93,7 @@ impl RayTracer {
                 "main",
                 &layouts,
                 wgpu::ShaderRuntimeChecks::unchecked(),
-                &[TRAVERSAL_STACK],
+                traversal::uninitialized(backend),
             )
         };
         RayTracer {
@@ -175,7 +178,10 @@ mod tests {
     #[test]
     fn the_wgsl_validates_and_matches_the_rust_layouts() {
         use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
-        let module = validate("trace rays", trace_rays_shader().source());
+        let module = validate(
+            "trace rays",
+            trace_rays_shader(TraversalBackend::Software).source(),
+        );
         assert!(module.entry_points.iter().any(|e| e.name == "main"));
         assert_wgsl_layout!(
             module,
@@ -218,7 +224,7 @@ mod tests {
         // A pass that silently fell back to WGSL would zero-fill its stack per invocation again
         // (measured much slower on the H100; see docs/decisions/stack-zero-fill.md).
         let g = crate::gpu::testing::gpu();
-        let tracer = RayTracer::new(&g.device);
+        let tracer = RayTracer::new(&g.device, TraversalBackend::Software);
         assert_eq!(
             tracer.own_spirv,
             crate::gpu::shader::spirv_accepted(&g.device)
@@ -661,7 +667,7 @@ mod tests {
         let g = crate::gpu::testing::gpu();
         let align = g.device.limits().min_storage_buffer_offset_alignment as u64;
         let scene = TestScene::single(cube(1));
-        let tracer = RayTracer::new(&g.device);
+        let tracer = RayTracer::new(&g.device, TraversalBackend::Software);
         let n = 100usize;
         let rays: Vec<GpuRay> = (0..n)
             .map(|i| {

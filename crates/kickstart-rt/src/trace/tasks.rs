@@ -12,12 +12,13 @@
 use super::gbuffer::{GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
 use super::sampling::blue_noise_texture;
+use crate::device::TraversalBackend;
 use crate::gpu::compose::ShaderLibrary;
 use crate::gpu::layout::BoundLayout;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedShader, ShaderReflection};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{SceneBuffers, TRAVERSAL_STACK};
+use crate::scene::traversal::{self, SceneBuffers};
 use crate::tasks::*;
 use crate::{Error, InstanceInclusionMask, Result};
 use bytemuck::{Pod, Zeroable};
@@ -153,17 +154,19 @@ pub(crate) struct TracePasses {
     /// The shader modules (unit tests stand a simple module in for the lighting cache's
     /// `cache/sample`).
     library: ShaderLibrary,
+    /// The traversal the passes are composed with.
+    backend: TraversalBackend,
     pipelines: Vec<Pipeline>,
 }
 
 impl TracePasses {
     /// Creates the layouts and the blue-noise tile (pipelines come on first use).
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, backend: TraversalBackend) -> Self {
         let gbuffer = GBufferBinder::new(device);
         // Absent optional textures bind the G-buffer's 1×1 placeholder.
         let placeholder = gbuffer.placeholder().clone();
         TracePasses {
-            scene_layout: SceneBuffers::layout(device),
+            scene_layout: SceneBuffers::layout(device, backend),
             gbuffer,
             blue_noise: blue_noise_texture(device, queue),
             placeholder,
@@ -174,7 +177,8 @@ impl TracePasses {
                     .reflection(),
                 3,
             ),
-            library: ShaderLibrary::builtin(),
+            library: traversal::library(backend),
+            backend,
             pipelines: Vec::new(),
         }
     }
@@ -234,7 +238,7 @@ impl TracePasses {
                 entry,
                 &layouts,
                 wgpu::ShaderRuntimeChecks::checked(),
-                &[TRAVERSAL_STACK],
+                traversal::uninitialized(self.backend),
             )
         };
         self.pipelines.push(Pipeline {

@@ -476,7 +476,12 @@ pub(crate) fn gpu_trace(
     use super::rays::RayTracer;
     use std::sync::OnceLock;
     static TRACER: OnceLock<RayTracer> = OnceLock::new();
-    let tracer = TRACER.get_or_init(|| RayTracer::new(&testing::gpu().device));
+    let tracer = TRACER.get_or_init(|| {
+        RayTracer::new(
+            &testing::gpu().device,
+            crate::device::TraversalBackend::Software,
+        )
+    });
     let ray_buf = upload(bytemuck::cast_slice(rays));
     let size = (rays.len().max(1) * 32) as u64;
     let hit_buf = testing::buffer(size);

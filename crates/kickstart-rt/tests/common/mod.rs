@@ -1,7 +1,9 @@
 //! Shared GPU test device and helpers. One device per test binary (device creation is slow on
 //! lavapipe). `KSRT_TEST_MINIMAL_DEVICE=1` creates it with `Features::empty()` and
 //! `Limits::default()` (CI runs the suite both ways). A missing adapter fails the test: a GPU
-//! test is never skipped.
+//! test is never skipped. `KSRT_TEST_BACKEND=hardware` creates it with hardware ray queries
+//! (contexts then take the hardware backend: `InitSettings::backend` is `Auto`), and a device
+//! without them fails the test; `software` or unset leaves them out.
 
 #![allow(dead_code)]
 
@@ -23,6 +25,15 @@ pub fn minimal() -> bool {
     std::env::var("KSRT_TEST_MINIMAL_DEVICE").is_ok_and(|v| v == "1")
 }
 
+/// The traversal backend this test pass asks for (`KSRT_TEST_BACKEND`).
+pub fn backend() -> kickstart_rt::TraversalBackend {
+    match std::env::var("KSRT_TEST_BACKEND").as_deref() {
+        Ok("hardware") => kickstart_rt::TraversalBackend::HardwareRayQuery,
+        Ok("software") | Err(_) => kickstart_rt::TraversalBackend::Software,
+        Ok(other) => panic!("KSRT_TEST_BACKEND={other}: expected `software` or `hardware`"),
+    }
+}
+
 pub fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();
     GPU.get_or_init(|| {
@@ -35,7 +46,8 @@ pub fn gpu() -> &'static Gpu {
             .unwrap_or_else(|e| {
                 panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")
             });
-        let (features, limits) = if minimal() {
+        let hardware = backend() == kickstart_rt::TraversalBackend::HardwareRayQuery;
+        let (mut features, mut limits) = if minimal() {
             (wgpu::Features::empty(), wgpu::Limits::default())
         } else {
             (
@@ -46,17 +58,32 @@ pub fn gpu() -> &'static Gpu {
                 adapter.limits(),
             )
         };
+        let mut experimental_features = wgpu::ExperimentalFeatures::disabled();
+        if hardware {
+            let rq = kickstart_rt::hardware_ray_query_features(&adapter).unwrap_or_else(|| {
+                panic!(
+                    "KSRT_TEST_BACKEND=hardware: {:?} has no ray queries",
+                    adapter.get_info().name
+                )
+            });
+            features |= rq;
+            limits = kickstart_rt::hardware_ray_query_limits(&adapter, limits);
+            // SAFETY: the tests accept wgpu's experimental ray-query support.
+            experimental_features = unsafe { wgpu::ExperimentalFeatures::enabled() };
+        }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("kickstart-rt tests"),
             required_features: features,
             required_limits: limits,
+            experimental_features,
             ..Default::default()
         }))
         .expect("request_device");
         eprintln!(
-            "test device: {:?} (minimal: {})",
+            "test device: {:?} (minimal: {}, backend: {})",
             adapter.get_info().name,
-            minimal()
+            minimal(),
+            backend()
         );
         Gpu {
             adapter,
@@ -66,9 +93,11 @@ pub fn gpu() -> &'static Gpu {
     })
 }
 
+/// A context on the shared device, with the default settings but `working_sets`; fails the test
+/// when it took another backend than the pass asks for (a silent fallback to software).
 pub fn context(working_sets: u32) -> kickstart_rt::ExecuteContext {
     let g = gpu();
-    kickstart_rt::ExecuteContext::new(
+    let ctx = kickstart_rt::ExecuteContext::new(
         &g.device,
         &g.queue,
         kickstart_rt::InitSettings {
@@ -76,7 +105,15 @@ pub fn context(working_sets: u32) -> kickstart_rt::ExecuteContext {
             ..Default::default()
         },
     )
-    .expect("context")
+    .expect("context");
+    let report = ctx.traversal_backend();
+    assert_eq!(
+        report.backend,
+        backend(),
+        "the context took another backend than KSRT_TEST_BACKEND asks for: {}",
+        report.reason
+    );
+    ctx
 }
 
 pub fn buffer(bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {

@@ -132,7 +132,11 @@ fn read(t: &TextureInput) -> Vec<[f32; 4]> {
 /// Records `tasks` with one set of passes and waits.
 fn run(scene: &TestScene, tasks: &[RenderTask]) {
     let g = testing::gpu();
-    let mut passes = TracePasses::new(&g.device, &g.queue);
+    let mut passes = TracePasses::new(
+        &g.device,
+        &g.queue,
+        crate::device::TraversalBackend::Software,
+    );
     testing::run(|rec| {
         for t in tasks {
             let job = TracePasses::job(t).expect("a trace task");

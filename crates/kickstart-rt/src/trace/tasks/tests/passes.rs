@@ -6,7 +6,11 @@ use super::*;
 #[test]
 fn every_pipeline_compiles_including_prepared_ones() {
     let g = testing::gpu();
-    let mut passes = TracePasses::new(&g.device, &g.queue);
+    let mut passes = TracePasses::new(
+        &g.device,
+        &g.queue,
+        crate::device::TraversalBackend::Software,
+    );
     passes.prepare(&g.device);
     // Eight kinds × formats, and the diffuse pass writing AO in two formats.
     assert_eq!(passes.pipelines.len(), 10);
