@@ -82,24 +82,23 @@ fn inject_shader(backend: TraversalBackend, depth_format: bool) -> ReflectedShad
     )
 }
 
-/// The WGSL of the injection (both depth inputs) and resolve passes, labelled.
-pub(crate) fn shader_variants() -> Vec<(String, String)> {
+/// The WGSL of the injection passes (both depth inputs) tracing with `backend`, labelled.
+pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
     let inject = |depth_format: bool| {
         (
             format!("injection (depth format: {depth_format})"),
-            inject_shader(TraversalBackend::Software, depth_format)
-                .source()
-                .to_string(),
+            inject_shader(backend, depth_format).source().to_string(),
         )
     };
-    vec![
-        inject(true),
-        inject(false),
-        (
-            "injection resolve".into(),
-            resolve_shader().source().to_string(),
-        ),
-    ]
+    vec![inject(true), inject(false)]
+}
+
+/// The WGSL of the injection's resolve pass (it traces nothing), labelled.
+pub(crate) fn resolve_shader_variants() -> Vec<(String, String)> {
+    vec![(
+        "injection resolve".into(),
+        resolve_shader().source().to_string(),
+    )]
 }
 
 /// The resolve pass's shader.
@@ -370,7 +369,10 @@ mod wgsl_tests {
     fn both_injection_variants_validate_and_match_the_rust_layout() {
         for depth_format in [true, false] {
             let label = format!("injection (depth format: {depth_format})");
-            let module = validate(&label, inject_shader(depth_format).source());
+            let module = validate(
+                &label,
+                inject_shader(TraversalBackend::Software, depth_format).source(),
+            );
             assert!(module.entry_points.iter().any(|e| e.name == "inject"));
             assert_wgsl_layout!(
                 module,

@@ -2,6 +2,8 @@
 //! outside it (`ksrt shaders --dump`, a browser's WebGPU, driver statistics), and for the
 //! CPU-only test that validates them all.
 
+use crate::device::TraversalBackend;
+
 /// One shader the SDK can create: a pass and, where it has variants, which one.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ShaderVariant {
@@ -9,37 +11,80 @@ pub struct ShaderVariant {
     pub name: String,
     /// The composed WGSL, as the SDK hands it to the device.
     pub wgsl: String,
+    /// The device features it needs: empty for portable WGSL (every device, WebGPU included);
+    /// `EXPERIMENTAL_RAY_QUERY` for the hardware backend's tracing passes, whose portable
+    /// fallback is the same pass with the software traversal.
+    pub features: wgpu::Features,
 }
 
 /// Every shader the SDK can create, each variant once: the BVH builders and the radix sort, the
 /// lighting cache's passes, ray batches, debug views, the trace tasks (kind × output formats) and
-/// the denoisers (signal set × output format). All are portable WGSL: where a device allows it,
-/// the traversal passes are also compiled from our own SPIR-V (native only), with these as their
-/// fallback.
+/// the denoisers (signal set × output format), then the tracing passes again for the hardware
+/// backend (named with ` [hardware ray query]`; see [`ShaderVariant::features`]). The rest is
+/// portable WGSL: where a device allows it, the software traversal passes are also compiled from
+/// our own SPIR-V (native only), with these as their fallback.
 pub fn shader_variants() -> Vec<ShaderVariant> {
-    let passes = [
+    let portable = [
         crate::gpu::radix_sort::shader_variants(),
         crate::scene::ingest::shader_variants(),
         crate::scene::prims::shader_variants(),
         crate::scene::lbvh::shader_variants(),
         crate::cache::alloc::shader_variants(),
-        crate::cache::inject::shader_variants(),
+        crate::cache::inject::resolve_shader_variants(),
         crate::cache::transfer::shader_variants(),
-        crate::trace::rays::shader_variants(),
-        crate::trace::debug_view::shader_variants(),
-        crate::trace::tasks::shader_variants(),
         crate::denoise::shader_variants(),
     ];
-    passes
+    let tracing = |backend| {
+        [
+            crate::cache::inject::shader_variants(backend),
+            crate::trace::rays::shader_variants(backend),
+            crate::trace::debug_view::shader_variants(backend),
+            crate::trace::tasks::shader_variants(backend),
+        ]
+    };
+    let variant = |features| {
+        move |(name, wgsl)| ShaderVariant {
+            name,
+            wgsl,
+            features,
+        }
+    };
+    let mut out: Vec<ShaderVariant> = portable
         .into_iter()
+        .chain(tracing(TraversalBackend::Software))
         .flatten()
-        .map(|(name, wgsl)| ShaderVariant { name, wgsl })
-        .collect()
+        .map(variant(wgpu::Features::empty()))
+        .collect();
+    out.extend(
+        tracing(TraversalBackend::HardwareRayQuery)
+            .into_iter()
+            .flatten()
+            .map(|(name, wgsl)| (format!("{name} [hardware ray query]"), wgsl))
+            .map(variant(wgpu::Features::EXPERIMENTAL_RAY_QUERY)),
+    );
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The hardware variants are exactly the tracing passes, each beside its portable fallback.
+    #[test]
+    fn every_hardware_variant_has_a_portable_fallback() {
+        let variants = shader_variants();
+        let hardware: Vec<_> = variants.iter().filter(|v| !v.features.is_empty()).collect();
+        assert!(hardware.len() > 50, "{} hardware variants", hardware.len());
+        for v in hardware {
+            assert!(v.wgsl.contains("rayQueryInitialize"), "{}", v.name);
+            let portable = v.name.trim_end_matches(" [hardware ray query]");
+            let fallback = variants
+                .iter()
+                .find(|p| p.name == portable)
+                .unwrap_or_else(|| panic!("{}: no portable fallback", v.name));
+            assert!(fallback.features.is_empty() && !fallback.wgsl.contains("ray_query"));
+        }
+    }
 
     /// Every variant validates with naga (as the device would) and has a compute entry point;
     /// names are unique; every module of the library is used by some variant (a module nothing
@@ -50,7 +95,7 @@ mod tests {
         let mut names = std::collections::BTreeSet::new();
         for v in &variants {
             assert!(names.insert(v.name.clone()), "{} twice", v.name);
-            let module = crate::gpu::wgsl_check::validate(&v.name, &v.wgsl);
+            let module = crate::gpu::wgsl_check::validate_for(&v.name, &v.wgsl, v.features);
             assert!(
                 module
                     .entry_points

@@ -80,6 +80,9 @@ pub enum ComposeError {
 #[derive(Debug, Clone)]
 pub(crate) struct ShaderLibrary {
     modules: BTreeMap<&'static str, Cow<'static, str>>,
+    /// Modules whose text is another module's ([`ShaderLibrary::substitute`]): the composed
+    /// shader's module header names the module the text came from.
+    substitutes: BTreeMap<&'static str, String>,
 }
 
 impl ShaderLibrary {
@@ -90,12 +93,13 @@ impl ShaderLibrary {
                 .iter()
                 .map(|&(name, source)| (name, Cow::Borrowed(source)))
                 .collect(),
+            substitutes: BTreeMap::new(),
         }
     }
 
     /// Gives module `name` the text of module `with` (which must exist): every import of
     /// `name` gets `with`'s code. How a traversal backend stands in for another
-    /// (`scene/traversal`, see `crate::scene::traversal`).
+    /// (`scene/traversal`: see the scene's traversal module).
     ///
     /// # Panics
     ///
@@ -108,6 +112,7 @@ impl ShaderLibrary {
             .cloned()
             .unwrap_or_else(|| panic!("no shader module `{with}` to stand in for `{name}`"));
         self.modules.insert(name, text);
+        self.substitutes.insert(name, with.to_string());
     }
 
     /// Replaces (or adds) module `name`: tests stand a simple module in for a real one with the
@@ -150,7 +155,8 @@ impl ShaderLibrary {
                     enables.push(e.clone());
                 }
             }
-            text.push_str(&module_header(name));
+            let from = self.substitutes.get(name).map_or(name, String::as_str);
+            text.push_str(&module_header(from));
             text.push_str(&module.fill(name, params)?);
         }
         if let Some(&(unused, _)) = params.iter().find(|(n, _)| !declared.contains(n)) {
@@ -336,6 +342,7 @@ mod tests {
     fn library(modules: &[(&'static str, &'static str)]) -> ShaderLibrary {
         let mut l = ShaderLibrary {
             modules: BTreeMap::new(),
+            substitutes: BTreeMap::new(),
         };
         for &(name, source) in modules {
             l.replace(name, source);
@@ -375,6 +382,42 @@ mod tests {
         // Directive lines stay as empty lines, so a module's line numbers are kept.
         let pass = s.split("// ---- module b/pass ----\n").nth(1).unwrap();
         assert_eq!(pass.lines().position(|l| l.starts_with("@group")), Some(4));
+    }
+
+    /// An `enable` directive of an imported module opens the composed shader, once, however many
+    /// modules declare it; a substituted module's code and header are its stand-in's.
+    #[test]
+    fn enables_come_first_and_substitutes_stand_in() {
+        let mut l = library(&[
+            ("a/base", "struct B { x: u32 }\n"),
+            (
+                "a/trace",
+                "#import a/base\nfn trace() -> u32 { return 1u; }\n",
+            ),
+            (
+                "a/trace_hw",
+                "enable wgpu_ray_query;\n#import a/base\nfn trace() -> u32 { return 2u; }\n",
+            ),
+            (
+                "a/pass",
+                "enable wgpu_ray_query;\n#import a/trace\nfn main() {}\n",
+            ),
+        ]);
+        let plain = l.compose(&["a/pass"], &[]).unwrap();
+        assert!(
+            plain.starts_with("enable wgpu_ray_query;\n// ---- module a/base"),
+            "{plain}"
+        );
+        assert!(plain.contains("return 1u;"), "{plain}");
+        l.substitute("a/trace", "a/trace_hw");
+        let hw = l.compose(&["a/pass"], &[]).unwrap();
+        assert_eq!(hw.matches("enable wgpu_ray_query;").count(), 1, "{hw}");
+        assert!(hw.starts_with("enable wgpu_ray_query;\n"), "{hw}");
+        assert!(
+            hw.contains("return 2u;") && !hw.contains("return 1u;"),
+            "{hw}"
+        );
+        assert!(hw.contains(&module_header("a/trace_hw")), "{hw}");
     }
 
     #[test]

@@ -330,7 +330,7 @@ impl ReflectedShader {
     }
 
     /// As [`ReflectedShader::compose`], from the modules of `library` (the SDK's, with a
-    /// backend's module substituted: see `crate::scene::traversal`).
+    /// backend's module substituted: see the scene's traversal module).
     pub fn compose_in(
         library: &super::compose::ShaderLibrary,
         roots: &[&str],

@@ -18,6 +18,16 @@ const CAPABILITIES: Capabilities = Capabilities::SHADER_FLOAT16_IN_FLOAT32
 /// Parses and validates `source` (variant `label`) with naga and every validation flag; panics
 /// naming the variant and naga's message with its source location.
 pub(crate) fn validate(label: &str, source: &str) -> naga::Module {
+    validate_for(label, source, wgpu::Features::empty())
+}
+
+/// As [`validate`], for a variant that needs the device `features` (ray queries: the hardware
+/// backend's tracing passes), with the capabilities wgpu grants for them.
+pub(crate) fn validate_for(label: &str, source: &str, features: wgpu::Features) -> naga::Module {
+    let mut capabilities = CAPABILITIES;
+    if features.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY) {
+        capabilities |= Capabilities::RAY_QUERY;
+    }
     let module = match naga::front::wgsl::parse_str(source) {
         Ok(m) => m,
         Err(e) => panic!(
@@ -25,7 +35,7 @@ pub(crate) fn validate(label: &str, source: &str) -> naga::Module {
             e.emit_to_string_with_path(source, label)
         ),
     };
-    if let Err(e) = Validator::new(ValidationFlags::all(), CAPABILITIES).validate(&module) {
+    if let Err(e) = Validator::new(ValidationFlags::all(), capabilities).validate(&module) {
         panic!(
             "{label}: WGSL does not validate:\n{}",
             e.emit_to_string_with_path(source, label)

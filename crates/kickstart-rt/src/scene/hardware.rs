@@ -10,10 +10,10 @@
 
 use std::collections::HashMap;
 
-use crate::scene::gpu_scene::INSTANCE_RECORD_BYTES;
-
-/// Words of one instance record (see `crate::context` `instance_record`).
-const RECORD_WORDS: usize = (INSTANCE_RECORD_BYTES / 4) as usize;
+/// Words of one instance record (128 bytes, the instance table's record; the context writes
+/// them: `instance_record`). Words 0–11: the object-to-world rows; 12–23: the world-to-object
+/// rows; 24: the geometry slot; 25: the inclusion mask; 26: bit 0, in the TLAS.
+const RECORD_WORDS: usize = 32;
 /// Vertices of the pool are `vec4<f32>` (xyz and the primitive index's bits in w).
 const VERTEX_STRIDE: u64 = 16;
 
@@ -139,8 +139,10 @@ impl HardwareScene {
         if self.records.len() <= slot {
             self.records.resize(slot + 1, [0; RECORD_WORDS]);
         }
-        let words: &[u32] = bytemuck::cast_slice(bytes);
-        self.records[slot].copy_from_slice(&words[..RECORD_WORDS]);
+        // Byte arrays carry no alignment: read the words one by one.
+        for (word, b) in self.records[slot].iter_mut().zip(bytes.chunks_exact(4)) {
+            *word = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
+        }
         self.tlas_dirty = true;
     }
 

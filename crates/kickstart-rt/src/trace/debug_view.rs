@@ -99,17 +99,15 @@ impl DebugView {
     }
 }
 
-/// The WGSL of the debug view pass for every writable output format, labelled.
-pub(crate) fn shader_variants() -> Vec<(String, String)> {
+/// The WGSL of the debug view pass with `backend` for every writable output format, labelled.
+pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
     crate::WRITABLE_OUTPUT_FORMATS
         .iter()
         .filter_map(|&f| {
             let name = wgsl_format(f)?;
             Some((
                 format!("debug view ({f:?})"),
-                debug_view_shader(TraversalBackend::Software, name)
-                    .source()
-                    .to_string(),
+                debug_view_shader(backend, name).source().to_string(),
             ))
         })
         .collect()

@@ -24,13 +24,11 @@ fn trace_rays_shader(backend: TraversalBackend) -> ReflectedShader {
     traversal::compose(backend, &["trace/rays"], &[])
 }
 
-/// The WGSL of the ray batch pass (software traversal), labelled.
-pub(crate) fn shader_variants() -> Vec<(String, String)> {
+/// The WGSL of the ray batch pass with `backend`, labelled.
+pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
     vec![(
         "trace rays".into(),
-        trace_rays_shader(TraversalBackend::Software)
-            .source()
-            .to_string(),
+        trace_rays_shader(backend).source().to_string(),
     )]
 }
 

@@ -546,9 +546,10 @@ fn second_outputs(kind: TraceKind) -> Vec<Option<wgpu::TextureFormat>> {
     }
 }
 
-/// The WGSL of every trace pass the SDK can create (kind × output formats), labelled.
-pub(crate) fn shader_variants() -> Vec<(String, String)> {
-    let library = ShaderLibrary::builtin();
+/// The WGSL of every trace pass the SDK can create with `backend` (kind × output formats),
+/// labelled.
+pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
+    let library = traversal::library(backend);
     let mut out = Vec::new();
     for kind in KINDS {
         for f0 in WRITABLE_OUTPUT_FORMATS {

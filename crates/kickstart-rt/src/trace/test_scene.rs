@@ -349,6 +349,7 @@ impl TestScene {
             geometries: &self.geometry_buf,
             blas_nodes: &self.blas_nodes,
             triangles: &self.triangles,
+            tlas: None,
         }
     }
 
