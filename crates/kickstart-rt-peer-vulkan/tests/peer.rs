@@ -30,11 +30,19 @@ struct Device {
     ray_tracing: bool,
 }
 
-/// The devices of this machine's Vulkan, or `None` without a loader.
+/// The devices of this machine's Vulkan, or `None` without a loader (of Vulkan 1.2 at least).
 fn devices() -> Option<Vec<Device>> {
     use ash::{khr, vk};
     // SAFETY: loading the system's Vulkan loader, as the peer does.
     let entry = unsafe { ash::Entry::load() }.ok()?;
+    // SAFETY: entry is a loaded loader.
+    let version = unsafe { entry.try_enumerate_instance_version() }
+        .expect("vkEnumerateInstanceVersion")
+        .unwrap_or(vk::API_VERSION_1_0);
+    if version < vk::API_VERSION_1_2 {
+        // The peer needs a 1.2 loader: as good as none.
+        return None;
+    }
     let app = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_2);
     // SAFETY: valid create info without layers or extensions.
     let instance = unsafe {
@@ -104,8 +112,11 @@ fn unavailable_names_the_device_and_missing_extension() {
                 assert!(why.contains("Vulkan loader"), "{why}");
                 return;
             }
-            Ok(p) => panic!("no Vulkan loader here, yet a peer on {}", p.device_name()),
-            Err(e) => panic!("no Vulkan loader: expected Unavailable, got: {e}"),
+            Ok(p) => panic!(
+                "no Vulkan 1.2 loader here, yet a peer on {}",
+                p.device_name()
+            ),
+            Err(e) => panic!("no Vulkan 1.2 loader: expected Unavailable, got: {e}"),
         }
     };
     for d in &devices {
