@@ -1189,8 +1189,18 @@ fn many_triangles(device: &wgpu::Device, triangles: u32) -> GeometryInput {
 /// A container registering `input` as `geometry`, an instance of it, and building both.
 fn register_and_build(
     ctx: &ExecuteContext,
+    handles: (GeometryHandle, InstanceHandle),
+    input: GeometryInput,
+) -> TaskContainer {
+    register_and_build_at(ctx, handles, input, Affine3A::IDENTITY)
+}
+
+/// As [`register_and_build`], the instance placed by `transform`.
+fn register_and_build_at(
+    ctx: &ExecuteContext,
     (geometry, instance): (GeometryHandle, InstanceHandle),
     input: GeometryInput,
+    transform: Affine3A,
 ) -> TaskContainer {
     let mut c = ctx.create_task_container();
     c.schedule_bvh_task(GeometryTask {
@@ -1198,15 +1208,58 @@ fn register_and_build(
         handle: geometry,
         input,
     });
-    register_instance(&mut c, instance, geometry, Affine3A::IDENTITY);
+    register_instance(&mut c, instance, geometry, transform);
     c.schedule_bvh_task(BvhBuildTask::default());
     c
+}
+
+/// Traces `rays` (closest hit) through `ctx` on its own `device`; the hits and the task's serial.
+fn trace_on(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    ctx: &ExecuteContext,
+    rays: &[GpuRay],
+) -> (Vec<GpuHit>, u64) {
+    use wgpu::util::DeviceExt;
+    let rb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("rays"),
+        contents: bytemuck::cast_slice(rays),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let size = rays.len() as u64 * 32;
+    let hb = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("hits"),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let read = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("hits read-back"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut c = ctx.create_task_container();
+    c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask::new(
+        rb,
+        rays.len() as u32,
+        hb.clone(),
+    )));
+    let mut e = device.create_command_encoder(&Default::default());
+    let t = ctx.build_gpu_task(c, &mut e).expect("trace task");
+    e.copy_buffer_to_buffer(&hb, 0, &read, 0, size);
+    queue.submit([e.finish()]);
+    read.map_async(wgpu::MapMode::Read, .., |_| {});
+    device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    ctx.mark_gpu_task_completed(t).unwrap();
+    let hits = bytemuck::pod_collect_to_vec(&read.get_mapped_range(..).expect("mapped"));
+    (hits, t.serial())
 }
 
 /// The record phase allocates as it goes (staged triangles, then the BLAS's triangles and
 /// nodes, ...). A task whose allocation past the first would exceed the device's binding size
 /// must be refused by the plan, before the earlier ones changed anything: the context is as it
-/// was, and then accepts a task that fits.
+/// was, then accepts a task that fits, and the next frame traces the scene as it should.
 #[test]
 fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
     // The least binding size the SDK works with (`Limits::default()`'s), whatever the adapter
@@ -1218,21 +1271,32 @@ fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
         device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
     };
     let encoder = || device.create_command_encoder(&Default::default());
-    // An earlier task the refused one must not disturb.
-    let first = ctx.create_geometry_handle();
-    let c = register_and_build(
-        &ctx,
-        (first, ctx.create_instance_handle()),
-        many_triangles(&device, 2),
-    );
+    // An earlier task the refused one must not disturb: the unit quad at z = 0.
+    let first = (ctx.create_geometry_handle(), ctx.create_instance_handle());
+    let c = register_and_build(&ctx, first, many_triangles(&device, 2));
     let mut e = encoder();
     let earlier = ctx.build_gpu_task(c, &mut e).unwrap();
     submit(e);
     ctx.mark_gpu_task_completed(earlier).unwrap();
+    // Down onto the quad; down from above with t_min past it; up from below; beside it.
+    let rays = [
+        common::rt::ray(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z, 0.0, 10.0),
+        common::rt::ray(Vec3::new(0.75, 0.25, 1.0), -Vec3::Z, 1.5, 10.0),
+        common::rt::ray(Vec3::new(0.75, 0.25, -3.0), Vec3::Z, 0.0, 10.0),
+        common::rt::ray(Vec3::new(1.5, 0.5, 1.0), -Vec3::Z, 0.0, 10.0),
+    ];
+    let hits_at = |h: &GpuHit, t: f32, instance: InstanceHandle| {
+        h.is_hit() && (h.t - t).abs() < 1e-5 && h.instance == instance.index()
+    };
+    let (hits, traced) = trace_on(&device, &queue, &ctx, &rays);
+    assert!(hits_at(&hits[0], 1.0, first.1), "{:?}", hits[0]);
+    assert!(!hits[1].is_hit(), "{:?}", hits[1]);
+    assert!(hits_at(&hits[2], 3.0, first.1), "{:?}", hits[2]);
+    assert!(!hits[3].is_hit(), "{:?}", hits[3]);
     // 2.2M triangles: their staged copy and BLAS triangles (48 bytes each, 106 MB) fit the
     // 128 MiB binding, their BLAS nodes (64 bytes each, 141 MB) do not.
     let handles = (ctx.create_geometry_handle(), ctx.create_instance_handle());
-    let before = observe(&ctx, &[first, handles.0]);
+    let before = observe(&ctx, &[first.0, handles.0]);
     let c = register_and_build(&ctx, handles, many_triangles(&device, 2_200_000));
     let mut e = encoder();
     match ctx.build_gpu_task(c, &mut e) {
@@ -1244,16 +1308,23 @@ fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
         other => panic!("expected OutOfDeviceMemory, got {other:?}"),
     }
     submit(e);
-    assert_eq!(observe(&ctx, &[first, handles.0]), before);
-    // The same context accepts the same work at a size that fits.
-    let c = register_and_build(&ctx, handles, many_triangles(&device, 1000));
+    assert_eq!(observe(&ctx, &[first.0, handles.0]), before);
+    // The same context accepts the same work at a size that fits, placed 2 below the first.
+    let below = Affine3A::from_translation(Vec3::new(0.0, 0.0, -2.0));
+    let c = register_and_build_at(&ctx, handles, many_triangles(&device, 1000), below);
     let mut e = encoder();
     let t = ctx.build_gpu_task(c, &mut e).expect("a task that fits");
     submit(e);
-    assert_eq!(t.serial(), earlier.serial() + 1);
+    assert_eq!(t.serial(), traced + 1);
     ctx.mark_gpu_task_completed(t).unwrap();
     assert_eq!(ctx.geometry_triangle_count(handles.0).unwrap(), Some(1000));
     assert!(ctx.geometry_is_built(handles.0).unwrap());
+    // The next frame sees both quads: the first where it was, the new one below it.
+    let (hits, _) = trace_on(&device, &queue, &ctx, &rays);
+    assert!(hits_at(&hits[0], 1.0, first.1), "{:?}", hits[0]);
+    assert!(hits_at(&hits[1], 3.0, handles.1), "{:?}", hits[1]);
+    assert!(hits_at(&hits[2], 1.0, handles.1), "{:?}", hits[2]);
+    assert!(!hits[3].is_hit(), "{:?}", hits[3]);
 }
 
 /// One field of one task made invalid, for the property test below.

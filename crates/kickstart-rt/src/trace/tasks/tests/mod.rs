@@ -5,6 +5,7 @@
 //! read-back helpers they share are here.
 
 mod ao;
+mod ggx;
 mod passes;
 mod radiance;
 mod shadows;

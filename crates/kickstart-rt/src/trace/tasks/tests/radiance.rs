@@ -18,7 +18,7 @@ fn cache_radiance(instance: u32, prim: u32, bary: vec2<f32>, bilinear: bool) -> 
 "#;
 
 /// Records `tasks` with the stand-in cache holding `colours[instance][primitive]`.
-fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
+pub(super) fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
     let g = testing::gpu();
     let mut passes = TracePasses::new(
         &g.device,
@@ -46,7 +46,7 @@ fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
     });
 }
 
-fn specular(c: TraceTaskCommon, out: &TextureInput) -> RenderTask {
+pub(super) fn specular(c: TraceTaskCommon, out: &TextureInput) -> RenderTask {
     RenderTask::TraceSpecular(TraceSpecularTask {
         common: c,
         output: out.clone(),

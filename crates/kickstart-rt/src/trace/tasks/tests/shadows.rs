@@ -1,6 +1,6 @@
 //! Shadows against analytic answers: a sphere over a plane (point and directional lights), the
-//! penumbra width of an edge under a sphere light, and the packed per-light visibility of the
-//! multi-shadow pass.
+//! penumbra width of an edge under a sphere light and under a directional light's angular
+//! extent, a spot light's cone, and the packed per-light visibility of the multi-shadow pass.
 
 use super::*;
 
@@ -233,5 +233,152 @@ fn multi_shadow_packs_each_lights_visibility() {
     assert!(
         checked > 150 && partial > 50,
         "{checked} checked, {partial} partial"
+    );
+}
+
+/// A spot light 2 above the floor under a ceiling that covers everything at height 1: the floor
+/// texels inside the cone (angle to the axis below `apex_angle`, the half-angle) are traced and
+/// find the ceiling halfway to the light; those outside are not traced and read as lit (-1),
+/// though the ceiling is in the way. Straight down, the cone meets the floor in the circle of
+/// radius 2·tan(apex); tilted, in an ellipse (the angle decides).
+#[test]
+fn spot_light_traces_inside_its_cone_only() {
+    let scene = TestScene::single(square(1, 1.0, 5.0));
+    let position = Vec3::new(0.0, 2.0, 0.0);
+    let apex = 30f32.to_radians();
+    for direction in [Vec3::NEG_Y, Vec3::new(0.4, -1.0, 0.2).normalize()] {
+        let out = output(N, N, -5.0);
+        let c = common(gbuffer(N, N, floor), Vec3::new(0.0, 5.0, 0.0));
+        let light = LightInfo::Spot {
+            position,
+            direction,
+            radius: 0.0,
+            range: 100.0,
+            apex_angle: apex,
+        };
+        run(
+            &scene,
+            &[RenderTask::TraceShadow(TraceShadowTask {
+                common: c,
+                output: out.clone(),
+                light,
+                enable_first_hit_and_end_search: false,
+            })],
+        );
+        let img = read(&out);
+        let (mut inside, mut outside) = (0, 0);
+        for y in 0..N {
+            for x in 0..N {
+                let (p, _) = floor(x, y).unwrap();
+                let to_p = p - position;
+                let angle = to_p.normalize().dot(direction).clamp(-1.0, 1.0).acos();
+                if direction == Vec3::NEG_Y {
+                    // The same edge from the circle's radius, independently of the angle.
+                    let radius = 2.0 * apex.tan();
+                    let r = Vec3::new(p.x, 0.0, p.z).length();
+                    assert_eq!(r < radius, angle < apex, "texel {x},{y}");
+                }
+                let v = img[(y * N + x) as usize][0];
+                // 0.01 rad either side of the edge: about 0.03 world units on the floor.
+                if angle < apex - 0.01 {
+                    inside += 1;
+                    let want = to_p.length() / 2.0;
+                    assert!(
+                        (v - want).abs() < 1e-3 * want,
+                        "{direction}: texel {x},{y} inside the cone ({angle} rad): {v}, the \
+                         ceiling at {want}"
+                    );
+                } else if angle > apex + 0.01 {
+                    outside += 1;
+                    assert_eq!(
+                        v, -1.0,
+                        "{direction}: texel {x},{y} outside the cone ({angle} rad) was traced"
+                    );
+                }
+            }
+        }
+        assert!(
+            inside > 100 && outside > 100,
+            "{direction}: {inside} texels inside the cone, {outside} outside"
+        );
+    }
+}
+
+/// A directional light straight down over an occluder edge at height h (x < 0 covered): with
+/// angular extent θ (full angle) its rays are aimed through a disc of radius tan(θ/2) at unit
+/// distance, so the visible fraction at x is the part of that disc beyond −x / (h·tan(θ/2)) and
+/// the penumbra is 2h·tan(θ/2) wide; with extent 0 the edge is hard (x > 0 lit, x < 0 not).
+#[test]
+fn directional_light_penumbra_width_follows_its_angular_extent() {
+    let h = 1.0f32;
+    let occluder: Vec<Tri> = square(1, h, 5.0)
+        .into_iter()
+        .map(|t| t.map(|v| v + Vec3::new(-5.0, 0.0, 0.0)))
+        .collect();
+    let scene = TestScene::single(occluder);
+    const W: u32 = 64;
+    const ROWS: u32 = 8;
+    let px = |x: u32| -1.0 + 2.0 * (x as f32 + 0.5) / W as f32;
+    let pixel = 2.0 / W as f32;
+    let visibility = |extent: f32, frames: u32| {
+        let light = LightInfo::Directional {
+            direction: Vec3::NEG_Y,
+            angular_extent: extent,
+        };
+        let mut vis = vec![0.0f64; W as usize];
+        for frame in 0..frames {
+            let out = output(W, ROWS, -5.0);
+            let mut c = common(
+                gbuffer(W, ROWS, |x, y| {
+                    Some((Vec3::new(px(x), 0.0, (y as f32 - 4.0) * 0.05), Vec3::Y))
+                }),
+                Vec3::new(0.0, 5.0, 0.0),
+            );
+            c.debug_parameters.frame_index = frame;
+            run(
+                &scene,
+                &[RenderTask::TraceShadow(TraceShadowTask {
+                    common: c,
+                    output: out.clone(),
+                    light,
+                    enable_first_hit_and_end_search: true,
+                })],
+            );
+            for (i, v) in read(&out).iter().enumerate() {
+                vis[i % W as usize] += (v[0] < 0.0) as u32 as f64 / (frames * ROWS) as f64;
+            }
+        }
+        vis
+    };
+
+    // Hard: every texel exactly lit or shadowed by the side of the edge it is on.
+    for (x, v) in visibility(0.0, 1).iter().enumerate() {
+        let want = if px(x as u32) > 0.0 { 1.0 } else { 0.0 };
+        assert_eq!(*v, want, "extent 0: x {} visible {v}", px(x as u32));
+    }
+
+    let extent = 0.4f32;
+    let spread = h * (extent / 2.0).tan();
+    let width = 2.0 * spread;
+    let vis = visibility(extent, 24);
+    for (x, v) in vis.iter().enumerate() {
+        let want = disc_fraction_above(-(px(x as u32) / spread) as f64);
+        assert!(
+            (v - want).abs() < 0.08,
+            "extent {extent}: x {}: visible {v}, want {want}",
+            px(x as u32)
+        );
+    }
+    // Width between the first texel above 0 and the first at 1, against 2h·tan(θ/2).
+    let first_lit = vis.iter().position(|v| *v > 0.0).unwrap() as f32;
+    let first_full = vis.iter().position(|v| *v >= 1.0).unwrap() as f32;
+    let measured = (first_full - first_lit) * pixel;
+    eprintln!(
+        "penumbra {measured}, analytic {width} ({} texels)",
+        width / pixel
+    );
+    assert!(
+        (measured - width).abs() <= 2.0 * pixel,
+        "extent {extent}: penumbra {measured}, analytic 2h·tan(θ/2) = {width}"
     );
 }
