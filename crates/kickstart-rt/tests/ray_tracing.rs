@@ -1700,3 +1700,94 @@ fn build_hints_choose_the_leaf_size() {
         "node visits (collapsed, count): {node_visits:?}"
     );
 }
+
+/// A geometry of more triangles than the device's `max_blas_primitive_count` cannot become one
+/// driver BLAS: the hardware backend refuses its task by name before recording, the context is
+/// unchanged, and a geometry within the limit then traces. The software backend has no such
+/// limit: the same geometry traces there (a device without ray queries reports 0 for it).
+#[test]
+fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backend() {
+    let g = gpu();
+    let hardware = backend() == TraversalBackend::HardwareRayQuery;
+    let mut limits = g.device.limits();
+    if hardware {
+        // wgpu checks a BLAS's vertex count against the limit: 16 triangles of 3 vertices fit.
+        limits.max_blas_primitive_count = 48;
+    }
+    let (device, queue) = pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("kickstart-rt small BLAS limit"),
+        required_features: g.device.features(),
+        required_limits: limits,
+        experimental_features: if hardware {
+            // SAFETY: the tests accept wgpu's experimental ray-query support.
+            unsafe { wgpu::ExperimentalFeatures::enabled() }
+        } else {
+            wgpu::ExperimentalFeatures::disabled()
+        },
+        ..Default::default()
+    }))
+    .expect("a device with a smaller BLAS limit than the adapter's");
+    let ctx = ExecuteContext::new(&device, &queue, InitSettings::default()).expect("context");
+    assert_eq!(ctx.traversal_backend().backend, backend());
+    let submit = |e: wgpu::CommandEncoder| {
+        queue.submit([e.finish()]);
+        device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    };
+    let big = (ctx.create_geometry_handle(), ctx.create_instance_handle());
+    let mut e = device.create_command_encoder(&Default::default());
+    let result = ctx.build_gpu_task(
+        register_and_build(&ctx, big, many_triangles(&device, 17)),
+        &mut e,
+    );
+    let down = [ray(
+        Vec3::new(0.25, 0.75, 1.0),
+        -Vec3::Z,
+        0.0,
+        f32::INFINITY,
+    )];
+    if !hardware {
+        let t = result.expect("the software backend has no BLAS limit");
+        submit(e);
+        ctx.mark_gpu_task_completed(t).unwrap();
+        let (hits, _) = trace_on(&device, &queue, &ctx, &down);
+        assert_eq!((hits[0].t, hits[0].instance), (1.0, big.1.index()));
+        return;
+    }
+    match result {
+        Err(Error::InvalidInput {
+            task,
+            field,
+            value,
+            reason,
+        }) => {
+            assert_eq!((task, field.as_str()), ("GeometryTask", "input.components"));
+            assert_eq!(value, "\"17 triangles\"");
+            assert!(
+                reason.contains("max_blas_primitive_count is 48"),
+                "{reason}"
+            );
+        }
+        other => panic!(
+            "17 triangles past a limit of 48 vertices: {:?}",
+            other.map(|t| t.serial())
+        ),
+    }
+    assert_eq!(
+        ctx.recorded_task_counts().geometry_tasks,
+        0,
+        "refused before recording"
+    );
+    submit(e);
+    let fits = (ctx.create_geometry_handle(), ctx.create_instance_handle());
+    let mut e = device.create_command_encoder(&Default::default());
+    let t = ctx
+        .build_gpu_task(
+            register_and_build(&ctx, fits, many_triangles(&device, 16)),
+            &mut e,
+        )
+        .expect("16 triangles fit");
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    let (hits, _) = trace_on(&device, &queue, &ctx, &down);
+    assert_eq!((hits[0].t, hits[0].instance), (1.0, fits.1.index()));
+}

@@ -61,11 +61,13 @@ pub(super) fn plan<'c>(
         match task {
             BvhTask::Geometry(t) => {
                 let extents = geometry_task(s, t, &geometries_here)?;
+                check_driver_blas(s, &extents, limits)?;
                 geometries_here.insert(t.handle);
                 plan.geometries.push((t, extents));
             }
             BvhTask::Instance(t) => {
                 instance_task(s, t, &instances_here, &geometries_here)?;
+                check_driver_tlas(s, t, limits)?;
                 instances_here.insert(t.handle);
                 plan.instances.push(t);
             }
@@ -129,6 +131,43 @@ fn geometry_task(
         }
         _ => Ok(extents),
     }
+}
+
+/// On the hardware backend, a geometry's triangles must fit one driver BLAS: its three vertices
+/// a triangle within the device's `max_blas_primitive_count` (software Vulkan allows 2^24 − 1).
+/// wgpu 30 checks a BLAS's vertex count, not its triangle count, against that limit, and the
+/// driver BLAS lists each triangle's three vertices (no index buffer).
+fn check_driver_blas(s: &State, extents: &[ComponentExtent], limits: &wgpu::Limits) -> Result<()> {
+    let n: u64 = extents.iter().map(|e| e.triangles as u64).sum();
+    let limit = limits.max_blas_primitive_count as u64;
+    if s.scene.hardware.is_some() && 3 * n > limit {
+        return Err(Error::input(
+            "GeometryTask",
+            "input.components",
+            format!("{n} triangles"),
+            format!(
+                "the hardware ray-query backend builds one driver BLAS per geometry, of 3 vertices a triangle, and the device's max_blas_primitive_count is {limit} (wgpu counts vertices against it): split the mesh, or use BackendChoice::Software"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// On the hardware backend, an instance's slot must fit the driver's TLAS: below the device's
+/// `max_tlas_instance_count`.
+fn check_driver_tlas(s: &State, t: &InstanceTask, limits: &wgpu::Limits) -> Result<()> {
+    let limit = limits.max_tlas_instance_count;
+    if s.scene.hardware.is_some() && t.handle.index() >= limit {
+        return Err(Error::input(
+            "InstanceTask",
+            "handle",
+            t.handle.index(),
+            format!(
+                "the hardware ray-query backend's TLAS holds the device's max_tlas_instance_count ({limit}) instance slots"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Checks an instance task's handles, operation and input.

@@ -522,10 +522,13 @@ fn update_tlas(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) {
 /// `BvhBuildTask` deferred the software TLAS: a driver TLAS must not keep instances of a BLAS
 /// whose triangles moved or were replaced.
 fn record_hardware_structures(frame: &mut Frame<'_>, s: &mut State) {
-    let Some(hw) = s.scene.hardware.as_mut() else {
+    if s.scene.hardware.is_none() {
         return;
-    };
-    hw.record(frame.encoder, s.scene.triangles.buffer());
+    }
+    let mut rec = frame.recorder("blas build");
+    if let Some(hw) = s.scene.hardware.as_mut() {
+        hw.record(&mut rec, s.scene.triangles.buffer());
+    }
 }
 
 /// Instance bookkeeping (after the records are recorded): a new instance, or one given another

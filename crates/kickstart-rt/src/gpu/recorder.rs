@@ -51,11 +51,8 @@ impl Timestamps {
         }
     }
 
-    fn next(
-        &mut self,
-        scope: &'static str,
-        label: &'static str,
-    ) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+    /// The begin and end query indices of a new timed pass, `None` when the set is full.
+    fn reserve(&mut self, scope: &'static str, label: &'static str) -> Option<(u32, u32)> {
         let begin = self.passes.len() as u32 * 2;
         if begin + 2 > self.capacity {
             return None;
@@ -66,10 +63,19 @@ impl Timestamps {
             begin,
             end: begin + 1,
         });
+        Some((begin, begin + 1))
+    }
+
+    fn next(
+        &mut self,
+        scope: &'static str,
+        label: &'static str,
+    ) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        let (begin, end) = self.reserve(scope, label)?;
         Some(wgpu::ComputePassTimestampWrites {
             query_set: &self.query_set,
             beginning_of_pass_write_index: Some(begin),
-            end_of_pass_write_index: Some(begin + 1),
+            end_of_pass_write_index: Some(end),
         })
     }
 }
@@ -153,6 +159,33 @@ impl<'a> Recorder<'a> {
             pass.set_bind_group(i as u32, Some(*bg), &[]);
         }
         pass.dispatch_workgroups(x, y, 1);
+    }
+
+    /// Encoder work that is not a compute pass (the driver's acceleration-structure builds),
+    /// timed as a pass named `label` when GPU timing is on and the device can write timestamps
+    /// between passes (`TIMESTAMP_QUERY_INSIDE_ENCODERS`); untimed otherwise.
+    pub fn encoder_work(
+        &mut self,
+        label: &'static str,
+        work: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) {
+        let inside = self
+            .device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS);
+        let scope = self.scope;
+        let queries = match self.timestamps.as_mut() {
+            Some(t) if inside => t.reserve(scope, label).map(|q| (&t.query_set, q)),
+            _ => None,
+        };
+        match queries {
+            Some((set, (begin, end))) => {
+                self.encoder.write_timestamp(set, begin);
+                work(self.encoder);
+                self.encoder.write_timestamp(set, end);
+            }
+            None => work(self.encoder),
+        }
     }
 
     /// A uniform buffer holding `data` (written at creation: safe to use in this encoder).

@@ -10,6 +10,8 @@
 
 use std::collections::HashMap;
 
+use crate::gpu::Recorder;
+
 /// Words of one instance record (128 bytes, the instance table's record; the context writes
 /// them: `instance_record`). Words 0–11: the object-to-world rows; 12–23: the world-to-object
 /// rows; 24: the geometry slot; 25: the inclusion mask; 26: bit 0, in the TLAS.
@@ -147,9 +149,10 @@ impl HardwareScene {
     }
 
     /// Records the pending BLAS builds and updates (reading the triangle pool `triangles`, as
-    /// the software build left it earlier in the same encoder) and, when anything it depends on
-    /// changed, the TLAS over instance slots `0..slots`.
-    pub fn record(&mut self, encoder: &mut wgpu::CommandEncoder, triangles: &wgpu::Buffer) {
+    /// the software build left it earlier in the same encoder; timed as `driver blas build` in
+    /// the `blas build` scope) and, when anything it depends on changed, the TLAS over every
+    /// instance record (`driver tlas build`, scope `tlas build`).
+    pub fn record(&mut self, rec: &mut Recorder<'_>, triangles: &wgpu::Buffer) {
         if self.pending.is_empty() && !self.tlas_dirty {
             return;
         }
@@ -173,9 +176,19 @@ impl HardwareScene {
                 ]),
             })
             .collect();
+        if !entries.is_empty() {
+            rec.scope = "blas build";
+            rec.encoder_work("driver blas build", |encoder| {
+                encoder.build_acceleration_structures(entries.iter(), std::iter::empty())
+            });
+        }
         let instances = self.instances();
         if instances.len() > self.tlas.get().len() {
-            let capacity = (instances.len() as u32).next_power_of_two().max(64);
+            // The plan refused instance slots past the device's limit.
+            let limit = self.device.limits().max_tlas_instance_count;
+            let capacity = (instances.len() as u32)
+                .next_power_of_two()
+                .clamp(64, limit);
             self.tlas = create_tlas(&self.device, capacity);
         }
         let capacity = self.tlas.get().len();
@@ -187,7 +200,11 @@ impl HardwareScene {
                 self.tlas[i] = None;
             }
         }
-        encoder.build_acceleration_structures(entries.iter(), std::iter::once(&self.tlas));
+        rec.scope = "tlas build";
+        let tlas = &self.tlas;
+        rec.encoder_work("driver tlas build", |encoder| {
+            encoder.build_acceleration_structures(std::iter::empty(), std::iter::once(tlas))
+        });
         self.tlas_dirty = false;
     }
 

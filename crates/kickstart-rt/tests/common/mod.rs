@@ -426,3 +426,120 @@ fn assert_depth_holds(dst: &wgpu::TextureView, w: u32, h: u32, depth: &[f32]) {
         }
     }
 }
+
+// Tests on a device of their own (other limits than the shared one's).
+use glam::Affine3A;
+use kickstart_rt::{
+    BvhBuildTask, ExecuteContext, GeometryComponent, GeometryHandle, GeometryInput, GeometryTask,
+    GpuHit, GpuRay, IndexBufferInput, IndexFormat, InstanceHandle, RenderTask, TaskContainer,
+    TaskOperation, TraceRaysTask, VertexBufferInput, VertexFormat,
+};
+
+/// A geometry of `triangles` triangles over the 4 corners of a unit quad (the indices cycle
+/// through its two triangles), in buffers of `device`.
+pub fn many_triangles(device: &wgpu::Device, triangles: u32) -> GeometryInput {
+    let p: [[f32; 3]; 4] = [[0.0; 3], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let quad = [0u32, 1, 2, 0, 2, 3];
+    let indices: Vec<u32> = (0..triangles as usize * 3).map(|i| quad[i % 6]).collect();
+    let init = |contents: &[u8], usage| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents,
+            usage: usage | wgpu::BufferUsages::COPY_SRC,
+        })
+    };
+    let (vb, ib) = (
+        init(bytemuck::cast_slice(&p), wgpu::BufferUsages::VERTEX),
+        init(bytemuck::cast_slice(&indices), wgpu::BufferUsages::INDEX),
+    );
+    GeometryInput {
+        name: format!("{triangles} triangles"),
+        components: vec![GeometryComponent {
+            vertex_buffer: VertexBufferInput {
+                buffer: vb,
+                offset: 0,
+                stride: 12,
+                count: 4,
+                format: VertexFormat::Float32x3,
+            },
+            index_buffer: Some(IndexBufferInput {
+                buffer: ib,
+                offset: 0,
+                count: triangles * 3,
+                format: IndexFormat::Uint32,
+            }),
+            transform: None,
+            index_range: None,
+        }],
+        ..Default::default()
+    }
+}
+
+/// Traces `rays` (closest hit) through `ctx` on its own `device`; the hits and the task's serial.
+pub fn trace_on(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    ctx: &ExecuteContext,
+    rays: &[GpuRay],
+) -> (Vec<GpuHit>, u64) {
+    let rb = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("rays"),
+        contents: bytemuck::cast_slice(rays),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let size = rays.len() as u64 * 32;
+    let hb = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("hits"),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let read = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("hits read-back"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut c = ctx.create_task_container();
+    c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask::new(
+        rb,
+        rays.len() as u32,
+        hb.clone(),
+    )));
+    let mut e = device.create_command_encoder(&Default::default());
+    let t = ctx.build_gpu_task(c, &mut e).expect("trace task");
+    e.copy_buffer_to_buffer(&hb, 0, &read, 0, size);
+    queue.submit([e.finish()]);
+    read.map_async(wgpu::MapMode::Read, .., |_| {});
+    device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    ctx.mark_gpu_task_completed(t).unwrap();
+    let hits = bytemuck::pod_collect_to_vec(&read.get_mapped_range(..).expect("mapped"));
+    (hits, t.serial())
+}
+
+/// A container registering `input` as `geometry`, an instance of it, and building both.
+pub fn register_and_build(
+    ctx: &ExecuteContext,
+    handles: (GeometryHandle, InstanceHandle),
+    input: GeometryInput,
+) -> TaskContainer {
+    register_and_build_at(ctx, handles, input, Affine3A::IDENTITY)
+}
+
+/// As [`register_and_build`], the instance placed by `transform`.
+pub fn register_and_build_at(
+    ctx: &ExecuteContext,
+    (geometry, instance): (GeometryHandle, InstanceHandle),
+    input: GeometryInput,
+    transform: Affine3A,
+) -> TaskContainer {
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: geometry,
+        input,
+    });
+    register_instance(&mut c, instance, geometry, transform);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    c
+}
