@@ -113,6 +113,10 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
         scene.triangle_count(),
         result.sdk_bytes
     );
+    println!(
+        "traversal backend: {} ({})",
+        result.backend.backend, result.backend.reason
+    );
     let written = lit::write(&result, &args.out, args.hdr)?;
     println!(
         "wrote {} images to {} ({width}x{height}, {frames} frames, preset {}, in {:.2} s): {}",
@@ -194,6 +198,7 @@ fn report(
         let mut value = lit::timing_json(scene_name, size, frames, &result.timings);
         value["frames_in_flight"] = serde_json::json!({"summary": fif, "frames": result.frames});
         value["preset"] = serde_json::json!(args.preset.name());
+        value["traversal_backend"] = serde_json::json!(result.backend.backend.to_string());
         std::fs::write(path, serde_json::to_string_pretty(&value)?)
             .map_err(|e| format!("--json {}: {e}", path.display()))?;
         println!("wrote {}", path.display());

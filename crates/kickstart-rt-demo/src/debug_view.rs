@@ -105,7 +105,7 @@ mod tests {
         view: DebugView,
         (width, height): (u32, u32),
     ) -> AnyResult<Vec<[f32; 4]>> {
-        let ctx = ksrt::ExecuteContext::new(device, queue, ksrt::InitSettings::default())?;
+        let ctx = ksrt::ExecuteContext::new(device, queue, crate::gpu::init_settings())?;
         let uploads = gpu::upload_scene(device, scene);
         let mut c = ctx.create_task_container();
         gpu::schedule_static_scene(&ctx, &mut c, scene, &uploads);

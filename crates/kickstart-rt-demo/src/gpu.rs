@@ -27,18 +27,66 @@ pub fn adapter() -> AnyResult<wgpu::Adapter> {
     Ok(adapter)
 }
 
+/// The traversal backend every `ksrt` command asks the SDK for (`--backend`), set once by
+/// `main` before any device is made.
+static BACKEND: std::sync::OnceLock<ksrt::BackendChoice> = std::sync::OnceLock::new();
+
+/// Sets the backend choice of this run (`--backend`); the first call wins.
+pub fn set_backend_choice(choice: ksrt::BackendChoice) {
+    let _ = BACKEND.set(choice);
+}
+
+/// The backend choice of this run (`Auto` unless `--backend` said otherwise).
+pub fn backend_choice() -> ksrt::BackendChoice {
+    BACKEND.get().copied().unwrap_or_default()
+}
+
 /// A device with the SDK's required features and every optional one the adapter has (which
 /// includes `TIMESTAMP_QUERY`, the benchmark's GPU timing), less those named in
-/// `KSRT_DISABLE_FEATURES` ([`disabled_features`]).
+/// `KSRT_DISABLE_FEATURES` ([`disabled_features`]); with ray queries when the adapter has them
+/// and `--backend` is not `software` (an explicit `hardware` on an adapter without them is an
+/// error naming it).
 pub fn device(adapter: &wgpu::Adapter) -> AnyResult<(wgpu::Device, wgpu::Queue)> {
     let optional = ksrt::optional_features_supported(adapter) - disabled_features()?;
+    let mut features = ksrt::required_features() | optional;
+    let mut limits = ksrt::required_limits().using_resolution(adapter.limits());
+    let mut experimental_features = wgpu::ExperimentalFeatures::disabled();
+    let choice = backend_choice();
+    if choice != ksrt::BackendChoice::Software {
+        match ksrt::hardware_ray_query_features(adapter) {
+            Some(rq) => {
+                features |= rq;
+                limits = ksrt::hardware_ray_query_limits(adapter, limits);
+                // SAFETY: `ksrt` accepts wgpu's experimental ray-query support (the SDK's
+                // hardware backend is tested against the software one and the CPU oracle).
+                experimental_features = unsafe { wgpu::ExperimentalFeatures::enabled() };
+            }
+            None if choice == ksrt::BackendChoice::HardwareRayQuery => {
+                return Err(format!(
+                    "--backend hardware: {} has no ray queries (Features::EXPERIMENTAL_RAY_QUERY)",
+                    adapter.get_info().name
+                )
+                .into());
+            }
+            None => {}
+        }
+    }
     let desc = wgpu::DeviceDescriptor {
         label: Some("ksrt"),
-        required_features: ksrt::required_features() | optional,
-        required_limits: ksrt::required_limits().using_resolution(adapter.limits()),
+        required_features: features,
+        required_limits: limits,
+        experimental_features,
         ..Default::default()
     };
     Ok(pollster::block_on(adapter.request_device(&desc))?)
+}
+
+/// `InitSettings` of this run's backend choice (and the other defaults).
+pub fn init_settings() -> ksrt::InitSettings {
+    ksrt::InitSettings {
+        backend: backend_choice(),
+        ..Default::default()
+    }
 }
 
 /// Optional SDK features named in the environment variable `KSRT_DISABLE_FEATURES`
@@ -125,9 +173,21 @@ pub fn info() -> AnyResult<()> {
         limits.max_storage_buffer_binding_size / (1 << 20),
         limits.max_storage_buffers_per_shader_stage
     );
+    println!(
+        "hardware ray queries: {}",
+        match ksrt::hardware_ray_query_features(&adapter) {
+            Some(_) => "yes (the hardware backend is available)",
+            None => "no (the software backend traces)",
+        }
+    );
     let (device, queue) = device(&adapter)?;
-    let ctx = ksrt::ExecuteContext::new(&device, &queue, ksrt::InitSettings::default())?;
+    let ctx = ksrt::ExecuteContext::new(&device, &queue, init_settings())?;
+    let backend = ctx.traversal_backend();
     println!("ExecuteContext: created ({ctx:?})");
+    println!(
+        "traversal backend: {} ({})",
+        backend.backend, backend.reason
+    );
     Ok(())
 }
 

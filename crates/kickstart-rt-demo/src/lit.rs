@@ -68,6 +68,8 @@ pub struct LitResult {
     pub debug: Vec<(DebugView, Texels)>,
     /// The SDK's GPU memory after the last frame, bytes.
     pub sdk_bytes: u64,
+    /// The traversal backend the SDK traced with, and why.
+    pub backend: kickstart_rt::BackendReport,
 }
 
 impl LitResult {
@@ -131,6 +133,7 @@ pub fn render(
         frames: looped.records,
         debug,
         sdk_bytes: renderer.sdk.ctx.resource_allocations().total(),
+        backend: renderer.sdk.ctx.traversal_backend().clone(),
     })
 }
 

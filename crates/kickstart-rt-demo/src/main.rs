@@ -43,8 +43,33 @@ pub type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
     about = "kickstart-rt: ray-traced effects on wgpu — demo and tools"
 )]
 struct Cli {
+    /// How the SDK traces rays: `auto` takes the GPU's ray-tracing hardware (wgpu ray queries)
+    /// where the adapter has it, the SDK's own BVH traversal elsewhere.
+    #[arg(long, global = true, value_enum, default_value_t = BackendArg::Auto)]
+    backend: BackendArg,
     #[command(subcommand)]
     command: Command,
+}
+
+/// `--backend`: the SDK's `BackendChoice`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum BackendArg {
+    /// Hardware ray queries when the adapter has them, else software.
+    Auto,
+    /// The SDK's own BVH and traversal, on every GPU.
+    Software,
+    /// Hardware ray queries (an error where the adapter has none).
+    Hardware,
+}
+
+impl From<BackendArg> for kickstart_rt::BackendChoice {
+    fn from(b: BackendArg) -> Self {
+        match b {
+            BackendArg::Auto => kickstart_rt::BackendChoice::Auto,
+            BackendArg::Software => kickstart_rt::BackendChoice::Software,
+            BackendArg::Hardware => kickstart_rt::BackendChoice::HardwareRayQuery,
+        }
+    }
 }
 
 #[derive(Subcommand)]
@@ -447,6 +472,7 @@ fn bench_command(args: BenchArgs) -> AnyResult<()> {
 fn main() {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
+    gpu::set_backend_choice(cli.backend.into());
     let result = match cli.command {
         Command::Info => gpu::info(),
         Command::Shaders { dump } => shaders::run(dump.as_deref()),

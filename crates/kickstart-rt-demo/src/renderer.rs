@@ -108,7 +108,7 @@ impl Renderer {
         scene: &Scene,
         opts: &RendererOptions,
     ) -> AnyResult<Renderer> {
-        let defaults = ksrt::InitSettings::default();
+        let defaults = crate::gpu::init_settings();
         let settings = ksrt::InitSettings {
             gpu_timing: opts.gpu_timing,
             supported_working_sets: defaults

@@ -32,7 +32,7 @@ pub enum Tlas {
 pub fn init_settings(gpu_timing: bool) -> ksrt::InitSettings {
     ksrt::InitSettings {
         gpu_timing,
-        ..Default::default()
+        ..crate::gpu::init_settings()
     }
 }
 

@@ -27,6 +27,9 @@ pub(super) struct Bench<'a> {
     pub(super) busy: Option<busy::BusyGpu>,
     /// The measurements to run (`--sections`; empty: all).
     pub(super) sections: Vec<extras::Section>,
+    /// The traversal backend of the contexts [`Bench::context`] makes (`--backend`; the
+    /// backend comparison switches it for its measurements).
+    pub(super) backend: std::cell::Cell<ksrt::BackendChoice>,
 }
 
 impl<'a> Bench<'a> {
@@ -41,6 +44,7 @@ impl<'a> Bench<'a> {
             warmed: Default::default(),
             busy: None,
             sections: Vec::new(),
+            backend: std::cell::Cell::new(gpu::backend_choice()),
         }
     }
 
@@ -63,7 +67,11 @@ impl<'a> Bench<'a> {
     }
 
     pub(super) fn context(&self) -> AnyResult<ksrt::ExecuteContext> {
-        let ctx = ksrt::ExecuteContext::new(self.device, self.queue, glue::init_settings(true))?;
+        let settings = ksrt::InitSettings {
+            backend: self.backend.get(),
+            ..glue::init_settings(true)
+        };
+        let ctx = ksrt::ExecuteContext::new(self.device, self.queue, settings)?;
         glue::prepare_pipelines(&ctx)?;
         Ok(ctx)
     }

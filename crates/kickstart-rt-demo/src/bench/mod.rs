@@ -20,6 +20,7 @@ use crate::gpu;
 use crate::scene::{self, Camera};
 use crate::AnyResult;
 
+mod backends;
 mod busy;
 mod cache;
 pub mod denoise;
@@ -259,6 +260,9 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         );
         bar.suspend(|| {
             print_scene(&r, opts.size);
+            if let Some(b) = &r.backends {
+                backends::print(b, &r);
+            }
             if let Some(p) = &r.peer {
                 peer::print(p);
             }

@@ -106,6 +106,11 @@ pub struct SceneReport {
     pub trace_combined: Option<Stats>,
     /// The peer's figures on the same meshes and rays (`--peer`), or why it was skipped.
     pub peer: Option<peer::PeerReport>,
+    /// The traversal backend of this scene's figures.
+    pub traversal_backend: Option<String>,
+    /// Where the device has both backends: the other one on the same scene and rays.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backends: Option<super::backends::BackendComparison>,
     /// `--tree-work`: other builders' trees on the same rays.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub tree_work: Vec<tree_work::TreeWork>,
@@ -146,6 +151,8 @@ impl SceneReport {
             trace_tasks: Vec::new(),
             trace_combined: None,
             peer: None,
+            traversal_backend: None,
+            backends: None,
             tree_work: Vec::new(),
             errors: Vec::new(),
         }
@@ -234,6 +241,9 @@ pub(super) fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
         "\n{}: {} geometries, {} instances, {} geometry triangles ({} in the world)",
         r.scene, r.meshes, r.instances, r.geometry_triangles, r.world_triangles
     );
+    if let Some(b) = &r.traversal_backend {
+        println!("  traversal backend: {b}");
+    }
     println!(
         "  BLAS build   {}{}",
         opt(&r.blas_build),

@@ -10,7 +10,7 @@ use super::harness::Bench;
 use super::rays::{rays, Rng};
 use super::report::{SahReport, SceneReport, TlasReport, WorkPerRay};
 use super::tasks::trace_tasks;
-use super::{attempt, cache, extras, peer, tree_work, Stats};
+use super::{attempt, backends, cache, extras, peer, tree_work, Stats};
 use crate::gpu;
 use crate::scene::{Camera, Scene};
 use crate::sdk_glue::{self as glue, GpuRay, Query, Tlas};
@@ -27,6 +27,7 @@ pub(super) fn bench_scene(
     measure_tree_work: bool,
 ) -> SceneReport {
     let mut r = SceneReport::new(name, scene, &camera);
+    r.traversal_backend = backends::backend_of(bench, bench.backend.get()).map(|b| b.to_string());
     let uploads = gpu::upload_scene(bench.device, scene);
     let mut errors = Vec::new();
     let runs = |s: extras::Section| s.runs_in(&bench.sections);
@@ -107,6 +108,9 @@ pub(super) fn bench_scene(
             tree_work::print(&gpu, &trees);
             r.tree_work = trees;
         }
+    }
+    if let Some(b) = &batches {
+        r.backends = backends::compare(bench, scene, &uploads, b, &r);
     }
     if let Some(p) = peer {
         r.peer = Some(peer::compare(

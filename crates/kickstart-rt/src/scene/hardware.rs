@@ -33,6 +33,8 @@ struct GeometryBlas {
 /// A BLAS build or update recorded by the next [`HardwareScene::record`].
 struct PendingBlas {
     geometry: u32,
+    /// An in-place update of a built BLAS (a refit), not a new build.
+    update: bool,
 }
 
 /// The driver's acceleration structures of one context.
@@ -57,7 +59,7 @@ impl HardwareScene {
             blases: HashMap::new(),
             pending: Vec::new(),
             records: Vec::new(),
-            tlas: create_tlas(device, 64),
+            tlas: create_tlas(device, 64.min(device.limits().max_tlas_instance_count)),
             tlas_dirty: true,
         }
     }
@@ -111,7 +113,10 @@ impl HardwareScene {
                 updatable,
             },
         );
-        self.pending.push(PendingBlas { geometry: slot });
+        self.pending.push(PendingBlas {
+            geometry: slot,
+            update: false,
+        });
         self.tlas_dirty = true;
     }
 
@@ -121,7 +126,10 @@ impl HardwareScene {
         if self.blases.get(&slot).is_some_and(|b| b.updatable)
             && !self.pending.iter().any(|p| p.geometry == slot)
         {
-            self.pending.push(PendingBlas { geometry: slot });
+            self.pending.push(PendingBlas {
+                geometry: slot,
+                update: true,
+            });
             self.tlas_dirty = true;
         }
     }
@@ -150,37 +158,25 @@ impl HardwareScene {
 
     /// Records the pending BLAS builds and updates (reading the triangle pool `triangles`, as
     /// the software build left it earlier in the same encoder; timed as `driver blas build` in
-    /// the `blas build` scope) and, when anything it depends on changed, the TLAS over every
-    /// instance record (`driver tlas build`, scope `tlas build`).
+    /// the `blas build` scope and `driver blas update` in the `blas refit` scope) and, when
+    /// anything it depends on changed, the TLAS over every instance record (`driver tlas
+    /// build`, scope `tlas build`).
     pub fn record(&mut self, rec: &mut Recorder<'_>, triangles: &wgpu::Buffer) {
         if self.pending.is_empty() && !self.tlas_dirty {
             return;
         }
         let pending = std::mem::take(&mut self.pending);
-        let entries: Vec<wgpu::BlasBuildEntry<'_>> = pending
-            .iter()
-            .filter_map(|p| self.blases.get(&p.geometry))
-            .map(|b| wgpu::BlasBuildEntry {
-                blas: &b.blas,
-                geometry: wgpu::BlasGeometries::TriangleGeometries(vec![
-                    wgpu::BlasTriangleGeometry {
-                        size: &b.size,
-                        vertex_buffer: triangles,
-                        first_vertex: b.first_triangle * 3,
-                        vertex_stride: VERTEX_STRIDE,
-                        index_buffer: None,
-                        first_index: None,
-                        transform_buffer: None,
-                        transform_buffer_offset: None,
-                    },
-                ]),
-            })
-            .collect();
-        if !entries.is_empty() {
-            rec.scope = "blas build";
-            rec.encoder_work("driver blas build", |encoder| {
-                encoder.build_acceleration_structures(entries.iter(), std::iter::empty())
-            });
+        for (update, scope, label) in [
+            (false, "blas build", "driver blas build"),
+            (true, "blas refit", "driver blas update"),
+        ] {
+            let entries = self.entries(&pending, update, triangles);
+            if !entries.is_empty() {
+                rec.scope = scope;
+                rec.encoder_work(label, |encoder| {
+                    encoder.build_acceleration_structures(entries.iter(), std::iter::empty())
+                });
+            }
         }
         let instances = self.instances();
         if instances.len() > self.tlas.get().len() {
@@ -188,7 +184,8 @@ impl HardwareScene {
             let limit = self.device.limits().max_tlas_instance_count;
             let capacity = (instances.len() as u32)
                 .next_power_of_two()
-                .clamp(64, limit);
+                .max(64)
+                .min(limit);
             self.tlas = create_tlas(&self.device, capacity);
         }
         let capacity = self.tlas.get().len();
@@ -206,6 +203,36 @@ impl HardwareScene {
             encoder.build_acceleration_structures(std::iter::empty(), std::iter::once(tlas))
         });
         self.tlas_dirty = false;
+    }
+
+    /// The build entries of the `pending` builds (`update == false`) or updates, reading
+    /// `triangles`.
+    fn entries<'a>(
+        &'a self,
+        pending: &[PendingBlas],
+        update: bool,
+        triangles: &'a wgpu::Buffer,
+    ) -> Vec<wgpu::BlasBuildEntry<'a>> {
+        pending
+            .iter()
+            .filter(|p| p.update == update)
+            .filter_map(|p| self.blases.get(&p.geometry))
+            .map(|b| wgpu::BlasBuildEntry {
+                blas: &b.blas,
+                geometry: wgpu::BlasGeometries::TriangleGeometries(vec![
+                    wgpu::BlasTriangleGeometry {
+                        size: &b.size,
+                        vertex_buffer: triangles,
+                        first_vertex: b.first_triangle * 3,
+                        vertex_stride: VERTEX_STRIDE,
+                        index_buffer: None,
+                        first_index: None,
+                        transform_buffer: None,
+                        transform_buffer_offset: None,
+                    },
+                ]),
+            })
+            .collect()
     }
 
     /// The TLAS instance of every record: `None` where the slot is dead, hidden from every
