@@ -35,14 +35,25 @@ const timeoutSeconds = Number(option("--timeout", "600"));
 // cannot build; their module is still compiled and validated.
 const skipPipelines = args.flatMap((a, i) => (a === "--skip-pipeline" ? [args[i + 1]] : []));
 
-// index.txt: "file<TAB>variant name" per line.
-const shaders = readFileSync(join(dir, "index.txt"), "utf8")
+// index.txt: "file<TAB>variant name<TAB>native features" per line; the third column is empty for
+// portable WGSL. A variant that needs a native feature WebGPU lacks (the hardware ray-query
+// backend's tracing passes) is not compiled here: its portable fallback is listed beside it and
+// must be in the dump (it is compiled like every portable variant).
+const all = readFileSync(join(dir, "index.txt"), "utf8")
   .split("\n")
   .filter((l) => l.length > 0)
   .map((l) => {
-    const [file, name] = l.split("\t");
-    return { file, name };
+    const [file, name, features = "", fallback = ""] = l.split("\t");
+    return { file, name, features, fallback };
   });
+const shaders = all.filter((s) => s.features === "");
+for (const s of all.filter((s) => s.features !== "")) {
+  if (!shaders.some((p) => p.name === s.fallback)) {
+    console.error(`browser-shaders: ${s.name} needs ${s.features} and has no portable fallback`);
+    process.exit(2);
+  }
+  console.log(`native-only (${s.features}): ${s.name}; fallback compiled: ${s.fallback}`);
+}
 
 // The page: compiles the shaders one by one and posts a result per shader, then "done".
 const page = `<!doctype html><meta charset="utf-8"><script type="module">

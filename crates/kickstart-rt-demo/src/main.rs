@@ -633,12 +633,26 @@ mod tests {
         }
         // Redrawing needs a folder to draw into.
         assert!(Cli::try_parse_from(["ksrt", "bench", "--plots-from", "r.json"]).is_err());
+        // --backend is global: before or after the command, and only the three choices.
+        for args in [
+            &["ksrt", "--backend", "software", "render"][..],
+            &["ksrt", "render", "--backend", "software"],
+        ] {
+            let cli = Cli::try_parse_from(args).expect("parses");
+            assert_eq!(cli.backend, BackendArg::Software);
+        }
+        assert_eq!(
+            Cli::try_parse_from(["ksrt", "info"]).unwrap().backend,
+            BackendArg::Auto
+        );
+        assert!(Cli::try_parse_from(["ksrt", "render", "--backend", "rtx"]).is_err());
         match Cli::try_parse_from(["ksrt", "render", "--frames-in-flight", "2"]) {
             Ok(Cli {
                 command:
                     Command::Render {
                         frames_in_flight, ..
                     },
+                ..
             }) => assert_eq!(frames_in_flight, 2),
             _ => panic!("render --frames-in-flight 2 does not parse"),
         }

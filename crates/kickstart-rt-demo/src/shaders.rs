@@ -18,8 +18,16 @@ fn file_name(name: &str) -> String {
     out.trim_matches('_').to_string()
 }
 
-/// Lists every variant (name, lines); with `dump`, writes each to `dump/<name>.wgsl` and an
-/// `index.txt` of `file<TAB>variant name` lines.
+/// The portable variant a native one falls back to: the same pass, without the SDK's
+/// ` [hardware ray query]` suffix.
+fn portable_name(name: &str) -> &str {
+    name.trim_end_matches(" [hardware ray query]")
+}
+
+/// Lists every variant (name, lines, and the native features it needs); with `dump`, writes each
+/// to `dump/<name>.wgsl` and an `index.txt` of `file<TAB>variant name<TAB>features<TAB>fallback`
+/// lines, the last two empty for portable WGSL (a native variant's fallback is the portable
+/// variant of the same pass).
 pub fn run(dump: Option<&Path>) -> crate::AnyResult<()> {
     let variants = kickstart_rt::shader_variants();
     let mut index = String::new();
@@ -29,12 +37,29 @@ pub fn run(dump: Option<&Path>) -> crate::AnyResult<()> {
     }
     for v in &variants {
         let file = format!("{}.wgsl", file_name(&v.name));
-        println!("{:>6} lines  {}", v.wgsl.lines().count(), v.name);
+        let (features, fallback) = if v.features.is_empty() {
+            (String::new(), String::new())
+        } else {
+            (
+                format!("{:?}", v.features),
+                portable_name(&v.name).to_string(),
+            )
+        };
+        println!(
+            "{:>6} lines  {}{}",
+            v.wgsl.lines().count(),
+            v.name,
+            if features.is_empty() {
+                String::new()
+            } else {
+                format!("  (native: {features})")
+            }
+        );
         if let Some(dir) = dump {
             let path = dir.join(&file);
             std::fs::write(&path, &v.wgsl)
                 .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-            index.push_str(&format!("{file}\t{}\n", v.name));
+            index.push_str(&format!("{file}\t{}\t{features}\t{fallback}\n", v.name));
         }
     }
     if let Some(dir) = dump {
@@ -85,9 +110,17 @@ mod tests {
         let index = std::fs::read_to_string(dir.join("index.txt")).unwrap();
         assert_eq!(index.lines().count(), variants.len());
         for line in index.lines() {
-            let (file, name) = line.split_once('\t').unwrap();
+            let [file, name, features, fallback] = line.split('\t').collect::<Vec<_>>()[..] else {
+                panic!("{line}: not four columns");
+            };
             let v = variants.iter().find(|v| v.name == name).unwrap();
             assert_eq!(std::fs::read_to_string(dir.join(file)).unwrap(), v.wgsl);
+            assert_eq!(features.is_empty(), v.features.is_empty(), "{line}");
+            // A native variant names a portable fallback that is in the dump too.
+            if !features.is_empty() {
+                let f = variants.iter().find(|p| p.name == fallback).unwrap();
+                assert!(f.features.is_empty(), "{line}");
+            }
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -505,6 +505,12 @@ fn closed_meshes_have_no_gaps() {
         "closed meshes",
     );
 
+    rays_in_face_planes_agree(&ctx, &oracle, &mut rng);
+}
+
+/// Rays in the face planes and along the edges of the cube at (0, 6, 0) of
+/// [`closed_meshes_have_no_gaps`], and axis-aligned rays, against the CPU.
+fn rays_in_face_planes_agree(ctx: &ExecuteContext, oracle: &Oracle, rng: &mut Rng) {
     // Rays in the cube's face planes and along its edges, and axis-aligned rays.
     let cube_at = Vec3::new(0.0, 6.0, 0.0);
     let mut planar = Vec::new();
@@ -526,8 +532,8 @@ fn closed_meshes_have_no_gaps() {
         };
         planar.push(ray(o, d, 0.0, f32::INFINITY));
     }
-    let hits = closest(&ctx, &planar);
-    let in_planes = compare(&oracle, &planar, &hits, VISIBLE);
+    let hits = closest(ctx, &planar);
+    let in_planes = compare(oracle, &planar, &hits, VISIBLE);
     // A ray lying in a triangle's plane grazes it everywhere: our traversal decides each the
     // way the oracle does; the driver (hardware backend) may call any of them a miss, so there
     // only real mismatches count.

@@ -16,6 +16,11 @@ use crate::gpu::UploadedMesh;
 use crate::scene::Scene;
 use crate::sdk_glue::{GpuHit, Query};
 
+/// The share of a batch's rays on which the backends may disagree (a hit against a miss, or
+/// another triangle beyond a tie) before the comparison counts as failed: rays grazing a shared
+/// edge or lying in a triangle's plane, which each backend's triangle test may decide otherwise.
+const MAX_DISAGREEMENT: f64 = 1e-4;
+
 /// One ray batch on both backends.
 #[derive(Debug, Clone, Serialize)]
 pub struct BackendRays {
@@ -144,6 +149,14 @@ pub(super) fn compare(
                 Query::Any => vkrt::QueryKind::Any,
             };
             let agreement = vkrt::compare_hits(&this_hits, &other_hits, query_kind);
+            if agreement.disagreement_fraction() > MAX_DISAGREEMENT {
+                errors.push(format!(
+                    "{kind} rays: the backends disagree on {} of {} rays (more than {} %)",
+                    agreement.disagreements,
+                    rays.len(),
+                    MAX_DISAGREEMENT * 100.0
+                ));
+            }
             report.rays.push(BackendRays {
                 kind,
                 rays: rays.len() as u64,

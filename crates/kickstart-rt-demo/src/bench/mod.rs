@@ -295,7 +295,11 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             .map_err(|e| format!("--json {}: cannot write: {e}", path.display()))?;
         println!("wrote {}", path.display());
     }
-    let failed = report.scenes.iter().map(|s| s.errors.len()).sum::<usize>()
+    let failed = report
+        .scenes
+        .iter()
+        .map(|s| s.errors.len() + s.backends.as_ref().map_or(0, |b| b.errors.len()))
+        .sum::<usize>()
         + report.tlas.iter().map(|t| t.errors.len()).sum::<usize>()
         + report.extras.failures();
     if failed > 0 {

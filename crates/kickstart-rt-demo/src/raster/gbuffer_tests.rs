@@ -123,6 +123,10 @@ fn hdr_channels_are_written_as_linear_exr() {
         frames: vec![],
         debug: vec![],
         sdk_bytes: 0,
+        backend: kickstart_rt::BackendReport {
+            backend: kickstart_rt::TraversalBackend::Software,
+            reason: "test".into(),
+        },
     };
     let dir = testing::temp_dir("exr");
     let written = crate::lit::write(&result, &dir, true).expect("write");
