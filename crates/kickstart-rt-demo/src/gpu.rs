@@ -173,11 +173,24 @@ pub fn info() -> AnyResult<()> {
         limits.max_storage_buffer_binding_size / (1 << 20),
         limits.max_storage_buffers_per_shader_stage
     );
+    let limits = adapter.limits();
     println!(
         "hardware ray queries: {}",
-        match ksrt::hardware_ray_query_features(&adapter) {
-            Some(_) => "yes (the hardware backend is available)",
-            None => "no (the software backend traces)",
+        match (
+            ksrt::hardware_ray_query_features(&adapter),
+            have.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY)
+        ) {
+            (Some(_), _) => format!(
+                "yes (the hardware backend is available; BLAS vertices ≤ {}, TLAS instances ≤ {})",
+                limits.max_blas_primitive_count, limits.max_tlas_instance_count
+            ),
+            (None, true) => "no: the adapter reports no acceleration-structure limits".to_string(),
+            // wgpu's Vulkan backend offers ray queries where the device has VK_KHR_ray_query
+            // with VK_KHR_acceleration_structure, VK_KHR_deferred_host_operations and
+            // VK_KHR_buffer_device_address.
+            (None, false) => "no: the adapter lacks Features::EXPERIMENTAL_RAY_QUERY (on Vulkan: \
+                 VK_KHR_ray_query and VK_KHR_acceleration_structure); the software backend traces"
+                .to_string(),
         }
     );
     let (device, queue) = device(&adapter)?;
