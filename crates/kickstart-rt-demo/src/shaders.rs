@@ -40,10 +40,8 @@ pub fn run(dump: Option<&Path>) -> crate::AnyResult<()> {
         let (features, fallback) = if v.features.is_empty() {
             (String::new(), String::new())
         } else {
-            (
-                format!("{:?}", v.features),
-                portable_name(&v.name).to_string(),
-            )
+            let names: Vec<&str> = v.features.iter_names().map(|(n, _)| n).collect();
+            (names.join("|"), portable_name(&v.name).to_string())
         };
         println!(
             "{:>6} lines  {}{}",

@@ -36,6 +36,8 @@ pub struct BackendRays {
     pub other_time: Stats,
     /// Ray-by-ray comparison of the hits (the other backend as "theirs").
     pub agreement: AgreementReport,
+    /// The largest |t − t'| / max(|t|, 1) over rays both backends hit on the same triangle.
+    pub max_relative_distance: f64,
 }
 
 /// The scene traced by the other backend, against the measured one.
@@ -149,6 +151,16 @@ pub(super) fn compare(
                 Query::Any => vkrt::QueryKind::Any,
             };
             let agreement = vkrt::compare_hits(&this_hits, &other_hits, query_kind);
+            let max_relative_distance = this_hits
+                .iter()
+                .zip(&other_hits)
+                .filter(|(a, b)| {
+                    a.hit == 1
+                        && b.hit == 1
+                        && (a.instance, a.primitive) == (b.instance, b.primitive)
+                })
+                .map(|(a, b)| (a.t as f64 - b.t as f64).abs() / (a.t.abs() as f64).max(1.0))
+                .fold(0.0, f64::max);
             if agreement.disagreement_fraction() > MAX_DISAGREEMENT {
                 errors.push(format!(
                     "{kind} rays: the backends disagree on {} of {} rays (more than {} %)",
@@ -164,6 +176,7 @@ pub(super) fn compare(
                 other_mrays_per_s: rays.len() as f64 / (time.median_ms * 1e3),
                 other_time: time,
                 agreement: agreement.into(),
+                max_relative_distance,
             });
         }
     }
@@ -186,7 +199,7 @@ pub(super) fn print(c: &BackendComparison, ours: &SceneReport) {
     for r in &c.rays {
         let a = &r.agreement;
         println!(
-            "    {:<8} {:>8.1} / {:>8.1} Mrays/s   disagree {} of {} ({:.4} %; hit/miss {}, other triangle {}), ties {}, distances apart {}",
+            "    {:<8} {:>8.1} / {:>8.1} Mrays/s   disagree {} of {} ({:.4} %; hit/miss {}, other triangle {}), ties {}, distances apart {}, largest distance difference {:.1e}",
             r.kind,
             r.this_mrays_per_s,
             r.other_mrays_per_s,
@@ -196,7 +209,8 @@ pub(super) fn print(c: &BackendComparison, ours: &SceneReport) {
             a.hit_miss,
             a.different_triangle,
             a.ties,
-            a.distance_mismatches
+            a.distance_mismatches,
+            r.max_relative_distance
         );
     }
     for e in &c.errors {
