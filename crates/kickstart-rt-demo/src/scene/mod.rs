@@ -8,6 +8,7 @@ pub mod builtin;
 mod framing;
 mod gltf;
 mod obj;
+pub mod town;
 
 use std::path::{Path, PathBuf};
 
@@ -500,6 +501,7 @@ pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("default", None),
     ("cornell", None),
     ("window-room", None),
+    ("town", None),
     ("dragon", Some("stanford_dragon/dragon_vrip.glb")),
     ("apartment", Some("dream_apartment/dream_apartment.glb")),
     ("bunny", Some("stanford_bunny/bunny.obj")),
@@ -524,6 +526,7 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
         "default" => return Ok(builtin::default_scene()),
         "cornell" => return Ok(builtin::cornell_box()),
         "window-room" => return Ok(builtin::window_room()),
+        "town" => return Ok(town::town()),
         _ => {}
     }
     if let Some((name, Some(file))) = SCENE_NAMES.iter().find(|(n, _)| *n == name_or_path) {
