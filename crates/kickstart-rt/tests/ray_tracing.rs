@@ -1797,3 +1797,102 @@ fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backen
     let (hits, _) = trace_on(&device, &queue, &ctx, &down);
     assert_eq!((hits[0].t, hits[0].instance), (1.0, fits.1.index()));
 }
+
+/// Fast-trace builds of very different sizes registered in one task are built as one batch
+/// (one hierarchy pass, one clustered climb and one gather for all of them, no per-build box
+/// pass), and every geometry traces as the CPU oracle says: builds of 1, 2 and 3 triangles,
+/// around the batch's 256-position blocks, and one of 100,000.
+#[test]
+fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
+    let mut rng = Rng(34);
+    let g = gpu();
+    let ctx = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            gpu_timing: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let counts = [1u32, 2, 3, 100, 255, 256, 257, 1000, 4097, 100_000];
+    let geometries = ctx.create_geometry_handles(counts.len());
+    let instances = ctx.create_instance_handles(counts.len());
+    let mut oracle = Oracle::default();
+    let mut c = ctx.create_task_container();
+    let mut centres = Vec::new();
+    for (k, (&gh, &ih)) in geometries.iter().zip(&instances).enumerate() {
+        let mesh = Mesh::soup(&mut rng, counts[k], 1.0);
+        schedule_mesh(&mut c, gh, &format!("{} triangles", counts[k]), &mesh);
+        let t = Affine3A::from_translation(Vec3::new(3.0 * k as f32, 0.0, 0.0));
+        register_instance(&mut c, ih, gh, t);
+        oracle.geometry(gh, &mesh);
+        oracle.instance(ih, &InstanceInput::new(gh, t));
+        let shift = Vec3::from(t.translation);
+        centres.push(
+            mesh.triangles()
+                .iter()
+                .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
+                .collect::<Vec<_>>(),
+        );
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: counts.len() as u32,
+        ..Default::default()
+    });
+    let mut e = encoder();
+    let task = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(task).unwrap();
+    if g.device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+    {
+        let t = ctx.wait_for_gpu_timings(task).unwrap();
+        let passes = |name: &str| {
+            t.passes
+                .iter()
+                .filter(|p| p.label == "blas build" && p.pass == name)
+                .count()
+        };
+        assert_eq!(
+            (
+                passes("lbvh hierarchy"),
+                passes("hploc climb"),
+                passes("lbvh gather")
+            ),
+            (1, 1, 1),
+            "one batch for all {} builds: {:?}",
+            counts.len(),
+            t.passes.iter().map(|p| p.pass).collect::<Vec<_>>()
+        );
+        assert_eq!(passes("blas build: triangle aabbs"), 0);
+    }
+    // Rays at triangles of every geometry (the small ones all of theirs), and random ones.
+    let mut rays = random_rays(&mut rng, 1000, 2.0);
+    for (k, r) in rays.iter_mut().enumerate() {
+        r.origin[0] += 3.0 * (k % counts.len()) as f32;
+    }
+    for of in &centres {
+        // The small builds' every triangle; 300 of the big ones'.
+        for j in 0..of.len().min(300) {
+            let at = match of.len() <= 300 {
+                true => of[j],
+                false => of[rng.below(of.len() as u32) as usize],
+            };
+            let o = at + rng.v(-2.0, 2.0);
+            rays.push(ray(o, at - o, 0.0, f32::INFINITY));
+        }
+    }
+    let hits = closest(&ctx, &rays);
+    let a = compare(&oracle, &rays, &hits, VISIBLE);
+    assert_agrees(&a, "a batch of builds of every size");
+    // Every geometry is hit somewhere (none was left unbuilt or built into another's nodes).
+    for &ih in &instances {
+        assert!(
+            hits.iter().any(|h| h.is_hit() && h.instance == ih.index()),
+            "instance {} never hit",
+            ih.index()
+        );
+    }
+}

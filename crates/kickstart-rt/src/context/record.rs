@@ -384,6 +384,8 @@ fn build_blases(
     let serial = frame.serial;
     let mut headers = Uploads::default();
     let mut rec = frame.recorder("blas build");
+    // Fast-trace builds: allocated in queue order, their passes recorded as one batch below.
+    let mut batch = Vec::new();
     let mut done = 0;
     while done < build.max_blas_build_count {
         let Some(h) = s.blas_queue.pop_front() else {
@@ -421,6 +423,7 @@ fn build_blases(
                     &mut d.gpu,
                     d.allow_update,
                     d.strategy,
+                    &mut batch,
                 );
                 headers.push(
                     &s.scene.geometry_table.buffer,
@@ -451,6 +454,7 @@ fn build_blases(
         }
         done += 1;
     }
+    s.scene.record_batch(&mut rec, batch);
     debug_assert_eq!(
         done_work, plan.reserved.blas,
         "the plan's prediction of step 5"

@@ -11,8 +11,8 @@ use crate::gpu::buffers::{read_back, storage, Grown};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    Lbvh, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles, RefitSource,
-    BLAS_KEY_BITS, TLAS_KEY_BITS,
+    BatchBuild, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles,
+    RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
@@ -38,6 +38,17 @@ pub(crate) enum PendingBvh {
     Build,
     /// New vertices of a built `allow_update` geometry: refit.
     Refit,
+}
+
+/// A fast-trace build allocated by [`GpuScene::build_blas`] whose passes wait for the task's
+/// batch ([`GpuScene::record_batch`]).
+pub(crate) struct DeferredBuild {
+    slot: u32,
+    staged: Range,
+    tris: Range,
+    nodes: Range,
+    count: u32,
+    max_leaf: u32,
 }
 
 /// A new BLAS's pool ranges: triangles, nodes, and (sort order, refit topology) when kept.
@@ -488,7 +499,9 @@ impl GpuScene {
 
     /// Builds the BLAS of geometry slot `slot` from its staged triangles `staged` into pool
     /// space the plan reserved. Returns the geometry table header (first 16 bytes of its
-    /// record) to upload.
+    /// record) to upload. A fast-trace build whose order and topology are not kept only
+    /// allocates here: its passes are recorded with the task's other such builds, as one batch,
+    /// by [`GpuScene::record_batch`] (pushed onto `batch`).
     pub fn build_blas(
         &mut self,
         rec: &mut Recorder<'_>,
@@ -496,10 +509,92 @@ impl GpuScene {
         g: &mut GeometryGpu,
         keep_for_refit: bool,
         strategy: BuildStrategy,
+        batch: &mut Vec<DeferredBuild>,
     ) -> [u32; 4] {
         let n = g.triangles;
-        let max_leaf = strategy.max_leaf();
         let (tris, nodes, refit) = self.alloc_blas(rec.encoder, n, keep_for_refit);
+        if strategy == BuildStrategy::FastTrace && refit.is_none() && n >= 1 {
+            batch.push(DeferredBuild {
+                slot,
+                staged,
+                tris,
+                nodes,
+                count: n,
+                max_leaf: strategy.max_leaf(),
+            });
+        } else {
+            self.record_blas_passes(rec, (slot, staged), n, (tris, nodes, refit), strategy);
+        }
+        g.blas = Some(BlasRanges {
+            tris,
+            nodes,
+            strategy,
+            refit,
+        });
+        // The build's stamp (flags bits 8-31): the TLAS's refs name nodes of one build of this
+        // BLAS, so the traversal enters a ref whose stamp is not the geometry's current one at
+        // the BLAS root instead (a TLAS update deferred past a rebuild; see instance_refs).
+        self.blas_builds = self.blas_builds.wrapping_add(1);
+        [
+            nodes.start,
+            tris.start,
+            n,
+            1 | ((self.blas_builds & 0x00ff_ffff) << 8),
+        ]
+    }
+
+    /// Records the fast-trace builds [`GpuScene::build_blas`] deferred, as one batch
+    /// ([`Lbvh::build_batch`]); one by one when the batch cannot take them (fewer than two).
+    pub fn record_batch(&mut self, rec: &mut Recorder<'_>, batch: Vec<DeferredBuild>) {
+        if batch.is_empty() {
+            return;
+        }
+        rec.scope = "blas build";
+        let builds: Vec<BatchBuild> = batch
+            .iter()
+            .map(|d| BatchBuild {
+                count: d.count,
+                tri_src_base: d.staged.start,
+                tri_dst_base: d.tris.start,
+                node_base: d.nodes.start,
+                bounds_base: d.slot * 3 + 1,
+                max_leaf: d.max_leaf,
+            })
+            .collect();
+        let (_, lbvh) = self.passes.build(&self.device);
+        let batched = lbvh.build_batch(
+            rec,
+            &LbvhBatch {
+                staged: self.staged.buffer(),
+                triangles: self.triangles.buffer(),
+                nodes: self.nodes.buffer(),
+                bounds_out: &self.geometry_table.buffer,
+                builds: &builds,
+            },
+        );
+        if !batched {
+            for d in batch {
+                self.record_blas_passes(
+                    rec,
+                    (d.slot, d.staged),
+                    d.count,
+                    (d.tris, d.nodes, None),
+                    BuildStrategy::FastTrace,
+                );
+            }
+        }
+    }
+
+    /// The passes of one BLAS build into its allocated ranges.
+    fn record_blas_passes(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        (slot, staged): (u32, Range),
+        n: u32,
+        (tris, nodes, refit): BlasAlloc,
+        strategy: BuildStrategy,
+    ) {
+        let max_leaf = strategy.max_leaf();
         self.ensure_scratch(n);
         rec.scope = "blas build";
         let (prims, lbvh) = self.passes.build(&self.device);
@@ -585,22 +680,6 @@ impl GpuScene {
                 None,
             ),
         }
-        g.blas = Some(BlasRanges {
-            tris,
-            nodes,
-            strategy,
-            refit,
-        });
-        // The build's stamp (flags bits 8-31): the TLAS's refs name nodes of one build of this
-        // BLAS, so the traversal enters a ref whose stamp is not the geometry's current one at
-        // the BLAS root instead (a TLAS update deferred past a rebuild; see instance_refs).
-        self.blas_builds = self.blas_builds.wrapping_add(1);
-        [
-            nodes.start,
-            tris.start,
-            n,
-            1 | ((self.blas_builds & 0x00ff_ffff) << 8),
-        ]
     }
 
     /// Whether [`GpuScene::refit_blas`] can decode `triangles` triangles of these component

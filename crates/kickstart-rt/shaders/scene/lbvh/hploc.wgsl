@@ -82,6 +82,7 @@ var<workgroup> hp_goal: u32;
 var<workgroup> hp_merges: atomic<u32>;
 var<workgroup> hp_kept: atomic<u32>;
 var<workgroup> hp_base: u32;
+var<workgroup> hp_segment: u32;
 // The output slots the merge may use (see the layout notes).
 var<workgroup> hp_pool: array<u32, HP_WG>;
 // Per lane: the cluster it holds (ref, box, SAH summary) and its nearest neighbour.
@@ -100,30 +101,30 @@ fn hp_merging(lane: u32) -> bool {
 }
 
 fn hp_xchg_at() -> u32 {
-    return BOXES_AT + 6u * (params.count - 1u);
+    return BOXES_AT + 6u * (seg.count - 1u);
 }
 
 fn hp_counts_at() -> u32 {
-    return BOXES_AT + 10u * (params.count - 1u);
+    return BOXES_AT + 10u * (seg.count - 1u);
 }
 
 fn hp_lists_at() -> u32 {
-    return BOXES_AT + 11u * (params.count - 1u);
+    return BOXES_AT + 11u * (seg.count - 1u);
 }
 
 fn hp_free_at() -> u32 {
-    return BOXES_AT + 12u * (params.count - 1u) + 1u;
+    return BOXES_AT + 12u * (seg.count - 1u) + 1u;
 }
 
 // Karras parent of inner node `node` (the hierarchy is at base 0 of `topology`).
 fn hp_karras_parent(node: u32) -> u32 {
-    return topology[2u * (params.count - 1u) + node] & PARENT_INDEX_MASK;
+    return topology[seg.karras_base + 2u * (seg.count - 1u) + node] & PARENT_INDEX_MASK;
 }
 
 // The other end of inner Karras node `node`'s leaf range (it starts or ends at its index), as
 // lbvh_hierarchy stored it (range_ends_at, here at base 0).
 fn hp_range_end(node: u32) -> u32 {
-    return topology[4u * params.count - 3u + node];
+    return topology[seg.karras_base + 4u * seg.count - 3u + node];
 }
 
 // Leaves covered by Karras child `r` (topology encoding).
@@ -147,7 +148,7 @@ struct Cluster {
 // all three loads are in flight together).
 fn hp_load(k: u32, listed: bool) -> Cluster {
     if listed {
-        return Cluster(atomicLoad(&work[hp_lists_at() + k]), load_box(k), load_subtree(k));
+        return Cluster(atomicLoad(&work[seg.work_base + hp_lists_at() + k]), load_box(k), load_subtree(k));
     }
     let b = leaf_box(k);
     return Cluster(LEAF_BIT | k, b, leaf_subtree(k, b));
@@ -206,11 +207,11 @@ fn hp_tie_before(j: u32, m: u32, best: u32) -> bool {
 
 // The output-topology parent slot of child ref `r`.
 fn hp_parent_slot(r: u32) -> u32 {
-    let n = params.count;
+    let n = seg.count;
     if (r & LEAF_BIT) != 0u {
-        return params.topo_base + 3u * (n - 1u) + (r & 0x7fffffffu);
+        return seg.topo_base + 3u * (n - 1u) + (r & 0x7fffffffu);
     }
-    return params.topo_base + 2u * (n - 1u) + r;
+    return seg.topo_base + 2u * (n - 1u) + r;
 }
 
 // One climber: its Karras node (topology encoding), the node's leaf range [lo, hi], and the split
@@ -228,12 +229,22 @@ struct HpClimber {
 @compute @workgroup_size(32)
 fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {
-    let n = params.count;
-    // The driver runs lbvh_climb instead below two primitives; `n` is uniform.
+    // The build of the batch this workgroup's leaves belong to (builds start at multiples of WG,
+    // so at multiples of HP_WG), read through workgroup memory so that `n` is uniform.
+    let first = (wid.y * nwg.x + wid.x) * HP_WG;
+    if lane == 0u {
+        hp_segment = segment_at(first);
+    }
+    let s = workgroupUniformLoad(&hp_segment);
+    seg = segs[s];
+    let n = segs[s].count;
+    let k = first - seg.key_base + lane;
+    // Below two primitives there are no inner nodes: the root alone (a batch's tiny builds;
+    // a single build of one primitive runs lbvh_climb instead).
     if n < 2u {
+        write_tiny_root(k);
         return;
     }
-    let k = (wid.y * nwg.x + wid.x) * HP_WG + lane;
     let xchg = hp_xchg_at();
     let counts = hp_counts_at();
     let lists = hp_lists_at();
@@ -255,13 +266,13 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
         c.hi = max(k, end);
         let size = c.hi - c.lo + 1u;
         if size > HP_KEEP || size == n {
-            let l = topology[2u * k];
+            let l = topology[seg.karras_base + 2u * k];
             c.split = l & 0x7fffffffu;
             let small_l = hp_child_size(l) <= HP_KEEP;
-            let small_r = hp_child_size(topology[2u * k + 1u]) <= HP_KEEP;
+            let small_r = hp_child_size(topology[seg.karras_base + 2u * k + 1u]) <= HP_KEEP;
             c.climbing = small_l && small_r;
             if small_l != small_r {
-                let before = atomicExchange(&work[xchg + k], select(c.hi, c.lo, small_l) + 1u);
+                let before = atomicExchange(&work[seg.work_base + xchg + k], select(c.hi, c.lo, small_l) + 1u);
                 c.climbing = before != 0u;
             }
             c.pending = c.climbing;
@@ -296,8 +307,8 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
                 let rsize = c.hi - c.split;
                 hp_info[0] = c.lo;
                 hp_info[1] = c.split;
-                hp_info[2] = select(lsize, atomicLoad(&work[counts + c.split]), lsize > HP_KEEP);
-                hp_info[3] = select(rsize, atomicLoad(&work[counts + c.split + 1u]), rsize > HP_KEEP);
+                hp_info[2] = select(lsize, atomicLoad(&work[seg.work_base + counts + c.split]), lsize > HP_KEEP);
+                hp_info[3] = select(rsize, atomicLoad(&work[seg.work_base + counts + c.split + 1u]), rsize > HP_KEEP);
                 hp_info[4] = select(0u, 1u, lsize > HP_KEEP) | select(0u, 2u, rsize > HP_KEEP)
                     | select(0u, 4u, c.hi - c.lo + 1u == n);
                 hp_info[5] = c.node;
@@ -327,11 +338,11 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
                 // set), then the node's own index (see the layout notes).
                 var slot = node;
                 if lane + 1u < lcount {
-                    slot = select(lo + 1u + lane, atomicLoad(&work[free + lo + lane]),
+                    slot = select(lo + 1u + lane, atomicLoad(&work[seg.work_base + free + lo + lane]),
                                   (flags & 1u) != 0u);
                 } else if lane + 2u < total {
                     let j = lane + 1u - lcount;
-                    slot = select(split + 1u + j, atomicLoad(&work[free + split + 1u + j]),
+                    slot = select(split + 1u + j, atomicLoad(&work[seg.work_base + free + split + 1u + j]),
                                   (flags & 2u) != 0u);
                 }
                 hp_pool[lane] = slot;
@@ -400,8 +411,8 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
                     let s = join_subtrees(b, mine_c.sub, o.sub);
                     write_node(x, mine_c.bx, child_ref(mine_c.r, mine_c.sub), o.bx,
                                child_ref(o.r, o.sub));
-                    topo_out[params.topo_base + 2u * x] = mine_c.r;
-                    topo_out[params.topo_base + 2u * x + 1u] = o.r;
+                    topo_out[seg.topo_base + 2u * x] = mine_c.r;
+                    topo_out[seg.topo_base + 2u * x + 1u] = o.r;
                     topo_out[hp_parent_slot(mine_c.r)] = x;
                     topo_out[hp_parent_slot(o.r)] = x;
                     mine_c = Cluster(x, b, s);
@@ -424,18 +435,18 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
             let left_count = hp_count;
             if lane < left_count {
                 mine_c = hp_get(lane);
-                atomicStore(&work[lists + lo + lane], mine_c.r);
+                atomicStore(&work[seg.work_base + lists + lo + lane], mine_c.r);
                 store_box(lo + lane, mine_c.bx);
                 store_subtree(lo + lane, mine_c.sub);
             }
             if lane + 1u < left_count {
-                atomicStore(&work[free + lo + lane], hp_pool[hp_base + lane]);
+                atomicStore(&work[seg.work_base + free + lo + lane], hp_pool[hp_base + lane]);
             }
             if lane == 0u {
-                atomicStore(&work[counts + node], left_count);
+                atomicStore(&work[seg.work_base + counts + node], left_count);
                 if root {
                     write_bounds(mine_c.bx);
-                    topo_out[params.topo_base + 2u * (n - 1u)] = NO_PARENT;
+                    topo_out[seg.topo_base + 2u * (n - 1u)] = NO_PARENT;
                 }
             }
             if owner == lane && root {
@@ -455,7 +466,7 @@ fn hploc_climb(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
             let left = c.node == c.hi;
             // The sibling needs the end of this node's range it cannot know: the left child's
             // first leaf, the right child's last.
-            let before = atomicExchange(&work[xchg + p], select(c.hi, c.lo, left) + 1u);
+            let before = atomicExchange(&work[seg.work_base + xchg + p], select(c.hi, c.lo, left) + 1u);
             // First to arrive: the sibling's climber takes over.
             c.climbing = before != 0u;
             if c.climbing {

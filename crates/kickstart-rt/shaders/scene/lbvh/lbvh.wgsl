@@ -3,7 +3,7 @@
 // src/scene/lbvh.rs, which documents the pass order.
 //
 // Entry points (all 256 invocations, 1-D workgroups split into 2-D by the Recorder):
-//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[0..6] (not run
+//   lbvh_bounds    per primitive: centroid bounds of the valid primitives -> work[seg.work_base + 0..6] (not run
 //                  when the caller's pass merged them: the TLAS's instance boxes)
 //   lbvh_morton    per primitive: Morton key of key_bits bits, min(key_bits / 3, 10) per axis
 //                  (empty: all ones, sorts last), value = index
@@ -60,17 +60,49 @@ struct Params {
     // First of the 6 centroid-bounds words lbvh_morton reads from binding 2: 0 (work's header),
     // or where the caller's pass merged them in the buffer bound there instead.
     centroid_base: u32,
-    pad1: u32,
-    pad2: u32,
+    // First word of this build's region of `work` (a batch gives each build its own).
+    work_base: u32,
+    // First position of this build's keys and values in the sort's arrays: its primitives'
+    // place in a batch (a multiple of WG), 0 for a single build.
+    key_base: u32,
     // lbvh_refit_gather: first staged triangle (binding 12) and first BLAS triangle (13).
     tri_src_base: u32,
     tri_dst_base: u32,
     // lbvh_refit_ingest: rows of ingest_rows in use, and the first of its two counters.
     ingest_row_count: u32,
     ingest_counter: u32,
+    // Where lbvh_hierarchy writes the Karras tree's topology (topo_base, unless the build is
+    // clustered: then the builder's scratch, which hploc_climb reads).
+    karras_base: u32,
+    pad3: u32,
+    pad4: u32,
+    pad5: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
+// The builds of a batch, one Params each, in increasing key_base (build passes; a single build
+// is a batch of one). Refits and lbvh_climb read `params` only.
+@group(0) @binding(18) var<storage, read> segs: array<Params>;
+// The Params of the build (or refit) this invocation works on: every entry point sets it first,
+// from `segs` (build passes) or `params` (refits, lbvh_climb). Its values are never used in
+// control flow that reaches a barrier (a private variable is not uniform).
+var<private> seg: Params;
+
+// The build of a batch that sorted position (or primitive) `g` of the whole batch belongs to:
+// the last whose key_base <= g.
+fn segment_at(g: u32) -> u32 {
+    var lo = 0u;
+    var hi = arrayLength(&segs);
+    while hi - lo > 1u {
+        let mid = (lo + hi) / 2u;
+        if segs[mid].key_base <= g {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
 @group(0) @binding(1) var<storage, read> aabbs: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> work: array<atomic<u32>>;
 @group(0) @binding(3) var<storage, read_write> keys: array<u32>;
@@ -88,6 +120,9 @@ const FLAG_BOUNDS_OUT: u32 = 2u;
 // Leaf k's box is aabbs[aabb_base + k] (already in sorted order: a BLAS refit's gather writes
 // them so), not aabbs[aabb_base + order[k]]: one coalesced load instead of two dependent ones.
 const FLAG_SORTED_BOXES: u32 = 4u;
+// Primitive boxes come from the staged triangles (refit_src from tri_src_base) instead of
+// `aabbs`: a batch's builds read their own geometry's triangles where they lie.
+const FLAG_TRIANGLE_BOXES: u32 = 8u;
 const LEAF_BIT: u32 = 0x80000000u;
 const NO_PARENT: u32 = 0xFFFFFFFFu;
 // In a parent ref: the parent's leaves all lie in one block of WG sorted positions (one climb
@@ -132,7 +167,13 @@ fn is_empty(b: Box) -> bool {
 // Primitive `prim`'s box; empty (min.x > max.x, or any NaN) becomes the canonical empty box so
 // it never enlarges a parent.
 fn prim_box(prim: u32) -> Box {
-    let i = 2u * (params.aabb_base + prim);
+    if (seg.flags & FLAG_TRIANGLE_BOXES) != 0u {
+        let t = 3u * (seg.tri_src_base + prim);
+        let b = triangle_box(bitcast<vec4<f32>>(refit_src[t]), bitcast<vec4<f32>>(refit_src[t + 1u]),
+                             bitcast<vec4<f32>>(refit_src[t + 2u]));
+        return stored_box(b.lo.xyz, b.hi.xyz);
+    }
+    let i = 2u * (seg.aabb_base + prim);
     return stored_box(aabbs[i].xyz, aabbs[i + 1u].xyz);
 }
 
@@ -154,25 +195,30 @@ fn centroid(b: Box) -> vec3<f32> {
 
 // ---------------------------------------------------------------------------------------------
 // Scene bounds of the valid centroids (scene/centroid_bounds.wgsl): workgroup reduce in shared atomics,
-// then one device atomicMax per word into work[0..6]. Skipped when the caller's primitive pass
+// then one device atomicMax per word into work[seg.work_base + 0..6]. Skipped when the caller's primitive pass
 // merged them already (the TLAS's instance boxes): lbvh_morton then reads the caller's words.
 
 @compute @workgroup_size(256)
 fn lbvh_bounds(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = linear_id(lid, wid, nwg);
+    // A block of WG positions lies in one build of a batch (builds start at multiples of WG).
+    let g = linear_id(lid, wid, nwg);
+    seg = segs[segment_at(g - lid)];
+    let i = g - seg.key_base;
     wg_bounds_clear(lid);
     workgroupBarrier();
     // No early return: the barriers below must be reached by the whole workgroup.
-    if i < params.count {
-        let at = 2u * (params.aabb_base + i);
-        wg_bounds_add(aabbs[at].xyz, aabbs[at + 1u].xyz);
+    if i < seg.count {
+        let b = prim_box(i);
+        if !is_empty(b) {
+            wg_bounds_add(b.lo, b.hi);
+        }
     }
     workgroupBarrier();
     if lid < 6u {
         let v = wg_bounds_word(lid);
         if v != 0u {
-            atomicMax(&work[lid], v);
+            atomicMax(&work[seg.work_base + lid], v);
         }
     }
 }
@@ -205,31 +251,42 @@ fn cell(c: f32, lo: f32, hi: f32, cells: f32) -> u32 {
 @compute @workgroup_size(256)
 fn lbvh_morton(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = linear_id(lid, wid, nwg);
-    if i >= params.count {
+    let g = linear_id(lid, wid, nwg);
+    // params.count: every position of the batch, the builds' padding included.
+    if g >= params.count {
         return;
     }
-    let key = morton_key(i);
-    keys[i] = key;
-    values[i] = i;
+    keys[g] = batch_morton_key(g);
+    values[g] = g;
+}
+
+// The sort key of position g of a batch: its build's Morton key of primitive g - key_base, or
+// the empty key in the padding after the build's primitives (sorted last within the build).
+fn batch_morton_key(g: u32) -> u32 {
+    seg = segs[segment_at(g)];
+    return morton_key(g - seg.key_base);
 }
 
 // Primitive i's sort key.
 fn morton_key(i: u32) -> u32 {
+    // Empty primitives (and a batch's padding past the build's primitives): all ones, the
+    // largest key, so they sort last.
+    let empty_key = (1u << seg.key_bits) - 1u;
+    if i >= seg.count {
+        return empty_key;
+    }
     let b = prim_box(i);
-    // Empty primitives: all ones, the largest key, so they sort last.
-    let empty_key = (1u << params.key_bits) - 1u;
     var key = empty_key;
     if !is_empty(b) {
-        // work[0..6], or the caller's words bound in its place (see lbvh_bounds).
-        let cb = params.centroid_base;
-        let lo = vec3<f32>(dec(~atomicLoad(&work[cb])), dec(~atomicLoad(&work[cb + 1u])),
-                           dec(~atomicLoad(&work[cb + 2u])));
-        let hi = vec3<f32>(dec(atomicLoad(&work[cb + 3u])), dec(atomicLoad(&work[cb + 4u])),
-                           dec(atomicLoad(&work[cb + 5u])));
+        // work[seg.work_base + 0..6], or the caller's words bound in its place (see lbvh_bounds).
+        let cb = seg.centroid_base;
+        let lo = vec3<f32>(dec(~atomicLoad(&work[seg.work_base + cb])), dec(~atomicLoad(&work[seg.work_base + cb + 1u])),
+                           dec(~atomicLoad(&work[seg.work_base + cb + 2u])));
+        let hi = vec3<f32>(dec(atomicLoad(&work[seg.work_base + cb + 3u])), dec(atomicLoad(&work[seg.work_base + cb + 4u])),
+                           dec(atomicLoad(&work[seg.work_base + cb + 5u])));
         let c = centroid(b);
         // Exact power of two (at most 1024): the same cells as a literal would give.
-        let cells = f32(1u << min(params.key_bits / 3u, 10u));
+        let cells = f32(1u << min(seg.key_bits / 3u, 10u));
         let morton = (spread3(cell(c.x, lo.x, hi.x, cells)) << 2u)
             | (spread3(cell(c.y, lo.y, hi.y, cells)) << 1u) | spread3(cell(c.z, lo.z, hi.z, cells));
         // Below the empty key: only when the Morton bits fill the key (24 bits: 8 per axis) can
@@ -258,7 +315,7 @@ fn lbvh_morton_histogram(@builtin(local_invocation_index) lid: u32,
     for (var j = 0u; j < DIGIT_BLOCK / WG; j++) {
         let i = block * DIGIT_BLOCK + j * WG + lid;
         if i < params.count {
-            let key = morton_key(i);
+            let key = batch_morton_key(i);
             keys[i] = key;
             values[i] = i;
             digit_bins_count(key & (DIGIT_VALUES - 1u), lid);
@@ -268,17 +325,60 @@ fn lbvh_morton_histogram(@builtin(local_invocation_index) lid: u32,
 }
 
 // ---------------------------------------------------------------------------------------------
+// A batch of builds sorts all of their keys at once: by Morton key first, then (stably) by
+// build, so each build's primitives are back in its own range, in Morton order. Between the two
+// sorts the keys become build indices (lbvh_segment_keys), after them Morton keys again
+// (lbvh_rekey), which the hierarchy reads.
+
+@compute @workgroup_size(256)
+fn lbvh_segment_keys(@builtin(local_invocation_index) lid: u32,
+                     @builtin(workgroup_id) wid: vec3<u32>,
+                     @builtin(num_workgroups) nwg: vec3<u32>) {
+    let g = linear_id(lid, wid, nwg);
+    if g < params.count {
+        keys[g] = segment_at(values[g]);
+    }
+}
+
+@compute @workgroup_size(256)
+fn lbvh_rekey(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+              @builtin(num_workgroups) nwg: vec3<u32>) {
+    let g = linear_id(lid, wid, nwg);
+    if g < params.count {
+        keys[g] = batch_morton_key(values[g]);
+    }
+}
+
+// The triangles of each build of a batch in its sorted order (leaf refs are sorted positions):
+// BLAS triangle k of a build is its staged triangle order[k].
+@compute @workgroup_size(256)
+fn lbvh_gather(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let g = linear_id(lid, wid, nwg);
+    seg = segs[segment_at(g)];
+    let k = g - seg.key_base;
+    if g >= params.count || k >= seg.count {
+        return;
+    }
+    let s = 3u * (seg.tri_src_base + order[seg.order_base + k]);
+    let d = 3u * (seg.tri_dst_base + k);
+    refit_dst[d] = refit_src[s];
+    refit_dst[d + 1u] = refit_src[s + 1u];
+    refit_dst[d + 2u] = refit_src[s + 2u];
+}
+
+// ---------------------------------------------------------------------------------------------
 // Hierarchy (Karras 2012, section 4): inner node i covers a key range starting or ending at i.
 
 // Length of the common prefix of sorted keys i and j, or -1 when j is outside [0, n). Equal keys
 // fall back to the indices (32 + clz(i ^ j)), so duplicates still give a valid binary tree.
 fn delta(i: i32, j: i32) -> i32 {
-    let n = i32(params.count);
+    let n = i32(seg.count);
     if j < 0 || j >= n {
         return -1;
     }
-    let a = keys[i];
-    let b = keys[j];
+    let a = keys[seg.key_base + u32(i)];
+    let b = keys[seg.key_base + u32(j)];
     if a == b {
         return 32 + i32(countLeadingZeros(u32(i) ^ u32(j)));
     }
@@ -288,19 +388,23 @@ fn delta(i: i32, j: i32) -> i32 {
 @compute @workgroup_size(256)
 fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
                   @builtin(num_workgroups) nwg: vec3<u32>) {
-    let k = linear_id(lid, wid, nwg);
-    let n = params.count;
+    let pos = linear_id(lid, wid, nwg);
+    seg = segs[segment_at(pos)];
+    let k = pos - seg.key_base;
+    let n = seg.count;
     if k >= n {
         return;
     }
-    // One primitive is never sorted (no keys were made): its order is the identity.
-    order[params.order_base + k] = select(values[k], k, n < 2u);
+    // One primitive is never sorted (no keys were made): its order is the identity. Sorted
+    // values are positions of the batch: the build's own start taken off.
+    order[seg.order_base + k] = select(values[pos] - seg.key_base, k, n < 2u);
     if k + 1u >= n {
         return; // n - 1 inner nodes
     }
     let i = i32(k);
-    let inner_parents = params.topo_base + 2u * (n - 1u);
-    let leaf_parents = params.topo_base + 3u * (n - 1u);
+    // The Karras tree goes to karras_base (topo_base unless the build is clustered).
+    let inner_parents = seg.karras_base + 2u * (n - 1u);
+    let leaf_parents = seg.karras_base + 3u * (n - 1u);
     if k == 0u {
         topology[inner_parents] = NO_PARENT;
     }
@@ -357,14 +461,14 @@ fn lbvh_hierarchy(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     } else {
         topology[inner_parents + g + 1u] = ref_k;
     }
-    topology[params.topo_base + 2u * k] = left;
-    topology[params.topo_base + 2u * k + 1u] = right;
+    topology[seg.karras_base + 2u * k] = left;
+    topology[seg.karras_base + 2u * k + 1u] = right;
     topology[range_ends_at() + k] = u32(j);
 }
 
 // First topology word of the inner nodes' range ends (n >= 2).
 fn range_ends_at() -> u32 {
-    return params.topo_base + 4u * params.count - 3u;
+    return seg.karras_base + 4u * seg.count - 3u;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -407,10 +511,10 @@ fn wg_any(flag: bool, lid: u32) -> bool {
 
 // The child ref as written into a node: inner index as is; leaf k -> k or order[k].
 fn out_ref(c: u32) -> u32 {
-    if (c & LEAF_BIT) == 0u || (params.flags & FLAG_PRIMITIVE_REFS) == 0u {
+    if (c & LEAF_BIT) == 0u || (seg.flags & FLAG_PRIMITIVE_REFS) == 0u {
         return c;
     }
-    return LEAF_BIT | order[params.order_base + (c & 0x7fffffffu)];
+    return LEAF_BIT | order[seg.order_base + (c & 0x7fffffffu)];
 }
 
 // Box lanes as stored in nodes/bounds_out: the documented (+1e30, -1e30) when empty.
@@ -423,7 +527,7 @@ fn out_hi(b: Box) -> vec3<u32> {
 }
 
 fn write_node(node: u32, l: Box, lref: u32, r: Box, rref: u32) {
-    let at = 4u * (params.node_base + node);
+    let at = 4u * (seg.node_base + node);
     nodes[at] = vec4<u32>(out_lo(l), lref);
     nodes[at + 1u] = vec4<u32>(out_hi(l), rref);
     nodes[at + 2u] = vec4<u32>(out_lo(r), 0u);
@@ -431,37 +535,37 @@ fn write_node(node: u32, l: Box, lref: u32, r: Box, rref: u32) {
 }
 
 fn write_bounds(b: Box) {
-    if (params.flags & FLAG_BOUNDS_OUT) != 0u {
-        bounds_out[params.bounds_base] = vec4<u32>(out_lo(b), 0u);
-        bounds_out[params.bounds_base + 1u] = vec4<u32>(out_hi(b), 0u);
+    if (seg.flags & FLAG_BOUNDS_OUT) != 0u {
+        bounds_out[seg.bounds_base] = vec4<u32>(out_lo(b), 0u);
+        bounds_out[seg.bounds_base + 1u] = vec4<u32>(out_hi(b), 0u);
     }
 }
 
 fn leaf_box(k: u32) -> Box {
-    if (params.flags & FLAG_SORTED_BOXES) != 0u {
+    if (seg.flags & FLAG_SORTED_BOXES) != 0u {
         return prim_box(k);
     }
-    return prim_box(order[params.order_base + k]);
+    return prim_box(order[seg.order_base + k]);
 }
 
 fn store_box(node: u32, b: Box) {
     let at = BOXES_AT + 6u * node;
-    atomicStore(&work[at], bitcast<u32>(b.lo.x));
-    atomicStore(&work[at + 1u], bitcast<u32>(b.lo.y));
-    atomicStore(&work[at + 2u], bitcast<u32>(b.lo.z));
-    atomicStore(&work[at + 3u], bitcast<u32>(b.hi.x));
-    atomicStore(&work[at + 4u], bitcast<u32>(b.hi.y));
-    atomicStore(&work[at + 5u], bitcast<u32>(b.hi.z));
+    atomicStore(&work[seg.work_base + at], bitcast<u32>(b.lo.x));
+    atomicStore(&work[seg.work_base + at + 1u], bitcast<u32>(b.lo.y));
+    atomicStore(&work[seg.work_base + at + 2u], bitcast<u32>(b.lo.z));
+    atomicStore(&work[seg.work_base + at + 3u], bitcast<u32>(b.hi.x));
+    atomicStore(&work[seg.work_base + at + 4u], bitcast<u32>(b.hi.y));
+    atomicStore(&work[seg.work_base + at + 5u], bitcast<u32>(b.hi.z));
 }
 
 fn load_box(node: u32) -> Box {
     let at = BOXES_AT + 6u * node;
     return Box(
-        vec3<f32>(bitcast<f32>(atomicLoad(&work[at])), bitcast<f32>(atomicLoad(&work[at + 1u])),
-                  bitcast<f32>(atomicLoad(&work[at + 2u]))),
-        vec3<f32>(bitcast<f32>(atomicLoad(&work[at + 3u])),
-                  bitcast<f32>(atomicLoad(&work[at + 4u])),
-                  bitcast<f32>(atomicLoad(&work[at + 5u]))));
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[seg.work_base + at])), bitcast<f32>(atomicLoad(&work[seg.work_base + at + 1u])),
+                  bitcast<f32>(atomicLoad(&work[seg.work_base + at + 2u]))),
+        vec3<f32>(bitcast<f32>(atomicLoad(&work[seg.work_base + at + 3u])),
+                  bitcast<f32>(atomicLoad(&work[seg.work_base + at + 4u])),
+                  bitcast<f32>(atomicLoad(&work[seg.work_base + at + 5u]))));
 }
 
 // Summary of child ref c whose box is `b`: a leaf's is computed, an inner node's was published
@@ -523,7 +627,7 @@ fn join_subtrees(b: Box, l: Subtree, r: Subtree) -> Subtree {
     let as_leaf = min(a * f32(count) * SAH_INTERSECTION, BIG);
     let contiguous = l.contiguous && r.contiguous
         && (l.first + l.count == r.first || r.first + r.count == l.first);
-    let collapse = collapsing() && contiguous && count <= params.max_leaf && as_leaf <= split;
+    let collapse = collapsing() && contiguous && count <= seg.max_leaf && as_leaf <= split;
     return Subtree(select(split, as_leaf, collapse), count, min(l.first, r.first), collapse,
                    contiguous);
 }
@@ -532,25 +636,25 @@ fn join_subtrees(b: Box, l: Subtree, r: Subtree) -> Subtree {
 // summaries' stores and loads, which would otherwise add 3 words per inner node to the climb's
 // device traffic for nothing.
 fn collapsing() -> bool {
-    return (params.flags & FLAG_PRIMITIVE_REFS) == 0u && params.max_leaf > 1u;
+    return (seg.flags & FLAG_PRIMITIVE_REFS) == 0u && seg.max_leaf > 1u;
 }
 
 fn subtree_at(node: u32) -> u32 {
-    let n = params.count;
+    let n = seg.count;
     return BOXES_AT + 7u * (n - 1u) + 3u * node;
 }
 
 fn store_subtree(node: u32, s: Subtree) {
     let at = subtree_at(node);
-    atomicStore(&work[at], bitcast<u32>(s.cost));
-    atomicStore(&work[at + 1u], subtree_word(s));
-    atomicStore(&work[at + 2u], s.first);
+    atomicStore(&work[seg.work_base + at], bitcast<u32>(s.cost));
+    atomicStore(&work[seg.work_base + at + 1u], subtree_word(s));
+    atomicStore(&work[seg.work_base + at + 2u], s.first);
 }
 
 fn load_subtree(node: u32) -> Subtree {
     let at = subtree_at(node);
-    return subtree_from(atomicLoad(&work[at]), atomicLoad(&work[at + 1u]),
-                        atomicLoad(&work[at + 2u]));
+    return subtree_from(atomicLoad(&work[seg.work_base + at]), atomicLoad(&work[seg.work_base + at + 1u]),
+                        atomicLoad(&work[seg.work_base + at + 2u]));
 }
 
 // The ref a node stores for child `c` (topology encoding) with summary `s`: a collapsed inner
@@ -564,11 +668,11 @@ fn child_ref(c: u32, s: Subtree) -> u32 {
 
 // Parent ref (index | PARENT_LOCAL_BIT) of a node in topology encoding (n >= 2).
 fn parent_ref(node: u32) -> u32 {
-    let n = params.count;
+    let n = seg.count;
     if (node & LEAF_BIT) != 0u {
-        return topology[params.topo_base + 3u * (n - 1u) + (node & 0x7fffffffu)];
+        return topology[seg.topo_base + 3u * (n - 1u) + (node & 0x7fffffffu)];
     }
-    return topology[params.topo_base + 2u * (n - 1u) + node];
+    return topology[seg.topo_base + 2u * (n - 1u) + node];
 }
 
 // One invocation's climb: its current node (topology encoding: leaf bit + sorted position, or
@@ -659,6 +763,7 @@ fn wg_child_subtree(c: u32, b: Box, block: u32) -> Subtree {
 @compute @workgroup_size(256)
 fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>,
               @builtin(num_workgroups) nwg: vec3<u32>) {
+    seg = params;
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
     // Fewer than two primitives: no inner nodes. (`n` is uniform, so this return keeps the rest
@@ -694,8 +799,8 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
         // round the second arrives in.
         workgroupBarrier();
         if local && c.climbing {
-            let lc = topology[params.topo_base + 2u * parent];
-            let rc = topology[params.topo_base + 2u * parent + 1u];
+            let lc = topology[seg.topo_base + 2u * parent];
+            let rc = topology[seg.topo_base + 2u * parent + 1u];
             let sib = sibling(c, lc, rc);
             let sb = wg_child_box(sib, block);
             climb_up(&c, parent, lc, rc, sb, wg_child_subtree(sib, sb, block),
@@ -708,7 +813,7 @@ fn lbvh_climb(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) 
 
 // The whole BVH of fewer than two primitives: one invocation writes the fixed-shape root.
 fn write_tiny_root(k: u32) {
-    let n = params.count;
+    let n = seg.count;
     if k == 0u {
         let none = empty_box();
         var l = none;
@@ -725,7 +830,7 @@ fn write_tiny_root(k: u32) {
 // The climber of leaf k (not climbing when k is past the primitives).
 fn leaf_climber(k: u32) -> Climber {
     var c: Climber;
-    c.climbing = k < params.count;
+    c.climbing = k < seg.count;
     c.node = LEAF_BIT | k;
     c.bx = empty_box();
     c.pref = NO_PARENT;
@@ -741,7 +846,7 @@ fn leaf_climber(k: u32) -> Climber {
 // has every ancestor of it), or the topology has no block structure at all (a clustered tree's
 // refit). Every invocation of the workgroup must call it (it has barriers).
 fn climb_across(c: ptr<function, Climber>, lid: u32) {
-    let arrival_at = BOXES_AT + 6u * (params.count - 1u);
+    let arrival_at = BOXES_AT + 6u * (seg.count - 1u);
     loop {
         // Uniform trip count: continue while anyone in the workgroup is still climbing.
         if !wg_any((*c).climbing, lid) {
@@ -755,8 +860,8 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
         var rc = 0u;
         var up = NO_PARENT;
         if (*c).climbing {
-            lc = topology[params.topo_base + 2u * parent];
-            rc = topology[params.topo_base + 2u * parent + 1u];
+            lc = topology[seg.topo_base + 2u * parent];
+            rc = topology[seg.topo_base + 2u * parent + 1u];
             up = parent_ref(parent);
         }
         if (*c).climbing && ((*c).node & LEAF_BIT) == 0u {
@@ -770,7 +875,7 @@ fn climb_across(c: ptr<function, Climber>, lid: u32) {
         // Release: the box above before the arrival below.
         storageBarrier();
         if (*c).climbing {
-            let before = atomicAdd(&work[arrival_at + parent], 1u);
+            let before = atomicAdd(&work[seg.work_base + arrival_at + parent], 1u);
             // First to arrive: the sibling's box may not exist yet; its climber takes over.
             (*c).climbing = before != 0u;
         }
@@ -841,12 +946,12 @@ fn pyramid_level_count(n: u32, level: u32) -> u32 {
 // stored, as leaf boxes come from the gathered triangles and workgroup memory), canonical when
 // empty.
 fn pyramid_box(at: u32) -> Box {
-    let i = 2u * (at - params.count);
+    let i = 2u * (at - seg.count);
     return stored_box(pyramid[i].xyz, pyramid[i + 1u].xyz);
 }
 
 fn pyramid_store(at: u32, b: Box) {
-    let i = 2u * (at - params.count);
+    let i = 2u * (at - seg.count);
     pyramid[i] = vec4<f32>(b.lo, 0.0);
     pyramid[i + 1u] = vec4<f32>(b.hi, 0.0);
 }
@@ -922,7 +1027,7 @@ fn straddle_counts_at(nb: u32) -> u32 {
 
 // Word of box i of pyramid level `level` (> REFIT_WG_LEVELS) in `work`.
 fn upper_box_at(level: u32, i: u32) -> u32 {
-    let n = params.count;
+    let n = seg.count;
     var start = 0u;
     var count = pyramid_level_count(n, REFIT_WG_LEVELS + 1u);
     for (var l = REFIT_WG_LEVELS + 1u; l < level; l++) {
@@ -958,13 +1063,14 @@ const REFIT_INGEST_ROWS: u32 = 32u;
 fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
                      @builtin(workgroup_id) wid: vec3<u32>,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
+    seg = params;
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
     let node = node_topology(k);
     // Past the end (and for dropped triangles): the empty box.
     var b = empty_box();
     if k < n {
-        let s = 3u * (params.tri_src_base + order[params.order_base + k]);
+        let s = 3u * (seg.tri_src_base + order[seg.order_base + k]);
         b = store_gathered(k, refit_src[s], refit_src[s + 1u], refit_src[s + 2u]);
     }
     let root = refit_block(lid, k, b, node);
@@ -984,16 +1090,17 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
 fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
                      @builtin(workgroup_id) wid: vec3<u32>,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
+    seg = params;
     let n = params.count;
     let k = linear_id(lid, wid, nwg);
     let node = node_topology(k);
     var b = empty_box();
     if k < n {
-        let p = order[params.order_base + k];
+        let p = order[seg.order_base + k];
         // Last row whose tri_start <= p (rows are sorted by tri_start, row 0 starts at 0; a
         // geometry's triangle index is its ingestion index).
         var lo = 0u;
-        var hi = min(params.ingest_row_count, REFIT_INGEST_ROWS);
+        var hi = min(seg.ingest_row_count, REFIT_INGEST_ROWS);
         while hi - lo > 1u {
             let mid = (lo + hi) / 2u;
             if ingest_rows[mid].tri_start <= p {
@@ -1004,7 +1111,7 @@ fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
         }
         let tri = ingest_triangle(ingest_rows[lo], p - ingest_rows[lo].tri_start);
         if tri.dropped != 0u {
-            atomicAdd(&ingest_counters[params.ingest_counter + tri.dropped - 1u], 1u);
+            atomicAdd(&ingest_counters[seg.ingest_counter + tri.dropped - 1u], 1u);
         }
         b = store_gathered(k, bitcast<vec4<u32>>(tri.v0), bitcast<vec4<u32>>(tri.v1),
                            bitcast<vec4<u32>>(tri.v2));
@@ -1021,11 +1128,11 @@ struct NodeTopology {
 }
 
 fn node_topology(k: u32) -> NodeTopology {
-    if k + 1u >= params.count {
+    if k + 1u >= seg.count {
         return NodeTopology(0u, 0u, 0u);
     }
-    return NodeTopology(topology[range_ends_at() + k], topology[params.topo_base + 2u * k],
-                        topology[params.topo_base + 2u * k + 1u]);
+    return NodeTopology(topology[range_ends_at() + k], topology[seg.topo_base + 2u * k],
+                        topology[seg.topo_base + 2u * k + 1u]);
 }
 
 // The rest of the refit gather, after invocation lid's leaf box b (sorted position k; the empty
@@ -1033,7 +1140,7 @@ fn node_topology(k: u32) -> NodeTopology {
 // in-block nodes, the straddling list and the upper levels. Returns the root's box when this
 // invocation wrote the root (only with one block), else the empty box.
 fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
-    let n = params.count;
+    let n = seg.count;
     let block = k - lid;
     let nb = (n + WG - 1u) / WG;
     if lid == 0u {
@@ -1084,12 +1191,12 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
             }
         } else {
             let slot = atomicAdd(&wg_straddlers, 1u);
-            atomicStore(&work[straddle_list_at() + block + slot], k);
+            atomicStore(&work[seg.work_base + straddle_list_at() + block + slot], k);
         }
     }
     workgroupBarrier();
     if lid == 0u {
-        atomicStore(&work[straddle_counts_at(nb) + w], atomicLoad(&wg_straddlers));
+        atomicStore(&work[seg.work_base + straddle_counts_at(nb) + w], atomicLoad(&wg_straddlers));
     }
     // The levels above the block's: its top box (level REFIT_WG_LEVELS; with one block the
     // pyramid is complete) merged into each ancestor, one word an invocation.
@@ -1102,7 +1209,7 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
             let at = upper_box_at(level, w >> (up + 1u)) + word;
             let bounds = array<f32, 6>(top.lo.x, top.lo.y, top.lo.z, top.hi.x, top.hi.y, top.hi.z);
             let v = enc(bounds[word]);
-            atomicMax(&work[at], select(v, ~v, word < 3u));
+            atomicMax(&work[seg.work_base + at], select(v, ~v, word < 3u));
         }
     }
     return root;
@@ -1110,7 +1217,7 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
 
 // Writes sorted position k's triangle into the BLAS's triangles and returns its box.
 fn store_gathered(k: u32, v0: vec4<u32>, v1: vec4<u32>, v2: vec4<u32>) -> Box {
-    let d = 3u * (params.tri_dst_base + k);
+    let d = 3u * (seg.tri_dst_base + k);
     refit_dst[d] = v0;
     refit_dst[d + 1u] = v1;
     refit_dst[d + 2u] = v2;
@@ -1126,7 +1233,7 @@ fn leaf_triangle_box(v0: vec4<u32>, v1: vec4<u32>, v2: vec4<u32>) -> Box {
 
 // The box of leaf k from its gathered triangle (lbvh_refit_gather wrote it).
 fn gathered_leaf_box(k: u32) -> Box {
-    let d = 3u * (params.tri_dst_base + k);
+    let d = 3u * (seg.tri_dst_base + k);
     return leaf_triangle_box(refit_dst[d], refit_dst[d + 1u], refit_dst[d + 2u]);
 }
 
@@ -1193,8 +1300,8 @@ fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
         w0 = walk_step(w0, l0, r0);
         w1 = walk_step(w1, l1, r1);
     }
-    var start = params.count;
-    var count = pyramid_parent_count(params.count);
+    var start = seg.count;
+    var count = pyramid_parent_count(seg.count);
     var level = 1u;
     // The walks end when their ranges are used up, at the latest at the level of one box.
     while walks_live(w0, w1) && level <= REFIT_WG_LEVELS {
@@ -1232,6 +1339,7 @@ fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
+    seg = params;
     let w = wid.y * nwg.x + wid.x;
     let nb = (params.count + WG - 1u) / WG;
     if w >= nb || lid >= work_read[straddle_counts_at(nb) + w] {
@@ -1239,8 +1347,8 @@ fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
     }
     let i = work_read[straddle_list_at() + w * WG + lid];
     let range = node_range(i);
-    let lc = topology[params.topo_base + 2u * i];
-    let rc = topology[params.topo_base + 2u * i + 1u];
+    let lc = topology[seg.topo_base + 2u * i];
+    let rc = topology[seg.topo_base + 2u * i + 1u];
     let g = lc & 0x7fffffffu;
     let boxes = range_boxes(range.x, g, g + 1u, range.y);
     write_ranged_node(i, lc, rc, boxes[0], boxes[1]);

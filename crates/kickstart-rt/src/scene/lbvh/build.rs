@@ -23,10 +23,10 @@ struct BuildScratch {
     /// Where the hierarchy pass writes the Karras tree: the output topology unless the build is
     /// clustered (then the builder's scratch).
     karras: wgpu::Buffer,
-    /// Params of the climb.
+    /// Params of every pass (a uniform).
     params: wgpu::Buffer,
-    /// Params of the passes up to the hierarchy (the Karras tree's topology base).
-    karras_params: wgpu::Buffer,
+    /// The same params as a batch of one build (the build passes read `segs`).
+    segs: wgpu::Buffer,
     /// Sort key bits, clamped.
     key_bits: u32,
 }
@@ -46,7 +46,10 @@ impl Lbvh {
         let device = rec.device;
         let bounds_out = b.bounds_out.map_or(&s.dummy, |(buffer, _)| buffer);
         let mut bind: Buffers<'_> = vec![
-            ("params", &s.karras_params),
+            ("params", &s.params),
+            ("segs", &s.segs),
+            // Primitive boxes come from `aabbs` (no triangle boxes flag): any read-only buffer.
+            ("refit_src", b.aabbs),
             ("aabbs", b.aabbs),
             ("work", &s.work),
             ("keys", &s.keys),
@@ -74,7 +77,6 @@ impl Lbvh {
                 groups(n),
             );
         }
-        bind.push(("params", &s.params));
         if b.hierarchy_only {
             return;
         }
@@ -131,7 +133,7 @@ impl Lbvh {
         let key_bits = b
             .key_bits
             .clamp(*KEY_BITS_RANGE.start(), *KEY_BITS_RANGE.end());
-        let params_at = |topo_base: u32| Params {
+        let params = Params {
             count: n,
             aabb_base: b.aabb_base,
             node_base: b.node_base,
@@ -142,18 +144,17 @@ impl Lbvh {
             max_leaf: effective_max_leaf(b.max_leaf, b.leaf_refs),
             key_bits,
             centroid_base: b.centroid_bounds.map_or(0, |(_, base)| base),
-            pad: [0; 2],
+            work_base: 0,
+            key_base: 0,
             tri_src_base: 0,
             tri_dst_base: 0,
             ingest_row_count: 0,
             ingest_counter: 0,
+            karras_base,
+            pad: [0; 3],
         };
-        let params = rec.uniform("lbvh params", &params_at(topo_base));
-        let karras_params = if clustered {
-            rec.uniform("lbvh hierarchy params", &params_at(karras_base))
-        } else {
-            params.clone()
-        };
+        let segs = rec.storage_init("lbvh segments", bytemuck::bytes_of(&params));
+        let params = rec.uniform("lbvh params", &params);
         BuildScratch {
             work,
             keys,
@@ -162,7 +163,7 @@ impl Lbvh {
             topology,
             karras,
             params,
-            karras_params,
+            segs,
             key_bits,
         }
     }

@@ -52,6 +52,7 @@
 //! Files: this one holds the inputs, the builder and its sizes; `build.rs` the build (steps 1–6),
 //! `refit.rs` both refits, `cpu.rs` the CPU helpers of the tests, `tests/` the tests.
 
+mod batch;
 mod build;
 #[cfg(test)]
 mod cpu;
@@ -62,6 +63,7 @@ mod tests;
 use crate::gpu::radix_sort::RadixSort;
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
+pub(crate) use batch::{BatchBuild, LbvhBatch};
 use bytemuck::{Pod, Zeroable};
 
 // The builder's scratch that only grows (gpu layer); the scene's tables use it too.
@@ -97,6 +99,8 @@ const FLAG_PRIMITIVE_REFS: u32 = 1;
 const FLAG_BOUNDS_OUT: u32 = 2;
 /// Params flag: the boxes are in sorted order ([`LbvhRefit::sorted_boxes`]).
 const FLAG_SORTED_BOXES: u32 = 4;
+/// Params flag: primitive boxes come from the staged triangles (a batch's builds).
+const FLAG_TRIANGLE_BOXES: u32 = 8;
 /// First word of the inner-node boxes in the work buffer (after the centroid-bounds header).
 const BOXES_AT: u64 = 8;
 /// Largest primitive count: a leaf ref has 28 bits for its first primitive.
@@ -269,7 +273,11 @@ struct Params {
     key_bits: u32,
     /// First centroid-bounds word in the buffer `lbvh_morton` binds at 2.
     centroid_base: u32,
-    pad: [u32; 2],
+    /// First word of the build's region of `work` (its own in a batch).
+    work_base: u32,
+    /// First position of the build's keys and values in a batch's sort (a multiple of
+    /// [`WORKGROUP`]).
+    key_base: u32,
     /// `lbvh refit gather`: first staged triangle.
     tri_src_base: u32,
     /// `lbvh refit gather`: first BLAS triangle.
@@ -278,6 +286,10 @@ struct Params {
     ingest_row_count: u32,
     /// `lbvh refit ingest`: first of the geometry's two dropped-triangle counters.
     ingest_counter: u32,
+    /// Where `lbvh hierarchy` writes the Karras topology: `topo_base`, or the builder's scratch
+    /// for a clustered build (which `hploc climb` reads).
+    karras_base: u32,
+    pad: [u32; 3],
 }
 
 /// The LBVH builder: its pipelines, the radix sort, and scratch grown on demand.
@@ -296,6 +308,11 @@ pub(crate) struct Lbvh {
     refit_ingest: ReflectedPipeline,
     /// `lbvh_range_refit`: the nodes that straddle blocks, from their leaf ranges.
     range_refit: ReflectedPipeline,
+    /// A batch's passes ([`Lbvh::build_batch`]): keys by build, Morton keys again, and the
+    /// triangles gathered into each build's sorted order.
+    segment_keys: ReflectedPipeline,
+    rekey: ReflectedPipeline,
+    gather: ReflectedPipeline,
     sort: RadixSort,
     /// Centroid bounds, inner boxes during the climb, arrival counters; for a clustered build
     /// also the cluster counts and lists ([`clustered_work_words`]).
@@ -311,6 +328,8 @@ pub(crate) struct Lbvh {
     dummy: Grown,
     /// The range refit's box pyramid above level 0 ([`pyramid_boxes`] − n boxes of 32 bytes).
     pyramid_boxes: Grown,
+    /// A batch's sort order (its builds' orders are not kept).
+    batch_order: Grown,
 }
 
 /// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/scene/lbvh/hploc.wgsl`).
@@ -371,6 +390,9 @@ impl Lbvh {
             refit_gather: pipeline("lbvh refit gather", "lbvh_refit_gather"),
             refit_ingest: pipeline("lbvh refit ingest", "lbvh_refit_ingest"),
             range_refit: pipeline("lbvh range refit", "lbvh_range_refit"),
+            segment_keys: pipeline("lbvh segment keys", "lbvh_segment_keys"),
+            rekey: pipeline("lbvh rekey", "lbvh_rekey"),
+            gather: pipeline("lbvh gather", "lbvh_gather"),
             sort: RadixSort::new(device),
             work: Grown::default(),
             keys: Grown::default(),
@@ -379,6 +401,7 @@ impl Lbvh {
             clustered_topology: Grown::default(),
             dummy: Grown::default(),
             pyramid_boxes: Grown::default(),
+            batch_order: Grown::default(),
         }
     }
 
@@ -403,6 +426,7 @@ impl Lbvh {
             + self.clustered_topology.bytes()
             + self.dummy.bytes()
             + self.pyramid_boxes.bytes()
+            + self.batch_order.bytes()
             + self.sort.scratch_bytes()
     }
 

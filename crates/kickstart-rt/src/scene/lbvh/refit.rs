@@ -77,11 +77,14 @@ impl Lbvh {
                 bounds_base,
                 flags,
                 max_leaf: effective_max_leaf(r.max_leaf, r.leaf_refs),
+                karras_base: r.topology.1,
                 ..Params::zeroed()
             },
         );
         let bind: Buffers<'_> = vec![
             ("params", &params),
+            // Primitive boxes come from `aabbs` (no triangle boxes flag): any read-only buffer.
+            ("refit_src", r.aabbs),
             ("aabbs", r.aabbs),
             ("work", &work),
             ("order", r.order),
@@ -149,6 +152,7 @@ impl Lbvh {
                 tri_dst_base: r.dst_base,
                 ingest_row_count,
                 ingest_counter,
+                karras_base: r.topology.1,
                 ..Params::zeroed()
             },
         );

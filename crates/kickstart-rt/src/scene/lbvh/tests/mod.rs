@@ -35,11 +35,14 @@ fn the_shader_validates_and_matches_the_rust_side() {
             max_leaf,
             key_bits,
             centroid_base,
-            pad => "pad1",
+            work_base,
+            key_base,
             tri_src_base,
             tri_dst_base,
             ingest_row_count,
             ingest_counter,
+            karras_base,
+            pad => "pad3",
         }
     );
     assert_eq!(const_u32(&module, "WG"), WORKGROUP);
@@ -47,6 +50,10 @@ fn the_shader_validates_and_matches_the_rust_side() {
     assert_eq!(
         const_u32(&module, "FLAG_PRIMITIVE_REFS"),
         FLAG_PRIMITIVE_REFS
+    );
+    assert_eq!(
+        const_u32(&module, "FLAG_TRIANGLE_BOXES"),
+        FLAG_TRIANGLE_BOXES
     );
     assert_eq!(const_u32(&module, "FLAG_BOUNDS_OUT"), FLAG_BOUNDS_OUT);
     assert_eq!(const_u32(&module, "FLAG_SORTED_BOXES"), FLAG_SORTED_BOXES);
