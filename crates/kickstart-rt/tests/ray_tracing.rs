@@ -1798,9 +1798,9 @@ fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backen
     assert_eq!((hits[0].t, hits[0].instance), (1.0, fits.1.index()));
 }
 
-/// Fast-trace builds of very different sizes registered in one task are built as one batch
-/// (one hierarchy pass, one clustered climb and one gather for all of them, no per-build box
-/// pass), and every geometry traces as the CPU oracle says: builds of 1, 2 and 3 triangles,
+/// Fast-trace builds of very different sizes registered in one task are ingested in one pass and
+/// built as one batch (one hierarchy pass, one clustered climb and one gather for all of them,
+/// no per-build box pass), and every geometry traces as the CPU oracle says: builds of 1, 2 and 3 triangles,
 /// around the batch's 256-position blocks, and one of 100,000.
 #[test]
 fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
@@ -1867,6 +1867,8 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
             t.passes.iter().map(|p| p.pass).collect::<Vec<_>>()
         );
         assert_eq!(passes("blas build: triangle aabbs"), 0);
+        // And one ingestion pass decodes all ten geometries.
+        assert_eq!(t.passes.iter().filter(|p| p.label == "ingest").count(), 1);
     }
     // Rays at triangles of every geometry (the small ones all of theirs), and random ones.
     let mut rays = random_rays(&mut rng, 1000, 2.0);

@@ -1,7 +1,9 @@
 // Vertex pulling: application vertex/index bytes (copied raw into SDK memory) -> triangle soup
 // (scene/ingest_decode decodes). Layouts: docs/ray-tracing-core.md. One
 // thread per triangle over all components of a dispatch; a thread finds its component by binary
-// search over the table's triangle starts, so thousands of small components cost one dispatch.
+// search over the table's triangle starts, so thousands of small components cost one dispatch:
+// the components of every geometry a task ingests are one table, each row naming its own
+// dropped-triangle counters.
 
 #import scene/ingest_decode
 
@@ -49,6 +51,6 @@ fn ingest(
     out_tris[base + 1u] = tri.v1;
     out_tris[base + 2u] = tri.v2;
     if tri.dropped != 0u {
-        atomicAdd(&counters[params.counter_base + tri.dropped - 1u], 1u);
+        atomicAdd(&counters[params.counter_base + c.counter + tri.dropped - 1u], 1u);
     }
 }

@@ -20,7 +20,7 @@ struct Component {
     idx_format: u32,    // 0 none (3 consecutive vertices), 1 u16, 2 u32
     first_index: u32,
     has_transform: u32, // 0: positions are copied bit-exactly (no arithmetic)
-    pad0: u32,
+    counter: u32,       // its ingestion's dropped-triangle counters, after the dispatch's counter_base
     pad1: u32,
     row0: vec4<f32>,    // rows of the 3x4 affine transform
     row1: vec4<f32>,

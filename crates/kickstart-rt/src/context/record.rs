@@ -218,6 +218,8 @@ fn ingest(
         *ingested.entry(t.handle).or_default() += 1;
     }
     let mut rec = frame.recorder("ingest");
+    // Every ingestion not fused into a refit, recorded as one pass below.
+    let mut plain: Vec<(Vec<ComponentIngest>, Range, u32)> = Vec::new();
     for (i, ((task, _, staged, triangles), comps)) in ingestions.iter().zip(components).enumerate()
     {
         // An update refit in this task decodes its own triangles (the ingestion fused into
@@ -248,11 +250,14 @@ fn ingest(
                 };
                 deferred.insert(task.handle, d);
             }
-            None => s
-                .scene
-                .record_ingest(&mut rec, &raw, &comps, *staged, i as u32),
+            None => plain.push((comps, *staged, i as u32)),
         }
     }
+    let plain: Vec<(&[ComponentIngest], Range, u32)> = plain
+        .iter()
+        .map(|(c, staged, i)| (c.as_slice(), *staged, *i))
+        .collect();
+    s.scene.record_ingests(&mut rec, &raw, &plain);
     frame.ws.held.push(raw);
     frame.ws.dropped = Some(dropped_readback(frame.device, ingestions));
     deferred

@@ -36,8 +36,10 @@ pub(crate) struct Timestamps {
 }
 
 impl Timestamps {
-    /// Queries of one task: two per pass.
-    pub const CAPACITY: u32 = 1024;
+    /// Queries of one task: two per pass, the most one query set may hold (wgpu's limit).
+    /// Passes past it go untimed: per-object passes (a task allocating the lighting caches of
+    /// thousands of instances) can outnumber it.
+    pub const CAPACITY: u32 = 4096;
 
     pub fn new(device: &wgpu::Device) -> Self {
         Timestamps {

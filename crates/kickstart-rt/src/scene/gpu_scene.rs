@@ -436,6 +436,27 @@ impl GpuScene {
         encoder.clear_buffer(&self.counters, 0, Some(bytes.div_ceil(4) * 4));
     }
 
+    /// Decodes the components of several geometries `(components, staged range, ingestion
+    /// index)` from `raw` into their staged ranges, in one pass.
+    pub fn record_ingests(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        raw: &wgpu::Buffer,
+        ingestions: &[(&[ComponentIngest], Range, u32)],
+    ) {
+        if ingestions.is_empty() {
+            return;
+        }
+        let ingest = self.passes.ingest(&self.device);
+        let (tris, counters) = (self.staged.buffer(), &self.counters);
+        rec.scope = "ingest";
+        let rows: Vec<(&[ComponentIngest], u32, u32)> = ingestions
+            .iter()
+            .map(|&(c, staged, i)| (c, staged.start, i * 2))
+            .collect();
+        ingest.record_many(rec, raw, &rows, tris, counters);
+    }
+
     /// Decodes one geometry's components from `raw` into its staged range.
     pub fn record_ingest(
         &mut self,

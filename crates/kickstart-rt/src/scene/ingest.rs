@@ -90,35 +90,60 @@ impl Ingest {
         counters: &wgpu::Buffer,
         counter_base: u32,
     ) {
+        self.record_many(
+            rec,
+            raw,
+            &[(components, out_base, counter_base)],
+            out_tris,
+            counters,
+        );
+    }
+
+    /// [`Ingest::record`] of several geometries' components `(components, out_base,
+    /// counter_base)` in one dispatch (one per 2^32 triangles): a task's ingestions cost one
+    /// pass, however many geometries it registers. Each table row names its geometry's
+    /// counters.
+    pub fn record_many(
+        &self,
+        rec: &mut Recorder<'_>,
+        raw: &wgpu::Buffer,
+        ingestions: &[(&[ComponentIngest], u32, u32)],
+        out_tris: &wgpu::Buffer,
+        counters: &wgpu::Buffer,
+    ) {
         let mut table: Vec<u32> = Vec::new();
         let mut total: u32 = 0;
-        for (i, c) in components.iter().enumerate() {
-            if c.triangle_count == 0 {
-                continue; // no rows for empty components keeps the search's rows non-empty
-            }
-            // A dispatch counts its triangles in u32: flush first when this one would overflow.
-            if total.checked_add(c.triangle_count).is_none() {
-                self.dispatch(rec, raw, &table, total, out_tris, counters, counter_base);
-                table.clear();
-                total = 0;
-            }
-            match component_row(c, out_base, total) {
-                Some(row) => {
-                    table.extend_from_slice(&row);
-                    total += c.triangle_count;
+        for &(components, out_base, counter_base) in ingestions {
+            for (i, c) in components.iter().enumerate() {
+                if c.triangle_count == 0 {
+                    continue; // no rows for empty components keeps the search's rows non-empty
                 }
-                None => log::error!(
-                    "kickstart-rt ingest: component {i} does not fit 32-bit GPU addressing \
-                     (offsets {:#x}/{:?}, stride {}, out slot {}+{}); its triangles are skipped",
-                    c.vertex_byte_offset,
-                    c.index,
-                    c.vertex_stride,
-                    out_base,
-                    c.primitive_base
-                ),
+                // A dispatch counts its triangles in u32: flush first when this one would
+                // overflow.
+                if total.checked_add(c.triangle_count).is_none() {
+                    self.dispatch(rec, raw, &table, total, out_tris, counters, 0);
+                    table.clear();
+                    total = 0;
+                }
+                match component_row(c, out_base, total) {
+                    Some(mut row) => {
+                        row[COUNTER_WORD] = counter_base;
+                        table.extend_from_slice(&row);
+                        total += c.triangle_count;
+                    }
+                    None => log::error!(
+                        "kickstart-rt ingest: component {i} does not fit 32-bit GPU addressing \
+                         (offsets {:#x}/{:?}, stride {}, out slot {}+{}); its triangles are skipped",
+                        c.vertex_byte_offset,
+                        c.index,
+                        c.vertex_stride,
+                        out_base,
+                        c.primitive_base
+                    ),
+                }
             }
         }
-        self.dispatch(rec, raw, &table, total, out_tris, counters, counter_base);
+        self.dispatch(rec, raw, &table, total, out_tris, counters, 0);
     }
 
     /// One dispatch over the rows of `table` (`total` triangles).
@@ -182,6 +207,10 @@ pub(crate) fn component_rows(components: &[ComponentIngest], out_base: u32) -> O
     }
     Some(table)
 }
+
+/// The word of a table row holding its geometry's first dropped-triangle counter (`counter`
+/// of `Component` in `scene/ingest_decode.wgsl`).
+const COUNTER_WORD: usize = 14;
 
 /// The table row of `c` (`Component` in `scene/ingest.wgsl`), its triangles starting at `tri_start`
 /// within the dispatch; `None` when an address the shader computes would overflow `u32`.

@@ -120,8 +120,9 @@ const FLAG_BOUNDS_OUT: u32 = 2u;
 // Leaf k's box is aabbs[aabb_base + k] (already in sorted order: a BLAS refit's gather writes
 // them so), not aabbs[aabb_base + order[k]]: one coalesced load instead of two dependent ones.
 const FLAG_SORTED_BOXES: u32 = 4u;
-// Primitive boxes come from the staged triangles (refit_src from tri_src_base) instead of
-// `aabbs`: a batch's builds read their own geometry's triangles where they lie.
+// Primitive boxes come from staged triangles (3 vec4 each, from tri_src_base) bound at `aabbs`
+// instead of boxes: a batch's builds read their own geometry's triangles where they lie. (The
+// same binding, so the clustered climb stays within 8 storage buffers.)
 const FLAG_TRIANGLE_BOXES: u32 = 8u;
 const LEAF_BIT: u32 = 0x80000000u;
 const NO_PARENT: u32 = 0xFFFFFFFFu;
@@ -169,8 +170,7 @@ fn is_empty(b: Box) -> bool {
 fn prim_box(prim: u32) -> Box {
     if (seg.flags & FLAG_TRIANGLE_BOXES) != 0u {
         let t = 3u * (seg.tri_src_base + prim);
-        let b = triangle_box(bitcast<vec4<f32>>(refit_src[t]), bitcast<vec4<f32>>(refit_src[t + 1u]),
-                             bitcast<vec4<f32>>(refit_src[t + 2u]));
+        let b = triangle_box(aabbs[t], aabbs[t + 1u], aabbs[t + 2u]);
         return stored_box(b.lo.xyz, b.hi.xyz);
     }
     let i = 2u * (seg.aabb_base + prim);

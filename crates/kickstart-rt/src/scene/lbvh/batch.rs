@@ -133,7 +133,6 @@ impl Lbvh {
         let clustered =
             self.clustered_topology
                 .get(device, "hploc topology", layout.topology_words * 4);
-        let dummy = self.dummy.get(device, "lbvh no bounds", 32);
         let segs = rec.storage_init("lbvh batch segments", bytemuck::cast_slice(&layout.segs));
         // The batch's own params: every position, the Morton keys' bits.
         let params = rec.uniform(
@@ -150,7 +149,8 @@ impl Lbvh {
         let mut bind: Buffers<'_> = vec![
             ("params", &params),
             ("segs", &segs),
-            ("aabbs", &dummy),
+            // The staged triangles, read as boxes' source (FLAG_TRIANGLE_BOXES).
+            ("aabbs", b.staged),
             ("work", &work),
             ("keys", &keys),
             ("values", &values),

@@ -48,8 +48,6 @@ impl Lbvh {
         let mut bind: Buffers<'_> = vec![
             ("params", &s.params),
             ("segs", &s.segs),
-            // Primitive boxes come from `aabbs` (no triangle boxes flag): any read-only buffer.
-            ("refit_src", b.aabbs),
             ("aabbs", b.aabbs),
             ("work", &s.work),
             ("keys", &s.keys),

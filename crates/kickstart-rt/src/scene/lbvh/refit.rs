@@ -83,8 +83,6 @@ impl Lbvh {
         );
         let bind: Buffers<'_> = vec![
             ("params", &params),
-            // Primitive boxes come from `aabbs` (no triangle boxes flag): any read-only buffer.
-            ("refit_src", r.aabbs),
             ("aabbs", r.aabbs),
             ("work", &work),
             ("order", r.order),
