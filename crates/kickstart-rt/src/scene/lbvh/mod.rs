@@ -49,8 +49,14 @@
 //! gather's place and decodes the triangles from the application's bytes itself: the ingestion
 //! fused into the refit.
 //!
+//! The build passes read their `Params` from the `segs` table (a single build is a batch of
+//! one); [`Lbvh::build_batch`] runs them once for every fast-trace build of a task (`batch.rs`:
+//! builds padded to blocks of 256 positions, a sort by Morton key then by build). Refits and
+//! `lbvh climb` read the `params` uniform.
+//!
 //! Files: this one holds the inputs, the builder and its sizes; `build.rs` the build (steps 1–6),
-//! `refit.rs` both refits, `cpu.rs` the CPU helpers of the tests, `tests/` the tests.
+//! `batch.rs` a batch of builds, `refit.rs` both refits, `cpu.rs` the CPU helpers of the tests,
+//! `tests/` the tests.
 
 mod batch;
 mod build;
