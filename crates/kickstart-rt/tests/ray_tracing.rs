@@ -1828,10 +1828,19 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
         register_instance(&mut c, ih, gh, t);
         oracle.geometry(gh, &mesh);
         oracle.instance(ih, &InstanceInput::new(gh, t));
+        // The centroids of well-shaped triangles: a sliver's centroid is hit or missed as
+        // rounding goes (the driver's triangle test on the hardware backend, FMA on a GPU).
         let shift = Vec3::from(t.translation);
         centres.push(
             mesh.triangles()
                 .iter()
+                .filter(|v| {
+                    let longest = (v[1] - v[0])
+                        .length_squared()
+                        .max((v[2] - v[1]).length_squared())
+                        .max((v[0] - v[2]).length_squared());
+                    (v[1] - v[0]).cross(v[2] - v[0]).length() > 0.05 * longest
+                })
                 .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
                 .collect::<Vec<_>>(),
         );
@@ -1889,8 +1898,14 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
     let hits = closest(&ctx, &rays);
     let a = compare(&oracle, &rays, &hits, VISIBLE);
     assert_agrees(&a, "a batch of builds of every size");
-    // Every geometry is hit somewhere (none was left unbuilt or built into another's nodes).
-    for &ih in &instances {
+    // Every geometry aimed at is hit somewhere (none was left unbuilt or built into another's
+    // nodes); a tiny soup may have no well-shaped triangle to aim at.
+    assert!(centres.iter().filter(|c| !c.is_empty()).count() >= counts.len() - 2);
+    for (&ih, _) in instances
+        .iter()
+        .zip(&centres)
+        .filter(|(_, c)| !c.is_empty())
+    {
         assert!(
             hits.iter().any(|h| h.is_hit() && h.instance == ih.index()),
             "instance {} never hit",
