@@ -539,12 +539,16 @@ mod tests {
     /// (atomics), 3 `keys`, 4 `values`, 5 `order`, 6 `topology`, 7 `nodes`, 8 `bounds_out`,
     /// all storage read_write. Each entry point's layout holds what it reaches, as read in the
     /// source:
-    /// - `lbvh_bounds`: `params`, `aabbs` (`prim_box`), `work` (`atomicMax`); workgroup memory
-    ///   `wg_bounds: array<atomic<u32>, 6>` = 24 bytes;
-    /// - `lbvh_morton`: `params`, `aabbs`, `work` (the scene bounds), `keys`, `values`;
+    /// - `lbvh_bounds`: `aabbs` (`prim_box`), `work` (`atomicMax`), 18 `segs` (storage read:
+    ///   the batch's per-build params; the build passes read theirs there, not `params`);
+    ///   workgroup memory `wg_bounds: array<atomic<u32>, 6>` = 24 bytes;
+    /// - `lbvh_morton` and `lbvh_rekey`: `params` (the batch's position count), `aabbs`,
+    ///   `work` (the scene bounds), `keys`, `values`, `segs`;
     /// - `lbvh_morton_histogram`: those and 10 `sort_hist` (the radix sort's histogram);
     ///   workgroup memory `wg_digit_bins: array<atomic<u32>, 2048>` = 8192 bytes;
-    /// - `lbvh_hierarchy`: `params`, `keys` (`delta`), `values`, `order`, `topology`;
+    /// - `lbvh_segment_keys`: `params`, `keys`, `values`, `segs`;
+    /// - `lbvh_gather`: `params`, `order`, `refit_src`, `refit_dst`, `segs`;
+    /// - `lbvh_hierarchy`: `keys` (`delta`), `values`, `order`, `topology`, `segs`;
     /// - `lbvh_climb`: `params`, `aabbs` (`leaf_box`), `work`, `order`, `topology`, `nodes`
     ///   (`write_node`), `bounds_out` (`write_bounds`). (Its workgroup memory is left out: it
     ///   changes whenever the climb is tuned.)
@@ -573,6 +577,9 @@ mod tests {
                 "lbvh_bounds",
                 "lbvh_morton",
                 "lbvh_morton_histogram",
+                "lbvh_segment_keys",
+                "lbvh_rekey",
+                "lbvh_gather",
                 "lbvh_hierarchy",
                 "lbvh_climb",
                 "lbvh_refit_gather",
@@ -583,17 +590,31 @@ mod tests {
         let got = |ep| layout_of(&module, &info, ep);
         assert_eq!(
             got("lbvh_bounds"),
-            (vec![(0, 0, 0, U), (0, 1, 1, R), (0, 2, 2, RW)], 24)
+            (vec![(0, 1, 0, R), (0, 2, 1, RW), (0, 18, 2, R)], 24)
+        );
+        let morton = vec![
+            (0, 0, 0, U),
+            (0, 1, 1, R),
+            (0, 2, 2, RW),
+            (0, 3, 3, RW),
+            (0, 4, 4, RW),
+            (0, 18, 5, R),
+        ];
+        assert_eq!(got("lbvh_morton"), (morton.clone(), 0));
+        assert_eq!(got("lbvh_rekey"), (morton, 0));
+        assert_eq!(
+            got("lbvh_segment_keys"),
+            (vec![(0, 0, 0, U), (0, 3, 1, RW), (0, 4, 2, RW), (0, 18, 3, R)], 0)
         );
         assert_eq!(
-            got("lbvh_morton"),
+            got("lbvh_gather"),
             (
                 vec![
                     (0, 0, 0, U),
-                    (0, 1, 1, R),
-                    (0, 2, 2, RW),
-                    (0, 3, 3, RW),
-                    (0, 4, 4, RW)
+                    (0, 5, 1, RW),
+                    (0, 12, 2, R),
+                    (0, 13, 3, RW),
+                    (0, 18, 4, R)
                 ],
                 0
             )
@@ -607,7 +628,8 @@ mod tests {
                     (0, 2, 2, RW),
                     (0, 3, 3, RW),
                     (0, 4, 4, RW),
-                    (0, 10, 5, RW)
+                    (0, 10, 5, RW),
+                    (0, 18, 6, R)
                 ],
                 8192
             )
@@ -616,11 +638,11 @@ mod tests {
             got("lbvh_hierarchy"),
             (
                 vec![
-                    (0, 0, 0, U),
-                    (0, 3, 1, RW),
-                    (0, 4, 2, RW),
-                    (0, 5, 3, RW),
-                    (0, 6, 4, RW)
+                    (0, 3, 0, RW),
+                    (0, 4, 1, RW),
+                    (0, 5, 2, RW),
+                    (0, 6, 3, RW),
+                    (0, 18, 4, R)
                 ],
                 0
             )
