@@ -604,7 +604,10 @@ mod tests {
         assert_eq!(got("lbvh_rekey"), (morton, 0));
         assert_eq!(
             got("lbvh_segment_keys"),
-            (vec![(0, 0, 0, U), (0, 3, 1, RW), (0, 4, 2, RW), (0, 18, 3, R)], 0)
+            (
+                vec![(0, 0, 0, U), (0, 3, 1, RW), (0, 4, 2, RW), (0, 18, 3, R)],
+                0
+            )
         );
         assert_eq!(
             got("lbvh_gather"),
