@@ -1140,7 +1140,9 @@ fn node_topology(k: u32) -> NodeTopology {
 // in-block nodes, the straddling list and the upper levels. Returns the root's box when this
 // invocation wrote the root (only with one block), else the empty box.
 fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
-    let n = seg.count;
+    // The refit passes' own params (`seg` holds the same, but a private variable is not uniform
+    // for the barriers below).
+    let n = params.count;
     let block = k - lid;
     let nb = (n + WG - 1u) / WG;
     if lid == 0u {
