@@ -49,6 +49,26 @@ fn the_context_reports_the_backend_of_the_test_pass() {
     }
 }
 
+/// Whether triangle `v` is no sliver: its area is not tiny against its longest edge. Whether a
+/// ray aimed at a sliver's centroid hits it is a matter of rounding (FMA on a GPU, the driver's
+/// triangle test on the hardware backend), so tests aim at well-shaped triangles only.
+fn well_shaped(v: &[Vec3; 3]) -> bool {
+    let longest = (v[1] - v[0])
+        .length_squared()
+        .max((v[2] - v[1]).length_squared())
+        .max((v[0] - v[2]).length_squared());
+    (v[1] - v[0]).cross(v[2] - v[0]).length() > 0.05 * longest
+}
+
+/// The centroids of `mesh`'s [`well_shaped`] triangles, moved by `shift`.
+fn well_shaped_centroids(mesh: &Mesh, shift: Vec3) -> Vec<Vec3> {
+    mesh.triangles()
+        .iter()
+        .filter(|v| well_shaped(v))
+        .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
+        .collect()
+}
+
 /// A random transform: rotation, non-uniform scale (sometimes mirrored), translation.
 fn random_transform(rng: &mut Rng, spread: f32) -> Affine3A {
     let axis = rng.unit();
@@ -894,19 +914,7 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
         // Not the soup's slivers and degenerate triangles, whose hit or miss at the centroid
         // is a matter of rounding (FMA on the H100 and not on the CPU: 3 of 4000 rays).
         let shift = Vec3::from(t.translation);
-        centroids.push(
-            mesh.triangles()
-                .iter()
-                .filter(|v| {
-                    let longest = (v[1] - v[0])
-                        .length_squared()
-                        .max((v[2] - v[1]).length_squared())
-                        .max((v[0] - v[2]).length_squared());
-                    (v[1] - v[0]).cross(v[2] - v[0]).length() > 0.05 * longest
-                })
-                .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
-                .collect(),
-        );
+        centroids.push(well_shaped_centroids(&mesh, shift));
     }
     c.schedule_bvh_task(BvhBuildTask {
         max_blas_build_count: geometries.len() as u32,
@@ -1022,11 +1030,7 @@ fn update_refits_in_their_task_and_later_trace_and_report_drops() {
                 let t = rng.below(m.indices.len() as u32 / 3) as usize;
                 let v: [Vec3; 3] =
                     std::array::from_fn(|i| m.positions[m.indices[3 * t + i] as usize]);
-                let longest = (v[1] - v[0])
-                    .length_squared()
-                    .max((v[2] - v[1]).length_squared())
-                    .max((v[0] - v[2]).length_squared());
-                if (v[1] - v[0]).cross(v[2] - v[0]).length() > 0.05 * longest {
+                if well_shaped(&v) {
                     break v;
                 }
             };
@@ -1831,19 +1835,7 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
         // The centroids of well-shaped triangles: a sliver's centroid is hit or missed as
         // rounding goes (the driver's triangle test on the hardware backend, FMA on a GPU).
         let shift = Vec3::from(t.translation);
-        centres.push(
-            mesh.triangles()
-                .iter()
-                .filter(|v| {
-                    let longest = (v[1] - v[0])
-                        .length_squared()
-                        .max((v[2] - v[1]).length_squared())
-                        .max((v[0] - v[2]).length_squared());
-                    (v[1] - v[0]).cross(v[2] - v[0]).length() > 0.05 * longest
-                })
-                .map(|v| (v[0] + v[1] + v[2]) / 3.0 + shift)
-                .collect::<Vec<_>>(),
-        );
+        centres.push(well_shaped_centroids(&mesh, shift));
     }
     c.schedule_bvh_task(BvhBuildTask {
         max_blas_build_count: counts.len() as u32,

@@ -8,13 +8,12 @@ use kickstart_rt_peer_vulkan as vkrt;
 use serde::Serialize;
 
 use super::harness::Bench;
-use super::peer::AgreementReport;
+use super::peer::{peer_hit, query_kind, AgreementReport};
 use super::rays::RayBatches;
 use super::report::SceneReport;
 use super::{attempt, Stats};
 use crate::gpu::UploadedMesh;
 use crate::scene::Scene;
-use crate::sdk_glue::{GpuHit, Query};
 
 /// The share of a batch's rays on which the backends may disagree (a hit against a miss, or
 /// another triangle beyond a tie) before the comparison counts as failed: rays grazing a shared
@@ -58,19 +57,6 @@ pub struct BackendComparison {
     pub rays: Vec<BackendRays>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
-}
-
-/// The peer tool's hit record of ours.
-fn hit(h: &GpuHit) -> vkrt::Hit {
-    vkrt::Hit {
-        t: h.t,
-        u: h.u,
-        v: h.v,
-        instance: h.instance,
-        primitive: h.primitive,
-        hit: u32::from(h.is_hit()),
-        _pad: [0; 2],
-    }
 }
 
 /// The backend a context made with `choice` on the bench's device takes.
@@ -144,13 +130,9 @@ pub(super) fn compare(
             else {
                 continue;
             };
-            let this_hits: Vec<vkrt::Hit> = this_hits.iter().map(hit).collect();
-            let other_hits: Vec<vkrt::Hit> = other_hits.iter().map(hit).collect();
-            let query_kind = match query {
-                Query::Closest => vkrt::QueryKind::Closest,
-                Query::Any => vkrt::QueryKind::Any,
-            };
-            let agreement = vkrt::compare_hits(&this_hits, &other_hits, query_kind);
+            let this_hits: Vec<vkrt::Hit> = this_hits.iter().map(peer_hit).collect();
+            let other_hits: Vec<vkrt::Hit> = other_hits.iter().map(peer_hit).collect();
+            let agreement = vkrt::compare_hits(&this_hits, &other_hits, query_kind(*query));
             let max_relative_distance = this_hits
                 .iter()
                 .zip(&other_hits)

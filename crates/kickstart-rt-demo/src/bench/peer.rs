@@ -186,8 +186,17 @@ impl PeerReport {
     }
 }
 
+/// The comparison rule of a query: closest hits must be the same triangle, any-hit queries only
+/// agree on hit or miss.
+pub(super) fn query_kind(query: Query) -> vkrt::QueryKind {
+    match query {
+        Query::Closest => vkrt::QueryKind::Closest,
+        Query::Any => vkrt::QueryKind::Any,
+    }
+}
+
 /// Our hit record as the peer's (the hit flag from [`GpuHit::is_hit`]).
-fn peer_hit(h: &GpuHit) -> vkrt::Hit {
+pub(super) fn peer_hit(h: &GpuHit) -> vkrt::Hit {
     vkrt::Hit {
         t: h.t,
         u: h.u,
@@ -287,11 +296,7 @@ pub fn compare(
                 };
                 let (t, theirs) = peer.trace(bytemuck::cast_slice(rays), q, b.width, timing)?;
                 let mine: Vec<vkrt::Hit> = our_hits.iter().map(peer_hit).collect();
-                let kind_q = match query {
-                    Query::Closest => vkrt::QueryKind::Closest,
-                    Query::Any => vkrt::QueryKind::Any,
-                };
-                let agreement = vkrt::compare_hits(&mine, &theirs, kind_q);
+                let agreement = vkrt::compare_hits(&mine, &theirs, query_kind(*query));
                 let time = Stats::new(t.0);
                 let theirs_mrays = rays.len() as f64 / (time.median_ms * 1e3);
                 let ours_mrays = ours

@@ -96,36 +96,39 @@ fn disc_fraction_above(s: f64) -> f64 {
 /// A sphere light of radius a at height H over a half-plane occluder edge at height h: the
 /// penumbra on the floor is 2a·h/(H − h) wide (similar triangles), and the visible fraction at x
 /// is the fraction of the light's disc beyond the edge's projection.
-#[test]
-fn penumbra_width_matches_similar_triangles() {
-    let (a, big_h, h) = (0.5f32, 4.0f32, 2.0f32);
-    // Occluder: x in [-10, 0] at height h.
+/// Columns and rows of the penumbra tests' floor images.
+const COLUMNS: u32 = 64;
+const ROWS: u32 = 8;
+
+/// An occluding half-plane: x in [-10, 0] at height `h`, over the floor at y = 0.
+fn half_plane_occluder(h: f32) -> TestScene {
     let occluder: Vec<Tri> = square(1, h, 5.0)
         .into_iter()
         .map(|t| t.map(|v| v + Vec3::new(-5.0, 0.0, 0.0)))
         .collect();
-    let scene = TestScene::single(occluder);
-    const W: u32 = 64;
-    const ROWS: u32 = 8;
-    let px = |x: u32| -2.0 + 4.0 * (x as f32 + 0.5) / W as f32;
-    let light = LightInfo::Point {
-        position: Vec3::new(0.0, big_h, 0.0),
-        radius: a,
-        range: 100.0,
-    };
-    let mut vis = vec![0.0f64; W as usize];
-    let frames = 24;
+    TestScene::single(occluder)
+}
+
+/// The share of texels `light` lights in each column of the floor y = 0 (column x at
+/// `px(x)`, [`ROWS`] rows 0.05 apart in z), over `frames` frames of the shadow pass's noise.
+fn lit_fraction_per_column(
+    scene: &TestScene,
+    light: LightInfo,
+    px: impl Fn(u32) -> f32,
+    frames: u32,
+) -> Vec<f64> {
+    let mut vis = vec![0.0f64; COLUMNS as usize];
     for frame in 0..frames {
-        let out = output(W, ROWS, -5.0);
+        let out = output(COLUMNS, ROWS, -5.0);
         let mut c = common(
-            gbuffer(W, ROWS, |x, y| {
+            gbuffer(COLUMNS, ROWS, |x, y| {
                 Some((Vec3::new(px(x), 0.0, (y as f32 - 4.0) * 0.05), Vec3::Y))
             }),
             Vec3::new(0.0, 5.0, 0.0),
         );
         c.debug_parameters.frame_index = frame;
         run(
-            &scene,
+            scene,
             &[RenderTask::TraceShadow(TraceShadowTask {
                 common: c,
                 output: out.clone(),
@@ -134,11 +137,25 @@ fn penumbra_width_matches_similar_triangles() {
             })],
         );
         for (i, v) in read(&out).iter().enumerate() {
-            vis[i % W as usize] += (v[0] < 0.0) as u32 as f64 / (frames * ROWS) as f64;
+            vis[i % COLUMNS as usize] += (v[0] < 0.0) as u32 as f64 / (frames * ROWS) as f64;
         }
     }
+    vis
+}
+
+#[test]
+fn penumbra_width_matches_similar_triangles() {
+    let (a, big_h, h) = (0.5f32, 4.0f32, 2.0f32);
+    let scene = half_plane_occluder(h);
+    let px = |x: u32| -2.0 + 4.0 * (x as f32 + 0.5) / COLUMNS as f32;
+    let light = LightInfo::Point {
+        position: Vec3::new(0.0, big_h, 0.0),
+        radius: a,
+        range: 100.0,
+    };
+    let vis = lit_fraction_per_column(&scene, light, px, 24);
     let width = 2.0 * a * h / (big_h - h);
-    let pixel = 4.0 / W as f32;
+    let pixel = 4.0 / COLUMNS as f32;
     for (x, v) in vis.iter().enumerate() {
         // The edge projects to q = -x·h/(H-h) on the light's disc (here h = H - h).
         let want = disc_fraction_above(-(px(x as u32) * h / (big_h - h) / a) as f64);
@@ -311,44 +328,15 @@ fn spot_light_traces_inside_its_cone_only() {
 #[test]
 fn directional_light_penumbra_width_follows_its_angular_extent() {
     let h = 1.0f32;
-    let occluder: Vec<Tri> = square(1, h, 5.0)
-        .into_iter()
-        .map(|t| t.map(|v| v + Vec3::new(-5.0, 0.0, 0.0)))
-        .collect();
-    let scene = TestScene::single(occluder);
-    const W: u32 = 64;
-    const ROWS: u32 = 8;
-    let px = |x: u32| -1.0 + 2.0 * (x as f32 + 0.5) / W as f32;
-    let pixel = 2.0 / W as f32;
+    let scene = half_plane_occluder(h);
+    let px = |x: u32| -1.0 + 2.0 * (x as f32 + 0.5) / COLUMNS as f32;
+    let pixel = 2.0 / COLUMNS as f32;
     let visibility = |extent: f32, frames: u32| {
         let light = LightInfo::Directional {
             direction: Vec3::NEG_Y,
             angular_extent: extent,
         };
-        let mut vis = vec![0.0f64; W as usize];
-        for frame in 0..frames {
-            let out = output(W, ROWS, -5.0);
-            let mut c = common(
-                gbuffer(W, ROWS, |x, y| {
-                    Some((Vec3::new(px(x), 0.0, (y as f32 - 4.0) * 0.05), Vec3::Y))
-                }),
-                Vec3::new(0.0, 5.0, 0.0),
-            );
-            c.debug_parameters.frame_index = frame;
-            run(
-                &scene,
-                &[RenderTask::TraceShadow(TraceShadowTask {
-                    common: c,
-                    output: out.clone(),
-                    light,
-                    enable_first_hit_and_end_search: true,
-                })],
-            );
-            for (i, v) in read(&out).iter().enumerate() {
-                vis[i % W as usize] += (v[0] < 0.0) as u32 as f64 / (frames * ROWS) as f64;
-            }
-        }
-        vis
+        lit_fraction_per_column(&scene, light, px, frames)
     };
 
     // Hard: every texel exactly lit or shadowed by the side of the edge it is on.
