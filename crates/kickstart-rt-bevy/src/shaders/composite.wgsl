@@ -1,0 +1,87 @@
+// Adds the SDK's ray-traced lighting to Bevy's lit image (a full-screen triangle writing the
+// view's other main texture):
+//   out = lit − sun diffuse × (1 − visibility)          (shadows)
+//       + diffuse colour × GI × AO                      (GI; without GI, AO scales `lit`)
+//       + reflections × split-sum specular term         (reflections)
+// Pixels with nothing rendered (depth 0 under Bevy's reverse Z) pass through.
+
+struct Params {
+    // Clip space to world space (the inverse of Bevy's unjittered clip_from_world).
+    world_from_clip: mat4x4<f32>,
+    // Camera position (xyz).
+    camera: vec4<f32>,
+    // Unit vector towards the sun (xyz); w = 1 when there is a sun.
+    to_sun: vec4<f32>,
+    // Sun colour × illuminance × exposure (rgb).
+    sun: vec4<f32>,
+    // Effects on: reflections, GI, AO, shadows.
+    effects: vec4<u32>,
+};
+
+@group(0) @binding(0) var lit: texture_2d<f32>;
+@group(0) @binding(1) var depth: texture_depth_2d;
+@group(0) @binding(2) var normal_roughness: texture_2d<f32>;
+@group(0) @binding(3) var specular: texture_2d<f32>;
+@group(0) @binding(4) var diffuse_color: texture_2d<f32>;
+@group(0) @binding(5) var reflections: texture_2d<f32>;
+@group(0) @binding(6) var gi: texture_2d<f32>;
+@group(0) @binding(7) var ao: texture_2d<f32>;
+@group(0) @binding(8) var shadow: texture_2d<f32>;
+@group(0) @binding(9) var<uniform> params: Params;
+
+const PI: f32 = 3.14159265;
+
+@vertex
+fn fullscreen(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
+    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
+}
+
+// The split-sum specular term's scale and bias for F0 (Karis' analytic fit of the
+// environment BRDF).
+fn environment_brdf(f0: vec3<f32>, roughness: f32, n_dot_v: f32) -> vec3<f32> {
+    let c0 = vec4<f32>(-1.0, -0.0275, -0.572, 0.022);
+    let c1 = vec4<f32>(1.0, 0.0425, 1.04, -0.04);
+    let r = roughness * c0 + c1;
+    let a004 = min(r.x * r.x, exp2(-9.28 * n_dot_v)) * r.x + r.y;
+    let ab = vec2<f32>(-1.04, 1.04) * a004 + r.zw;
+    return f0 * ab.x + ab.y;
+}
+
+@fragment
+fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
+    let p = vec2<i32>(position.xy);
+    var color = textureLoad(lit, p, 0).rgb;
+    let d = textureLoad(depth, p, 0);
+    if d <= 0.0 {
+        return vec4<f32>(color, 1.0);
+    }
+    let size = vec2<f32>(textureDimensions(lit));
+    let ndc = vec2<f32>(position.x / size.x * 2.0 - 1.0, 1.0 - position.y / size.y * 2.0);
+    let world_h = params.world_from_clip * vec4<f32>(ndc, d, 1.0);
+    let world = world_h.xyz / world_h.w;
+    let nr = textureLoad(normal_roughness, p, 0);
+    let n = normalize(nr.xyz);
+    let albedo = textureLoad(diffuse_color, p, 0).rgb;
+    let on = params.effects != vec4<u32>(0u);
+
+    if on.w && params.to_sun.w > 0.0 {
+        let visibility = saturate(textureLoad(shadow, p, 0).r);
+        let n_dot_l = max(dot(n, params.to_sun.xyz), 0.0);
+        let sun_diffuse = albedo / PI * params.sun.rgb * n_dot_l;
+        color = max(color - sun_diffuse * (1.0 - visibility), vec3<f32>(0.0));
+    }
+    let occlusion = select(1.0, saturate(textureLoad(ao, p, 0).r), on.z);
+    if on.y {
+        color += albedo * max(textureLoad(gi, p, 0).rgb, vec3<f32>(0.0)) * occlusion;
+    } else {
+        color *= occlusion;
+    }
+    if on.x {
+        let v = normalize(params.camera.xyz - world);
+        let f0 = textureLoad(specular, p, 0).rgb;
+        let brdf = environment_brdf(f0, nr.w, saturate(dot(n, v)));
+        color += max(textureLoad(reflections, p, 0).rgb, vec3<f32>(0.0)) * brdf;
+    }
+    return vec4<f32>(color, 1.0);
+}

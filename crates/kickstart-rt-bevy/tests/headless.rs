@@ -1,0 +1,264 @@
+//! The plugin in a real Bevy app, rendered headless: the seed scene's GI carries each object's
+//! colour onto the floor beside it, shadows fall where the sun casts them, and the scene follows
+//! entities as they are despawned.
+//!
+//! The camera renders linear HDR (`Rgba16Float`, no tone mapping) into an image, read back
+//! with Bevy's screenshot; each check compares two renders of the same view that differ in one
+//! thing.
+
+#[path = "../examples/seed/mod.rs"]
+mod seed;
+
+use std::sync::{Arc, Mutex};
+
+use bevy::camera::RenderTarget;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::prelude::*;
+use bevy::render::RenderPlugin;
+use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
+use bevy::render::render_resource::TextureFormat;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+use kickstart_rt_bevy::{KickstartRtPlugin, RayTracedLighting};
+
+const WIDTH: u32 = 320;
+const HEIGHT: u32 = 180;
+/// Frames each configuration renders before it is read: the denoisers' history fills.
+const SETTLE_FRAMES: u32 = 24;
+
+/// A linear RGB image read back from the camera's target.
+struct Frame {
+    texels: Vec<[f32; 3]>,
+}
+
+impl Frame {
+    /// Mean colour of the `radius`-pixel square around `p`.
+    fn mean(&self, (x, y): (u32, u32), radius: u32) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        let mut n = 0.0;
+        for yy in y.saturating_sub(radius)..=(y + radius).min(HEIGHT - 1) {
+            for xx in x.saturating_sub(radius)..=(x + radius).min(WIDTH - 1) {
+                sum += Vec3::from(self.texels[(yy * WIDTH + xx) as usize]);
+                n += 1.0;
+            }
+        }
+        sum / n
+    }
+}
+
+/// The app and its camera's target image.
+struct Harness {
+    app: App,
+    target: Handle<Image>,
+}
+
+impl Harness {
+    fn new(effects: RayTracedLighting) -> Harness {
+        let mut app = App::new();
+        app.add_plugins((
+            DefaultPlugins
+                .set(WindowPlugin {
+                    primary_window: None,
+                    exit_condition: ExitCondition::DontExit,
+                    close_when_requested: false,
+                    ..default()
+                })
+                .set(RenderPlugin {
+                    synchronous_pipeline_compilation: true,
+                    ..default()
+                })
+                .disable::<WinitPlugin>()
+                .disable::<PipelinedRenderingPlugin>()
+                .disable::<bevy::log::LogPlugin>(),
+            KickstartRtPlugin::default(),
+        ))
+        .insert_resource(seed::Matte)
+        .add_systems(Startup, seed::spawn);
+        let image = Image::new_target_texture(WIDTH, HEIGHT, TextureFormat::Rgba16Float, None);
+        let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
+        app.world_mut().spawn((
+            Camera3d::default(),
+            Msaa::Off,
+            Tonemapping::None,
+            RenderTarget::Image(target.clone().into()),
+            effects,
+            Transform::from_translation(seed::EYE).looking_at(seed::LOOK_AT, Vec3::Y),
+        ));
+        app.finish();
+        app.cleanup();
+        Harness { app, target }
+    }
+
+    fn run(&mut self, frames: u32) {
+        for _ in 0..frames {
+            self.app.update();
+        }
+    }
+
+    /// Renders until a screenshot of the target arrives.
+    fn capture(&mut self) -> Frame {
+        let slot: Arc<Mutex<Option<Image>>> = Arc::default();
+        let into = slot.clone();
+        self.app
+            .world_mut()
+            .spawn(Screenshot::image(self.target.clone()))
+            .observe(move |captured: On<ScreenshotCaptured>| {
+                *into.lock().unwrap() = Some(captured.image.clone());
+            });
+        for _ in 0..20 {
+            self.app.update();
+            if let Some(image) = slot.lock().unwrap().take() {
+                return decode(&image);
+            }
+        }
+        panic!("no screenshot after 20 frames");
+    }
+
+    /// The entity of coloured object `i`.
+    fn object(&mut self, i: usize) -> Entity {
+        let world = self.app.world_mut();
+        world
+            .query::<(Entity, &seed::Object)>()
+            .iter(world)
+            .find(|(_, o)| o.0 == i)
+            .map(|(e, _)| e)
+            .expect("the seed scene has three objects")
+    }
+
+    fn set_object_visibility(&mut self, i: usize, visibility: Visibility) {
+        let object = self.object(i);
+        self.app.world_mut().entity_mut(object).insert(visibility);
+    }
+}
+
+/// `Rgba16Float` texels to linear RGB.
+fn decode(image: &Image) -> Frame {
+    assert_eq!(image.texture_descriptor.format, TextureFormat::Rgba16Float);
+    let data = image.data.as_ref().expect("screenshot has data");
+    assert_eq!(data.len(), (WIDTH * HEIGHT * 8) as usize);
+    let half = |b: &[u8]| f16_to_f32(u16::from_le_bytes([b[0], b[1]]));
+    let texels = data
+        .chunks_exact(8)
+        .map(|t| [half(&t[0..2]), half(&t[2..4]), half(&t[4..6])])
+        .collect();
+    Frame { texels }
+}
+
+fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = i32::from((h >> 10) & 0x1f);
+    let frac = f32::from(h & 0x3ff);
+    sign * match exp {
+        0 => frac * 2f32.powi(-24),
+        31 => f32::INFINITY,
+        e => (1.0 + frac / 1024.0) * 2f32.powi(e - 15),
+    }
+}
+
+/// The pixel showing world point `p` (Bevy's default perspective camera at the seed's eye).
+fn pixel_of(p: Vec3) -> (u32, u32) {
+    let view = Transform::from_translation(seed::EYE)
+        .looking_at(seed::LOOK_AT, Vec3::Y)
+        .to_matrix()
+        .inverse();
+    let projection = bevy::camera::CameraProjection::get_clip_from_view(&PerspectiveProjection {
+        aspect_ratio: WIDTH as f32 / HEIGHT as f32,
+        ..default()
+    });
+    let ndc = (projection * view).project_point3(p);
+    let x = (ndc.x * 0.5 + 0.5) * WIDTH as f32;
+    let y = (0.5 - ndc.y * 0.5) * HEIGHT as f32;
+    (x as u32, y as u32)
+}
+
+/// Radius of a circle on the floor around each coloured object, just outside its footprint.
+const RING: [f32; 3] = [1.0, 1.7, 1.1];
+
+/// `with` − `without` on the floor on the ring around object `i`, summed over the ring's half
+/// that faces the camera (floor that no object hides: every object stands behind it), leaving
+/// out the part of the ring that comes near another object.
+fn added_on_ring(i: usize, without: &Frame, with: &Frame) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    for k in 0..48 {
+        let a = std::f32::consts::TAU * k as f32 / 48.0;
+        let offset = Vec3::new(a.cos(), 0.0, a.sin());
+        let p = seed::PLACES[i] + offset * RING[i];
+        let near_another = (0..3).any(|j| j != i && p.distance(seed::PLACES[j]) < RING[j] + 0.6);
+        if offset.z < 0.25 || near_another {
+            continue;
+        }
+        let px = pixel_of(p);
+        sum += with.mean(px, 0) - without.mean(px, 0);
+    }
+    sum
+}
+
+#[test]
+fn gi_carries_each_objects_colour_onto_the_floor() {
+    // GI alone: what an object adds to the floor around it is its bounce light, measured by
+    // hiding it (which also checks the scene follows visibility).
+    let mut h = Harness::new(RayTracedLighting {
+        reflections: false,
+        ao: false,
+        shadows: false,
+        ..default()
+    });
+    h.run(SETTLE_FRAMES);
+    let all = h.capture();
+    for i in 0..3 {
+        h.set_object_visibility(i, Visibility::Hidden);
+        h.run(SETTLE_FRAMES);
+        let without = h.capture();
+        h.set_object_visibility(i, Visibility::Inherited);
+
+        let added = added_on_ring(i, &without, &all);
+        let colour = Vec3::from(seed::COLOURS[i]);
+        let dominant = colour.max_position();
+        println!("object {i}: its bounce light on its ring: {added}");
+        for c in (0..3).filter(|c| *c != dominant) {
+            assert!(
+                added[dominant] > 2.0 * added[c].max(0.0),
+                "object {i}: the bounce light around a {colour} object is {added}"
+            );
+        }
+        // More than noise would leave (the floor is lit at about 0.55 a pixel).
+        assert!(
+            added[dominant] > 0.03,
+            "object {i}: it bounced only {added}"
+        );
+    }
+}
+
+#[test]
+fn shadows_follow_the_scene_as_an_object_is_despawned() {
+    let mut h = Harness::new(RayTracedLighting {
+        gi: false,
+        reflections: false,
+        ao: false,
+        ..default()
+    });
+    h.run(SETTLE_FRAMES);
+    let before = h.capture();
+    // The floor point the sun's ray through the sphere's centre reaches.
+    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
+    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
+    let shadow = pixel_of(centre - to_sun * (centre.y / to_sun.y));
+    let open = pixel_of(seed::PLACES[0] + Vec3::new(0.0, 0.0, 2.0));
+    let (shadowed, lit) = (before.mean(shadow, 2), before.mean(open, 2));
+    println!("shadow {shadowed} open {lit}");
+    assert!(
+        shadowed.length() < 0.3 * lit.length(),
+        "the sphere's shadow at {shadow:?} is {shadowed}, open floor {lit}"
+    );
+
+    let sphere = h.object(0);
+    h.app.world_mut().despawn(sphere);
+    h.run(SETTLE_FRAMES);
+    let after = h.capture();
+    let now = after.mean(shadow, 2);
+    assert!(
+        (now - lit).length() < 0.1 * lit.length(),
+        "with the sphere gone its shadow should be open floor ({lit}); it is {now}"
+    );
+}
