@@ -237,16 +237,18 @@ fn count_frames(
     target: Option<Res<Target>>,
     timings: Res<SdkTimings>,
     mut frame: Local<u32>,
-    mut sums: Local<BTreeMap<String, (f64, u32)>>,
+    mut sums: Local<(BTreeMap<String, f64>, u32)>,
     mut exit: MessageWriter<AppExit>,
 ) {
     *frame += 1;
     let Some(frames) = options.frames else { return };
-    if options.timings && *frame > frames / 2 {
-        for (label, ms) in timings.passes() {
-            let entry = sums.entry(label).or_default();
-            entry.0 += ms;
-            entry.1 += 1;
+    if options.timings && *frame > frames / 2 && *frame <= frames {
+        let passes = timings.passes();
+        if !passes.is_empty() {
+            sums.1 += 1;
+        }
+        for (label, ms) in passes {
+            *sums.0.entry(label).or_default() += ms;
         }
     }
     if *frame == frames {
@@ -275,10 +277,12 @@ fn count_frames(
     }
 }
 
-fn print_timings(sums: &BTreeMap<String, (f64, u32)>, size: UVec2) {
-    let frames = sums.values().map(|(_, n)| *n).max().unwrap_or(0);
+fn print_timings((sums, frames): &(BTreeMap<String, f64>, u32), size: UVec2) {
+    let frames = *frames;
     if frames == 0 {
-        println!("no GPU timings (the device lacks timestamp queries)");
+        println!(
+            "no GPU timings were read (the device needs TIMESTAMP_QUERY and TIMESTAMP_QUERY_INSIDE_ENCODERS)"
+        );
         return;
     }
     println!(
@@ -286,10 +290,10 @@ fn print_timings(sums: &BTreeMap<String, (f64, u32)>, size: UVec2) {
         size.x, size.y
     );
     let mut total = 0.0;
-    for (label, (ms, _)) in sums {
+    for (label, ms) in sums {
         let mean = ms / frames as f64;
         total += mean;
-        println!("  {label:<40} {mean:8.3} ms");
+        println!("  {label:<48} {mean:8.3} ms");
     }
-    println!("  {:<40} {total:8.3} ms", "total");
+    println!("  {:<48} {total:8.3} ms", "total");
 }

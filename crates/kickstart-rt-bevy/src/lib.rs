@@ -19,8 +19,10 @@
 //!   vertex layout with `Float32x3` positions, `u16` or `u32` indices or none) is registered with
 //!   the SDK, and kept in sync as it moves, spawns, despawns, hides or changes mesh. The SDK
 //!   copies positions out of Bevy's own mesh buffers on the GPU (the plugin asks Bevy's mesh
-//!   allocator for `COPY_SRC` on them). Skinned and morphed meshes are traced in their rest pose
-//!   (Bevy deforms them in its vertex shader, out of the SDK's reach); the plugin logs that once.
+//!   allocator for `COPY_SRC` on them). Skinned and morphed meshes are left out, with a warning
+//!   logged once: Bevy deforms them in its vertex shader, out of the SDK's reach (a compute
+//!   skinning pass feeding the SDK's refit would bring them in). Meshes with compressed
+//!   positions or a topology other than a triangle list are left out with a warning each.
 //! - **Each frame, for each camera with [`RayTracedLighting`]**, after Bevy's deferred lighting
 //!   pass: the deferred G-buffer is unpacked into the SDK's inputs (normal, roughness, F0); Bevy's
 //!   lit image, which at that point holds only Bevy's own (direct) light, is injected into the
@@ -154,14 +156,15 @@ impl Plugin for KickstartRtPlugin {
                 return;
             }
         };
+        let timings = SdkTimings::default();
         render_app
             .insert_resource(context)
+            .insert_resource(timings.clone())
             .insert_resource(passes.0)
             .insert_resource(passes.1)
             .init_resource::<scene::ExtractedScene>()
             .init_resource::<scene::SceneSync>()
             .init_resource::<frame::FramesInFlight>()
-            .init_resource::<SdkTimings>()
             .add_systems(
                 ExtractSchedule,
                 (scene::extract_mesh_instances, scene::extract_lights),
@@ -187,7 +190,7 @@ impl Plugin for KickstartRtPlugin {
                     .before(bevy::core_pipeline::core_3d::main_opaque_pass_3d)
                     .in_set(Core3dSystems::MainPass),
             );
-        // SdkTimings lives in the render world; the main world gets a copy each frame.
-        app.init_resource::<SdkTimings>();
+        // The render world writes the timings; the main world reads the same shared value.
+        app.insert_resource(timings);
     }
 }

@@ -25,7 +25,7 @@ use crate::sdk::SdkContext;
 #[derive(Resource, Default)]
 pub(crate) struct ExtractedScene {
     /// Visible mesh entities added or changed: mesh, object-to-world transform, and whether the
-    /// mesh is deformed by skinning or morph targets (traced in its rest pose).
+    /// mesh is deformed by skinning or morph targets (left out).
     changed: Vec<(Entity, AssetId<Mesh>, Affine3A, bool)>,
     /// Entities to remove from the SDK's scene: despawned, hidden or without a mesh now.
     removed: Vec<Entity>,
@@ -182,12 +182,21 @@ pub(crate) fn sync_scene(
     }
 
     for (entity, mesh, transform, deformed) in extracted.changed.drain(..) {
-        if deformed && !sync.warned_deformed {
-            warn!(
-                "kickstart-rt: skinned or morphed meshes are traced in their rest pose (Bevy \
-                 deforms them in its vertex shader)"
-            );
-            sync.warned_deformed = true;
+        if deformed {
+            // Bevy skins and morphs in its vertex shader, out of the SDK's reach: tracing the
+            // rest pose would cast shadows and bounce light where the mesh is not.
+            if !sync.warned_deformed {
+                warn!(
+                    "kickstart-rt: skinned and morphed meshes are left out of ray tracing (Bevy \
+                     deforms them in its vertex shader); entity {entity} is the first"
+                );
+                sync.warned_deformed = true;
+            }
+            sync.waiting.remove(&entity);
+            if let Some(old) = sync.instances.remove(&entity) {
+                destroy_instance(ctx, old.handle);
+            }
+            continue;
         }
         match sync.instances.get(&entity) {
             Some(instance) if instance.mesh == mesh => {

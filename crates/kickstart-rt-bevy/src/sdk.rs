@@ -48,8 +48,8 @@ impl SdkContext {
     }
 }
 
-/// GPU time of the SDK's passes in the last frame whose timings were read, per pass label, in
-/// milliseconds (only with [`KickstartRtPlugin::gpu_timing`]). The same value is a resource of
+/// GPU time of the SDK's passes in the last frame whose timings were read, per pass
+/// (`"group: pass"`, e.g. `"trace: trace diffuse"`), in milliseconds (only with [`KickstartRtPlugin::gpu_timing`]). The same value is a resource of
 /// the main world and the render world.
 #[derive(Resource, Clone, Default)]
 pub struct SdkTimings(pub Arc<Mutex<Vec<(String, f64)>>>);
@@ -70,7 +70,7 @@ impl SdkTimings {
             *passes = timings
                 .passes
                 .iter()
-                .map(|p| (p.label.to_string(), p.ms))
+                .map(|p| (format!("{}: {}", p.label, p.pass), p.ms))
                 .collect();
         }
     }
