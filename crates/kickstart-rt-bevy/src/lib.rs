@@ -174,6 +174,7 @@ impl Plugin for KickstartRtPlugin {
                 (
                     frame::retire_finished_frames,
                     scene::sync_scene,
+                    view::release_view_resources,
                     view::prepare_view_resources,
                 )
                     .chain()

@@ -92,6 +92,18 @@ impl ViewResources {
     }
 }
 
+/// Hands back the resources of cameras that no longer have [`RayTracedLighting`].
+pub(crate) fn release_view_resources(
+    mut commands: Commands,
+    sdk: Res<SdkContext>,
+    views: Query<(Entity, &ViewResources), Without<RayTracedLighting>>,
+) {
+    for (entity, resources) in &views {
+        resources.release(&sdk.ctx);
+        commands.entity(entity).remove::<ViewResources>();
+    }
+}
+
 /// Creates each ray-traced camera's resources, and remakes them when its size changes.
 pub(crate) fn prepare_view_resources(
     mut commands: Commands,
