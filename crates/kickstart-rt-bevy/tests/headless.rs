@@ -230,8 +230,31 @@ fn gi_carries_each_objects_colour_onto_the_floor() {
     }
 }
 
+/// Floor pixels within `radius` pixels of `centre` that `before` shows in shadow (neutral grey,
+/// darker than a third of `lit`) and `after` shows lit (within 10 % of `lit`).
+fn shadow_pixels_lifted(
+    before: &Frame,
+    after: &Frame,
+    centre: (u32, u32),
+    radius: u32,
+    lit: Vec3,
+) -> usize {
+    let mut count = 0;
+    for y in centre.1.saturating_sub(radius)..(centre.1 + radius).min(HEIGHT) {
+        for x in centre.0.saturating_sub(radius)..(centre.0 + radius).min(WIDTH) {
+            let b = before.mean((x, y), 0);
+            let a = after.mean((x, y), 0);
+            let grey = b.max_element() - b.min_element() < 0.02;
+            if grey && b.length() < lit.length() / 3.0 && (a - lit).length() < 0.1 * lit.length() {
+                count += 1;
+            }
+        }
+    }
+    count
+}
+
 #[test]
-fn shadows_follow_the_scene_as_an_object_is_despawned() {
+fn shadows_fall_where_the_sun_casts_them_and_go_with_their_object() {
     let mut h = Harness::new(RayTracedLighting {
         gi: false,
         reflections: false,
@@ -240,25 +263,35 @@ fn shadows_follow_the_scene_as_an_object_is_despawned() {
     });
     h.run(SETTLE_FRAMES);
     let before = h.capture();
-    // The floor point the sun's ray through the sphere's centre reaches.
-    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
-    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
-    let shadow = pixel_of(centre - to_sun * (centre.y / to_sun.y));
-    let open = pixel_of(seed::PLACES[0] + Vec3::new(0.0, 0.0, 2.0));
-    let (shadowed, lit) = (before.mean(shadow, 2), before.mean(open, 2));
-    println!("shadow {shadowed} open {lit}");
-    assert!(
-        shadowed.length() < 0.3 * lit.length(),
-        "the sphere's shadow at {shadow:?} is {shadowed}, open floor {lit}"
-    );
-
     let sphere = h.object(0);
     h.app.world_mut().despawn(sphere);
     h.run(SETTLE_FRAMES);
     let after = h.capture();
-    let now = after.mean(shadow, 2);
-    assert!(
-        (now - lit).length() < 0.1 * lit.length(),
-        "with the sphere gone its shadow should be open floor ({lit}); it is {now}"
+
+    // Where the sun's ray through the sphere's centre meets the floor (the seed's sun shines
+    // from (4, 6, 3) towards the origin), and a point as far again beyond the sphere's foot on
+    // its sunlit side (the shadow reaches 0.3 m sunward of the foot; this point is 1.3 m).
+    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
+    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
+    let behind = centre - to_sun * (centre.y / to_sun.y);
+    let sunlit_side = seed::PLACES[0] + (seed::PLACES[0] - behind.with_y(0.0)) * 2.2;
+    let lit = after.mean(pixel_of(behind), 0);
+    let shadowed = shadow_pixels_lifted(&before, &after, pixel_of(behind), 12, lit);
+    let sunward = shadow_pixels_lifted(&before, &after, pixel_of(sunlit_side), 12, lit);
+    println!(
+        "open floor {lit}: {shadowed} shadow pixels behind the sphere, {sunward} on its sunlit side"
     );
+    // The open floor there is sunlit (the sun brings it to about 0.6)…
+    assert!(
+        lit.min_element() > 0.3,
+        "the floor behind the sphere is {lit} without it"
+    );
+    // …and a despawn turned many floor pixels from shadow into sunlight on the far side of the
+    // sphere from the sun (the patch is 24 × 24 pixels; the sphere hides part of it)…
+    assert!(
+        shadowed >= 40,
+        "only {shadowed} shadow pixels behind the sphere"
+    );
+    // …none on the side facing the sun.
+    assert_eq!(sunward, 0, "shadow pixels on the sphere's sunlit side");
 }
