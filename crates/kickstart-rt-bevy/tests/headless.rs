@@ -254,7 +254,7 @@ fn shadow_pixels_lifted(
 }
 
 #[test]
-fn shadows_fall_where_the_sun_casts_them_and_go_with_their_object() {
+fn shadows_fall_where_the_sun_casts_them_and_follow_their_object() {
     let mut h = Harness::new(RayTracedLighting {
         gi: false,
         reflections: false,
@@ -263,7 +263,16 @@ fn shadows_fall_where_the_sun_casts_them_and_go_with_their_object() {
     });
     h.run(SETTLE_FRAMES);
     let before = h.capture();
+    // Moved well away (an instance update), back (another), then despawned.
     let sphere = h.object(0);
+    let home = h.app.world().get::<Transform>(sphere).copied().unwrap();
+    let away = home.with_translation(home.translation + Vec3::new(0.0, 0.0, -6.0));
+    h.app.world_mut().entity_mut(sphere).insert(away);
+    h.run(SETTLE_FRAMES);
+    let moved = h.capture();
+    h.app.world_mut().entity_mut(sphere).insert(home);
+    h.run(SETTLE_FRAMES);
+    let back = h.capture();
     h.app.world_mut().despawn(sphere);
     h.run(SETTLE_FRAMES);
     let after = h.capture();
@@ -276,22 +285,41 @@ fn shadows_fall_where_the_sun_casts_them_and_go_with_their_object() {
     let behind = centre - to_sun * (centre.y / to_sun.y);
     let sunlit_side = seed::PLACES[0] + (seed::PLACES[0] - behind.with_y(0.0)) * 2.2;
     let lit = after.mean(pixel_of(behind), 0);
-    let shadowed = shadow_pixels_lifted(&before, &after, pixel_of(behind), 12, lit);
-    let sunward = shadow_pixels_lifted(&before, &after, pixel_of(sunlit_side), 12, lit);
+    let lifted = |shadowed: &Frame, open: &Frame, at: Vec3| {
+        shadow_pixels_lifted(shadowed, open, pixel_of(at), 12, lit)
+    };
+    let (despawned, sunward) = (
+        lifted(&before, &after, behind),
+        lifted(&before, &after, sunlit_side),
+    );
+    let (moved_away, moved_back) = (
+        lifted(&before, &moved, behind),
+        lifted(&back, &moved, behind),
+    );
     println!(
-        "open floor {lit}: {shadowed} shadow pixels behind the sphere, {sunward} on its sunlit side"
+        "open floor {lit}: shadow pixels behind the sphere lifted by the despawn {despawned}, \
+         by the move {moved_away}, back after moving back {moved_back}; sunward {sunward}"
     );
     // The open floor there is sunlit (the sun brings it to about 0.6)…
     assert!(
         lit.min_element() > 0.3,
         "the floor behind the sphere is {lit} without it"
     );
-    // …and a despawn turned many floor pixels from shadow into sunlight on the far side of the
-    // sphere from the sun (the patch is 24 × 24 pixels; the sphere hides part of it)…
+    // …and many floor pixels on the far side of the sphere from the sun turn from shadow into
+    // sunlight when it goes (the patch is 24 × 24 pixels; the sphere hides part of it)…
     assert!(
-        shadowed >= 40,
-        "only {shadowed} shadow pixels behind the sphere"
+        despawned >= 40,
+        "only {despawned} shadow pixels behind the sphere"
     );
-    // …none on the side facing the sun.
+    // …none on the side facing the sun…
     assert_eq!(sunward, 0, "shadow pixels on the sphere's sunlit side");
+    // …and the shadow leaves with the sphere as it moves, and comes back with it.
+    assert!(
+        moved_away >= 40,
+        "moving the sphere away left its shadow ({moved_away} lifted)"
+    );
+    assert!(
+        moved_back >= 40,
+        "moving the sphere back left no shadow ({moved_back})"
+    );
 }
