@@ -86,6 +86,7 @@ type LightingView = (
     &'static ViewPrepassTextures,
     &'static RayTracedLighting,
     &'static mut ViewResources,
+    &'static Msaa,
 );
 
 /// The Core3d system: after Bevy's deferred lighting, unpack the G-buffer, inject Bevy's lit
@@ -102,7 +103,17 @@ pub(crate) fn ray_traced_lighting(
     device: Res<RenderDevice>,
     mut ctx: RenderContext,
 ) {
-    let (extracted, camera, target, prepass, settings, mut resources) = view.into_inner();
+    let (extracted, camera, target, prepass, settings, mut resources, msaa) = view.into_inner();
+    if *msaa != Msaa::Off {
+        if !resources.warned_msaa {
+            error!(
+                "kickstart-rt: a RayTracedLighting camera has {msaa:?}; Bevy's deferred renderer \
+                 needs Msaa::Off on the camera, so this camera is not ray traced"
+            );
+            resources.warned_msaa = true;
+        }
+        return;
+    }
     let (Some(deferred), Some(depth), Some(motion)) = (
         prepass.deferred_view(),
         prepass.depth_only_view(),

@@ -31,6 +31,8 @@ pub(crate) struct ViewResources {
     pub last_settings: Option<RayTracedLighting>,
     /// Last frame's world-to-view and view-to-clip matrices.
     pub previous: Option<(Mat4, Mat4)>,
+    /// Whether the camera's MSAA was reported (it keeps the camera from being traced).
+    pub warned_msaa: bool,
 }
 
 impl ViewResources {
@@ -81,6 +83,7 @@ impl ViewResources {
             frame: 0,
             last_settings: None,
             previous: None,
+            warned_msaa: false,
         })
     }
 
