@@ -98,7 +98,7 @@ enum Command {
         /// A GPU primary-ray debug view instead of the CPU reference image.
         #[arg(long, value_enum)]
         debug_view: Option<debug_view::DebugView>,
-        /// Scene: default, cornell, window-room, town, dragon, apartment, bunny, cornell-obj,
+        /// Scene: default, cornell, window-room, town, crowd, dragon, apartment, bunny, cornell-obj,
         /// cornell-gltf, or a path to a .gltf/.glb/.obj file.
         #[arg(long, default_value = "default")]
         scene: String,

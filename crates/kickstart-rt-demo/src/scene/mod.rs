@@ -5,6 +5,7 @@
 //! [`Mesh`] and one instance per [`Instance`], so a glTF mesh used by several nodes is built once.
 
 pub mod builtin;
+pub mod crowd;
 mod framing;
 mod gltf;
 mod obj;
@@ -502,6 +503,7 @@ pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("cornell", None),
     ("window-room", None),
     ("town", None),
+    ("crowd", None),
     ("dragon", Some("stanford_dragon/dragon_vrip.glb")),
     ("apartment", Some("dream_apartment/dream_apartment.glb")),
     ("bunny", Some("stanford_bunny/bunny.obj")),
@@ -527,6 +529,7 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
         "cornell" => return Ok(builtin::cornell_box()),
         "window-room" => return Ok(builtin::window_room()),
         "town" => return Ok(town::town()),
+        "crowd" => return Ok(crowd::crowd()),
         _ => {}
     }
     if let Some((name, Some(file))) = SCENE_NAMES.iter().find(|(n, _)| *n == name_or_path) {

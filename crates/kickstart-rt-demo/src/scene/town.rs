@@ -18,7 +18,7 @@ const BLOCKS_X: usize = 40;
 const BLOCK: f32 = 30.0;
 
 /// A small deterministic generator (SplitMix64): the town is the same on every run.
-struct Rng(u64);
+pub(super) struct Rng(pub(super) u64);
 
 impl Rng {
     fn next(&mut self) -> u64 {
@@ -30,7 +30,7 @@ impl Rng {
     }
 
     /// Uniform in [lo, hi).
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+    pub(super) fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
     }
 }
@@ -38,7 +38,7 @@ impl Rng {
 /// A unit box [-0.5, 0.5]³ whose faces are `n` × `n` grids of quads (12 n² triangles), every
 /// vertex moved along its face's normal by up to `bump` (a face's border vertices are shared
 /// with the next face, so the box stays closed: they are not moved).
-fn bumpy_box(n: u32, bump: f32, rng: &mut Rng) -> (Vec<[f32; 3]>, Vec<u32>) {
+pub(super) fn bumpy_box(n: u32, bump: f32, rng: &mut Rng) -> (Vec<[f32; 3]>, Vec<u32>) {
     let mut positions = Vec::new();
     let mut indices = Vec::new();
     // Each face: its normal and two in-plane axes (u × v = normal, so the winding faces out).
