@@ -555,7 +555,7 @@ mod tests {
     /// - `lbvh_refit_gather`: `params`, `work` (the straddling nodes' lists, the pyramid's
     ///   upper levels), `order`, `topology`, `nodes`, `bounds_out`, 11 `pyramid`, 12
     ///   `refit_src` (storage read) and 13 `refit_dst`; workgroup memory `wg_pyramid_lo`,
-    ///   `wg_pyramid_hi: array<vec3<f32>, 512>` = 2 × 8192 bytes, plus `wg_straddlers`, 4 bytes;
+    ///   `wg_pyramid_hi: array<vec3<f32>, 511>` = 2 × 8176 bytes, plus `wg_straddlers`, 4 bytes;
     /// - `lbvh_refit_ingest`: as `lbvh_refit_gather` without `bounds_out` and `refit_src`,
     ///   with 14 `raw` (storage read), 15 `ingest_rows` (a uniform) and 16 `ingest_counters`:
     ///   eight storage buffers, the default limit;
@@ -676,7 +676,7 @@ mod tests {
                     (0, 12, 7, R),
                     (0, 13, 8, RW)
                 ],
-                16388
+                16356
             )
         );
         assert_eq!(
@@ -694,7 +694,7 @@ mod tests {
                     (0, 15, 8, U),
                     (0, 16, 9, RW)
                 ],
-                16388
+                16356
             )
         );
         assert_eq!(

@@ -956,9 +956,12 @@ fn pyramid_store(at: u32, b: Box) {
     pyramid[i + 1u] = vec4<f32>(b.hi, 0.0);
 }
 
-// The block's pyramid: level L (0..=REFIT_WG_LEVELS) at slots [2 WG - 2 WG / 2^L, + WG / 2^L).
-var<workgroup> wg_pyramid_lo: array<vec3<f32>, 512>;
-var<workgroup> wg_pyramid_hi: array<vec3<f32>, 512>;
+// The block's pyramid: level L (0..=REFIT_WG_LEVELS) at slots [2 WG - 2 WG / 2^L, + WG / 2^L),
+// 2 WG - 1 slots in all (the top box at 2 WG - 2). Not one more: with wg_straddlers the gather's
+// workgroup memory stays within WebGPU's default 16384 bytes (Dawn rounds each variable up to 16
+// bytes: 2 x 511 x 16 + 16 = 16368; with 512 slots, 16400 failed pipeline creation).
+var<workgroup> wg_pyramid_lo: array<vec3<f32>, 511>;
+var<workgroup> wg_pyramid_hi: array<vec3<f32>, 511>;
 
 fn wg_pyramid_box(slot: u32) -> Box {
     return Box(wg_pyramid_lo[slot], wg_pyramid_hi[slot]);
