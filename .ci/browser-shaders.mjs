@@ -174,8 +174,8 @@ server.listen(0, "127.0.0.1", () => {
       "--enable-unsafe-webgpu",
       "--use-webgpu-adapter=swiftshader",
       "--disable-gpu-sandbox",
-      // SwiftShader compiles the largest shaders (the BVH builder) for longer than the GPU
-      // process's hang watchdog allows, which then kills the GPU process mid-compile.
+      // On a loaded 2-core machine a large pipeline can take SwiftShader longer to compile than
+      // the GPU process's hang watchdog allows (the watchdog then kills the GPU process).
       "--disable-gpu-watchdog",
       "--disable-background-networking",
       "--disable-component-update",
