@@ -1058,6 +1058,120 @@ fn update_refits_in_their_task_and_later_trace_and_report_drops() {
     agree([&seen[0], &seen[1]], "both refit");
 }
 
+/// Update refits of fast-build geometries of very different sizes in one task are recorded as
+/// one batch: one `lbvh refit ingest` for every refit that decodes the application's bytes
+/// (more than one block of 256 triangles), whose one `lbvh range refit` follows, and one `lbvh
+/// refit gather` for those refit from staged triangles (one block or less: no range pass); and
+/// every moved geometry traces as the CPU oracle says.
+#[test]
+fn a_batch_of_refits_of_every_size_traces_as_the_oracle_says() {
+    let g = gpu();
+    let ctx = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            gpu_timing: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut rng = Rng(61);
+    let counts = [2u32, 3, 100, 256, 257, 513, 2000, 20_000];
+    let before: Vec<Mesh> = counts
+        .iter()
+        .map(|&n| Mesh::soup(&mut rng, n, 1.0))
+        .collect();
+    // Every mesh bent and shifted: each box changes.
+    let after: Vec<Mesh> = before
+        .iter()
+        .map(|m| {
+            let mut m = m.clone();
+            for p in &mut m.positions {
+                *p += Vec3::new(p.y * 0.3, (p.x * 5.0).sin() * 0.1, 0.05);
+            }
+            m
+        })
+        .collect();
+    let geoms = ctx.create_geometry_handles(counts.len());
+    let insts = ctx.create_instance_handles(counts.len());
+    let place = |k: usize| Affine3A::from_translation(Vec3::new(3.0 * k as f32, 0.0, 0.0));
+    let schedule = |c: &mut TaskContainer, op, meshes: &[Mesh]| {
+        for (k, geom) in geoms.iter().enumerate() {
+            c.schedule_bvh_task(GeometryTask {
+                operation: op,
+                handle: *geom,
+                // `Auto` with `allow_update`: the fast-build tree, refit by its leaf ranges.
+                input: mesh_input(&format!("{} triangles", counts[k]), &meshes[k], true),
+            });
+        }
+        c.schedule_bvh_task(BvhBuildTask {
+            max_blas_build_count: counts.len() as u32,
+            ..Default::default()
+        });
+    };
+    let mut c = ctx.create_task_container();
+    schedule(&mut c, TaskOperation::Register, &before);
+    for (k, (geom, inst)) in geoms.iter().zip(&insts).enumerate() {
+        register_instance(&mut c, *inst, *geom, place(k));
+    }
+    build_submit_complete(&ctx, c);
+    let mut c = ctx.create_task_container();
+    schedule(&mut c, TaskOperation::Update, &after);
+    let mut e = encoder();
+    let task = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(task).unwrap();
+    if g.device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+    {
+        let t = ctx.wait_for_gpu_timings(task).unwrap();
+        let passes = |name: &str| {
+            t.passes
+                .iter()
+                .filter(|p| p.label == "blas refit" && p.pass == name)
+                .count()
+        };
+        assert_eq!(
+            (
+                passes("lbvh refit ingest"),
+                passes("lbvh refit gather"),
+                passes("lbvh range refit")
+            ),
+            // The staged refits are of one block: all their nodes are the gather's.
+            (1, 1, 1),
+            "one batch for all {} refits: {:?}",
+            counts.len(),
+            t.passes
+                .iter()
+                .map(|p| (p.label, p.pass))
+                .collect::<Vec<_>>()
+        );
+    }
+    let mut oracle = Oracle::default();
+    let mut rays = random_rays(&mut rng, 1000, 2.0);
+    for (k, r) in rays.iter_mut().enumerate() {
+        r.origin[0] += 3.0 * (k % counts.len()) as f32;
+    }
+    let mut aimed = 0;
+    for (k, (geom, inst)) in geoms.iter().zip(&insts).enumerate() {
+        oracle.geometry(*geom, &after[k]);
+        oracle.instance(*inst, &InstanceInput::new(*geom, place(k)));
+        let centres = well_shaped_centroids(&after[k], Vec3::from(place(k).translation));
+        aimed += usize::from(!centres.is_empty());
+        for j in 0..centres.len().min(200) {
+            let at = centres[(j * 7919) % centres.len()];
+            let o = at + rng.v(-2.0, 2.0);
+            rays.push(ray(o, at - o, 0.0, f32::INFINITY));
+        }
+    }
+    assert!(aimed >= counts.len() - 2, "too few geometries to aim at");
+    let hits = closest(&ctx, &rays);
+    let a = compare(&oracle, &rays, &hits, VISIBLE);
+    assert!(a.hits > 1000, "{} hits", a.hits);
+    assert_agrees(&a, "a batch of refits of every size");
+}
+
 /// The instance a hit reports is the index of that instance's data, with instances registered
 /// out of order, destroyed, and their slots reused.
 #[test]

@@ -391,6 +391,8 @@ fn build_blases(
     let mut rec = frame.recorder("blas build");
     // Fast-trace builds: allocated in queue order, their passes recorded as one batch below.
     let mut batch = Vec::new();
+    // Range refits, recorded as one batch below too.
+    let mut refits = Vec::new();
     let mut done = 0;
     while done < build.max_blas_build_count {
         let Some(h) = s.blas_queue.pop_front() else {
@@ -449,7 +451,7 @@ fn build_blases(
             Some(PendingBvh::Refit) => {
                 let fused = deferred.remove(&h);
                 s.scene
-                    .refit_blas(&mut rec, h.index, &d.gpu, fused.as_ref());
+                    .refit_blas(&mut rec, h.index, &d.gpu, fused, &mut refits);
                 if let Some(hw) = s.scene.hardware.as_mut() {
                     hw.refit(h.index);
                 }
@@ -460,6 +462,7 @@ fn build_blases(
         done += 1;
     }
     s.scene.record_batch(&mut rec, batch);
+    s.scene.record_refit_batch(&mut rec, refits);
     debug_assert_eq!(
         done_work, plan.reserved.blas,
         "the plan's prediction of step 5"

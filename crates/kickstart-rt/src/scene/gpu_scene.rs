@@ -51,6 +51,20 @@ pub(crate) struct DeferredBuild {
     max_leaf: u32,
 }
 
+/// A range refit [`GpuScene::refit_blas`] left to the task's batch
+/// ([`GpuScene::record_refit_batch`]).
+pub(crate) struct DeferredRefit {
+    slot: u32,
+    staged: Range,
+    tris: Range,
+    nodes: Range,
+    order: Range,
+    topology: Range,
+    count: u32,
+    /// The ingestion the refit decodes itself ([`GpuScene::can_refit_from_raw`]).
+    fused: Option<DeferredIngest>,
+}
+
 /// A new BLAS's pool ranges: triangles, nodes, and (sort order, refit topology) when kept.
 type BlasAlloc = (Range, Range, Option<(Range, Range)>);
 
@@ -720,21 +734,26 @@ impl GpuScene {
     }
 
     /// Refits a built `allow_update` BLAS to its re-ingested triangles: a fast-build tree by the
-    /// range refit ([`Lbvh::refit_triangles`]), a fast-trace (clustered) tree by gathering the
-    /// triangles and their boxes and climbing. With `deferred`, the triangles are decoded from
-    /// the application's bytes by the refit itself when [`GpuScene::can_refit_from_raw`], and
-    /// ingested first otherwise.
+    /// range refit, pushed onto `refits` for the task's batch ([`GpuScene::record_refit_batch`]),
+    /// a fast-trace (clustered) tree by gathering the triangles and their boxes and climbing.
+    /// With `deferred`, the triangles are decoded from the application's bytes by the refit
+    /// itself when [`GpuScene::can_refit_from_raw`], and ingested first otherwise.
     pub fn refit_blas(
         &mut self,
         rec: &mut Recorder<'_>,
         slot: u32,
         g: &GeometryGpu,
-        deferred: Option<&DeferredIngest>,
+        deferred: Option<DeferredIngest>,
+        refits: &mut Vec<DeferredRefit>,
     ) {
-        let fused = deferred.filter(|d| Self::can_refit_from_raw(g, g.triangles, &d.rows));
-        if let (Some(d), None) = (deferred, fused) {
-            self.record_ingest(rec, &d.raw, &d.components, d.staged, d.ingestion);
-        }
+        let fused = deferred.and_then(|d| {
+            if Self::can_refit_from_raw(g, g.triangles, &d.rows) {
+                Some(d)
+            } else {
+                self.record_ingest(rec, &d.raw, &d.components, d.staged, d.ingestion);
+                None
+            }
+        });
         let (
             Some(staged),
             Some(BlasRanges {
@@ -751,36 +770,18 @@ impl GpuScene {
         let n = g.triangles;
         rec.scope = "blas refit";
         // A fast-build tree (the Karras tree, one triangle a leaf) is refit from its nodes' leaf
-        // ranges, straight from the re-ingested triangles.
+        // ranges, straight from the re-ingested triangles, with the task's other range refits.
         if strategy == BuildStrategy::FastBuild && n >= 2 {
-            let source = match fused {
-                Some(d) => RefitSource::Raw(RawTriangles {
-                    raw: &d.raw,
-                    rows: &d.rows,
-                    counters: &self.counters,
-                    counter_base: d.ingestion * 2,
-                }),
-                None => RefitSource::Staged {
-                    triangles: self.staged.buffer(),
-                    base: staged.start,
-                },
-            };
-            let (_, lbvh) = self.passes.build(&self.device);
-            lbvh.refit_triangles(
-                rec,
-                &LbvhTriangleRefit {
-                    source,
-                    dst: self.triangles.buffer(),
-                    dst_base: tris.start,
-                    count: n,
-                    nodes: self.nodes.buffer(),
-                    node_base: nodes.start,
-                    order: self.orders.buffer(),
-                    order_base: order.start,
-                    topology: (self.topologies.buffer(), topology.start),
-                    bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
-                },
-            );
+            refits.push(DeferredRefit {
+                slot,
+                staged,
+                tris,
+                nodes,
+                order,
+                topology,
+                count: n,
+                fused,
+            });
             return;
         }
         self.ensure_scratch(n);
@@ -815,6 +816,46 @@ impl GpuScene {
                 sorted_boxes: true,
             },
         );
+    }
+
+    /// Records the range refits [`GpuScene::refit_blas`] deferred, as one batch
+    /// ([`Lbvh::refit_triangles_batch`]): those decoding the application's bytes first, then
+    /// those of staged triangles, so each kind shares its dispatches.
+    pub fn record_refit_batch(&mut self, rec: &mut Recorder<'_>, mut refits: Vec<DeferredRefit>) {
+        if refits.is_empty() {
+            return;
+        }
+        rec.scope = "blas refit";
+        refits.sort_by_key(|r| r.fused.is_none());
+        let staged = self.staged.buffer();
+        let batch: Vec<LbvhTriangleRefit<'_>> = refits
+            .iter()
+            .map(|r| LbvhTriangleRefit {
+                source: match &r.fused {
+                    Some(d) => RefitSource::Raw(RawTriangles {
+                        raw: &d.raw,
+                        rows: &d.rows,
+                        counters: &self.counters,
+                        counter_base: d.ingestion * 2,
+                    }),
+                    None => RefitSource::Staged {
+                        triangles: staged,
+                        base: r.staged.start,
+                    },
+                },
+                dst: self.triangles.buffer(),
+                dst_base: r.tris.start,
+                count: r.count,
+                nodes: self.nodes.buffer(),
+                node_base: r.nodes.start,
+                order: self.orders.buffer(),
+                order_base: r.order.start,
+                topology: (self.topologies.buffer(), r.topology.start),
+                bounds_out: Some((&self.geometry_table.buffer, r.slot * 3 + 1)),
+            })
+            .collect();
+        let (_, lbvh) = self.passes.build(&self.device);
+        lbvh.refit_triangles_batch(rec, &batch);
     }
 
     /// Whether the next TLAS update must rebuild rather than refit.

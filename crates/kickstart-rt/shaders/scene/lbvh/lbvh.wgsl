@@ -74,14 +74,17 @@ struct Params {
     // Where lbvh_hierarchy writes the Karras tree's topology (topo_base, unless the build is
     // clustered: then the builder's scratch, which hploc_climb reads).
     karras_base: u32,
-    pad3: u32,
-    pad4: u32,
+    // Range refits: the refit's first box in `pyramid` (boxes above level 0, its own region in a
+    // batch), and its first row in ingest_rows (lbvh_refit_ingest).
+    pyramid_base: u32,
+    row_base: u32,
     pad5: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
 // The builds of a batch, one Params each, in increasing key_base (build passes; a single build
-// is a batch of one). Refits and lbvh_climb read `params` only.
+// is a batch of one). The range refits read theirs from refit_segs; lbvh_climb reads `params`
+// only.
 @group(0) @binding(18) var<storage, read> segs: array<Params>;
 // The Params of the build (or refit) this invocation works on: every entry point sets it first,
 // from `segs` (build passes) or `params` (refits, lbvh_climb). Its values are never used in
@@ -946,12 +949,12 @@ fn pyramid_level_count(n: u32, level: u32) -> u32 {
 // stored, as leaf boxes come from the gathered triangles and workgroup memory), canonical when
 // empty.
 fn pyramid_box(at: u32) -> Box {
-    let i = 2u * (at - seg.count);
+    let i = 2u * (seg.pyramid_base + at - seg.count);
     return stored_box(pyramid[i].xyz, pyramid[i + 1u].xyz);
 }
 
 fn pyramid_store(at: u32, b: Box) {
-    let i = 2u * (at - seg.count);
+    let i = 2u * (seg.pyramid_base + at - seg.count);
     pyramid[i] = vec4<f32>(b.lo, 0.0);
     pyramid[i + 1u] = vec4<f32>(b.hi, 0.0);
 }
@@ -1019,7 +1022,8 @@ fn write_ranged_node(i: u32, lc: u32, rc: u32, lb: Box, rb: Box) {
 //                                  enc(max)): every block merges its top box into each of its
 //                                  ancestors with atomicMax, so they need no pass, no fence and
 //                                  no waiting (cleared before the refit: zero is the identity)
-// src/scene/lbvh.rs's `range_refit_work` is the same layout.
+// All from the refit's seg.work_base (its own region in a batch). src/scene/lbvh/refit.rs's
+// `range_refit_work` is the same layout.
 fn straddle_list_at() -> u32 {
     return 8u;
 }
@@ -1055,20 +1059,46 @@ fn upper_box(at: u32) -> Box {
 var<workgroup> wg_straddlers: atomic<u32>;
 
 // lbvh_refit_ingest: the application's bytes (scene/ingest_decode.wgsl reads them as `raw`), the
-// geometry's component rows (as scene/ingest.wgsl's table, at most REFIT_INGEST_ROWS: a uniform keeps
-// the entry point within 8 storage buffers) and its dropped-triangle counters.
-const REFIT_INGEST_ROWS: u32 = 32u;
+// geometries' component rows (as scene/ingest.wgsl's table, each refit's from its row_base; at
+// most REFIT_INGEST_ROWS a dispatch: a uniform keeps the entry point within 8 storage buffers)
+// and their dropped-triangle counters.
+const REFIT_INGEST_ROWS: u32 = 128u;
 @group(0) @binding(14) var<storage, read> raw: array<u32>;
 @group(0) @binding(15) var<uniform> ingest_rows: array<Component, REFIT_INGEST_ROWS>;
 @group(0) @binding(16) var<storage, read_write> ingest_counters: array<atomic<u32>>;
+
+// A batch of range refits (src/scene/lbvh/refit.rs): every refit of a task in the same two
+// passes, whatever their number. Each refit takes ceil(count / WG) whole workgroups from its
+// key_base (a multiple of WG: the batch's positions), so a workgroup's blocks, pyramid and
+// straddling list are those of one refit, and every workgroup finds its refit here. A uniform,
+// not a storage buffer: the gather and the fused ingestion bind 8 storage buffers already.
+// params.count is the number of refits in use.
+const REFIT_BATCH: u32 = 128u;
+@group(0) @binding(19) var<uniform> refit_segs: array<Params, REFIT_BATCH>;
+
+// Sets `seg` to the refit that batch position g belongs to (the last whose key_base <= g) and
+// returns g's sorted position within it.
+fn enter_refit(g: u32) -> u32 {
+    var lo = 0u;
+    var hi = min(params.count, REFIT_BATCH);
+    while hi - lo > 1u {
+        let mid = (lo + hi) / 2u;
+        if refit_segs[mid].key_base <= g {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    seg = refit_segs[lo];
+    return g - seg.key_base;
+}
 
 @compute @workgroup_size(256)
 fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
                      @builtin(workgroup_id) wid: vec3<u32>,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
-    seg = params;
-    let n = params.count;
-    let k = linear_id(lid, wid, nwg);
+    let k = enter_refit(linear_id(lid, wid, nwg));
+    let n = seg.count;
     let node = node_topology(k);
     // Past the end (and for dropped triangles): the empty box.
     var b = empty_box();
@@ -1093,17 +1123,16 @@ fn lbvh_refit_gather(@builtin(local_invocation_index) lid: u32,
 fn lbvh_refit_ingest(@builtin(local_invocation_index) lid: u32,
                      @builtin(workgroup_id) wid: vec3<u32>,
                      @builtin(num_workgroups) nwg: vec3<u32>) {
-    seg = params;
-    let n = params.count;
-    let k = linear_id(lid, wid, nwg);
+    let k = enter_refit(linear_id(lid, wid, nwg));
+    let n = seg.count;
     let node = node_topology(k);
     var b = empty_box();
     if k < n {
         let p = order[seg.order_base + k];
-        // Last row whose tri_start <= p (rows are sorted by tri_start, row 0 starts at 0; a
-        // geometry's triangle index is its ingestion index).
-        var lo = 0u;
-        var hi = min(seg.ingest_row_count, REFIT_INGEST_ROWS);
+        // The refit's last row whose tri_start <= p (its rows are sorted by tri_start, the first
+        // starts at 0; a geometry's triangle index is its ingestion index).
+        var lo = seg.row_base;
+        var hi = min(seg.row_base + seg.ingest_row_count, REFIT_INGEST_ROWS);
         while hi - lo > 1u {
             let mid = (lo + hi) / 2u;
             if ingest_rows[mid].tri_start <= p {
@@ -1143,9 +1172,9 @@ fn node_topology(k: u32) -> NodeTopology {
 // in-block nodes, the straddling list and the upper levels. Returns the root's box when this
 // invocation wrote the root (only with one block), else the empty box.
 fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
-    // The refit passes' own params (`seg` holds the same, but a private variable is not uniform
-    // for the barriers below).
-    let n = params.count;
+    // The workgroup's refit (the same in all its invocations, but `seg` is a private variable,
+    // not uniform: no barrier below depends on it).
+    let n = seg.count;
     let block = k - lid;
     let nb = (n + WG - 1u) / WG;
     if lid == 0u {
@@ -1158,22 +1187,21 @@ fn refit_block(lid: u32, k: u32, b: Box, node: NodeTopology) -> Box {
     var start = 0u;
     var count = n;
     for (var level = 1u; level <= REFIT_WG_LEVELS; level++) {
-        // Uniform (n only): the pyramid ends at its level of one box, and no range needs more.
-        if count <= 1u {
-            break;
-        }
         workgroupBarrier();
-        start += count;
-        count = pyramid_parent_count(count);
-        if lid < (WG >> level) {
-            let below = wg_level_slot(level - 1u) + 2u * lid;
-            let up = union_box(wg_pyramid_box(below), wg_pyramid_box(below + 1u));
-            let slot = wg_level_slot(level) + lid;
-            wg_pyramid_lo[slot] = up.lo;
-            wg_pyramid_hi[slot] = up.hi;
-            let i = (block >> level) + lid;
-            if i < count {
-                pyramid_store(start + i, up);
+        // The pyramid ends at its level of one box, and no range needs more.
+        if count > 1u {
+            start += count;
+            count = pyramid_parent_count(count);
+            if lid < (WG >> level) {
+                let below = wg_level_slot(level - 1u) + 2u * lid;
+                let up = union_box(wg_pyramid_box(below), wg_pyramid_box(below + 1u));
+                let slot = wg_level_slot(level) + lid;
+                wg_pyramid_lo[slot] = up.lo;
+                wg_pyramid_hi[slot] = up.hi;
+                let i = (block >> level) + lid;
+                if i < count {
+                    pyramid_store(start + i, up);
+                }
             }
         }
     }
@@ -1322,7 +1350,7 @@ fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
     }
     // Above the blocks' levels: box i of a level 6 words after box i - 1.
     if walks_live(w0, w1) {
-        var at = upper_box_at(level, 0u);
+        var at = seg.work_base + upper_box_at(level, 0u);
         while walks_live(w0, w1) {
             let l0 = upper_box(at + 6u * walk_l(w0));
             let r0 = upper_box(at + 6u * walk_r(w0));
@@ -1337,20 +1365,19 @@ fn range_boxes(a0: u32, b0: u32, a1: u32, b1: u32) -> array<Box, 2> {
     return array<Box, 2>(w0.acc, w1.acc);
 }
 
-// One workgroup per block (n > WG): the block's inner nodes whose range straddles blocks, from
-// the list lbvh_refit_gather made, so the invocations that work are packed into few subgroups
+// One workgroup per block of every refit of the batch (a refit of one block has none): the
+// block's inner nodes whose range straddles blocks, from the list lbvh_refit_gather made, so the invocations that work are packed into few subgroups
 // (about one node in eight straddles on the dragon).
 @compute @workgroup_size(256)
 fn lbvh_range_refit(@builtin(local_invocation_index) lid: u32,
                     @builtin(workgroup_id) wid: vec3<u32>,
                     @builtin(num_workgroups) nwg: vec3<u32>) {
-    seg = params;
-    let w = wid.y * nwg.x + wid.x;
-    let nb = (params.count + WG - 1u) / WG;
-    if w >= nb || lid >= work_read[straddle_counts_at(nb) + w] {
+    let w = enter_refit((wid.y * nwg.x + wid.x) * WG) / WG;
+    let nb = (seg.count + WG - 1u) / WG;
+    if w >= nb || lid >= work_read[seg.work_base + straddle_counts_at(nb) + w] {
         return;
     }
-    let i = work_read[straddle_list_at() + w * WG + lid];
+    let i = work_read[seg.work_base + straddle_list_at() + w * WG + lid];
     let range = node_range(i);
     let lc = topology[seg.topo_base + 2u * i];
     let rc = topology[seg.topo_base + 2u * i + 1u];

@@ -92,7 +92,9 @@ impl Layout {
                 ingest_row_count: 0,
                 ingest_counter: 0,
                 karras_base: u32::try_from(topology).ok()?,
-                pad: [0; 3],
+                pyramid_base: 0,
+                row_base: 0,
+                pad: 0,
             });
             positions += u64::from(n.div_ceil(WORKGROUP) * WORKGROUP);
             work += clustered_work_words(n);

@@ -149,7 +149,9 @@ impl Lbvh {
             ingest_row_count: 0,
             ingest_counter: 0,
             karras_base,
-            pad: [0; 3],
+            pyramid_base: 0,
+            row_base: 0,
+            pad: 0,
         };
         let segs = rec.storage_init("lbvh segments", bytemuck::bytes_of(&params));
         let params = rec.uniform("lbvh params", &params);

@@ -51,7 +51,9 @@
 //!
 //! The build passes read their `Params` from the `segs` table (a single build is a batch of
 //! one); [`Lbvh::build_batch`] runs them once for every fast-trace build of a task (`batch.rs`:
-//! builds padded to blocks of 256 positions, a sort by Morton key then by build). Refits and
+//! builds padded to blocks of 256 positions, a sort by Morton key then by build). The range
+//! refits of a task are one batch too ([`Lbvh::refit_triangles_batch`]: each refit's blocks
+//! from a multiple of 256 positions, its `Params` in a uniform table). The climb's refit and
 //! `lbvh climb` read the `params` uniform.
 //!
 //! Files: this one holds the inputs, the builder and its sizes; `build.rs` the build (steps 1–6),
@@ -77,7 +79,10 @@ use crate::gpu::buffers::Grown;
 #[cfg(test)]
 pub(crate) use cpu::cpu_centroid_bounds;
 #[cfg(test)]
-use refit::{pyramid_boxes, pyramid_level_count, REFIT_GATHER_LEVELS};
+use refit::{
+    chunk_len, pyramid_boxes, pyramid_level_count, REFIT_BATCH, REFIT_BATCH_POSITIONS,
+    REFIT_GATHER_LEVELS,
+};
 
 /// Invocations per workgroup of every LBVH pass (the shader's `WG`).
 const WORKGROUP: u32 = 256;
@@ -260,8 +265,10 @@ pub(crate) struct RawTriangles<'a> {
     pub counter_base: u32,
 }
 
-/// Component rows `lbvh refit ingest` takes (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/lbvh.wgsl`).
-pub(crate) const REFIT_INGEST_ROWS: usize = 32;
+/// Component rows one `lbvh refit ingest` dispatch takes, for all of its refits
+/// (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/lbvh.wgsl`: its uniform table, 14 KiB), and so the
+/// most one refit from raw bytes may have.
+pub(crate) const REFIT_INGEST_ROWS: usize = 128;
 
 /// Per-dispatch parameters (the shader's `Params`).
 #[repr(C)]
@@ -295,7 +302,11 @@ struct Params {
     /// Where `lbvh hierarchy` writes the Karras topology: `topo_base`, or the builder's scratch
     /// for a clustered build (which `hploc climb` reads).
     karras_base: u32,
-    pad: [u32; 3],
+    /// Range refits: the refit's first box in the box pyramid (its own region in a batch).
+    pyramid_base: u32,
+    /// `lbvh refit ingest`: the refit's first row in the batch's component rows.
+    row_base: u32,
+    pad: u32,
 }
 
 /// The LBVH builder: its pipelines, the radix sort, and scratch grown on demand.

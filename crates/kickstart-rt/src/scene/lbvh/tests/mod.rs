@@ -13,6 +13,7 @@ mod build;
 mod collapse;
 mod hploc;
 mod range_refit;
+mod refit_batch;
 
 /// The builder's shader (the clustered climb and the LBVH it imports) composed and validated with
 /// naga without a device; its uniform and the constants the Rust side mirrors checked against it.
@@ -42,7 +43,9 @@ fn the_shader_validates_and_matches_the_rust_side() {
             ingest_row_count,
             ingest_counter,
             karras_base,
-            pad => "pad3",
+            pyramid_base,
+            row_base,
+            pad => "pad5",
         }
     );
     assert_eq!(const_u32(&module, "WG"), WORKGROUP);
@@ -61,6 +64,7 @@ fn the_shader_validates_and_matches_the_rust_side() {
         const_u32(&module, "REFIT_INGEST_ROWS") as usize,
         REFIT_INGEST_ROWS
     );
+    assert_eq!(const_u32(&module, "REFIT_BATCH") as usize, REFIT_BATCH);
 }
 
 /// A primitive box (min, max) as the AABB input holds it.

@@ -4,7 +4,7 @@ use super::*;
 
 /// `n` random staged triangles (3 `vec4`: xyz, w 0; the second vertex's w = 1 marks a
 /// dropped triangle), every 11th dropped and every 7th degenerate (a point).
-fn staged_triangles(rng: &mut Rng, n: usize, spread: f32) -> Vec<[f32; 4]> {
+pub(super) fn staged_triangles(rng: &mut Rng, n: usize, spread: f32) -> Vec<[f32; 4]> {
     let mut tris = Vec::with_capacity(3 * n);
     for t in 0..n {
         let c = rng.vec(-spread, spread);
@@ -25,7 +25,7 @@ fn staged_triangles(rng: &mut Rng, n: usize, spread: f32) -> Vec<[f32; 4]> {
 }
 
 /// Each staged triangle's box as `scene/triangle_box.wgsl` makes it (dropped: the empty box).
-fn staged_boxes(tris: &[[f32; 4]]) -> Vec<Aabb> {
+pub(super) fn staged_boxes(tris: &[[f32; 4]]) -> Vec<Aabb> {
     tris.chunks(3)
         .map(|v| {
             if v[1][3].to_bits() == 1 {
@@ -145,7 +145,11 @@ fn range_refit_of_triangles_equals_exact_boxes_and_gathers_them() {
 /// component A is a strip of Float32x3 vertices (stride 16, at an unaligned offset) with u32
 /// indices, every 13th triangle with an index past the end and every 97th vertex NaN;
 /// component B holds the rest, non-indexed (stride 12) and transformed.
-fn raw_geometry(rng: &mut Rng, n: u32, spread: f32) -> (Vec<u8>, Vec<ComponentIngest>, [u32; 2]) {
+pub(super) fn raw_geometry(
+    rng: &mut Rng,
+    n: u32,
+    spread: f32,
+) -> (Vec<u8>, Vec<ComponentIngest>, [u32; 2]) {
     let n_a = n * 2 / 3;
     let n_b = n - n_a;
     let verts_a = n_a + 2;
@@ -315,7 +319,7 @@ fn range_refit_from_raw_bytes_equals_ingestion_then_refit() {
 }
 
 /// The range refit of `tree` from `source` into `dst` at triangle `dst_base`.
-fn refit_of<'a>(
+pub(super) fn refit_of<'a>(
     tree: &'a GpuTree,
     source: RefitSource<'a>,
     dst: &'a wgpu::Buffer,
