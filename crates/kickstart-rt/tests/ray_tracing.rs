@@ -878,9 +878,20 @@ fn refit_equals_rebuild(hint: BuildHint) {
 /// A fast-build BLAS (`PreferFastBuild`, or `Auto` with `allow_update`) gets its nodes from the
 /// range refit's passes right after the hierarchy: one block of 256 triangles or less, exactly
 /// one, one and a bit, several; each geometry under one instance, traced against the CPU oracle.
+/// The builds of one task are two batches, one chain of passes each: those that keep their sort
+/// order and topology for refits (`allow_update`) and those that do not.
 #[test]
 fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
-    let ctx = context(4);
+    let g = gpu();
+    let ctx = ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            gpu_timing: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let mut rng = Rng(77);
     let counts = [2u32, 3, 17, 255, 256, 257, 513, 2000];
     let mut c = ctx.create_task_container();
@@ -920,7 +931,34 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
         max_blas_build_count: geometries.len() as u32,
         ..Default::default()
     });
-    build_submit_complete(&ctx, c);
+    let mut e = encoder();
+    let task = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(task).unwrap();
+    if g.device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+    {
+        let t = ctx.wait_for_gpu_timings(task).unwrap();
+        let passes = |name: &str| {
+            t.passes
+                .iter()
+                .filter(|p| p.label == "blas build" && p.pass == name)
+                .count()
+        };
+        assert_eq!(
+            (
+                passes("lbvh hierarchy"),
+                passes("lbvh refit gather"),
+                passes("lbvh range refit")
+            ),
+            (2, 2, 2),
+            "two batches for {} fast-build builds: {:?}",
+            geometries.len(),
+            t.passes.iter().map(|p| p.pass).collect::<Vec<_>>()
+        );
+        assert_eq!(passes("blas build: triangle aabbs"), 0);
+    }
     // Random rays (misses, bounded and axis-aligned ones), then rays at every geometry's
     // well-shaped triangles from around it.
     let mut rays = random_rays(&mut rng, 2000, 2.0);

@@ -11,8 +11,8 @@ use crate::gpu::buffers::{read_back, storage, Grown};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    BatchBuild, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs, RawTriangles,
-    RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
+    BatchBuild, BatchKind, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs,
+    RawTriangles, RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::pool::{Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
@@ -40,15 +40,17 @@ pub(crate) enum PendingBvh {
     Refit,
 }
 
-/// A fast-trace build allocated by [`GpuScene::build_blas`] whose passes wait for the task's
-/// batch ([`GpuScene::record_batch`]).
+/// A build allocated by [`GpuScene::build_blas`] whose passes wait for the task's batch of its
+/// strategy ([`GpuScene::record_batch`]).
 pub(crate) struct DeferredBuild {
     slot: u32,
     staged: Range,
     tris: Range,
     nodes: Range,
     count: u32,
-    max_leaf: u32,
+    strategy: BuildStrategy,
+    /// Its sort order and topology, kept for refits (`allow_update`).
+    kept: Option<(Range, Range)>,
 }
 
 /// A range refit [`GpuScene::refit_blas`] left to the task's batch
@@ -534,9 +536,10 @@ impl GpuScene {
 
     /// Builds the BLAS of geometry slot `slot` from its staged triangles `staged` into pool
     /// space the plan reserved. Returns the geometry table header (first 16 bytes of its
-    /// record) to upload. A fast-trace build whose order and topology are not kept only
-    /// allocates here: its passes are recorded with the task's other such builds, as one batch,
-    /// by [`GpuScene::record_batch`] (pushed onto `batch`).
+    /// record) to upload. A fast-trace build whose order and topology are not kept, and a
+    /// fast-build build of at least two triangles, only allocate here: their passes are
+    /// recorded with the task's other builds of their kind, as one batch, by
+    /// [`GpuScene::record_batch`] (pushed onto `batch`).
     pub fn build_blas(
         &mut self,
         rec: &mut Recorder<'_>,
@@ -548,14 +551,19 @@ impl GpuScene {
     ) -> [u32; 4] {
         let n = g.triangles;
         let (tris, nodes, refit) = self.alloc_blas(rec.encoder, n, keep_for_refit);
-        if strategy == BuildStrategy::FastTrace && refit.is_none() && n >= 1 {
+        let batched = match strategy {
+            BuildStrategy::FastTrace => refit.is_none() && n >= 1,
+            BuildStrategy::FastBuild => n >= 2,
+        };
+        if batched {
             batch.push(DeferredBuild {
                 slot,
                 staged,
                 tris,
                 nodes,
                 count: n,
-                max_leaf: strategy.max_leaf(),
+                strategy,
+                kept: refit,
             });
         } else {
             self.record_blas_passes(rec, (slot, staged), n, (tris, nodes, refit), strategy);
@@ -578,13 +586,38 @@ impl GpuScene {
         ]
     }
 
-    /// Records the fast-trace builds [`GpuScene::build_blas`] deferred, as one batch
-    /// ([`Lbvh::build_batch`]); one by one when the batch cannot take them (fewer than two).
+    /// Records the builds [`GpuScene::build_blas`] deferred, as one batch of each kind
+    /// ([`Lbvh::build_batch`]): fast-trace builds, fast-build builds that keep their order and
+    /// topology (`allow_update`), and those that do not. A kind the batch cannot take (fewer
+    /// than two builds) is built one by one.
     pub fn record_batch(&mut self, rec: &mut Recorder<'_>, batch: Vec<DeferredBuild>) {
         if batch.is_empty() {
             return;
         }
         rec.scope = "blas build";
+        let (fast_trace, fast_build): (Vec<DeferredBuild>, Vec<DeferredBuild>) = batch
+            .into_iter()
+            .partition(|d| d.strategy == BuildStrategy::FastTrace);
+        let (kept, scratch): (Vec<DeferredBuild>, Vec<DeferredBuild>) =
+            fast_build.into_iter().partition(|d| d.kept.is_some());
+        for builds in [fast_trace, kept, scratch] {
+            self.record_batch_of(rec, builds);
+        }
+    }
+
+    /// Records deferred builds of one kind (one strategy, all kept or none) as a batch, or one
+    /// by one.
+    fn record_batch_of(&mut self, rec: &mut Recorder<'_>, batch: Vec<DeferredBuild>) {
+        let Some(first) = batch.first() else {
+            return;
+        };
+        let kind = match (first.strategy, first.kept) {
+            (BuildStrategy::FastTrace, _) => BatchKind::FastTrace,
+            (BuildStrategy::FastBuild, Some(_)) => BatchKind::FastBuild {
+                kept: Some((self.orders.buffer(), self.topologies.buffer())),
+            },
+            (BuildStrategy::FastBuild, None) => BatchKind::FastBuild { kept: None },
+        };
         let builds: Vec<BatchBuild> = batch
             .iter()
             .map(|d| BatchBuild {
@@ -593,7 +626,10 @@ impl GpuScene {
                 tri_dst_base: d.tris.start,
                 node_base: d.nodes.start,
                 bounds_base: d.slot * 3 + 1,
-                max_leaf: d.max_leaf,
+                max_leaf: d.strategy.max_leaf(),
+                kept: d
+                    .kept
+                    .map(|(order, topology)| (order.start, topology.start)),
             })
             .collect();
         let (_, lbvh) = self.passes.build(&self.device);
@@ -605,6 +641,7 @@ impl GpuScene {
                 nodes: self.nodes.buffer(),
                 bounds_out: &self.geometry_table.buffer,
                 builds: &builds,
+                kind,
             },
         );
         if !batched {
@@ -613,8 +650,8 @@ impl GpuScene {
                     rec,
                     (d.slot, d.staged),
                     d.count,
-                    (d.tris, d.nodes, None),
-                    BuildStrategy::FastTrace,
+                    (d.tris, d.nodes, d.kept),
+                    d.strategy,
                 );
             }
         }

@@ -1,5 +1,5 @@
 //! A batch of BLAS builds ([`Lbvh::build_batch`]): every fast-trace build of a task in one chain
-//! of dispatches, whatever their number and sizes. A build's cost is mostly its chain of
+//! of dispatches, whatever their number and sizes, and every fast-build build in another. A build's cost is mostly its chain of
 //! dependent dispatches, not its triangles (the apartment's 67 meshes built one by one take many
 //! times what the same triangles take as one mesh), so a batch runs each pass once over all of
 //! its builds:
@@ -12,19 +12,23 @@
 //! - one sort of all keys by Morton code, then a stable sort by build (`lbvh segment keys`, one
 //!   or two digit passes), so each build's primitives are back in its range in Morton order, and
 //!   `lbvh rekey` restores the Morton keys the hierarchy reads;
-//! - hierarchy, clustered climb and triangle gather per build, as a single build does them.
+//! - hierarchy per build, then for fast-trace builds the clustered climb and the triangle gather,
+//!   for fast-build builds (Karras trees, one triangle a leaf) the batched range refit
+//!   ([`Lbvh::refit_triangles_batch`]: triangle gather and nodes in two passes), as a single build
+//!   does them.
 
 use super::{
-    clustered_work_words, effective_max_leaf, groups, Buffers, Lbvh, LeafRefs, Params,
-    BLAS_KEY_BITS, FLAG_BOUNDS_OUT, FLAG_TRIANGLE_BOXES, HPLOC_WORKGROUP, MAX_COUNT, WORKGROUP,
+    clustered_work_words, effective_max_leaf, groups, Buffers, Lbvh, LbvhTriangleRefit, LeafRefs,
+    Params, RefitSource, BLAS_KEY_BITS, BOXES_AT, FLAG_BOUNDS_OUT, FLAG_TRIANGLE_BOXES,
+    HPLOC_WORKGROUP, MAX_COUNT, WORKGROUP,
 };
 use crate::gpu::Recorder;
 
-/// One build of a batch: a fast-trace BLAS (clustered, leaves of sorted positions, the
-/// triangles gathered into sorted order) whose order and topology are not kept.
+/// One build of a batch: a BLAS with leaves of sorted positions, its triangles gathered into
+/// sorted order.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct BatchBuild {
-    /// Triangles (at least 1).
+    /// Triangles (at least 1; at least 2 in a fast-build batch).
     pub count: u32,
     /// First of its staged triangles in [`LbvhBatch::staged`].
     pub tri_src_base: u32,
@@ -34,8 +38,26 @@ pub(crate) struct BatchBuild {
     pub node_base: u32,
     /// Where its root box goes in [`LbvhBatch::bounds_out`] (vec4 index).
     pub bounds_base: u32,
-    /// Largest collapsed leaf.
+    /// Largest collapsed leaf (fast-trace builds).
     pub max_leaf: u32,
+    /// Fast-build builds of a batch with [`BatchKind::FastBuild`]'s kept buffers: the first
+    /// word of its sort order and of its topology there, kept for its refits.
+    pub kept: Option<(u32, u32)>,
+}
+
+/// The trees a batch builds.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum BatchKind<'a> {
+    /// Clustered (`hploc climb`), leaves collapsed up to each build's `max_leaf`; order and
+    /// topology not kept.
+    FastTrace,
+    /// The Karras tree, one triangle a leaf, its nodes by the range refit. `kept`: the buffers
+    /// of sort orders and topologies every build's `kept` bases point into (its
+    /// `allow_update` geometries'); `None`: the builder's scratch (no build keeps them).
+    FastBuild {
+        /// (orders, topologies).
+        kept: Option<(&'a wgpu::Buffer, &'a wgpu::Buffer)>,
+    },
 }
 
 /// The shared buffers of a batch and its builds.
@@ -50,6 +72,8 @@ pub(crate) struct LbvhBatch<'a> {
     pub bounds_out: &'a wgpu::Buffer,
     /// The builds, at least two.
     pub builds: &'a [BatchBuild],
+    /// The trees they are.
+    pub kind: BatchKind<'a>,
 }
 
 /// Where each build of a batch lies in the batch's scratch.
@@ -68,18 +92,28 @@ fn segment_bits(builds: usize) -> u32 {
 }
 
 impl Layout {
-    fn of(builds: &[BatchBuild]) -> Option<Layout> {
+    /// The layout of `builds`; `clustered` for fast-trace builds, whose climb needs scratch of
+    /// its own (a fast-build build's work is its centroid bounds only, and its order and
+    /// topology are its kept ones or in the scratch).
+    fn of(builds: &[BatchBuild], clustered: bool) -> Option<Layout> {
         let mut segs = Vec::with_capacity(builds.len());
         let (mut positions, mut work, mut topology) = (0u64, 0u64, 0u64);
         for b in builds {
             let n = b.count;
             let words = u64::from(Lbvh::topology_words(n));
+            let (order_base, topo_base) = match b.kept {
+                Some(kept) => kept,
+                None => (
+                    u32::try_from(positions).ok()?,
+                    u32::try_from(topology).ok()?,
+                ),
+            };
             segs.push(Params {
                 count: n,
                 aabb_base: 0,
                 node_base: b.node_base,
-                order_base: u32::try_from(positions).ok()?,
-                topo_base: u32::try_from(topology).ok()?,
+                order_base,
+                topo_base,
                 bounds_base: b.bounds_base,
                 flags: FLAG_BOUNDS_OUT | FLAG_TRIANGLE_BOXES,
                 max_leaf: effective_max_leaf(b.max_leaf, LeafRefs::SortedPosition),
@@ -91,14 +125,26 @@ impl Layout {
                 tri_dst_base: b.tri_dst_base,
                 ingest_row_count: 0,
                 ingest_counter: 0,
-                karras_base: u32::try_from(topology).ok()?,
+                // A clustered build's Karras tree goes to the scratch, a fast-build's is its
+                // topology.
+                karras_base: if clustered {
+                    u32::try_from(topology).ok()?
+                } else {
+                    topo_base
+                },
                 pyramid_base: 0,
                 row_base: 0,
                 pad: 0,
             });
             positions += u64::from(n.div_ceil(WORKGROUP) * WORKGROUP);
-            work += clustered_work_words(n);
-            topology += words;
+            work += if clustered {
+                clustered_work_words(n)
+            } else {
+                BOXES_AT
+            };
+            if b.kept.is_none() {
+                topology += words;
+            }
         }
         let positions = u32::try_from(positions).ok().filter(|&p| p <= MAX_COUNT)?;
         Some(Layout {
@@ -112,13 +158,24 @@ impl Layout {
 
 impl Lbvh {
     /// Records the builds of `b` as one batch (see the module docs). Returns `false`, recording
-    /// nothing, when the batch has fewer than two builds, a build of no triangle, or more
-    /// positions than a build may have: the caller builds those one by one.
+    /// nothing, when the batch has fewer than two builds, a build of no triangle (of fewer than
+    /// two in a fast-build batch: a range refit's tree has inner nodes), a fast-build build
+    /// whose `kept` disagrees with the batch's, or more positions than a build may have: the
+    /// caller builds those one by one.
     pub fn build_batch(&mut self, rec: &mut Recorder<'_>, b: &LbvhBatch<'_>) -> bool {
-        if b.builds.len() < 2 || b.builds.iter().any(|x| x.count == 0) {
+        let (clustered, kept) = match b.kind {
+            BatchKind::FastTrace => (true, None),
+            BatchKind::FastBuild { kept } => (false, kept),
+        };
+        let least = if clustered { 1 } else { 2 };
+        let kept_agree = |x: &BatchBuild| match b.kind {
+            BatchKind::FastTrace => x.kept.is_none(),
+            BatchKind::FastBuild { kept } => x.kept.is_some() == kept.is_some(),
+        };
+        if b.builds.len() < 2 || b.builds.iter().any(|x| x.count < least || !kept_agree(x)) {
             return false;
         }
-        let Some(layout) = Layout::of(b.builds) else {
+        let Some(layout) = Layout::of(b.builds, clustered) else {
             return false;
         };
         let device = rec.device;
@@ -131,10 +188,15 @@ impl Lbvh {
             .get(device, "lbvh batch order", u64::from(total) * 4);
         let karras = self
             .topology
-            .get(device, "lbvh topology", layout.topology_words * 4);
-        let clustered =
+            .get(device, "lbvh topology", layout.topology_words.max(1) * 4);
+        let clustered_topology =
             self.clustered_topology
-                .get(device, "hploc topology", layout.topology_words * 4);
+                .get(device, "hploc topology", layout.topology_words.max(1) * 4);
+        // A fast-build batch writes the orders and topologies its builds keep.
+        let (order, karras) = match kept {
+            Some((orders, topologies)) => (orders.clone(), topologies.clone()),
+            None => (order, karras),
+        };
         let segs = rec.storage_init("lbvh batch segments", bytemuck::cast_slice(&layout.segs));
         // The batch's own params: every position, the Morton keys' bits.
         let params = rec.uniform(
@@ -160,7 +222,7 @@ impl Lbvh {
             ("topology", &karras),
             ("nodes", b.nodes),
             ("bounds_out", b.bounds_out),
-            ("topo_out", &clustered),
+            ("topo_out", &clustered_topology),
             ("refit_src", b.staged),
             ("refit_dst", b.triangles),
         ];
@@ -177,6 +239,31 @@ impl Lbvh {
             &[&bg],
             groups(total),
         );
+        if !clustered {
+            // The nodes and the gathered triangles from each build's leaf ranges.
+            let refits: Vec<LbvhTriangleRefit<'_>> = b
+                .builds
+                .iter()
+                .zip(&layout.segs)
+                .map(|(x, seg)| LbvhTriangleRefit {
+                    source: RefitSource::Staged {
+                        triangles: b.staged,
+                        base: x.tri_src_base,
+                    },
+                    dst: b.triangles,
+                    dst_base: x.tri_dst_base,
+                    count: x.count,
+                    nodes: b.nodes,
+                    node_base: x.node_base,
+                    order: &order,
+                    order_base: seg.order_base,
+                    topology: (&karras, seg.topo_base),
+                    bounds_out: Some((b.bounds_out, x.bounds_base)),
+                })
+                .collect();
+            self.refit_triangles_batch(rec, &refits);
+            return true;
+        }
         let bg = self.hploc.bind_group(device, "lbvh", 0, &bind);
         rec.dispatch(
             "hploc climb",
@@ -267,8 +354,9 @@ mod tests {
             node_base: 11,
             bounds_base: 13,
             max_leaf: 4,
+            kept: None,
         };
-        let l = Layout::of(&[build(1), build(300), build(256)]).unwrap();
+        let l = Layout::of(&[build(1), build(300), build(256)], true).unwrap();
         let starts: Vec<u32> = l.segs.iter().map(|s| s.key_base).collect();
         assert_eq!(starts, [0, 256, 768]);
         assert_eq!(l.positions, 1024);
@@ -282,6 +370,6 @@ mod tests {
             ]
         );
         assert!(l.segs.iter().all(|s| s.karras_base == s.topo_base));
-        assert!(Layout::of(&[build(MAX_COUNT), build(1)]).is_none());
+        assert!(Layout::of(&[build(MAX_COUNT), build(1)], true).is_none());
     }
 }

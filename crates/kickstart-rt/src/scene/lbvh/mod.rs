@@ -71,7 +71,7 @@ mod tests;
 use crate::gpu::radix_sort::RadixSort;
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
-pub(crate) use batch::{BatchBuild, LbvhBatch};
+pub(crate) use batch::{BatchBuild, BatchKind, LbvhBatch};
 use bytemuck::{Pod, Zeroable};
 
 // The builder's scratch that only grows (gpu layer); the scene's tables use it too.
