@@ -88,6 +88,10 @@ pub struct SceneReport {
     pub blas_refit: Option<Stats>,
     /// Where the last timed refit's GPU time went.
     pub blas_refit_profile: Vec<PassProfile>,
+    /// TLAS rebuild over the scene's instances (`tlas build` passes).
+    pub tlas_build: Option<Stats>,
+    /// Where the last timed TLAS rebuild's GPU time went.
+    pub tlas_build_profile: Vec<PassProfile>,
     /// BVH quality of the largest geometry.
     pub sah: Option<SahReport>,
     /// Primary, AO and diffuse batches.
@@ -143,6 +147,8 @@ impl SceneReport {
             blas_build_fast_build_profile: Vec::new(),
             blas_refit: None,
             blas_refit_profile: Vec::new(),
+            tlas_build: None,
+            tlas_build_profile: Vec::new(),
             sah: None,
             rays: Vec::new(),
             peer_mrays_per_s: None,
@@ -263,6 +269,10 @@ pub(super) fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
     println!("  BLAS refit   {}", opt(&r.blas_refit));
     if !r.blas_refit_profile.is_empty() {
         println!("    profile    {}", prof::show(&r.blas_refit_profile));
+    }
+    println!("  TLAS build   {}", opt(&r.tlas_build));
+    if !r.tlas_build_profile.is_empty() {
+        println!("    profile    {}", prof::show(&r.tlas_build_profile));
     }
     match &r.sah {
         Some(s) => println!(

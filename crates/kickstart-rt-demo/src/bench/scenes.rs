@@ -83,6 +83,12 @@ pub(super) fn bench_scene(
         if r.blas_refit.is_some() {
             r.blas_refit_profile = bench.last_profile();
         }
+        r.tlas_build = attempt(&mut errors, "TLAS build", || {
+            bench.tlas_rebuild(scene, &uploads)
+        });
+        if r.tlas_build.is_some() {
+            r.tlas_build_profile = bench.last_profile();
+        }
     }
     let batches = runs(extras::Section::Rays)
         .then(|| {

@@ -1062,7 +1062,7 @@ var<workgroup> wg_straddlers: atomic<u32>;
 // geometries' component rows (as scene/ingest.wgsl's table, each refit's from its row_base; at
 // most REFIT_INGEST_ROWS a dispatch: a uniform keeps the entry point within 8 storage buffers)
 // and their dropped-triangle counters.
-const REFIT_INGEST_ROWS: u32 = 128u;
+const REFIT_INGEST_ROWS: u32 = 512u;
 @group(0) @binding(14) var<storage, read> raw: array<u32>;
 @group(0) @binding(15) var<uniform> ingest_rows: array<Component, REFIT_INGEST_ROWS>;
 @group(0) @binding(16) var<storage, read_write> ingest_counters: array<atomic<u32>>;
@@ -1073,7 +1073,7 @@ const REFIT_INGEST_ROWS: u32 = 128u;
 // straddling list are those of one refit, and every workgroup finds its refit here. A uniform,
 // not a storage buffer: the gather and the fused ingestion bind 8 storage buffers already.
 // params.count is the number of refits in use.
-const REFIT_BATCH: u32 = 128u;
+const REFIT_BATCH: u32 = 512u;
 @group(0) @binding(19) var<uniform> refit_segs: array<Params, REFIT_BATCH>;
 
 // Sets `seg` to the refit that batch position g belongs to (the last whose key_base <= g) and

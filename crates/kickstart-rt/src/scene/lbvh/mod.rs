@@ -266,9 +266,9 @@ pub(crate) struct RawTriangles<'a> {
 }
 
 /// Component rows one `lbvh refit ingest` dispatch takes, for all of its refits
-/// (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/lbvh.wgsl`: its uniform table, 14 KiB), and so the
-/// most one refit from raw bytes may have.
-pub(crate) const REFIT_INGEST_ROWS: usize = 128;
+/// (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/lbvh.wgsl`: its uniform table, 56 KiB of WebGPU's
+/// default 64 KiB uniform binding), and so the most one refit from raw bytes may have.
+pub(crate) const REFIT_INGEST_ROWS: usize = 512;
 
 /// Per-dispatch parameters (the shader's `Params`).
 #[repr(C)]

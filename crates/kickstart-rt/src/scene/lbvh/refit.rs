@@ -234,8 +234,8 @@ impl Lbvh {
 }
 
 /// Range refits one dispatch takes (`REFIT_BATCH` in `shaders/scene/lbvh/lbvh.wgsl`: the size of
-/// its uniform table of refits, 10 KiB).
-pub(crate) const REFIT_BATCH: usize = 128;
+/// its uniform table of refits, 40 KiB of WebGPU's default 64 KiB uniform binding).
+pub(crate) const REFIT_BATCH: usize = 512;
 
 /// Positions (triangles, each refit's padded to whole blocks of 256) one dispatch of a batch
 /// takes, unless a single refit has more: the box pyramid (32 bytes a position) stays within

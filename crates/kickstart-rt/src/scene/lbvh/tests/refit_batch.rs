@@ -285,14 +285,13 @@ fn a_batch_splits_at_its_tables_and_scratch_and_at_other_buffers() {
         out
     };
     // The table of refits.
-    let many: Vec<_> = (0..300).map(|_| staged(300)).collect();
-    assert_eq!(
-        lens(&many),
-        [REFIT_BATCH, REFIT_BATCH, 300 - 2 * REFIT_BATCH]
-    );
-    // The table of rows: 40 a refit, three in 128.
-    let raws: Vec<_> = (0..7).map(|_| raw(300)).collect();
-    assert_eq!(lens(&raws), [3, 3, 1]);
+    let count = 2 * REFIT_BATCH + 76;
+    let many: Vec<_> = (0..count).map(|_| staged(300)).collect();
+    assert_eq!(lens(&many), [REFIT_BATCH, REFIT_BATCH, 76]);
+    // The table of rows: 40 a refit.
+    let per = REFIT_INGEST_ROWS / 40;
+    let raws: Vec<_> = (0..2 * per + 1).map(|_| raw(300)).collect();
+    assert_eq!(lens(&raws), [per, per, 1]);
     // The scratch: positions past REFIT_BATCH_POSITIONS start a new pair, unless one refit
     // alone has more.
     let big = REFIT_BATCH_POSITIONS / 2 + 1;
