@@ -8,7 +8,7 @@
 struct Params {
     // Clip space to world space (the inverse of Bevy's unjittered clip_from_world).
     world_from_clip: mat4x4<f32>,
-    // Camera position (xyz).
+    // Camera position (xyz): the view vector's fallback on the near plane.
     camera: vec4<f32>,
     // Unit vector towards the sun (xyz); w = 1 when there is a sun.
     to_sun: vec4<f32>,
@@ -48,6 +48,24 @@ fn environment_brdf(f0: vec3<f32>, roughness: f32, n_dot_v: f32) -> vec3<f32> {
     return f0 * ab.x + ab.y;
 }
 
+// The world position of clip-space depth `d` (reverse Z) at `ndc`.
+fn unproject(ndc: vec2<f32>, d: f32) -> vec3<f32> {
+    let h = params.world_from_clip * vec4<f32>(ndc, d, 1.0);
+    return h.xyz / h.w;
+}
+
+// Unit vector from `world` (at `ndc`) back along the pixel's view ray: towards the pixel's point
+// on the near plane, so an orthographic camera gets its view direction (the same everywhere)
+// and a perspective one the direction to the camera. A point on the near plane itself falls back
+// to the camera position.
+fn to_viewer(ndc: vec2<f32>, world: vec3<f32>) -> vec3<f32> {
+    let back = unproject(ndc, 1.0) - world;
+    if dot(back, back) > 1e-12 {
+        return normalize(back);
+    }
+    return normalize(params.camera.xyz - world);
+}
+
 @fragment
 fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     let p = vec2<i32>(position.xy);
@@ -58,8 +76,7 @@ fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     }
     let size = vec2<f32>(textureDimensions(lit));
     let ndc = vec2<f32>(position.x / size.x * 2.0 - 1.0, 1.0 - position.y / size.y * 2.0);
-    let world_h = params.world_from_clip * vec4<f32>(ndc, d, 1.0);
-    let world = world_h.xyz / world_h.w;
+    let world = unproject(ndc, d);
     let nr = textureLoad(normal_roughness, p, 0);
     let n = normalize(nr.xyz);
     let albedo = textureLoad(diffuse_color, p, 0).rgb;
@@ -78,7 +95,7 @@ fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
         color *= occlusion;
     }
     if on.x {
-        let v = normalize(params.camera.xyz - world);
+        let v = to_viewer(ndc, world);
         let f0 = textureLoad(specular, p, 0).rgb;
         let brdf = environment_brdf(f0, nr.w, saturate(dot(n, v)));
         color += max(textureLoad(reflections, p, 0).rgb, vec3<f32>(0.0)) * brdf;
