@@ -1876,19 +1876,7 @@ fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backen
         // wgpu checks a BLAS's vertex count against the limit: 16 triangles of 3 vertices fit.
         limits.max_blas_primitive_count = 48;
     }
-    let (device, queue) = pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("kickstart-rt small BLAS limit"),
-        required_features: g.device.features(),
-        required_limits: limits,
-        experimental_features: if hardware {
-            // SAFETY: the tests accept wgpu's experimental ray-query support.
-            unsafe { wgpu::ExperimentalFeatures::enabled() }
-        } else {
-            wgpu::ExperimentalFeatures::disabled()
-        },
-        ..Default::default()
-    }))
-    .expect("a device with a smaller BLAS limit than the adapter's");
+    let (device, queue) = device_with_limits(limits, "kickstart-rt small BLAS limit");
     let ctx = ExecuteContext::new(&device, &queue, InitSettings::default()).expect("context");
     assert_eq!(ctx.traversal_backend().backend, backend());
     let submit = |e: wgpu::CommandEncoder| {
@@ -1952,6 +1940,125 @@ fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backen
     ctx.mark_gpu_task_completed(t).unwrap();
     let (hits, _) = trace_on(&device, &queue, &ctx, &down);
     assert_eq!((hits[0].t, hits[0].instance), (1.0, fits.1.index()));
+}
+
+/// A device of the test adapter with the test device's features and `limits` (wgpu's
+/// experimental ray queries accepted on the hardware pass, as the test device does).
+fn device_with_limits(limits: wgpu::Limits, label: &str) -> (wgpu::Device, wgpu::Queue) {
+    let g = gpu();
+    let hardware = backend() == TraversalBackend::HardwareRayQuery;
+    pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some(label),
+        required_features: g.device.features(),
+        required_limits: limits,
+        experimental_features: if hardware {
+            // SAFETY: the tests accept wgpu's experimental ray-query support.
+            unsafe { wgpu::ExperimentalFeatures::enabled() }
+        } else {
+            wgpu::ExperimentalFeatures::disabled()
+        },
+        ..Default::default()
+    }))
+    .expect("a device with lower limits than the adapter's")
+}
+
+/// An instance slot past the device's `max_tlas_instance_count` cannot enter the driver's TLAS:
+/// the hardware backend refuses its task by name before recording, the context is unchanged,
+/// and the instances within the limit still trace. The software backend has no such limit: the
+/// same instance traces there.
+#[test]
+fn an_instance_past_the_drivers_tlas_limit_is_refused_only_by_the_hardware_backend() {
+    let g = gpu();
+    let hardware = backend() == TraversalBackend::HardwareRayQuery;
+    let mut limits = g.device.limits();
+    if hardware {
+        limits.max_tlas_instance_count = 4;
+    }
+    let (device, queue) = device_with_limits(limits, "kickstart-rt small TLAS limit");
+    let ctx = ExecuteContext::new(&device, &queue, InitSettings::default()).expect("context");
+    assert_eq!(ctx.traversal_backend().backend, backend());
+    let submit = |e: wgpu::CommandEncoder| {
+        queue.submit([e.finish()]);
+        device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    };
+    let geometry = ctx.create_geometry_handle();
+    let instances = ctx.create_instance_handles(5);
+    assert_eq!(instances[4].index(), 4, "a fresh context's fifth slot");
+    let at = |k: usize| Affine3A::from_translation(Vec3::new(2.0 * k as f32, 0.0, 0.0));
+    // A quad under each of four instances, side by side.
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: geometry,
+        input: many_triangles(&device, 2),
+    });
+    for (k, &h) in instances[..4].iter().enumerate() {
+        register_instance(&mut c, h, geometry, at(k));
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    let mut e = device.create_command_encoder(&Default::default());
+    let t = ctx.build_gpu_task(c, &mut e).expect("four instances fit");
+    submit(e);
+    ctx.mark_gpu_task_completed(t).unwrap();
+    let recorded = ctx.recorded_task_counts().instance_tasks;
+    // The fifth, in slot 4.
+    let mut c = ctx.create_task_container();
+    register_instance(&mut c, instances[4], geometry, at(4));
+    c.schedule_bvh_task(BvhBuildTask::default());
+    let mut e = device.create_command_encoder(&Default::default());
+    let result = ctx.build_gpu_task(c, &mut e);
+    let down: Vec<GpuRay> = (0..5)
+        .map(|k| {
+            ray(
+                Vec3::new(2.0 * k as f32 + 0.25, 0.75, 1.0),
+                -Vec3::Z,
+                0.0,
+                f32::INFINITY,
+            )
+        })
+        .collect();
+    let hit_instances = |ctx: &ExecuteContext| -> Vec<Option<u32>> {
+        let (hits, _) = trace_on(&device, &queue, ctx, &down);
+        hits.iter()
+            .map(|h| h.is_hit().then_some(h.instance))
+            .collect()
+    };
+    if !hardware {
+        let t = result.expect("the software backend has no TLAS instance limit");
+        submit(e);
+        ctx.mark_gpu_task_completed(t).unwrap();
+        assert_eq!(hit_instances(&ctx), (0..5).map(Some).collect::<Vec<_>>());
+        return;
+    }
+    match result {
+        Err(Error::InvalidInput {
+            task,
+            field,
+            value,
+            reason,
+        }) => {
+            assert_eq!(
+                (task, field.as_str(), value.as_str()),
+                ("InstanceTask", "handle", "4")
+            );
+            assert!(reason.contains("max_tlas_instance_count (4)"), "{reason}");
+        }
+        other => panic!(
+            "instance slot 4 past a limit of 4: {:?}",
+            other.map(|t| t.serial())
+        ),
+    }
+    assert_eq!(
+        ctx.recorded_task_counts().instance_tasks,
+        recorded,
+        "refused before recording"
+    );
+    submit(e);
+    assert_eq!(
+        hit_instances(&ctx),
+        [Some(0), Some(1), Some(2), Some(3), None],
+        "the four instances within the limit trace; the refused one is not there"
+    );
 }
 
 /// Fast-trace builds of very different sizes registered in one task are ingested in one pass and
