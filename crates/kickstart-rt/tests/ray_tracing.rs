@@ -739,6 +739,34 @@ fn half_bits(v: f32) -> u16 {
     sign | ((e as u16) << 10) | ((b >> 13) & 0x3ff) as u16
 }
 
+/// A context of the test device that times its passes.
+fn timing_context() -> ExecuteContext {
+    let g = gpu();
+    ExecuteContext::new(
+        &g.device,
+        &g.queue,
+        InitSettings {
+            gpu_timing: true,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+/// Builds, submits and completes `c`'s task; its GPU timings where the device has timestamp
+/// queries.
+fn run_timed(ctx: &ExecuteContext, c: TaskContainer) -> Option<GpuTimings> {
+    let mut e = encoder();
+    let task = ctx.build_gpu_task(c, &mut e).unwrap();
+    submit(e);
+    ctx.mark_gpu_task_completed(task).unwrap();
+    gpu()
+        .device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+        .then(|| ctx.wait_for_gpu_timings(task).unwrap())
+}
+
 /// An `allow_update` geometry whose vertices move, refitted, traces exactly like a fresh build
 /// of the moved vertices; TLAS refit after moving instances equals a TLAS rebuild. Both BLAS
 /// kinds are refit: the LBVH (`Auto` with `allow_update`) and the clustered fast-trace tree
@@ -882,16 +910,7 @@ fn refit_equals_rebuild(hint: BuildHint) {
 /// order and topology for refits (`allow_update`) and those that do not.
 #[test]
 fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
-    let g = gpu();
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            gpu_timing: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let ctx = timing_context();
     let mut rng = Rng(77);
     let counts = [2u32, 3, 17, 255, 256, 257, 513, 2000];
     let mut c = ctx.create_task_container();
@@ -931,15 +950,7 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
         max_blas_build_count: geometries.len() as u32,
         ..Default::default()
     });
-    let mut e = encoder();
-    let task = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(task).unwrap();
-    if g.device
-        .features()
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-    {
-        let t = ctx.wait_for_gpu_timings(task).unwrap();
+    if let Some(t) = run_timed(&ctx, c) {
         let passes = |name: &str| {
             t.passes
                 .iter()
@@ -1103,16 +1114,7 @@ fn update_refits_in_their_task_and_later_trace_and_report_drops() {
 /// every moved geometry traces as the CPU oracle says.
 #[test]
 fn a_batch_of_refits_of_every_size_traces_as_the_oracle_says() {
-    let g = gpu();
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            gpu_timing: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let ctx = timing_context();
     let mut rng = Rng(61);
     let counts = [2u32, 3, 100, 256, 257, 513, 2000, 20_000];
     let before: Vec<Mesh> = counts
@@ -1155,15 +1157,7 @@ fn a_batch_of_refits_of_every_size_traces_as_the_oracle_says() {
     build_submit_complete(&ctx, c);
     let mut c = ctx.create_task_container();
     schedule(&mut c, TaskOperation::Update, &after);
-    let mut e = encoder();
-    let task = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(task).unwrap();
-    if g.device
-        .features()
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-    {
-        let t = ctx.wait_for_gpu_timings(task).unwrap();
+    if let Some(t) = run_timed(&ctx, c) {
         let passes = |name: &str| {
             t.passes
                 .iter()
@@ -2068,16 +2062,7 @@ fn an_instance_past_the_drivers_tlas_limit_is_refused_only_by_the_hardware_backe
 #[test]
 fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
     let mut rng = Rng(34);
-    let g = gpu();
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            gpu_timing: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let ctx = timing_context();
     let counts = [1u32, 2, 3, 100, 255, 256, 257, 1000, 4097, 100_000];
     let geometries = ctx.create_geometry_handles(counts.len());
     let instances = ctx.create_instance_handles(counts.len());
@@ -2100,15 +2085,7 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
         max_blas_build_count: counts.len() as u32,
         ..Default::default()
     });
-    let mut e = encoder();
-    let task = ctx.build_gpu_task(c, &mut e).unwrap();
-    submit(e);
-    ctx.mark_gpu_task_completed(task).unwrap();
-    if g.device
-        .features()
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-    {
-        let t = ctx.wait_for_gpu_timings(task).unwrap();
+    if let Some(t) = run_timed(&ctx, c) {
         let passes = |name: &str| {
             t.passes
                 .iter()
