@@ -753,6 +753,14 @@ fn timing_context() -> ExecuteContext {
     .unwrap()
 }
 
+/// Passes of `t` named `pass` under `label`.
+fn pass_count(t: &GpuTimings, label: &str, pass: &str) -> usize {
+    t.passes
+        .iter()
+        .filter(|p| p.label == label && p.pass == pass)
+        .count()
+}
+
 /// Builds, submits and completes `c`'s task; its GPU timings where the device has timestamp
 /// queries.
 fn run_timed(ctx: &ExecuteContext, c: TaskContainer) -> Option<GpuTimings> {
@@ -951,12 +959,7 @@ fn fast_build_blases_of_every_size_trace_as_the_oracle_says() {
         ..Default::default()
     });
     if let Some(t) = run_timed(&ctx, c) {
-        let passes = |name: &str| {
-            t.passes
-                .iter()
-                .filter(|p| p.label == "blas build" && p.pass == name)
-                .count()
-        };
+        let passes = |name: &str| pass_count(&t, "blas build", name);
         assert_eq!(
             (
                 passes("lbvh hierarchy"),
@@ -1158,12 +1161,7 @@ fn a_batch_of_refits_of_every_size_traces_as_the_oracle_says() {
     let mut c = ctx.create_task_container();
     schedule(&mut c, TaskOperation::Update, &after);
     if let Some(t) = run_timed(&ctx, c) {
-        let passes = |name: &str| {
-            t.passes
-                .iter()
-                .filter(|p| p.label == "blas refit" && p.pass == name)
-                .count()
-        };
+        let passes = |name: &str| pass_count(&t, "blas refit", name);
         assert_eq!(
             (
                 passes("lbvh refit ingest"),
@@ -2086,12 +2084,7 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
         ..Default::default()
     });
     if let Some(t) = run_timed(&ctx, c) {
-        let passes = |name: &str| {
-            t.passes
-                .iter()
-                .filter(|p| p.label == "blas build" && p.pass == name)
-                .count()
-        };
+        let passes = |name: &str| pass_count(&t, "blas build", name);
         assert_eq!(
             (
                 passes("lbvh hierarchy"),
