@@ -2,8 +2,8 @@
 //! [`super`] (bounds, morton keys, sort, hierarchy, and the climb or the clustered climb).
 
 use super::{
-    clustered_work_words, effective_max_leaf, groups, work_words, Buffers, Lbvh, LbvhBuild,
-    LeafRefs, Params, BOXES_AT, HPLOC_WORKGROUP, KEY_BITS_RANGE, MAX_COUNT, PLOC_SMALL_MAX,
+    clustered_work_words, effective_max_leaf, groups, work_words, Buffers, Lbvh, LbvhBuild, Params,
+    BOXES_AT, HPLOC_WORKGROUP, KEY_BITS_RANGE, MAX_COUNT,
 };
 use crate::gpu::Recorder;
 
@@ -65,21 +65,6 @@ impl Lbvh {
             sorted = self.record_keys_and_sort(rec, b, &s, &bind);
             bind.push(("keys", &sorted.0));
             bind.push(("values", &sorted.1));
-        }
-        // A small TLAS: clustered in one workgroup (no hierarchy, no climb).
-        if clustered
-            && b.leaf_refs == LeafRefs::PrimitiveIndex
-            && n <= PLOC_SMALL_MAX
-            && b.bounds_out.is_none()
-            && !b.hierarchy_only
-        {
-            let pyramid = self
-                .pyramid_boxes
-                .get(device, "lbvh box pyramid", 4 * u64::from(n) * 16);
-            bind.push(("pyramid", &pyramid));
-            let bg = self.ploc_small.bind_group(device, "lbvh", 0, &bind);
-            rec.dispatch("ploc small", &self.ploc_small.pipeline, &[&bg], 1);
-            return;
         }
         if n >= 1 {
             let bg = self.hierarchy.bind_group(device, "lbvh", 0, &bind);

@@ -29,11 +29,7 @@
 //! leaves (H-PLOC), writing the nodes and the caller's topology of the clustered tree (whose parent
 //! refs never carry the block-local bit, so a refit of it runs the climb's device-scope phase
 //! only). Its subtrees need not be ranges of sorted positions; only those that are may become
-//! one leaf. A clustered build of primitive-index leaves (the TLAS) of at most
-//! [`PLOC_SMALL_MAX`] primitives without `bounds_out` skips steps 5 and 6 for `ploc small`
-//! (`shaders/scene/lbvh/ploc_small.wgsl`): PLOC over the sorted primitives in one workgroup, the
-//! same outputs (nodes, order, the clustered topology) with workgroup barriers instead of the
-//! climb's device-scope round trips.
+//! one leaf.
 //!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology; a BLAS refit's
 //! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]).
@@ -322,8 +318,6 @@ pub(crate) struct Lbvh {
     hierarchy: ReflectedPipeline,
     climb: ReflectedPipeline,
     hploc: ReflectedPipeline,
-    /// `ploc_small`: a clustered TLAS of at most [`PLOC_SMALL_MAX`] refs in one workgroup.
-    ploc_small: ReflectedPipeline,
     /// `lbvh_refit_gather`: the range refit's gather, box pyramid and in-block nodes.
     refit_gather: ReflectedPipeline,
     /// `lbvh_refit_ingest`: `lbvh_refit_gather` decoding its triangles from the application's
@@ -354,9 +348,6 @@ pub(crate) struct Lbvh {
     /// A batch's sort order (its builds' orders are not kept).
     batch_order: Grown,
 }
-
-/// Most primitives `ploc_small` builds over (`PS_MAX` in `shaders/scene/lbvh/ploc_small.wgsl`).
-pub(crate) const PLOC_SMALL_MAX: u32 = 2048;
 
 /// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/scene/lbvh/hploc.wgsl`).
 const HPLOC_WORKGROUP: u32 = 32;
@@ -395,17 +386,16 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
 
 /// The WGSL of the builder's passes, labelled.
 pub(crate) fn shader_variants() -> Vec<(String, String)> {
-    let shader = ReflectedShader::compose(&["scene/lbvh/ploc_small"], &[]);
+    let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
     vec![("scene/lbvh".into(), shader.source().to_string())]
 }
 
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
-        // The LBVH, its clustered variant (which imports it) and the one-workgroup clustering
-        // (which imports that), with the digit counting, centroid bounds, triangle boxes and
-        // vertex decoding they share with other passes.
-        let shader = ReflectedShader::compose(&["scene/lbvh/ploc_small"], &[]);
+        // The LBVH and its clustered variant (which imports it), with the digit counting, centroid
+        // bounds, triangle boxes and vertex decoding they share with other passes.
+        let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
         let pipeline = |label, entry| shader.pipeline(device, label, entry);
         Lbvh {
             bounds: pipeline("lbvh bounds", "lbvh_bounds"),
@@ -414,7 +404,6 @@ impl Lbvh {
             hierarchy: pipeline("lbvh hierarchy", "lbvh_hierarchy"),
             climb: pipeline("lbvh climb", "lbvh_climb"),
             hploc: pipeline("hploc climb", "hploc_climb"),
-            ploc_small: pipeline("ploc small", "ploc_small"),
             refit_gather: pipeline("lbvh refit gather", "lbvh_refit_gather"),
             refit_ingest: pipeline("lbvh refit ingest", "lbvh_refit_ingest"),
             range_refit: pipeline("lbvh range refit", "lbvh_range_refit"),

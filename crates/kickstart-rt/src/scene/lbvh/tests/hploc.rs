@@ -153,7 +153,7 @@ fn hploc_refit_keeps_the_clustered_topology() {
 }
 
 /// Depth of the tree (root = 1) from its read-back topology.
-pub(super) fn topology_depth(tree: &GpuTree) -> usize {
+fn topology_depth(tree: &GpuTree) -> usize {
     let topo = read_words(&tree.topology);
     let topo = &topo[tree.bases.topo as usize..];
     let mut deepest = 0;

@@ -12,7 +12,6 @@ use glam::Vec3;
 mod build;
 mod collapse;
 mod hploc;
-mod ploc_small;
 mod range_refit;
 mod refit_batch;
 
