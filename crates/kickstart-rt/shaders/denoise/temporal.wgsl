@@ -188,6 +188,28 @@ fn dn_hard_edge(h: array<DnRecord, 4>, w: vec4<f32>) -> bool {
     return hi - lo > 0.5 && spread < 0.02;
 }
 
+// Whether the shadow edge at grid pixel `p` (surface point `pos`) is narrower than a grid pixel:
+// its penumbra, 2 × `hit` (the largest occluder distance of the 3×3 neighbours) × the light's
+// tan, against the size of a grid pixel at `pos`. The tan is read from the raw sample of `lit`,
+// a lit neighbour: the shadow trace writes a lit pixel's value as minus that tan. Inputs written
+// elsewhere, whose lit value is -1, read as a very wide penumbra (no edge is called sharp).
+fn dn_sharp_shadow_edge(s: u32, lit: vec2<u32>, hit: f32, pos: vec3<f32>) -> bool {
+    var t: f32;
+    if s == 0u {
+        t = textureLoad(dn_input0, dn_texel(lit), 0).x;
+    } else {
+        t = textureLoad(dn_input1, dn_texel(lit), 0).x;
+    }
+    let tan_l = max(-dn_sanitize(vec4<f32>(t)).x, 0.0);
+    // Viewport pixels per world unit at `pos`, across the view direction.
+    let v = dn_to_eye(pos);
+    let a = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(v.y) > 0.9);
+    let e = normalize(cross(v, a));
+    let k = 0.01 * max(dn_view_distance(pos), 1e-6);
+    let ppu = length(gb_project(pos + e * k).xy - gb_project(pos).xy) / k;
+    return 2.0 * hit * tan_l * ppu < f32(dp.grid.z);
+}
+
 // Loads the workgroup's tile (every invocation takes part, before any returns).
 fn dn_fill_tile(wg: vec2<u32>, lid: u32) {
     let origin = vec2<i32>(wg * 8u) - vec2<i32>(1);
@@ -321,6 +343,8 @@ fn main(
         var cnt = 0.0;
         var lo = vec4<f32>(1e30);
         var hi = vec4<f32>(-1e30);
+        // A neighbour whose sample is 1 (for a shadow: lit), for dn_sharp_shadow_edge.
+        var lit = p;
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let t = (lid.y + u32(1 + dy)) * DN_TILE + lid.x + u32(1 + dx);
@@ -333,6 +357,9 @@ fn main(
                 cnt += 1.0;
                 lo = min(lo, v);
                 hi = max(hi, v);
+                if v.x == 1.0 {
+                    lit = vec2<u32>(vec2<i32>(p) + vec2<i32>(dx, dy));
+                }
             }
         }
         let mean = m1 / max(cnt, 1.0);
@@ -348,8 +375,14 @@ fn main(
         let hc = select(h02, h12, second);
         let hd = select(h03, h13, second);
         let visibility = kind == DN_KIND_SHADOW || kind == DN_KIND_MULTI_SHADOW;
-        let edge = visibility && dn_hard_edge(array<DnRecord, 4>(ha, hb, hc, hd),
-                                              vec4<f32>(w0, w1, w2, w3));
+        // This frame's samples around a shadow edge sharper than a grid pixel are exact (the
+        // point each pixel shows is lit or not), and history resampled at a sub-pixel offset,
+        // frame after frame, only blurs them: thin shadows faded along a pan. Wider penumbrae
+        // keep their history (their 1-spp samples are noise).
+        let sharp = kind == DN_KIND_SHADOW && cnt > 0.0 && lo.x == 0.0 && hi.x == 1.0
+            && dn_sharp_shadow_edge(s, lit, hi.w, pos);
+        let edge = visibility && (sharp || dn_hard_edge(array<DnRecord, 4>(ha, hb, hc, hd),
+                                                        vec4<f32>(w0, w1, w2, w3)));
         let has_history = wsum > 1e-3 && !edge;
         if has_history {
             let inv = 1.0 / wsum;

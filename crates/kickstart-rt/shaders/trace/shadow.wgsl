@@ -1,7 +1,8 @@
 // TraceShadowTask and TraceMultiShadowTask: one ray per pixel and light towards a random point
 // of the light (soft shadows: the disc of a sphere light facing the pixel, the cone of a
 // directional light's angular extent). Entry points: `shadow` (one light, output0 = closest hit
-// distance, -1 where the light is visible) and `multi_shadow` (up to 32 lights, the packed
+// distance, or where the light is visible minus the tangent of its angular radius, at least
+// TR_LIT_MIN; -1 where no surface is) and `multi_shadow` (up to 32 lights, the packed
 // format of docs/trace-tasks.md in output0 and output1). The G-buffer is at
 // group 1 (trace/common).
 
@@ -96,7 +97,25 @@ fn shadow(
     }
     var rng = tr_rng(px.texel);
     let origin = tr_origin(s.position, s.normal, s.view_distance);
-    textureStore(out0, px.texel, vec4<f32>(tr_light_hit(0u, s, origin, &rng)));
+    let t = tr_light_hit(0u, s, origin, &rng);
+    // Lit: the light's angular size instead of -1 (still negative), which the shadow denoiser
+    // needs for the penumbra's width (occluder distance × 2 tan): hard edges keep their exact
+    // samples, penumbrae their history.
+    textureStore(out0, px.texel, vec4<f32>(select(t, -tr_light_tan(tp.lights[0], s.position), t < 0.0)));
+}
+
+// Smallest magnitude of a lit pixel's value: f16's smallest normal, so that it stays negative in
+// every float output format.
+const TR_LIT_MIN: f32 = 6.103515625e-5;
+
+// tan of the angular radius of light `l` seen from `p` (a sphere light's radius over its
+// distance), at least TR_LIT_MIN.
+fn tr_light_tan(l: TrLight, p: vec3<f32>) -> f32 {
+    var t = l.a.w;
+    if tr_branch(u32(l.c.y + 0.5)) != 0u {
+        t = l.a.w / max(length(l.a.xyz - p), 1e-6);
+    }
+    return max(t, TR_LIT_MIN);
 }
 
 // Light li's bit in the packed visibility: channel li / 8, bit li % 8.

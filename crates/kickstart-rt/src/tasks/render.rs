@@ -593,7 +593,10 @@ pub enum LightInfo {
 pub struct TraceShadowTask {
     /// Shared inputs.
     pub common: TraceTaskCommon,
-    /// Closest hit distance; negative where the light is visible.
+    /// Closest hit distance; negative where the light is visible: there minus the tangent of the
+    /// light's angular radius seen from the pixel (at least 2^-14, so negative in every float
+    /// format), which [`DenoiseShadowTask`] reads as the width of the penumbra; -1 where the
+    /// G-buffer has no surface.
     pub output: TextureInput,
     /// The light.
     pub light: LightInfo,
