@@ -352,12 +352,17 @@ fn composite_params(
         to_sun: to_sun.to_array(),
         sun: sun_radiance.to_array(),
         effects: [
-            settings.reflections,
-            settings.gi,
-            settings.ao,
-            settings.shadows && sun.is_some(),
-        ]
-        .map(u32::from),
+            u32::from(settings.reflections),
+            u32::from(settings.gi),
+            u32::from(settings.ao),
+            // 2: denoising is off and the shadow texture holds the raw trace (the occluder's
+            // distance, negative where the sun is visible), not visibility.
+            match (settings.shadows && sun.is_some(), settings.denoise) {
+                (false, _) => 0,
+                (true, true) => 1,
+                (true, false) => 2,
+            },
+        ],
     }
 }
 

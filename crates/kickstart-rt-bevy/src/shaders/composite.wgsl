@@ -14,7 +14,7 @@ struct Params {
     to_sun: vec4<f32>,
     // Sun colour × illuminance × exposure (rgb).
     sun: vec4<f32>,
-    // Effects on: reflections, GI, AO, shadows.
+    // Effects on: reflections, GI, AO, shadows (shadows 2: the raw trace, denoising off).
     effects: vec4<u32>,
 };
 
@@ -83,7 +83,10 @@ fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     let on = params.effects != vec4<u32>(0u);
 
     if on.w && params.to_sun.w > 0.0 {
-        let visibility = saturate(textureLoad(shadow, p, 0).r);
+        // Denoised: visibility. Raw (denoising off): the occluder's distance, negative where the
+        // sun is visible.
+        let s = textureLoad(shadow, p, 0).r;
+        let visibility = select(saturate(s), select(0.0, 1.0, s < 0.0), params.effects.w == 2u);
         let n_dot_l = max(dot(n, params.to_sun.xyz), 0.0);
         let sun_diffuse = albedo / PI * params.sun.rgb * n_dot_l;
         color = max(color - sun_diffuse * (1.0 - visibility), vec3<f32>(0.0));
