@@ -51,7 +51,7 @@ fn check_sphere_shadow(light: LightInfo, first_hit: bool) {
             let v = img[(y * N + x) as usize][0];
             if miss_by > 0.02 || oc.dot(dir) < 0.0 {
                 lit += 1;
-                assert_eq!(v, -1.0, "{light:?}: lit at {x},{y}");
+                assert_eq!(v, -LIT_MIN, "{light:?}: lit at {x},{y}");
             } else if miss_by < -0.02 {
                 shadowed += 1;
                 let t = ray_sphere(p, dir, centre, r).unwrap();
@@ -87,6 +87,25 @@ fn sphere_over_a_plane_shadows_the_predicted_disc_directional_light() {
     check_sphere_shadow(light, true);
 }
 
+/// A lit pixel's value for a light without size: minus 2^-14, the smallest normal f16, where
+/// a sized light writes minus the tangent of its angular radius.
+const LIT_MIN: f32 = 6.103_515_6e-5;
+
+/// The value the shadow trace writes where `light` is visible from `p`: minus the tangent of its
+/// angular radius seen from there, at least [`LIT_MIN`].
+fn lit_value(light: LightInfo, p: Vec3) -> f32 {
+    let tan = match light {
+        LightInfo::Directional { angular_extent, .. } => (angular_extent * 0.5).tan(),
+        LightInfo::Point {
+            position, radius, ..
+        }
+        | LightInfo::Spot {
+            position, radius, ..
+        } => radius / (position - p).length(),
+    };
+    -tan.max(LIT_MIN)
+}
+
 /// Fraction of a unit disc with coordinate > s (s in [-1, 1]).
 fn disc_fraction_above(s: f64) -> f64 {
     let s = s.clamp(-1.0, 1.0);
@@ -111,6 +130,7 @@ fn half_plane_occluder(h: f32) -> TestScene {
 
 /// The share of texels `light` lights in each column of the floor y = 0 (column x at
 /// `px(x)`, [`ROWS`] rows 0.05 apart in z), over `frames` frames of the shadow pass's noise.
+/// Every lit texel holds [`lit_value`].
 fn lit_fraction_per_column(
     scene: &TestScene,
     light: LightInfo,
@@ -137,7 +157,17 @@ fn lit_fraction_per_column(
             })],
         );
         for (i, v) in read(&out).iter().enumerate() {
-            vis[i % COLUMNS as usize] += (v[0] < 0.0) as u32 as f64 / (frames * ROWS) as f64;
+            let (x, y) = (i as u32 % COLUMNS, i as u32 / COLUMNS);
+            if v[0] < 0.0 {
+                let p = Vec3::new(px(x), 0.0, (y as f32 - 4.0) * 0.05);
+                let want = lit_value(light, p);
+                assert!(
+                    (v[0] - want).abs() <= 1e-4 * want.abs(),
+                    "{light:?}: lit texel {x},{y} holds {}, want {want}",
+                    v[0]
+                );
+            }
+            vis[x as usize] += (v[0] < 0.0) as u32 as f64 / (frames * ROWS) as f64;
         }
     }
     vis
@@ -255,7 +285,7 @@ fn multi_shadow_packs_each_lights_visibility() {
 
 /// A spot light 2 above the floor under a ceiling that covers everything at height 1: the floor
 /// texels inside the cone (angle to the axis below `apex_angle`, the half-angle) are traced and
-/// find the ceiling halfway to the light; those outside are not traced and read as lit (-1),
+/// find the ceiling halfway to the light; those outside are not traced and read as lit,
 /// though the ceiling is in the way. Straight down, the cone meets the floor in the circle of
 /// radius 2·tan(apex); tilted, in an ellipse (the angle decides).
 #[test]
@@ -308,7 +338,7 @@ fn spot_light_traces_inside_its_cone_only() {
                 } else if angle > apex + 0.01 {
                     outside += 1;
                     assert_eq!(
-                        v, -1.0,
+                        v, -LIT_MIN,
                         "{direction}: texel {x},{y} outside the cone ({angle} rad) was traced"
                     );
                 }
