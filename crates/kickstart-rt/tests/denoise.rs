@@ -13,6 +13,14 @@ use kickstart_rt::*;
 
 const EYE: Vec3 = Vec3::new(0.3, 1.6, 2.6);
 
+/// A 4-sample sub-pixel jitter pattern (pixels), as TAA cycles through.
+const JITTER: [glam::Vec2; 4] = [
+    glam::Vec2::new(0.25, -0.25),
+    glam::Vec2::new(-0.25, 0.25),
+    glam::Vec2::new(-0.25, -0.25),
+    glam::Vec2::new(0.25, 0.25),
+];
+
 fn static_gbuffer() -> GBuffer {
     gbuffer(EYE, Vec3::ZERO, EYE, Vec3::ZERO)
 }
@@ -184,18 +192,12 @@ fn very_sparse_signal_keeps_its_energy_every_frame() {
 fn jittered_camera_converges() {
     // A static camera whose projection is jittered by a 4-sample pattern (as for TAA); the
     // G-buffer is rendered jittered, and the denoiser compensates with ViewInfo::jitter.
-    let pattern = [
-        glam::Vec2::new(0.25, -0.25),
-        glam::Vec2::new(-0.25, 0.25),
-        glam::Vec2::new(-0.25, -0.25),
-        glam::Vec2::new(0.25, 0.25),
-    ];
     let h = Harness::new(SignalType::Diffuse, DenoisingMethod::HighQuality);
     let mut rng = Rng(13);
     let mut psnrs = Vec::new();
     let mut noisy_psnr = 0.0;
     for f in 0..16 {
-        let g = gbuffer_jittered(EYE, Vec3::ZERO, EYE, Vec3::ZERO, pattern[f % 4]);
+        let g = gbuffer_jittered(EYE, Vec3::ZERO, EYE, Vec3::ZERO, JITTER[f % 4]);
         let r = reference_image(&g, reference);
         let input = noisy(&r, &mut rng);
         noisy_psnr = psnr(&g, &input, &r);
@@ -703,18 +705,26 @@ fn small_light_shadow_stays_hard() {
     assert!(checked > 1000);
 }
 
+/// How far a denoised shadow is from the visibility `want` gives each surface (by its x): the
+/// mean absolute error, the pixels off by more than 0.25, and the surfaces counted.
+fn visibility_error(g: &GBuffer, out: &[Vec4], want: impl Fn(f32) -> f32) -> (f32, usize, usize) {
+    let (mut err, mut wrong, mut n) = (0.0f32, 0, 0);
+    for (i, s) in g.surfaces.iter().enumerate() {
+        let Some(s) = s else { continue };
+        let e = (out[i].x - want(s.position.x)).abs();
+        err += e;
+        wrong += (e > 0.25) as usize;
+        n += 1;
+    }
+    (err / n as f32, wrong, n)
+}
+
 /// A small light's shadow is exact at one sample per pixel: along a jittered, moving camera the
 /// denoised shadow must stay as exact as its raw input (the reference of each frame is that
 /// frame's visibility). Resampling the history across the edge, or blurring by the edge's
 /// spatial spread as if it were noise, softens it (frame 0 alone lost 10 dB that way).
 #[test]
 fn hard_shadow_stays_as_exact_as_its_input_along_a_jittered_pan() {
-    let pattern = [
-        glam::Vec2::new(0.25, -0.25),
-        glam::Vec2::new(-0.25, 0.25),
-        glam::Vec2::new(-0.25, -0.25),
-        glam::Vec2::new(0.25, 0.25),
-    ];
     let eye = |f: usize| EYE + Vec3::new(0.01 * f as f32, 0.0, 0.0);
     let h = Harness::new(SignalType::Shadow, DenoisingMethod::HighQuality);
     let mut rng = Rng(31);
@@ -724,7 +734,7 @@ fn hard_shadow_stays_as_exact_as_its_input_along_a_jittered_pan() {
             Vec3::ZERO,
             eye(f.saturating_sub(1)),
             Vec3::ZERO,
-            pattern[f % 4],
+            JITTER[f % 4],
         );
         let out = h
             .frame(
@@ -734,15 +744,7 @@ fn hard_shadow_stays_as_exact_as_its_input_along_a_jittered_pan() {
                 DenoiseMode::Continue,
             )
             .remove(0);
-        let (mut err, mut wrong, mut n) = (0.0f32, 0, 0);
-        for (i, s) in g.surfaces.iter().enumerate() {
-            let Some(s) = s else { continue };
-            let e = (out[i].x - visibility(s.position.x, 0.0)).abs();
-            err += e;
-            wrong += (e > 0.25) as usize;
-            n += 1;
-        }
-        let mean = err / n as f32;
+        let (mean, wrong, n) = visibility_error(&g, &out, |x| visibility(x, 0.0));
         eprintln!("frame {f}: mean error {mean:.4}, {wrong} of {n} pixels off by 0.25");
         assert!(mean < 0.01, "frame {f}: mean error {mean:.4}");
         assert!(
@@ -763,12 +765,6 @@ const SUN_TAN: f32 = 0.0047;
 /// 320×180 lost 6 dB to its raw input over a 16-frame pan that way).
 #[test]
 fn thin_sun_shadow_stays_exact_along_a_long_pan() {
-    let pattern = [
-        glam::Vec2::new(0.25, -0.25),
-        glam::Vec2::new(-0.25, 0.25),
-        glam::Vec2::new(-0.25, -0.25),
-        glam::Vec2::new(0.25, 0.25),
-    ];
     let lit = |x: f32| (x - 0.2).abs() >= 0.04;
     let eye = |f: usize| EYE + Vec3::new(0.017 * f as f32, 0.0, 0.0);
     let h = Harness::new(SignalType::Shadow, DenoisingMethod::HighQuality);
@@ -778,7 +774,7 @@ fn thin_sun_shadow_stays_exact_along_a_long_pan() {
             Vec3::ZERO,
             eye(f.saturating_sub(1)),
             Vec3::ZERO,
-            pattern[f % 4],
+            JITTER[f % 4],
         );
         let input: Vec<Vec4> = g
             .surfaces
@@ -792,16 +788,7 @@ fn thin_sun_shadow_stays_exact_along_a_long_pan() {
         let out = h
             .frame(&g, &[input], Motion::Matrices, DenoiseMode::Continue)
             .remove(0);
-        let (mut err, mut wrong, mut n) = (0.0f32, 0, 0);
-        for (i, s) in g.surfaces.iter().enumerate() {
-            let Some(s) = s else { continue };
-            let want = if lit(s.position.x) { 1.0 } else { 0.0 };
-            let e = (out[i].x - want).abs();
-            err += e;
-            wrong += (e > 0.25) as usize;
-            n += 1;
-        }
-        let mean = err / n as f32;
+        let (mean, wrong, n) = visibility_error(&g, &out, |x| if lit(x) { 1.0 } else { 0.0 });
         eprintln!("frame {f}: mean error {mean:.4}, {wrong} of {n} pixels off by 0.25");
         assert!(mean < 0.005, "frame {f}: mean error {mean:.4}");
         assert!(

@@ -390,20 +390,29 @@ impl Oracle {
             .any(|(i, g)| g.bvh.any_hit(&g.tris, &Self::object_ray(i, r)))
     }
 
+    /// Ray `r` in the object space of `instance`, and that instance's triangle `primitive`.
+    fn object_triangle(
+        &self,
+        r: &GpuRay,
+        instance: u32,
+        primitive: u32,
+    ) -> Option<(Ray, [Vec3; 3])> {
+        let i = self.instances.iter().find(|i| i.index == instance)?;
+        let tri = *self
+            .geometries
+            .get(&i.geometry)?
+            .tris
+            .get(primitive as usize)?;
+        Some((Self::object_ray(i, r), tri))
+    }
+
     /// The smallest barycentric coordinate where the ray crosses the plane of triangle
     /// (`instance`, `primitive`): ≈ 0 means the ray grazes an edge or vertex, where f32 rounding
     /// legitimately decides either way.
     pub fn edge_distance(&self, r: &GpuRay, instance: u32, primitive: u32) -> f32 {
-        let Some(i) = self.instances.iter().find(|i| i.index == instance) else {
+        let Some((ray, [a, b, c])) = self.object_triangle(r, instance, primitive) else {
             return f32::INFINITY;
         };
-        let Some(g) = self.geometries.get(&i.geometry) else {
-            return f32::INFINITY;
-        };
-        let Some(&[a, b, c]) = g.tris.get(primitive as usize) else {
-            return f32::INFINITY;
-        };
-        let ray = Self::object_ray(i, r);
         let n = (b - a).cross(c - a);
         let denom = n.dot(ray.dir);
         if denom == 0.0 || n.length_squared() == 0.0 {
@@ -422,17 +431,9 @@ impl Oracle {
     /// instance's space: near 0 the ray grazes the triangle's plane, where its distance is
     /// ill-conditioned (a rounding of the plane moves it by about rounding / cos).
     pub fn incidence_cos(&self, r: &GpuRay, instance: u32, primitive: u32) -> f32 {
-        let Some(i) = self.instances.iter().find(|i| i.index == instance) else {
+        let Some((ray, [a, b, c])) = self.object_triangle(r, instance, primitive) else {
             return 1.0;
         };
-        let Some(&[a, b, c]) = self
-            .geometries
-            .get(&i.geometry)
-            .and_then(|g| g.tris.get(primitive as usize))
-        else {
-            return 1.0;
-        };
-        let ray = Self::object_ray(i, r);
         let n = (b - a).cross(c - a).normalize_or_zero();
         n.dot(ray.dir.normalize_or_zero()).abs()
     }
@@ -444,17 +445,9 @@ impl Oracle {
     /// which differs between our triangle test, the oracle's and the JIT of a software driver
     /// (it may fuse multiply-adds on one CPU and not on another).
     pub fn starts_on_plane(&self, r: &GpuRay, instance: u32, primitive: u32) -> bool {
-        let Some(i) = self.instances.iter().find(|i| i.index == instance) else {
+        let Some((ray, [a, b, c])) = self.object_triangle(r, instance, primitive) else {
             return false;
         };
-        let Some(&[a, b, c]) = self
-            .geometries
-            .get(&i.geometry)
-            .and_then(|g| g.tris.get(primitive as usize))
-        else {
-            return false;
-        };
-        let ray = Self::object_ray(i, r);
         let start = ray.origin + ray.dir * ray.t_min;
         let n = (b - a).cross(c - a).normalize_or_zero();
         let scale = [a, b, c, start]
@@ -465,19 +458,13 @@ impl Oracle {
 
     /// Whether the CPU's triangle test hits (`instance`, `primitive`) at about `t`.
     pub fn hits_at(&self, r: &GpuRay, instance: u32, primitive: u32, t: f32) -> bool {
-        let Some(i) = self.instances.iter().find(|i| i.index == instance) else {
-            return false;
-        };
-        let Some(g) = self.geometries.get(&i.geometry) else {
-            return false;
-        };
-        let Some(&[a, b, c]) = g.tris.get(primitive as usize) else {
+        let Some((ray, [a, b, c])) = self.object_triangle(r, instance, primitive) else {
             return false;
         };
         let ray = Ray {
             t_min: f32::NEG_INFINITY,
             t_max: f32::INFINITY,
-            ..Self::object_ray(i, r)
+            ..ray
         };
         intersect_triangle(&ray, a, b, c).is_some_and(|h| close(h.t, t))
             || self.edge_distance(r, instance, primitive) < 1e-4
