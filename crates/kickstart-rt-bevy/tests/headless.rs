@@ -323,3 +323,49 @@ fn shadows_fall_where_the_sun_casts_them_and_follow_their_object() {
         "moving the sphere back left no shadow ({moved_back})"
     );
 }
+
+#[test]
+fn raw_shadows_with_denoise_off_are_dark_where_the_sun_is_hidden() {
+    // With the denoisers off the composite reads the shadow trace's raw output (occluder
+    // distance where hidden, minus the light's angular tan where lit): read as visibility it
+    // would light the shadow and darken the open floor.
+    let mut h = Harness::new(RayTracedLighting {
+        gi: false,
+        reflections: false,
+        ao: false,
+        denoise: false,
+        ..default()
+    });
+    h.run(4);
+    let before = h.capture();
+    let sphere = h.object(0);
+    h.app.world_mut().despawn(sphere);
+    h.run(4);
+    let after = h.capture();
+
+    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
+    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
+    let behind = centre - to_sun * (centre.y / to_sun.y);
+    let sunlit_side = seed::PLACES[0] + (seed::PLACES[0] - behind.with_y(0.0)) * 2.2;
+    let lit = after.mean(pixel_of(behind), 0);
+    let sunlit_before = before.mean(pixel_of(sunlit_side), 0);
+    let despawned = shadow_pixels_lifted(&before, &after, pixel_of(behind), 12, lit);
+    let sunward = shadow_pixels_lifted(&before, &after, pixel_of(sunlit_side), 12, lit);
+    println!(
+        "raw shadows: open floor {lit}, sunward floor with the sphere {sunlit_before}; shadow \
+         pixels lifted by the despawn {despawned}, sunward {sunward}"
+    );
+    assert!(
+        lit.min_element() > 0.3,
+        "the open floor behind the sphere is {lit} with denoise off"
+    );
+    assert!(
+        (sunlit_before - lit).length() < 0.1 * lit.length(),
+        "the sunlit floor beside the sphere is {sunlit_before}, the open floor {lit}"
+    );
+    assert!(
+        despawned >= 40,
+        "only {despawned} raw shadow pixels behind the sphere"
+    );
+    assert_eq!(sunward, 0, "raw shadow pixels on the sphere's sunlit side");
+}
