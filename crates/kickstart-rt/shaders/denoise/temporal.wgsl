@@ -168,6 +168,114 @@ fn dn_reusable(g: DnGuide, pos: vec3<f32>, n: vec3<f32>, pred: vec3<f32>) -> boo
     return plane_ok || abs(dn_prev_view_distance(g.position) - d) < (0.03 / ndv) * d;
 }
 
+// Visibility signals (a shadow, a multi-shadow: each compiled alone) reconstruct their history
+// with a Catmull-Rom kernel instead of the bilinear one, see dn_sharp_visibility_history.
+const DN_SHARP_HISTORY: bool = DN_SIGNALS == 1u
+    && (DN_KIND0 == DN_KIND_SHADOW || DN_KIND0 == DN_KIND_MULTI_SHADOW);
+
+// Catmull-Rom weights of the taps at -1, 0, 1, 2 for a sample at fraction `t` past tap 0.
+fn dn_catmull_rom(t: f32) -> vec4<f32> {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    return vec4<f32>(
+        -0.5 * t3 + t2 - 0.5 * t,
+        1.5 * t3 - 2.5 * t2 + 1.0,
+        -1.5 * t3 + 2.0 * t2 + 0.5 * t,
+        0.5 * t3 - 0.5 * t2,
+    );
+}
+
+// One ring tap of dn_sharp_visibility_history: (w × value, w × second moment, w), or w = -1e9
+// where the tap cannot be used (outside the grid, no surface, or off this pixel's plane). Only
+// the plane is tested (with the previous distance `dist` of `pred`), not the normal (no decode
+// per tap): a tap of another normal on the same plane is rare, weighs little, and the result is
+// clamped to the neighbourhood anyway.
+fn dn_ring_tap(q: vec2<i32>, g: vec4<u32>, r: DnRecord, w: f32, n: vec3<f32>, pred: vec3<f32>,
+               dist: f32) -> vec3<f32> {
+    let on_plane = abs(dot(n, bitcast<vec3<f32>>(g.xyz) - pred)) < 0.01 * dist;
+    if !dn_in_grid(q) || g.w == DN_INVALID || !on_plane {
+        return vec3<f32>(0.0, 0.0, -1e9);
+    }
+    return w * vec3<f32>(dn_value(r).x, dn_rec_z(r), 1.0);
+}
+
+// A visibility history resampled with a Catmull-Rom kernel: (value, second moment, 1), or z = 0
+// where it cannot be (a tap outside the grid or showing another surface: the caller keeps the
+// bilinear history). The bilinear kernel blurs by its sub-pixel offset every frame, and a shadow
+// edge one or two grid pixels wide, which keeps its history, faded along a pan; the cubic's
+// negative lobes undo most of that blur. `base`, `f`: the bilinear footprint's first tap and
+// fraction; `inner`: its four records (all usable). The kernel's 4×4 corners weigh at most
+// 0.0055 each and are left out (12 taps, weights renormalised). The value is clamped to [0, 1],
+// the moment between the value's square and the value (the bounds of a [0, 1] signal's).
+// Written out tap by tap, so that no array is indexed at run time.
+fn dn_sharp_visibility_history(
+    base: vec2<i32>,
+    f: vec2<f32>,
+    inner: array<DnRecord, 4>,
+    n: vec3<f32>,
+    pred: vec3<f32>,
+) -> vec3<f32> {
+    let wx = dn_catmull_rom(f.x);
+    let wy = dn_catmull_rom(f.y);
+    // The ring around the bilinear footprint: above, left, right and below it.
+    let qa = base + vec2<i32>(0, -1);
+    let qb = base + vec2<i32>(1, -1);
+    let qc = base + vec2<i32>(-1, 0);
+    let qd = base + vec2<i32>(2, 0);
+    let qe = base + vec2<i32>(-1, 1);
+    let qf = base + vec2<i32>(2, 1);
+    let qg = base + vec2<i32>(0, 2);
+    let qh = base + vec2<i32>(1, 2);
+    let ja = dn_clamped_index(qa);
+    let jb = dn_clamped_index(qb);
+    let jc = dn_clamped_index(qc);
+    let jd = dn_clamped_index(qd);
+    let je = dn_clamped_index(qe);
+    let jf = dn_clamped_index(qf);
+    let jg = dn_clamped_index(qg);
+    let jh = dn_clamped_index(qh);
+    // Every guide and record is loaded before any is used, so that their latencies overlap.
+    let ga = guide_prev[ja];
+    let gb = guide_prev[jb];
+    let gc = guide_prev[jc];
+    let gd = guide_prev[jd];
+    let ge = guide_prev[je];
+    let gf = guide_prev[jf];
+    let gg = guide_prev[jg];
+    let gh = guide_prev[jh];
+    let ra = hist_prev0[ja];
+    let rb = hist_prev0[jb];
+    let rc = hist_prev0[jc];
+    let rd = hist_prev0[jd];
+    let re = hist_prev0[je];
+    let rf = hist_prev0[jf];
+    let rg = hist_prev0[jg];
+    let rh = hist_prev0[jh];
+    let dist = max(dn_prev_view_distance(pred), 1e-6);
+    var sum = dn_ring_tap(qa, ga, ra, wx.y * wy.x, n, pred, dist);
+    sum += dn_ring_tap(qb, gb, rb, wx.z * wy.x, n, pred, dist);
+    sum += dn_ring_tap(qc, gc, rc, wx.x * wy.y, n, pred, dist);
+    sum += dn_ring_tap(qd, gd, rd, wx.w * wy.y, n, pred, dist);
+    sum += dn_ring_tap(qe, ge, re, wx.x * wy.z, n, pred, dist);
+    sum += dn_ring_tap(qf, gf, rf, wx.w * wy.z, n, pred, dist);
+    sum += dn_ring_tap(qg, gg, rg, wx.y * wy.w, n, pred, dist);
+    sum += dn_ring_tap(qh, gh, rh, wx.z * wy.w, n, pred, dist);
+    if sum.z < -1.0 {
+        return vec3<f32>(0.0);
+    }
+    let w0 = wx.y * wy.y;
+    let w1 = wx.z * wy.y;
+    let w2 = wx.y * wy.z;
+    let w3 = wx.z * wy.z;
+    sum += w0 * vec3<f32>(dn_value(inner[0]).x, dn_rec_z(inner[0]), 1.0);
+    sum += w1 * vec3<f32>(dn_value(inner[1]).x, dn_rec_z(inner[1]), 1.0);
+    sum += w2 * vec3<f32>(dn_value(inner[2]).x, dn_rec_z(inner[2]), 1.0);
+    sum += w3 * vec3<f32>(dn_value(inner[3]).x, dn_rec_z(inner[3]), 1.0);
+    let v = clamp(sum.x / sum.z, 0.0, 1.0);
+    let m2 = clamp(sum.y / sum.z, v * v, v);
+    return vec3<f32>(v, m2, 1.0);
+}
+
 // Whether the previous frame's taps (records `h`, weights `w`; 0: unusable) straddle a hard
 // visibility edge: taps that each saw one value all along (their sample spread is small) but
 // disagree. Resampling them would blur the edge by the reprojection's sub-pixel offset every
@@ -390,6 +498,19 @@ fn main(
             hist_m2 = (w0 * dn_rec_z(ha) + w1 * dn_rec_z(hb) + w2 * dn_rec_z(hc) + w3 * dn_rec_z(hd)) * inv;
             hist_len = (w0 * dn_rec_len(ha) + w1 * dn_rec_len(hb) + w2 * dn_rec_len(hc)
                 + w3 * dn_rec_len(hd)) * inv;
+            // Where the four taps hold one value the bilinear history is kept: that is most of
+            // a frame (lit or in umbra all along, where the cubic clamped to [0, 1] returns the
+            // same value), and the cubic's 16 more loads go only to taps that differ.
+            let va = vec4<f32>(dn_value(ha).x, dn_value(hb).x, dn_value(hc).x, dn_value(hd).x);
+            let differ = any(va != vec4<f32>(va.x));
+            if DN_SHARP_HISTORY && differ && min(min(w0, w1), min(w2, w3)) > 0.0 {
+                let sharp_hist = dn_sharp_visibility_history(
+                    base, f, array<DnRecord, 4>(ha, hb, hc, hd), n, pred);
+                if sharp_hist.z > 0.0 {
+                    hist = vec4<f32>(vec3<f32>(sharp_hist.x), hist.w);
+                    hist_m2 = sharp_hist.y;
+                }
+            }
         }
         // The spread of the samples this pixel has seen (its luminance moments over the
         // history). A 3×3 neighbourhood of a sparse 1-spp signal (dark radiance with rare
