@@ -185,18 +185,38 @@ fn dn_catmull_rom(t: f32) -> vec4<f32> {
     );
 }
 
-// One ring tap of dn_sharp_visibility_history: (w × value, w × second moment, w), or w = -1e9
-// where the tap cannot be used (outside the grid, no surface, or off this pixel's plane). Only
-// the plane is tested (with the previous distance `dist` of `pred`), not the normal (no decode
-// per tap): a tap of another normal on the same plane is rare, weighs little, and the result is
-// clamped to the neighbourhood anyway.
-fn dn_ring_tap(q: vec2<i32>, g: vec4<u32>, r: DnRecord, w: f32, n: vec3<f32>, pred: vec3<f32>,
-               dist: f32) -> vec3<f32> {
+// One ring tap of dn_sharp_visibility_history at previous grid pixel `q`: (w × value,
+// w × second moment, w), or w = -1e9 where the tap cannot be used (outside the grid, no surface,
+// or off this pixel's plane). Only the plane is tested (with the previous distance `dist` of
+// `pred`), not the normal (no decode per tap): a tap of another normal on the same plane is
+// rare, weighs little, and the result is clamped to the neighbourhood anyway.
+fn dn_ring_tap(q: vec2<i32>, w: f32, n: vec3<f32>, pred: vec3<f32>, dist: f32) -> vec3<f32> {
+    let j = dn_clamped_index(q);
+    let g = guide_prev[j];
+    let r = hist_prev0[j];
     let on_plane = abs(dot(n, bitcast<vec3<f32>>(g.xyz) - pred)) < 0.01 * dist;
     if !dn_in_grid(q) || g.w == DN_INVALID || !on_plane {
         return vec3<f32>(0.0, 0.0, -1e9);
     }
     return w * vec3<f32>(dn_value(r).x, dn_rec_z(r), 1.0);
+}
+
+// Cell (column, row) of ring tap `k` (0..8) in the Catmull-Rom footprint's 4×4: the two above
+// the bilinear taps, then left and right of each of their rows, then the two below. Computed,
+// not read from a constant array, so that no array is indexed at run time.
+fn dn_ring_cell(k: i32) -> vec2<i32> {
+    if k < 2 {
+        return vec2<i32>(1 + k, 0);
+    }
+    if k < 6 {
+        return vec2<i32>(select(0, 3, (k & 1) == 1), 1 + (k - 2) / 2);
+    }
+    return vec2<i32>(k - 5, 3);
+}
+
+// Component `i` (0..4) of `v`, by selects (no dynamic vector index).
+fn dn_component(v: vec4<f32>, i: i32) -> f32 {
+    return select(select(select(v.x, v.y, i == 1), v.z, i == 2), v.w, i == 3);
 }
 
 // A visibility history resampled with a Catmull-Rom kernel: (value, second moment, 1), or z = 0
@@ -207,7 +227,10 @@ fn dn_ring_tap(q: vec2<i32>, g: vec4<u32>, r: DnRecord, w: f32, n: vec3<f32>, pr
 // fraction; `inner`: its four records (all usable). The kernel's 4×4 corners weigh at most
 // 0.0055 each and are left out (12 taps, weights renormalised). The value is clamped to [0, 1],
 // the moment between the value's square and the value (the bounds of a [0, 1] signal's).
-// Written out tap by tap, so that no array is indexed at run time.
+//
+// The ring's 8 taps are a loop, not written out: written out, SwiftShader's pipeline compile
+// (Chromium's WebGPU without a GPU) grew steeply with each tap (4 taps 21 s, 8 past its GPU
+// watchdog's 3 minutes); the loop compiles in 2 s.
 fn dn_sharp_visibility_history(
     base: vec2<i32>,
     f: vec2<f32>,
@@ -217,49 +240,13 @@ fn dn_sharp_visibility_history(
 ) -> vec3<f32> {
     let wx = dn_catmull_rom(f.x);
     let wy = dn_catmull_rom(f.y);
-    // The ring around the bilinear footprint: above, left, right and below it.
-    let qa = base + vec2<i32>(0, -1);
-    let qb = base + vec2<i32>(1, -1);
-    let qc = base + vec2<i32>(-1, 0);
-    let qd = base + vec2<i32>(2, 0);
-    let qe = base + vec2<i32>(-1, 1);
-    let qf = base + vec2<i32>(2, 1);
-    let qg = base + vec2<i32>(0, 2);
-    let qh = base + vec2<i32>(1, 2);
-    let ja = dn_clamped_index(qa);
-    let jb = dn_clamped_index(qb);
-    let jc = dn_clamped_index(qc);
-    let jd = dn_clamped_index(qd);
-    let je = dn_clamped_index(qe);
-    let jf = dn_clamped_index(qf);
-    let jg = dn_clamped_index(qg);
-    let jh = dn_clamped_index(qh);
-    // Every guide and record is loaded before any is used, so that their latencies overlap.
-    let ga = guide_prev[ja];
-    let gb = guide_prev[jb];
-    let gc = guide_prev[jc];
-    let gd = guide_prev[jd];
-    let ge = guide_prev[je];
-    let gf = guide_prev[jf];
-    let gg = guide_prev[jg];
-    let gh = guide_prev[jh];
-    let ra = hist_prev0[ja];
-    let rb = hist_prev0[jb];
-    let rc = hist_prev0[jc];
-    let rd = hist_prev0[jd];
-    let re = hist_prev0[je];
-    let rf = hist_prev0[jf];
-    let rg = hist_prev0[jg];
-    let rh = hist_prev0[jh];
     let dist = max(dn_prev_view_distance(pred), 1e-6);
-    var sum = dn_ring_tap(qa, ga, ra, wx.y * wy.x, n, pred, dist);
-    sum += dn_ring_tap(qb, gb, rb, wx.z * wy.x, n, pred, dist);
-    sum += dn_ring_tap(qc, gc, rc, wx.x * wy.y, n, pred, dist);
-    sum += dn_ring_tap(qd, gd, rd, wx.w * wy.y, n, pred, dist);
-    sum += dn_ring_tap(qe, ge, re, wx.x * wy.z, n, pred, dist);
-    sum += dn_ring_tap(qf, gf, rf, wx.w * wy.z, n, pred, dist);
-    sum += dn_ring_tap(qg, gg, rg, wx.y * wy.w, n, pred, dist);
-    sum += dn_ring_tap(qh, gh, rh, wx.z * wy.w, n, pred, dist);
+    var sum = vec3<f32>(0.0);
+    for (var k = 0; k < 8; k++) {
+        let c = dn_ring_cell(k);
+        let w = dn_component(wx, c.x) * dn_component(wy, c.y);
+        sum += dn_ring_tap(base - vec2<i32>(1) + c, w, n, pred, dist);
+    }
     if sum.z < -1.0 {
         return vec3<f32>(0.0);
     }
