@@ -253,6 +253,17 @@ fn shadow_pixels_lifted(
     count
 }
 
+/// Where the sun's ray through the sphere's centre meets the floor (the seed's sun shines from
+/// (4, 6, 3) towards the origin), and a point as far again beyond the sphere's foot on its
+/// sunlit side (the shadow reaches 0.3 m sunward of the foot; this point is 1.3 m).
+fn sphere_shadow_points() -> (Vec3, Vec3) {
+    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
+    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
+    let behind = centre - to_sun * (centre.y / to_sun.y);
+    let sunlit_side = seed::PLACES[0] + (seed::PLACES[0] - behind.with_y(0.0)) * 2.2;
+    (behind, sunlit_side)
+}
+
 #[test]
 fn shadows_fall_where_the_sun_casts_them_and_follow_their_object() {
     let mut h = Harness::new(RayTracedLighting {
@@ -277,13 +288,7 @@ fn shadows_fall_where_the_sun_casts_them_and_follow_their_object() {
     h.run(SETTLE_FRAMES);
     let after = h.capture();
 
-    // Where the sun's ray through the sphere's centre meets the floor (the seed's sun shines
-    // from (4, 6, 3) towards the origin), and a point as far again beyond the sphere's foot on
-    // its sunlit side (the shadow reaches 0.3 m sunward of the foot; this point is 1.3 m).
-    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
-    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
-    let behind = centre - to_sun * (centre.y / to_sun.y);
-    let sunlit_side = seed::PLACES[0] + (seed::PLACES[0] - behind.with_y(0.0)) * 2.2;
+    let (behind, sunlit_side) = sphere_shadow_points();
     let lit = after.mean(pixel_of(behind), 0);
     let lifted = |shadowed: &Frame, open: &Frame, at: Vec3| {
         shadow_pixels_lifted(shadowed, open, pixel_of(at), 12, lit)
@@ -343,10 +348,7 @@ fn raw_shadows_with_denoise_off_are_dark_where_the_sun_is_hidden() {
     h.run(4);
     let after = h.capture();
 
-    let to_sun = Vec3::new(4.0, 6.0, 3.0).normalize();
-    let centre = seed::PLACES[0] + Vec3::Y * 0.7;
-    let behind = centre - to_sun * (centre.y / to_sun.y);
-    let sunlit_side = seed::PLACES[0] + (seed::PLACES[0] - behind.with_y(0.0)) * 2.2;
+    let (behind, sunlit_side) = sphere_shadow_points();
     let lit = after.mean(pixel_of(behind), 0);
     let sunlit_before = before.mean(pixel_of(sunlit_side), 0);
     let despawned = shadow_pixels_lifted(&before, &after, pixel_of(behind), 12, lit);
