@@ -41,8 +41,7 @@ pub fn backend_choice() -> ksrt::BackendChoice {
     BACKEND.get().copied().unwrap_or_default()
 }
 
-/// A device with the SDK's required features and limits, the optional limits the adapter offers,
-/// and every optional feature the adapter has (which
+/// A device with the SDK's required features and every optional one the adapter has (which
 /// includes `TIMESTAMP_QUERY`, the benchmark's GPU timing), less those named in
 /// `KSRT_DISABLE_FEATURES` ([`disabled_features`]); with ray queries when the adapter has them
 /// and `--backend` is not `software` (an explicit `hardware` on an adapter without them is an
@@ -50,8 +49,7 @@ pub fn backend_choice() -> ksrt::BackendChoice {
 pub fn device(adapter: &wgpu::Adapter) -> AnyResult<(wgpu::Device, wgpu::Queue)> {
     let optional = ksrt::optional_features_supported(adapter) - disabled_features()?;
     let mut features = ksrt::required_features() | optional;
-    let limits = ksrt::required_limits().using_resolution(adapter.limits());
-    let mut limits = ksrt::optional_limits_supported(adapter, limits);
+    let mut limits = ksrt::required_limits().using_resolution(adapter.limits());
     let mut experimental_features = wgpu::ExperimentalFeatures::disabled();
     let choice = backend_choice();
     if choice != ksrt::BackendChoice::Software {
@@ -174,19 +172,6 @@ pub fn info() -> AnyResult<()> {
         "  max_storage_buffer_binding_size: {} MiB, max_storage_buffers_per_shader_stage: {}",
         limits.max_storage_buffer_binding_size / (1 << 20),
         limits.max_storage_buffers_per_shader_stage
-    );
-    println!(
-        "optional limits (used when present): max_compute_workgroup_storage_size {} bytes: \
-         one-workgroup TLAS build {}",
-        limits.max_compute_workgroup_storage_size,
-        if ksrt::one_workgroup_tlas_build(&ksrt::optional_limits_supported(
-            &adapter,
-            ksrt::required_limits()
-        )) {
-            "yes"
-        } else {
-            "no (the climb builds TLASes)"
-        }
     );
     let limits = adapter.limits();
     println!(

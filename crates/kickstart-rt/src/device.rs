@@ -28,38 +28,6 @@ pub fn required_limits() -> wgpu::Limits {
     wgpu::Limits::default()
 }
 
-/// `limits` raised, where `adapter` offers it, to the limits the SDK uses when a device has them
-/// (each with a fallback, like [`optional_features`]); never lowered:
-/// - `max_compute_workgroup_storage_size` to 29,752 bytes: a TLAS of up to 2,048 instance refs
-///   is then built in one dispatch, its clustering in workgroup memory, instead of by the climb's
-///   eight dependent dispatches. WebGPU's default is 16 KiB; desktop GPUs, Metal and software
-///   Vulkan offer 32 KiB or more.
-///
-/// ```no_run
-/// # fn limits(adapter: &wgpu::Adapter) -> wgpu::Limits {
-/// kickstart_rt::optional_limits_supported(adapter, kickstart_rt::required_limits())
-/// # }
-/// ```
-pub fn optional_limits_supported(adapter: &wgpu::Adapter, limits: wgpu::Limits) -> wgpu::Limits {
-    raise_to_optional_limits(&adapter.limits(), limits)
-}
-
-/// [`optional_limits_supported`] for an adapter offering `have`.
-fn raise_to_optional_limits(have: &wgpu::Limits, mut limits: wgpu::Limits) -> wgpu::Limits {
-    let wanted = crate::scene::ONE_WORKGROUP_TLAS_BYTES;
-    if have.max_compute_workgroup_storage_size >= wanted {
-        limits.max_compute_workgroup_storage_size =
-            limits.max_compute_workgroup_storage_size.max(wanted);
-    }
-    limits
-}
-
-/// Whether a device with `limits` builds a TLAS of up to 2,048 instance refs in one dispatch
-/// (see [`optional_limits_supported`]).
-pub fn one_workgroup_tlas_build(limits: &wgpu::Limits) -> bool {
-    limits.max_compute_workgroup_storage_size >= crate::scene::ONE_WORKGROUP_TLAS_BYTES
-}
-
 /// The optional features `adapter` offers, for a device request:
 /// `required_features() | optional_features_supported(&adapter)`.
 pub fn optional_features_supported(adapter: &wgpu::Adapter) -> wgpu::Features {
@@ -235,34 +203,5 @@ pub(crate) fn choose_backend(
              (see kickstart_rt::hardware_ray_query_limits)"
                 .into(),
         ),
-    }
-}
-
-#[cfg(test)]
-mod optional_limit_tests {
-    use super::*;
-
-    #[test]
-    fn optional_limits_raise_the_workgroup_memory_only_where_the_adapter_has_it() {
-        let wanted = crate::scene::ONE_WORKGROUP_TLAS_BYTES;
-        assert_eq!(
-            wanted, 29_752,
-            "the figure optional_limits_supported's docs give"
-        );
-        let mut big = wgpu::Limits::default();
-        big.max_compute_workgroup_storage_size = 49_152;
-        let raised = raise_to_optional_limits(&big, wgpu::Limits::default());
-        assert_eq!(raised.max_compute_workgroup_storage_size, wanted);
-        assert!(one_workgroup_tlas_build(&raised));
-        // An adapter of WebGPU's 16 KiB: unchanged, and the climb builds the TLAS.
-        let small = wgpu::Limits::default();
-        let kept = raise_to_optional_limits(&small, wgpu::Limits::default());
-        assert_eq!(kept.max_compute_workgroup_storage_size, 16_384);
-        assert!(!one_workgroup_tlas_build(&kept));
-        // Never lowered.
-        let mut asked = wgpu::Limits::default();
-        asked.max_compute_workgroup_storage_size = 49_152;
-        let kept = raise_to_optional_limits(&big, asked);
-        assert_eq!(kept.max_compute_workgroup_storage_size, 49_152);
     }
 }

@@ -3,8 +3,7 @@
 //! ## Execution model
 //!
 //! 1. [`ExecuteContext::new`] on the engine's device and queue (request
-//!    [`required_features`] and [`required_limits`], plus any of [`optional_features`], and
-//!    the limits of [`optional_limits_supported`]).
+//!    [`required_features`] and [`required_limits`], plus any of [`optional_features`]).
 //! 2. Each frame, fill one or more [`TaskContainer`]s (on any threads) with BVH tasks
 //!    ([`GeometryTask`], [`InstanceTask`], [`BvhBuildTask`]) and render tasks ([`RenderTask`]).
 //! 3. [`ExecuteContext::build_gpu_task`] validates the whole container and records compute passes
@@ -152,9 +151,9 @@ pub use context::{
     ShaderVariant, INSTANCE_RECORD_SIZE,
 };
 pub use device::{
-    hardware_ray_query_features, hardware_ray_query_limits, one_workgroup_tlas_build,
-    optional_features, optional_features_supported, optional_limits_supported, required_features,
-    required_limits, BackendChoice, BackendReport, TraversalBackend,
+    hardware_ray_query_features, hardware_ray_query_limits, optional_features,
+    optional_features_supported, required_features, required_limits, BackendChoice, BackendReport,
+    TraversalBackend,
 };
 pub use error::{Error, HandleKind, Result};
 pub use gpu::compose::{compose_shader, shader_modules, ComposeError};

@@ -36,7 +36,6 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "scene/ingest_decode",
     "scene/lbvh/hploc",
     "scene/lbvh/lbvh",
-    "scene/lbvh/ploc_small",
     "scene/prims",
     "scene/traversal",
     "scene/traversal_ray_query",

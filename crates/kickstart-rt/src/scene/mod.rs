@@ -10,6 +10,3 @@ pub(crate) mod prims;
 pub(crate) mod reserve;
 pub(crate) mod strategy;
 pub(crate) mod traversal;
-
-/// Workgroup memory a device needs for the one-workgroup TLAS build.
-pub(crate) const ONE_WORKGROUP_TLAS_BYTES: u32 = lbvh::PLOC_SMALL_WORKGROUP_BYTES;

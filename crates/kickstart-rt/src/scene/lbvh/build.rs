@@ -2,8 +2,8 @@
 //! [`super`] (bounds, morton keys, sort, hierarchy, and the climb or the clustered climb).
 
 use super::{
-    clustered_work_words, effective_max_leaf, groups, work_words, Buffers, Lbvh, LbvhBuild,
-    LeafRefs, Params, BOXES_AT, HPLOC_WORKGROUP, KEY_BITS_RANGE, MAX_COUNT, PLOC_SMALL_MAX,
+    clustered_work_words, effective_max_leaf, groups, work_words, Buffers, Lbvh, LbvhBuild, Params,
+    BOXES_AT, HPLOC_WORKGROUP, KEY_BITS_RANGE, MAX_COUNT,
 };
 use crate::gpu::Recorder;
 
@@ -59,23 +59,6 @@ impl Lbvh {
             ("bounds_out", bounds_out),
             ("topo_out", &s.topology),
         ];
-        // A small TLAS: every step in one workgroup (its own bounds, keys and sort).
-        if clustered
-            && b.leaf_refs == LeafRefs::PrimitiveIndex
-            && n <= PLOC_SMALL_MAX
-            && !b.hierarchy_only
-        {
-            if let Some(ploc_small) = &self.ploc_small {
-                // The exact box of every leaf and merge (2 n - 1, two vec4 each).
-                let boxes =
-                    self.pyramid_boxes
-                        .get(device, "lbvh box pyramid", u64::from(2 * n - 1) * 32);
-                bind.push(("pyramid", &boxes));
-                let bg = ploc_small.bind_group(device, "lbvh", 0, &bind);
-                rec.dispatch("ploc small", &ploc_small.pipeline, &[&bg], 1);
-                return;
-            }
-        }
         // Where the sorted pairs end up (the sort's scratch after an odd number of passes).
         let sorted;
         if n >= 2 {

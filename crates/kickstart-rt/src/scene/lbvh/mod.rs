@@ -31,12 +31,6 @@
 //! only). Its subtrees need not be ranges of sorted positions; only those that are may become
 //! one leaf.
 //!
-//! A clustered build of primitive-index leaves (the TLAS) of 2 to [`PLOC_SMALL_MAX`] primitives
-//! is instead one dispatch, `ploc small` (`shaders/scene/lbvh/ploc_small.wgsl`), on a device
-//! whose `max_compute_workgroup_storage_size` holds [`PLOC_SMALL_WORKGROUP_BYTES`]: steps 2–6
-//! in one workgroup (its own bounds, Morton keys and sort, then PLOC over quantised clusters in
-//! workgroup memory, nodes numbered depth first), the same outputs. Elsewhere it climbs as above.
-//!
 //! Refit runs steps 1 (arrival counters only) and 6 over the stored topology; a BLAS refit's
 //! boxes come in sorted order ([`LbvhRefit::sorted_boxes`]).
 //!
@@ -324,9 +318,6 @@ pub(crate) struct Lbvh {
     hierarchy: ReflectedPipeline,
     climb: ReflectedPipeline,
     hploc: ReflectedPipeline,
-    /// `ploc_small`: a clustered TLAS of at most [`PLOC_SMALL_MAX`] refs in one workgroup;
-    /// `None` on a device whose workgroup memory is too small for it.
-    ploc_small: Option<ReflectedPipeline>,
     /// `lbvh_refit_gather`: the range refit's gather, box pyramid and in-block nodes.
     refit_gather: ReflectedPipeline,
     /// `lbvh_refit_ingest`: `lbvh_refit_gather` decoding its triangles from the application's
@@ -357,16 +348,6 @@ pub(crate) struct Lbvh {
     /// A batch's sort order (its builds' orders are not kept).
     batch_order: Grown,
 }
-
-/// Most primitives `ploc_small` builds over (`PS_MAX` in `shaders/scene/lbvh/ploc_small.wgsl`).
-pub(crate) const PLOC_SMALL_MAX: u32 = 2048;
-
-/// Workgroup memory of `ploc_small`, in bytes: its clusters (3 words each), nearest neighbours
-/// (half a word each), the prefix sum's 256 words, two sets of bounds (6 words each) and two
-/// counters. A device needs `max_compute_workgroup_storage_size` at least this for the
-/// one-workgroup TLAS build ([`crate::optional_limits_supported`] asks for it).
-pub(crate) const PLOC_SMALL_WORKGROUP_BYTES: u32 =
-    4 * (3 * PLOC_SMALL_MAX + PLOC_SMALL_MAX / 2 + 256 + 12 + 2);
 
 /// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/scene/lbvh/hploc.wgsl`).
 const HPLOC_WORKGROUP: u32 = 32;
@@ -405,21 +386,17 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
 
 /// The WGSL of the builder's passes, labelled.
 pub(crate) fn shader_variants() -> Vec<(String, String)> {
-    let shader = ReflectedShader::compose(&["scene/lbvh/ploc_small"], &[]);
+    let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
     vec![("scene/lbvh".into(), shader.source().to_string())]
 }
 
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
-        // The LBVH, its clustered variant (which imports it) and the one-workgroup clustering
-        // (which imports that), with the digit counting, centroid bounds, triangle boxes and
-        // vertex decoding they share with other passes.
-        let shader = ReflectedShader::compose(&["scene/lbvh/ploc_small"], &[]);
+        // The LBVH and its clustered variant (which imports it), with the digit counting, centroid
+        // bounds, triangle boxes and vertex decoding they share with other passes.
+        let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
         let pipeline = |label, entry| shader.pipeline(device, label, entry);
-        let ploc_small = (device.limits().max_compute_workgroup_storage_size
-            >= PLOC_SMALL_WORKGROUP_BYTES)
-            .then(|| pipeline("ploc small", "ploc_small"));
         Lbvh {
             bounds: pipeline("lbvh bounds", "lbvh_bounds"),
             morton: pipeline("lbvh morton", "lbvh_morton"),
@@ -427,7 +404,6 @@ impl Lbvh {
             hierarchy: pipeline("lbvh hierarchy", "lbvh_hierarchy"),
             climb: pipeline("lbvh climb", "lbvh_climb"),
             hploc: pipeline("hploc climb", "hploc_climb"),
-            ploc_small,
             refit_gather: pipeline("lbvh refit gather", "lbvh_refit_gather"),
             refit_ingest: pipeline("lbvh refit ingest", "lbvh_refit_ingest"),
             range_refit: pipeline("lbvh range refit", "lbvh_range_refit"),
@@ -444,14 +420,6 @@ impl Lbvh {
             pyramid_boxes: Grown::default(),
             batch_order: Grown::default(),
         }
-    }
-
-    /// The builder without its one-workgroup TLAS build, as on a device without the workgroup
-    /// memory for it (tests of the climb).
-    #[cfg(test)]
-    pub(crate) fn without_ploc_small(mut self) -> Self {
-        self.ploc_small = None;
-        self
     }
 
     /// Nodes of a BVH over `count` primitives: `count - 1` inner nodes, and always a root.

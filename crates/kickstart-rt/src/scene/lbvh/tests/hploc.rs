@@ -23,9 +23,8 @@ fn hploc_with_primitive_index_leaves_as_the_tlas_builds() {
     // The TLAS's leaves name primitives, not sorted positions: every count from none to
     // past two clusters' worth and across workgroups gives a valid tree over the same
     // boxes, far-apart groups (instances in rooms) a lower SAH cost than the LBVH's, and a
-    // refit (instances moved) exact boxes with every ref kept. The climb itself: a device with
-    // the workgroup memory builds TLASes of up to PLOC_SMALL_MAX refs in one workgroup.
-    let mut lbvh = Lbvh::new(&gpu().device).without_ploc_small();
+    // refit (instances moved) exact boxes with every ref kept.
+    let mut lbvh = Lbvh::new(&gpu().device);
     let mut rng = Rng(19);
     for n in (0..=40).chain([255, 256, 257, 1000, 1024]) {
         let aabbs: Vec<Aabb> = (0..n).map(|_| random_box(&mut rng)).collect();
@@ -154,7 +153,7 @@ fn hploc_refit_keeps_the_clustered_topology() {
 }
 
 /// Depth of the tree (root = 1) from its read-back topology.
-pub(super) fn topology_depth(tree: &GpuTree) -> usize {
+fn topology_depth(tree: &GpuTree) -> usize {
     let topo = read_words(&tree.topology);
     let topo = &topo[tree.bases.topo as usize..];
     let mut deepest = 0;

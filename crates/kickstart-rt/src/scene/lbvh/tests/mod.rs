@@ -12,7 +12,6 @@ use glam::Vec3;
 mod build;
 mod collapse;
 mod hploc;
-mod ploc_small;
 mod range_refit;
 mod refit_batch;
 
@@ -22,10 +21,7 @@ mod refit_batch;
 fn the_shader_validates_and_matches_the_rust_side() {
     use crate::gpu::compose::compose;
     use crate::gpu::wgsl_check::{assert_wgsl_layout, const_u32, validate};
-    let module = validate(
-        "scene/lbvh/ploc_small",
-        &compose(&["scene/lbvh/ploc_small"], &[]),
-    );
+    let module = validate("scene/lbvh/hploc", &compose(&["scene/lbvh/hploc"], &[]));
     assert_wgsl_layout!(
         module,
         "Params",
@@ -69,36 +65,6 @@ fn the_shader_validates_and_matches_the_rust_side() {
         REFIT_INGEST_ROWS
     );
     assert_eq!(const_u32(&module, "REFIT_BATCH") as usize, REFIT_BATCH);
-    assert_eq!(const_u32(&module, "PS_MAX"), PLOC_SMALL_MAX);
-    // The one-workgroup build's workgroup memory, as naga lays it out, is what the device is
-    // checked for.
-    let ploc_small = module
-        .entry_points
-        .iter()
-        .find(|e| e.name == "ploc_small")
-        .expect("entry point ploc_small");
-    let info = naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .expect("valid");
-    let index = module
-        .entry_points
-        .iter()
-        .position(|e| e.name == ploc_small.name)
-        .expect("index");
-    let ep_info = info.get_entry_point(index);
-    let bytes: u32 = module
-        .global_variables
-        .iter()
-        .filter(|(h, v)| v.space == naga::AddressSpace::WorkGroup && !ep_info[*h].is_empty())
-        .map(|(_, v)| module.types[v.ty].inner.size(module.to_ctx()))
-        .sum();
-    assert_eq!(
-        bytes, PLOC_SMALL_WORKGROUP_BYTES,
-        "ploc_small's workgroup memory"
-    );
 }
 
 /// A primitive box (min, max) as the AABB input holds it.
