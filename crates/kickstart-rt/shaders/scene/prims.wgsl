@@ -204,82 +204,50 @@ fn box_area(b: StoredBox) -> f32 {
     return d.x * d.y + d.y * d.z + d.z * d.x;
 }
 
-// Opens instance slot i (traced as `t`) into at most k refs and writes refs i * k .. i * k + k
-// (unused ones empty). The ref arrays are function variables: WGSL zero-fills every variable
-// and a module-scope private array is filled at the start of every invocation, 36 bytes of
-// local-memory stores per ref slot of MAX_REFS, also where k = 1 never opens anything (the TLAS
-// of 100k instances measured slower on the H100: docs/decisions/instance-refs.md); here only
-// invocations that open pay it.
-fn open_instance(i: u32, t: Traced, k: u32, stamp: u32) {
-    var r_entry: array<u32, MAX_REFS>;
-    var r_lo: array<vec4<f32>, MAX_REFS>;
-    var r_hi: array<vec4<f32>, MAX_REFS>;
-    var n = 0u;
-    if t.visible {
-        let m = instances[i].object_to_world;
-        let root = world_box(m, t.g.bounds_min.xyz, t.g.bounds_max.xyz);
-        r_entry[0] = 0u;
-        r_lo[0] = root.lo;
-        r_hi[0] = root.hi;
-        n = 1u;
-        // Each opening replaces one inner ref by its non-empty children (at most two). Bounded:
-        // a chain of one-child nodes (trees of one triangle) would otherwise not raise n.
-        for (var it = 0u; it < 4u * MAX_REFS && n < k; it++) {
-            var pick = MAX_REFS;
-            var best = -1.0;
-            for (var j = 0u; j < n; j++) {
-                if (r_entry[j] & REF_LEAF_BIT) == 0u {
-                    let a = box_area(StoredBox(r_lo[j], r_hi[j]));
-                    if a > best {
-                        best = a;
-                        pick = j;
-                    }
-                }
-            }
-            if pick == MAX_REFS {
-                break;
-            }
-            let at = 4u * (t.g.node_base + r_entry[pick]);
-            let n0 = ref_blas_nodes[at];
-            let n1 = ref_blas_nodes[at + 1u];
-            let n2 = ref_blas_nodes[at + 2u];
-            let n3 = ref_blas_nodes[at + 3u];
-            // Left child: box (n0.xyz, n1.xyz), ref n0.w; right: (n2.xyz, n3.xyz), ref n1.w. An
-            // empty child (min > max) is never entered and is dropped.
-            var kept = 0u;
-            if all(n0.xyz <= n1.xyz) {
-                let b = world_box(m, n0.xyz, n1.xyz);
-                r_entry[pick] = bitcast<u32>(n0.w);
-                r_lo[pick] = b.lo;
-                r_hi[pick] = b.hi;
-                kept = 1u;
-            }
-            if all(n2.xyz <= n3.xyz) {
-                let put = select(pick, n, kept == 1u);
-                let b = world_box(m, n2.xyz, n3.xyz);
-                r_entry[put] = bitcast<u32>(n1.w);
-                r_lo[put] = b.lo;
-                r_hi[put] = b.hi;
-                n += kept;
-                kept += 1u;
-            }
-            if kept == 0u {
-                n -= 1u;
-                r_entry[pick] = r_entry[n];
-                r_lo[pick] = r_lo[n];
-                r_hi[pick] = r_hi[n];
-            }
-        }
+// The instance being opened by an `instance_refs_opened` workgroup: its refs so far (entry, world
+// box), how many, and each step's pick. One lane per ref slot.
+var<workgroup> open_entry: array<u32, MAX_REFS>;
+var<workgroup> open_lo: array<vec4<f32>, MAX_REFS>;
+var<workgroup> open_hi: array<vec4<f32>, MAX_REFS>;
+var<workgroup> open_count: u32;
+// Largest area + 1 (as bits: non-negative floats order like their bits) among the inner refs,
+// 0 when there is none; then the lowest slot holding it.
+var<workgroup> open_best: atomic<u32>;
+var<workgroup> open_pick: atomic<u32>;
+var<workgroup> open_go: u32;
+
+fn open_put(j: u32, entry: u32, b: StoredBox) {
+    open_entry[j] = entry;
+    open_lo[j] = b.lo;
+    open_hi[j] = b.hi;
+}
+
+// One opening step of `instance_refs_opened` (lane 0): ref `pick`, an inner node of the BLAS,
+// is replaced by its non-empty children (at most two; none: the last ref takes its slot).
+fn open_step(m: mat3x4<f32>, node_base: u32, pick: u32) {
+    let at = 4u * (node_base + open_entry[pick]);
+    let n0 = ref_blas_nodes[at];
+    let n1 = ref_blas_nodes[at + 1u];
+    let n2 = ref_blas_nodes[at + 2u];
+    let n3 = ref_blas_nodes[at + 3u];
+    var n = open_count;
+    // Left child: box (n0.xyz, n1.xyz), ref n0.w; right: (n2.xyz, n3.xyz), ref n1.w. An empty
+    // child (min > max) is never entered and is dropped.
+    var kept = 0u;
+    if all(n0.xyz <= n1.xyz) {
+        open_put(pick, bitcast<u32>(n0.w), world_box(m, n0.xyz, n1.xyz));
+        kept = 1u;
     }
-    for (var j = 0u; j < k; j++) {
-        var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
-        var entry = 0u;
-        if j < n {
-            b = StoredBox(r_lo[j], r_hi[j]);
-            entry = r_entry[j];
-        }
-        write_ref(i * k + j, i, b, entry, stamp, j < n);
+    if all(n2.xyz <= n3.xyz) {
+        open_put(select(pick, n, kept == 1u), bitcast<u32>(n1.w), world_box(m, n2.xyz, n3.xyz));
+        n += kept;
+        kept += 1u;
     }
+    if kept == 0u {
+        n -= 1u;
+        open_put(pick, open_entry[n], StoredBox(open_lo[n], open_hi[n]));
+    }
+    open_count = n;
 }
 
 // Ref r of instance slot i: its world box and table entry; a used ref's box also joins the
@@ -293,6 +261,87 @@ fn write_ref(r: u32, i: u32, b: StoredBox, entry: u32, stamp: u32, used: bool) {
     }
 }
 
+// K > 1: one workgroup per instance slot, one lane per ref. The BLAS is opened from the root,
+// largest world-box area first (the lowest slot among equal areas), until K refs or only leaves
+// remain: each step the lanes find the largest inner ref together (two workgroup atomics), and
+// one lane loads that node and puts its children in. One invocation per instance took 0.09 ms
+// for the apartment's 67 instances on an H200: 29 dependent steps, each scanning every ref it
+// held in local memory, and 30 refs' centroids merged into the same six workgroup words by each
+// invocation.
+@compute @workgroup_size(MAX_REFS)
+fn instance_refs_opened(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lane: u32,
+) {
+    let i = wid.y * nwg.x + wid.x;
+    let k = clamp(params.b >> 8u, 1u, MAX_REFS);
+    wg_bounds_clear(lane);
+    // Uniform: the same slot for the whole workgroup.
+    if i >= params.a {
+        return;
+    }
+    let t = traced(i);
+    let m = instances[i].object_to_world;
+    if lane == 0u {
+        open_count = 0u;
+        if t.visible {
+            open_put(0u, 0u, world_box(m, t.g.bounds_min.xyz, t.g.bounds_max.xyz));
+            open_count = 1u;
+        }
+    }
+    // Bounded: a chain of one-child nodes (trees of one triangle) would not raise the count.
+    for (var it = 0u; it < 4u * MAX_REFS; it++) {
+        if lane == 0u {
+            atomicStore(&open_best, 0u);
+            atomicStore(&open_pick, MAX_REFS);
+        }
+        workgroupBarrier();
+        var key = 0u;
+        if lane < open_count && (open_entry[lane] & REF_LEAF_BIT) == 0u {
+            let a = box_area(StoredBox(open_lo[lane], open_hi[lane]));
+            if !is_nan(a) {
+                key = bitcast<u32>(a) + 1u;
+                atomicMax(&open_best, key);
+            }
+        }
+        workgroupBarrier();
+        if key != 0u && key == atomicLoad(&open_best) {
+            atomicMin(&open_pick, lane);
+        }
+        workgroupBarrier();
+        if lane == 0u {
+            open_go = select(0u, 1u, open_count < k && atomicLoad(&open_pick) != MAX_REFS);
+        }
+        if workgroupUniformLoad(&open_go) == 0u {
+            break;
+        }
+        if lane == 0u {
+            open_step(m, t.g.node_base, atomicLoad(&open_pick));
+        }
+    }
+    workgroupBarrier();
+    let stamp = select(0u, t.g.flags >> 8u, t.visible);
+    if lane < k {
+        let used = lane < open_count;
+        var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
+        var entry = 0u;
+        if used {
+            b = StoredBox(open_lo[lane], open_hi[lane]);
+            entry = open_entry[lane];
+        }
+        write_ref(i * k + lane, i, b, entry, stamp, used);
+    }
+    workgroupBarrier();
+    if (params.b & MERGE_CENTROID_BOUNDS) != 0u && lane < 6u {
+        let v = wg_bounds_word(lane);
+        if v != 0u {
+            atomicMax(&instance_centroid_bounds[params.c + lane], v);
+        }
+    }
+}
+
+// K = 1: one invocation per instance slot, its one ref the BLAS root.
 @compute @workgroup_size(256)
 fn instance_refs(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -300,7 +349,6 @@ fn instance_refs(
     @builtin(local_invocation_index) lid: u32,
 ) {
     let i = (wid.y * nwg.x + wid.x) * INSTANCE_WG + lid;
-    let k = clamp(params.b >> 8u, 1u, MAX_REFS);
     wg_bounds_clear(lid);
     workgroupBarrier();
     // No early return: the barriers must be reached by the whole workgroup.
@@ -308,17 +356,12 @@ fn instance_refs(
         let t = traced(i);
         // The BLAS build the entries belong to (0 for a hidden instance: its refs are empty).
         let stamp = select(0u, t.g.flags >> 8u, t.visible);
-        if k == 1u {
-            // The instance as a whole: its BLAS root and world box.
-            var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
-            if t.visible {
-                b = world_box(instances[i].object_to_world, t.g.bounds_min.xyz,
-                              t.g.bounds_max.xyz);
-            }
-            write_ref(i, i, b, 0u, stamp, t.visible);
-        } else {
-            open_instance(i, t, k, stamp);
+        // The instance as a whole: its BLAS root and world box.
+        var b = StoredBox(EMPTY_MIN, EMPTY_MAX);
+        if t.visible {
+            b = world_box(instances[i].object_to_world, t.g.bounds_min.xyz, t.g.bounds_max.xyz);
         }
+        write_ref(i, i, b, 0u, stamp, t.visible);
     }
     workgroupBarrier();
     if (params.b & MERGE_CENTROID_BOUNDS) != 0u && lid < 6u {

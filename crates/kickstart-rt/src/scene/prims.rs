@@ -16,7 +16,7 @@ const MERGE_CENTROID_BOUNDS: u32 = 1;
 /// [`Prims::new`] so the two cannot differ (the ref layout `i * k + j` depends on both).
 pub(crate) const MAX_REFS_PER_INSTANCE: u32 = 32;
 
-/// The three pipelines (one module, one entry point each).
+/// The pipelines (one module, one entry point each).
 pub(crate) struct Prims {
     /// `triangle_aabbs` entry point.
     triangle_aabbs: ReflectedPipeline,
@@ -24,8 +24,10 @@ pub(crate) struct Prims {
     gather_triangles: ReflectedPipeline,
     /// `gather_triangles_boxes` entry point.
     gather_triangles_boxes: ReflectedPipeline,
-    /// `instance_refs` entry point.
+    /// `instance_refs` entry point (one ref an instance).
     instance_refs: ReflectedPipeline,
+    /// `instance_refs_opened` entry point (instances opened into more refs: a workgroup each).
+    instance_refs_opened: ReflectedPipeline,
     /// Bound in place of missing centroid-bounds words (never written: the flag is off).
     no_bounds: wgpu::Buffer,
 }
@@ -48,6 +50,7 @@ impl Prims {
             gather_triangles: make("gather_triangles"),
             gather_triangles_boxes: make("gather_triangles_boxes"),
             instance_refs: make("instance_refs"),
+            instance_refs_opened: make("instance_refs_opened"),
             no_bounds: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("kickstart-rt no centroid bounds"),
                 size: 32,
@@ -178,7 +181,14 @@ impl Prims {
             "kickstart-rt instance refs params",
             &[count, flags | (k << 8), bounds_base, 0],
         );
-        let bind = self.instance_refs.bind_group(
+        // Opened instances take a workgroup each (at most TLAS_REF_BUDGET / 2 of them: one
+        // dimension suffices), unopened ones an invocation each.
+        let (pass, workgroups) = if k > 1 {
+            (&self.instance_refs_opened, count)
+        } else {
+            (&self.instance_refs, count.div_ceil(INSTANCE_WORKGROUP))
+        };
+        let bind = pass.bind_group(
             rec.device,
             "kickstart-rt instance refs",
             0,
@@ -194,9 +204,9 @@ impl Prims {
         );
         rec.dispatch(
             "tlas build: instance refs",
-            &self.instance_refs.pipeline,
+            &pass.pipeline,
             &[&bind],
-            count.div_ceil(INSTANCE_WORKGROUP),
+            workgroups,
         );
     }
 }
@@ -635,19 +645,57 @@ mod tests {
         }
     }
 
+    /// An instance record of `geometry` moved by `x` along x (`flags` bit 0: visible).
+    fn instance(x: f32, geometry: u32, flags: u32) -> Vec<u32> {
+        let mut w = Vec::new();
+        for r in 0..3 {
+            let row = [f32::from(r == 0), f32::from(r == 1), f32::from(r == 2)];
+            w.extend([row[0], row[1], row[2], if r == 0 { x } else { 0.0 }].map(f32::to_bits));
+        }
+        w.extend([0u32; 12]);
+        w.extend([geometry, 0xff, flags, 0, 0, 0, 0, 0]);
+        w
+    }
+
+    #[test]
+    fn instance_refs_open_the_lowest_slot_among_equal_areas() {
+        // Root → inner 1 (x -11..-10) and inner 2 (x 10..11): mirror images, so their padded
+        // world boxes have exactly equal areas; each holds two leaves. With 3 refs the second
+        // opening takes slot 0 (node 1), so its children take slots 0 and 2 and node 2 stays
+        // whole in slot 1.
+        const LEAF: u32 = 0x8000_0000;
+        let p = ([-11.0, 0.0, 0.0], [-10.5, 1.0, 1.0], LEAF);
+        let q = ([-10.5, 0.0, 0.0], [-10.0, 1.0, 1.0], LEAF | 1);
+        let r = ([10.0, 0.0, 0.0], [10.5, 1.0, 1.0], LEAF | 2);
+        let t = ([10.5, 0.0, 0.0], [11.0, 1.0, 1.0], LEAF | 3);
+        let mut nodes = bvh2_node(
+            ([-11.0, 0.0, 0.0], [-10.0, 1.0, 1.0], 1),
+            ([10.0, 0.0, 0.0], [11.0, 1.0, 1.0], 2),
+        );
+        nodes.extend(bvh2_node(p, q));
+        nodes.extend(bvh2_node(r, t));
+        let mut geos: Vec<u32> = vec![0, 0, 4, 1];
+        geos.extend([-11.0f32, 0.0, 0.0, 0.0, 11.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        let prims = Prims::new(&gpu().device);
+        let inst_buf = buffer_with(bytemuck::cast_slice(&instance(0.0, 0, 1)));
+        let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
+        let blas = buffer_with(bytemuck::cast_slice(&nodes));
+        let k = 3;
+        let aabbs = buffer_with(bytemuck::cast_slice(&vec![SENTINEL; 8 * k]));
+        let tlas = buffer_with(&vec![0xffu8; 80 * k]);
+        run(|rec| {
+            prims.instance_refs(
+                rec, &inst_buf, &geo_buf, &blas, 1, k as u32, &aabbs, &tlas, None,
+            )
+        });
+        let table = words(&tlas, 20 * k);
+        let entries: Vec<u32> = (0..k).map(|j| table[16 * k + 4 * j + 1]).collect();
+        assert_eq!(entries, [p.2, 2, q.2], "slot 0 opened first");
+    }
+
     #[test]
     fn instance_refs_open_the_largest_subtrees_first_up_to_k() {
         let (nodes, geos, [a, b, c, d, e, f]) = opening_scene();
-        let instance = |x: f32, geometry: u32, flags: u32| -> Vec<u32> {
-            let mut w = Vec::new();
-            for r in 0..3 {
-                let row = [f32::from(r == 0), f32::from(r == 1), f32::from(r == 2)];
-                w.extend([row[0], row[1], row[2], if r == 0 { x } else { 0.0 }].map(f32::to_bits));
-            }
-            w.extend([0u32; 12]);
-            w.extend([geometry, 0xff, flags, 0, 0, 0, 0, 0]);
-            w
-        };
         // Slots: 0 the tree moved by x + 100, 1 hidden, 2 the one-triangle geometry.
         let inst: Vec<u32> = [
             instance(100.0, 0, 1),
