@@ -2,6 +2,10 @@
 // memory over (key, input position), so equal keys keep their input order (stable, like the
 // radix sort it stands in for). One dispatch instead of the radix sort's 12 (31-bit keys):
 // small BLASes and small TLASes are bound by dispatch count, not by work.
+//
+// sort_small_positions: the same for at most SMALL_POS_N pairs whose values are their input
+// positions (0, 1, 2, ...: the LBVH's sorts of one build), so the value itself breaks ties and
+// no position array is needed: keys and values of 2048 pairs fill the 16 KiB exactly.
 
 struct SmallParams {
     count: u32,
@@ -21,6 +25,11 @@ const SMALL_WG: u32 = 256u;
 var<workgroup> w_key: array<u32, 1024>;
 var<workgroup> w_pos: array<u32, 1024>;
 var<workgroup> w_val: array<u32, 1024>;
+
+// The lower element of compare-exchange pair t at `stride` of a bitonic stage.
+fn pair_low(t: u32, stride: u32) -> u32 {
+    return 2u * t - (t & (stride - 1u));
+}
 
 // Strict order on (key, position); padding (key and position 0xffffffff) sorts last.
 fn before(i: u32, j: u32) -> bool {
@@ -47,7 +56,7 @@ fn sort_small(@builtin(local_invocation_index) lid: u32) {
             // SMALL_N / 2 compare-exchange pairs, two per invocation.
             for (var e = 0u; e < SMALL_N / (2u * SMALL_WG); e += 1u) {
                 let t = lid + e * SMALL_WG;
-                let i = 2u * t - (t & (stride - 1u));
+                let i = pair_low(t, stride);
                 let j = i + stride;
                 let ascending = (i & size) == 0u;
                 if select(before(i, j), before(j, i), ascending) {
@@ -70,6 +79,56 @@ fn sort_small(@builtin(local_invocation_index) lid: u32) {
         if i < small.count {
             s_keys[i] = w_key[i];
             s_vals[i] = w_val[i];
+        }
+    }
+}
+
+const SMALL_POS_N: u32 = 2048u;
+
+// 16 KiB: the WebGPU default, exactly.
+var<workgroup> wp_key: array<u32, 2048>;
+var<workgroup> wp_val: array<u32, 2048>;
+
+// Strict order on (key, value); padding (key and value 0xffffffff) sorts last.
+fn before_by_value(i: u32, j: u32) -> bool {
+    return wp_key[i] < wp_key[j] || (wp_key[i] == wp_key[j] && wp_val[i] < wp_val[j]);
+}
+
+@compute @workgroup_size(256)
+fn sort_small_positions(@builtin(local_invocation_index) lid: u32) {
+    for (var e = 0u; e < SMALL_POS_N / SMALL_WG; e += 1u) {
+        let i = lid + e * SMALL_WG;
+        if i < small.count {
+            wp_key[i] = s_keys[i];
+            wp_val[i] = s_vals[i];
+        } else {
+            wp_key[i] = 0xffffffffu;
+            wp_val[i] = 0xffffffffu;
+        }
+    }
+    workgroupBarrier();
+    for (var size = 2u; size <= SMALL_POS_N; size <<= 1u) {
+        for (var stride = size >> 1u; stride > 0u; stride >>= 1u) {
+            for (var e = 0u; e < SMALL_POS_N / (2u * SMALL_WG); e += 1u) {
+                let i = pair_low(lid + e * SMALL_WG, stride);
+                let j = i + stride;
+                if select(before_by_value(i, j), before_by_value(j, i), (i & size) == 0u) {
+                    let k = wp_key[i];
+                    let v = wp_val[i];
+                    wp_key[i] = wp_key[j];
+                    wp_val[i] = wp_val[j];
+                    wp_key[j] = k;
+                    wp_val[j] = v;
+                }
+            }
+            workgroupBarrier();
+        }
+    }
+    for (var e = 0u; e < SMALL_POS_N / SMALL_WG; e += 1u) {
+        let i = lid + e * SMALL_WG;
+        if i < small.count {
+            s_keys[i] = wp_key[i];
+            s_vals[i] = wp_val[i];
         }
     }
 }

@@ -25,6 +25,9 @@ use super::Recorder;
 
 /// Largest count sorted by the one-workgroup path (its workgroup arrays' length).
 pub(crate) const SMALL_SORT_MAX: u32 = 1024;
+/// Largest count [`RadixSort::record_positions`] sorts in one workgroup (`SMALL_POS_N`): with
+/// the values known to be the positions, keys and values of 2048 pairs fill WebGPU's 16 KiB.
+pub(crate) const SMALL_POSITIONS_SORT_MAX: u32 = 2048;
 
 /// Bits of one digit (one pass each). `RADIX` must match the shader's.
 const DIGIT_BITS: u32 = 8;
@@ -78,6 +81,8 @@ pub(crate) struct RadixSort {
     scatter_summing: ReflectedPipeline,
     /// The one-workgroup path for counts up to [`SMALL_SORT_MAX`].
     small: ReflectedPipeline,
+    /// The one-workgroup path of [`Self::record_positions`], up to [`SMALL_POSITIONS_SORT_MAX`].
+    small_positions: ReflectedPipeline,
     /// Ping-pong keys/values (the other half is the caller's buffers) and the histogram with
     /// its row totals; created on first use, grown when a sort needs more.
     keys_tmp: Option<wgpu::Buffer>,
@@ -99,6 +104,7 @@ impl RadixSort {
             scatter: pipeline("scatter"),
             scatter_summing: pipeline("scatter_summing"),
             small: small.pipeline(device, "radix sort (small)", "sort_small"),
+            small_positions: small.pipeline(device, "radix sort (small)", "sort_small_positions"),
             keys_tmp: None,
             vals_tmp: None,
             hist: None,
@@ -136,6 +142,34 @@ impl RadixSort {
         key_bits: u32,
     ) -> (wgpu::Buffer, wgpu::Buffer) {
         self.record_passes(rec, keys, values, count, key_bits, false)
+    }
+
+    /// [`Self::record`] of pairs whose values are their input positions (`values[i] == i`, as
+    /// the LBVH's Morton pass writes them): the same result, and counts up to
+    /// [`SMALL_POSITIONS_SORT_MAX`] take one dispatch (ties broken by the value, which is the
+    /// position). With other values the order of equal keys is unspecified.
+    #[must_use = "the sorted pairs may be in the returned scratch buffers, not in `keys`"]
+    pub fn record_positions(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        keys: &wgpu::Buffer,
+        values: &wgpu::Buffer,
+        count: u32,
+        key_bits: u32,
+    ) -> (wgpu::Buffer, wgpu::Buffer) {
+        if count > SMALL_SORT_MAX && count <= SMALL_POSITIONS_SORT_MAX && key_bits > 0 {
+            let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
+            let pass = &self.small_positions;
+            let bg = pass.bind_group(
+                rec.device,
+                "radix sort (small)",
+                0,
+                &[("small", &uniform), ("s_keys", keys), ("s_vals", values)],
+            );
+            rec.dispatch("radix sort (small)", &pass.pipeline, &[&bg], 1);
+            return (keys.clone(), values.clone());
+        }
+        self.record(rec, keys, values, count, key_bits)
     }
 
     /// For a sort that will run the digit passes (more than [`SMALL_SORT_MAX`] pairs, at least
@@ -342,6 +376,7 @@ mod tests {
             &compose(&["gpu/radix_sort_small"], &[]),
         );
         assert_eq!(const_u32(&small, "SMALL_N"), SMALL_SORT_MAX);
+        assert_eq!(const_u32(&small, "SMALL_POS_N"), SMALL_POSITIONS_SORT_MAX);
     }
 
     /// Deterministic xorshift generator (tests need no `rand`).
@@ -429,6 +464,52 @@ mod tests {
         (0..n)
             .map(|_| pool[rng.next() as usize % pool.len()])
             .collect()
+    }
+
+    #[test]
+    fn radix_sort_of_positions_takes_one_workgroup_up_to_2048() {
+        // Values that are the positions (as the LBVH's Morton pass writes them): the same
+        // stable order as a CPU sort, in the caller's buffers, in one dispatch from 1025 to
+        // 2048 pairs; past that the digit passes (24-bit keys: 3, ending in the scratch).
+        let mut sorter = RadixSort::new(&testing::gpu().device);
+        for (n, seed) in [
+            (1000, 1),
+            (1025, 2),
+            (1500, 3),
+            (2047, 4),
+            (2048, 5),
+            (2049, 6),
+        ] {
+            let keys = random_keys(n, 24, seed);
+            let values: Vec<u32> = (0..n as u32).collect();
+            let kb = testing::buffer_with(bytemuck::cast_slice(&keys));
+            let vb = testing::buffer_with(bytemuck::cast_slice(&values));
+            let mut out = None;
+            let mut dispatches = 0;
+            testing::run(|rec| {
+                out = Some(sorter.record_positions(rec, &kb, &vb, n as u32, 24));
+                dispatches = rec.dispatches;
+            });
+            let (sk, sv) = out.expect("recorded");
+            let one_workgroup = n as u32 <= SMALL_POSITIONS_SORT_MAX;
+            assert_eq!(
+                dispatches == 1,
+                one_workgroup,
+                "n = {n}: {dispatches} dispatches"
+            );
+            assert_eq!(
+                (sk == kb, sv == vb),
+                (one_workgroup, one_workgroup),
+                "n = {n}"
+            );
+            let got_keys = to_u32s(&testing::read_back(&sk, 0, n as u64 * 4));
+            let got_vals = to_u32s(&testing::read_back(&sv, 0, n as u64 * 4));
+            let mut expected: Vec<(u32, u32)> = keys.iter().copied().zip(values).collect();
+            expected.sort_by_key(|&(k, _)| k); // stable
+            let (exp_keys, exp_vals): (Vec<u32>, Vec<u32>) = expected.into_iter().unzip();
+            assert_eq!(got_keys, exp_keys, "keys, n = {n}");
+            assert_eq!(got_vals, exp_vals, "values, n = {n}");
+        }
     }
 
     #[test]

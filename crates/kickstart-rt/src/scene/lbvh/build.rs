@@ -5,6 +5,7 @@ use super::{
     clustered_work_words, effective_max_leaf, groups, work_words, Buffers, Lbvh, LbvhBuild, Params,
     BOXES_AT, HPLOC_WORKGROUP, KEY_BITS_RANGE, MAX_COUNT,
 };
+use crate::gpu::radix_sort::SMALL_POSITIONS_SORT_MAX;
 use crate::gpu::Recorder;
 
 /// What one build binds besides the caller's buffers: the builder's scratch, sized for it, and
@@ -191,8 +192,16 @@ impl Lbvh {
                 rec.dispatch("lbvh bounds", &self.bounds.pipeline, &[&bg], groups(n));
             }
         }
-        // A sort of more than one workgroup takes its first histogram from the morton pass
-        // (one dependent dispatch fewer).
+        // Up to SMALL_POSITIONS_SORT_MAX keys the sort is one workgroup (the morton pass writes
+        // each value as its position); a larger sort takes its first histogram from the morton
+        // pass (one dependent dispatch fewer).
+        if n <= SMALL_POSITIONS_SORT_MAX {
+            let bg = self.morton.bind_group(device, "lbvh", 0, &morton_bind);
+            rec.dispatch("lbvh morton", &self.morton.pipeline, &[&bg], groups(n));
+            return self
+                .sort
+                .record_positions(rec, &s.keys, &s.values, n, key_bits);
+        }
         match self.sort.first_histogram(device, n, key_bits) {
             Some((hist, nblocks)) => {
                 morton_bind.push(("sort_hist", &hist));

@@ -282,14 +282,17 @@ fn lbvh_build_dispatch_counts() {
     // A BLAS build of more than 1024 primitives: bounds, morton, 4 sort passes, hierarchy,
     // climb; a sort pass is 2 dispatches up to SUMMING_MAX_BLOCKS blocks of 1024 (the
     // scatter sums the histogram rows), 3 above, and the morton pass makes the first pass's
-    // histogram. A TLAS build: 3 sort passes and no copy back. Up to 1024: one sort
-    // dispatch.
+    // histogram. A TLAS build: 3 sort passes and no copy back. Up to 2048 (the values are the
+    // positions): one sort dispatch.
     let limit = crate::gpu::radix_sort::SUMMING_MAX_BLOCKS as usize * 1024;
     let mut lbvh = Lbvh::new(&gpu().device);
     for (n, bits, expected) in [
         (5000, BLAS_KEY_BITS, 11),
         (5000, TLAS_KEY_BITS, 9),
         (1000, TLAS_KEY_BITS, 5),
+        (2048, TLAS_KEY_BITS, 5),
+        (2048, BLAS_KEY_BITS, 5),
+        (2049, TLAS_KEY_BITS, 9),
         (limit, TLAS_KEY_BITS, 9),
         (limit + 1, TLAS_KEY_BITS, 12),
     ] {
