@@ -84,14 +84,25 @@ fn sort_small(@builtin(local_invocation_index) lid: u32) {
 }
 
 const SMALL_POS_N: u32 = 2048u;
+// Pairs each invocation holds in registers for the stages of strides below WP_RUN.
+const WP_RUN: u32 = SMALL_POS_N / SMALL_WG;
 
 // 16 KiB: the WebGPU default, exactly.
 var<workgroup> wp_key: array<u32, 2048>;
 var<workgroup> wp_val: array<u32, 2048>;
 
-// Strict order on (key, value); padding (key and value 0xffffffff) sorts last.
-fn before_by_value(i: u32, j: u32) -> bool {
-    return wp_key[i] < wp_key[j] || (wp_key[i] == wp_key[j] && wp_val[i] < wp_val[j]);
+// Order: (key, value) ascending; padding (key and value 0xffffffff) sorts last.
+
+// Compare-exchange of pairs a < b of a run starting at position `base`, in the direction of the
+// bitonic sequence of length `size` the run lies in.
+fn wp_exchange(run: ptr<function, array<vec2<u32>, WP_RUN>>, a: u32, b: u32, base: u32, size: u32) {
+    let x = (*run)[a];
+    let y = (*run)[b];
+    let a_after_b = x.x > y.x || (x.x == y.x && x.y > y.y);
+    if a_after_b == (((base + a) & size) == 0u) {
+        (*run)[a] = y;
+        (*run)[b] = x;
+    }
 }
 
 @compute @workgroup_size(256)
@@ -108,21 +119,56 @@ fn sort_small_positions(@builtin(local_invocation_index) lid: u32) {
     }
     workgroupBarrier();
     for (var size = 2u; size <= SMALL_POS_N; size <<= 1u) {
-        for (var stride = size >> 1u; stride > 0u; stride >>= 1u) {
+        // Strides of 8 and more across invocations, in workgroup memory.
+        for (var stride = size >> 1u; stride >= WP_RUN; stride >>= 1u) {
             for (var e = 0u; e < SMALL_POS_N / (2u * SMALL_WG); e += 1u) {
                 let i = pair_low(lid + e * SMALL_WG, stride);
                 let j = i + stride;
-                if select(before_by_value(i, j), before_by_value(j, i), (i & size) == 0u) {
-                    let k = wp_key[i];
-                    let v = wp_val[i];
-                    wp_key[i] = wp_key[j];
-                    wp_val[i] = wp_val[j];
-                    wp_key[j] = k;
-                    wp_val[j] = v;
+                // Each pair's four words loaded once; the values differ, so i after j is the
+                // strict order's negation of j after i.
+                let ki = wp_key[i];
+                let kj = wp_key[j];
+                let vi = wp_val[i];
+                let vj = wp_val[j];
+                let i_after_j = ki > kj || (ki == kj && vi > vj);
+                if i_after_j == ((i & size) == 0u) {
+                    wp_key[i] = kj;
+                    wp_val[i] = vj;
+                    wp_key[j] = ki;
+                    wp_val[j] = vi;
                 }
             }
             workgroupBarrier();
         }
+        // Strides 4, 2 and 1 stay within each invocation's run of WP_RUN pairs: in registers,
+        // one barrier for the three stages.
+        let base = lid * WP_RUN;
+        var run: array<vec2<u32>, WP_RUN>;
+        for (var a = 0u; a < WP_RUN; a++) {
+            run[a] = vec2<u32>(wp_key[base + a], wp_val[base + a]);
+        }
+        // Written out (WP_RUN is 8), so every index is a constant and `run` stays in registers.
+        if size >= 8u {
+            wp_exchange(&run, 0u, 4u, base, size);
+            wp_exchange(&run, 1u, 5u, base, size);
+            wp_exchange(&run, 2u, 6u, base, size);
+            wp_exchange(&run, 3u, 7u, base, size);
+        }
+        if size >= 4u {
+            wp_exchange(&run, 0u, 2u, base, size);
+            wp_exchange(&run, 1u, 3u, base, size);
+            wp_exchange(&run, 4u, 6u, base, size);
+            wp_exchange(&run, 5u, 7u, base, size);
+        }
+        wp_exchange(&run, 0u, 1u, base, size);
+        wp_exchange(&run, 2u, 3u, base, size);
+        wp_exchange(&run, 4u, 5u, base, size);
+        wp_exchange(&run, 6u, 7u, base, size);
+        for (var a = 0u; a < WP_RUN; a++) {
+            wp_key[base + a] = run[a].x;
+            wp_val[base + a] = run[a].y;
+        }
+        workgroupBarrier();
     }
     for (var e = 0u; e < SMALL_POS_N / SMALL_WG; e += 1u) {
         let i = lid + e * SMALL_WG;
