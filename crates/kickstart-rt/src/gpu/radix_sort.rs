@@ -158,18 +158,28 @@ impl RadixSort {
         key_bits: u32,
     ) -> (wgpu::Buffer, wgpu::Buffer) {
         if count > SMALL_SORT_MAX && count <= SMALL_POSITIONS_SORT_MAX && key_bits > 0 {
-            let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
-            let pass = &self.small_positions;
-            let bg = pass.bind_group(
-                rec.device,
-                "radix sort (small)",
-                0,
-                &[("small", &uniform), ("s_keys", keys), ("s_vals", values)],
-            );
-            rec.dispatch("radix sort (small)", &pass.pipeline, &[&bg], 1);
+            Self::record_one_workgroup(rec, &self.small_positions, keys, values, count);
             return (keys.clone(), values.clone());
         }
         self.record(rec, keys, values, count, key_bits)
+    }
+
+    /// Records `pass`, a one-workgroup sort of the `count` pairs in place.
+    fn record_one_workgroup(
+        rec: &mut Recorder<'_>,
+        pass: &ReflectedPipeline,
+        keys: &wgpu::Buffer,
+        values: &wgpu::Buffer,
+        count: u32,
+    ) {
+        let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
+        let bg = pass.bind_group(
+            rec.device,
+            "radix sort (small)",
+            0,
+            &[("small", &uniform), ("s_keys", keys), ("s_vals", values)],
+        );
+        rec.dispatch("radix sort (small)", &pass.pipeline, &[&bg], 1);
     }
 
     /// For a sort that will run the digit passes (more than [`SMALL_SORT_MAX`] pairs, at least
@@ -221,14 +231,7 @@ impl RadixSort {
         }
         if count <= SMALL_SORT_MAX {
             // Same result (stable, ascending) in one dispatch instead of 3 per digit pass.
-            let uniform = rec.uniform("radix sort (small) params", &[count, 0u32, 0, 0]);
-            let bg = self.small.bind_group(
-                rec.device,
-                "radix sort (small)",
-                0,
-                &[("small", &uniform), ("s_keys", keys), ("s_vals", values)],
-            );
-            rec.dispatch("radix sort (small)", &self.small.pipeline, &[&bg], 1);
+            Self::record_one_workgroup(rec, &self.small, keys, values, count);
             return in_place;
         }
         let key_bits = key_bits.min(32);
