@@ -125,6 +125,8 @@ fn gather_triangles_boxes(
 // Also merges the boxes' centroid bounds (scene/centroid_bounds.wgsl) when asked (params.b bit 0, the
 // TLAS build): the LBVH then skips its own bounds pass over the boxes, a dependent dispatch
 // fewer. Params: a = instance slots, b = flags | K << 8, c = first centroid-bounds word.
+// Entry points: `instance_refs` for K = 1 (an invocation an instance), `instance_refs_opened`
+// for K > 1 (a workgroup an instance).
 
 @group(0) @binding(1) var<storage, read> instances: array<InstanceGpu>;
 @group(0) @binding(2) var<storage, read> geometries: array<GeometryGpu>;
@@ -264,10 +266,10 @@ fn write_ref(r: u32, i: u32, b: StoredBox, entry: u32, stamp: u32, used: bool) {
 // K > 1: one workgroup per instance slot, one lane per ref. The BLAS is opened from the root,
 // largest world-box area first (the lowest slot among equal areas), until K refs or only leaves
 // remain: each step the lanes find the largest inner ref together (two workgroup atomics), and
-// one lane loads that node and puts its children in. One invocation per instance took 0.09 ms
-// for the apartment's 67 instances on an H200: 29 dependent steps, each scanning every ref it
-// held in local memory, and 30 refs' centroids merged into the same six workgroup words by each
-// invocation.
+// one lane loads that node and puts its children in. With one invocation per instance each of
+// the K - 1 dependent steps scanned every ref held so far in local memory, and each invocation
+// merged all K refs' centroids into the same six workgroup words: a scene of few big instances
+// (the TLAS's common case for opening) ran that long chain on a few threads.
 @compute @workgroup_size(MAX_REFS)
 fn instance_refs_opened(
     @builtin(workgroup_id) wid: vec3<u32>,
