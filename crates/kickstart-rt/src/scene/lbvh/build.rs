@@ -192,17 +192,15 @@ impl Lbvh {
                 rec.dispatch("lbvh bounds", &self.bounds.pipeline, &[&bg], groups(n));
             }
         }
-        // Up to SMALL_POSITIONS_SORT_MAX keys the sort is one workgroup (the morton pass writes
-        // each value as its position); a larger sort takes its first histogram from the morton
-        // pass (one dependent dispatch fewer).
-        if n <= SMALL_POSITIONS_SORT_MAX {
-            let bg = self.morton.bind_group(device, "lbvh", 0, &morton_bind);
-            rec.dispatch("lbvh morton", &self.morton.pipeline, &[&bg], groups(n));
-            return self
-                .sort
-                .record_positions(rec, &s.keys, &s.values, n, key_bits);
-        }
-        match self.sort.first_histogram(device, n, key_bits) {
+        // The morton pass writes each value as its position, so up to SMALL_POSITIONS_SORT_MAX
+        // keys the sort is one workgroup; a larger sort of digit passes takes its first
+        // histogram from the morton pass (one dependent dispatch fewer).
+        let first_histogram = if n <= SMALL_POSITIONS_SORT_MAX {
+            None
+        } else {
+            self.sort.first_histogram(device, n, key_bits)
+        };
+        match first_histogram {
             Some((hist, nblocks)) => {
                 morton_bind.push(("sort_hist", &hist));
                 let pass = &self.morton_histogram;
@@ -214,7 +212,8 @@ impl Lbvh {
             None => {
                 let bg = self.morton.bind_group(device, "lbvh", 0, &morton_bind);
                 rec.dispatch("lbvh morton", &self.morton.pipeline, &[&bg], groups(n));
-                self.sort.record(rec, &s.keys, &s.values, n, key_bits)
+                self.sort
+                    .record_positions(rec, &s.keys, &s.values, n, key_bits)
             }
         }
     }
