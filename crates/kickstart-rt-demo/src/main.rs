@@ -451,7 +451,13 @@ fn bench_command(args: BenchArgs) -> AnyResult<()> {
         eprintln!("{notice}");
     }
     if args.denoisers {
-        return bench::denoise::run(size, iterations, args.json.as_deref());
+        args.extras.check()?;
+        return bench::denoise::run(
+            size,
+            iterations,
+            args.extras.busy_gpu_ms,
+            args.json.as_deref(),
+        );
     }
     bench::run(bench::BenchOptions {
         scenes_dir: scene::scenes_dir(args.scenes),

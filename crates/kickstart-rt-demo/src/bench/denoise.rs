@@ -4,6 +4,7 @@
 //! state of a frame). Each measurement is the span of the task's `denoise …` passes (GPU
 //! timestamps). Issue 7's targets on the H100: SpecularAndDiffuse ≤ 0.6 ms, Shadow ≤ 0.15 ms.
 
+use crate::bench::busy::BusyGpu;
 use crate::bench::Stats;
 use crate::gpu;
 use crate::sdk_glue as glue;
@@ -49,6 +50,8 @@ pub struct DenoiserReport {
     pub width: u32,
     /// Image height.
     pub height: u32,
+    /// Untimed GPU work before each timed task, ms (`--busy-gpu-ms`; 0: none).
+    pub busy_gpu_ms: f64,
     /// Every task × method.
     pub denoisers: Vec<DenoiserTime>,
 }
@@ -266,8 +269,15 @@ const SIGNALS: [(ksrt::SignalType, Option<f64>); 6] = [
     (ksrt::SignalType::MultiShadow, None),
 ];
 
-/// Runs the denoiser benchmark.
-pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<()> {
+/// Runs the denoiser benchmark; `busy_gpu_ms` > 0 submits that much untimed GPU work before
+/// each timed task (`--busy-gpu-ms`: in a frame the denoisers follow the traces, so they run at
+/// a busy GPU's clocks, not the lower ones an idle GPU drops to between repetitions).
+pub fn run(
+    size: (u32, u32),
+    iterations: u32,
+    busy_gpu_ms: f64,
+    json: Option<&Path>,
+) -> AnyResult<()> {
     let adapter = gpu::adapter()?;
     if !adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
         return Err("the adapter has no TIMESTAMP_QUERY: GPU times cannot be measured".into());
@@ -276,6 +286,7 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
     let ctx = ksrt::ExecuteContext::new(&device, &queue, glue::init_settings(true))?;
     glue::prepare_pipelines(&ctx)?;
     let inputs = Inputs::new(&device, &queue, size);
+    let busy = (busy_gpu_ms > 0.0).then(|| BusyGpu::new(&device, busy_gpu_ms));
     let info = adapter.get_info();
     println!(
         "kickstart-rt {} (commit {}) denoisers at {}x{} on {}, {iterations} iterations after a warm-up",
@@ -285,11 +296,15 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
         size.1,
         info.name
     );
+    if busy.is_some() {
+        println!("each timed task follows ~{busy_gpu_ms} ms of untimed GPU work (--busy-gpu-ms)");
+    }
     let mut report = DenoiserReport {
         adapter: info.name.clone(),
         commit: env!("KSRT_COMMIT").to_string(),
         width: size.0,
         height: size.1,
+        busy_gpu_ms,
         denoisers: Vec::new(),
     };
     for method in [
@@ -308,6 +323,9 @@ pub fn run(size: (u32, u32), iterations: u32, json: Option<&Path>) -> AnyResult<
             let one = || -> AnyResult<(f64, Vec<(&'static str, f64)>)> {
                 let mut c = ctx.create_task_container();
                 c.schedule_render_task(task.clone());
+                if let Some(busy) = &busy {
+                    busy.submit(&device, &queue);
+                }
                 let t = gpu::submit(&ctx, &device, &queue, c, |_| {})?;
                 let timings = ctx.wait_for_gpu_timings(t);
                 gpu::complete(&ctx, &device, t)?;

@@ -58,7 +58,7 @@ pub struct ExtraArgs {
     pub ray_order: RayOrder,
     /// Before each timed task, keep the GPU busy for about this many milliseconds (a spin
     /// kernel submitted just before it, not timed), as a frame's other work would: short tasks
-    /// (refits, TLAS builds) then run at the clocks of a busy GPU, not the lower ones it drops
+    /// (refits, TLAS builds, `--denoisers`) then run at the clocks of a busy GPU, not the lower ones it drops
     /// to while the CPU prepares the next repetition. 0 (default): no such work, as every
     /// earlier figure was measured.
     #[arg(long, default_value_t = 0.0)]
