@@ -330,14 +330,107 @@ fn main(
     @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(local_invocation_index) lindex: u32,
 ) {
+    // The G-buffer and the previous frame's taps are read before the tile is filled and the
+    // workgroup waits on it: no load can be moved across the barrier, and read after it they
+    // would add their two latencies (the taps' addresses depend on the G-buffer) to the tile's
+    // instead of overlapping it. Nothing returns before the barrier (it needs every invocation).
+    let p = gid.xy;
+    let in_grid = gid.x < dp.grid.x && gid.y < dp.grid.y;
+    let inside = in_grid && dn_texel_inside(p);
+    let texel = dn_texel(p);
+
+    // gb_surface unprojects the jittered depth where it was sampled (trace/gbuffer.wgsl).
+    var surf: GbSurface;
+    if inside {
+        surf = gb_surface(texel);
+    }
+    let pos = surf.position;
+    let n = surf.normal;
+
+    // Bilinear taps of the previous frame that show this surface, written out: the four
+    // previous guides and history records are loaded before any is used (indices clamped into
+    // the viewport; unusable taps get weight 0), so that their latencies overlap.
+    var pred = pos;
+    var base = vec2<i32>(0);
+    var f = vec2<f32>(0.0);
+    var h00: DnRecord;
+    var h01: DnRecord;
+    var h02: DnRecord;
+    var h03: DnRecord;
+    var h10: DnRecord;
+    var h11: DnRecord;
+    var h12: DnRecord;
+    var h13: DnRecord;
+    var w0 = 0.0;
+    var w1 = 0.0;
+    var w2 = 0.0;
+    var w3 = 0.0;
+    if inside && surf.valid {
+        // Where this surface was in the previous frame (continuous viewport pixel coordinates),
+        // then on the previous frame's grid (below).
+        var prev_xy: vec2<f32>;
+        let size = vec2<f32>(dp.viewport.zw);
+        if dp.motion_type == 1u {
+            let m = textureLoad(dn_motion, texel, 0).xy * dp.motion_scale.xy;
+            let uv = (vec2<f32>(dn_grid_pixel(p)) + 0.5 - dp.jitter.xy) / size;
+            prev_xy = (uv + m) * size + dp.jitter.zw;
+        } else {
+            if dp.motion_type == 2u {
+                pred = pos + textureLoad(dn_motion, texel, 0).xyz * dp.motion_scale.xyz;
+            }
+            let c = gb_project_prev(pred);
+            prev_xy = c.xy + dp.jitter.zw;
+            if c.w <= 0.0 {
+                prev_xy = vec2<f32>(-1e6);
+            }
+        }
+        let use_history = dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6));
+        // The previous grid's pixel g covered viewport pixel g · block + its traced pixel.
+        prev_xy = (prev_xy - 0.5 - vec2<f32>(dp.lattice.zw)) / f32(dp.grid.z) + 0.5;
+        let base_f = select(vec2<f32>(0.0), floor(prev_xy - 0.5), use_history);
+        f = prev_xy - 0.5 - base_f;
+        base = vec2<i32>(base_f);
+        let q0 = base;
+        let q1 = base + vec2<i32>(1, 0);
+        let q2 = base + vec2<i32>(0, 1);
+        let q3 = base + vec2<i32>(1, 1);
+        let j0 = dn_clamped_index(q0);
+        let j1 = dn_clamped_index(q1);
+        let j2 = dn_clamped_index(q2);
+        let j3 = dn_clamped_index(q3);
+        let pg0 = guide_prev[j0];
+        let pg1 = guide_prev[j1];
+        let pg2 = guide_prev[j2];
+        let pg3 = guide_prev[j3];
+        h00 = hist_prev0[j0];
+        h01 = hist_prev0[j1];
+        h02 = hist_prev0[j2];
+        h03 = hist_prev0[j3];
+        h10 = h00;
+        h11 = h01;
+        h12 = h02;
+        h13 = h03;
+        if DN_SIGNALS > 1u {
+            h10 = hist_prev1[j0];
+            h11 = hist_prev1[j1];
+            h12 = hist_prev1[j2];
+            h13 = hist_prev1[j3];
+        }
+        if use_history {
+            w0 = dn_history_weight(q0, pg0, (1.0 - f.x) * (1.0 - f.y), pos, n, pred);
+            w1 = dn_history_weight(q1, pg1, f.x * (1.0 - f.y), pos, n, pred);
+            w2 = dn_history_weight(q2, pg2, (1.0 - f.x) * f.y, pos, n, pred);
+            w3 = dn_history_weight(q3, pg3, f.x * f.y, pos, n, pred);
+        }
+    }
+
     dn_fill_tile(wg.xy, lindex);
     workgroupBarrier();
-    if gid.x >= dp.grid.x || gid.y >= dp.grid.y {
+    if !in_grid {
         return;
     }
-    let p = gid.xy;
     let i = dn_index(p);
-    if !dn_texel_inside(p) {
+    if !inside {
         // A block whose traced pixel lies past the viewport this frame: nothing traced.
         guide_cur[i] = vec4<u32>(DN_INVALID);
         for (var s = 0u; s < DN_SIGNALS; s++) {
@@ -345,13 +438,6 @@ fn main(
         }
         return;
     }
-    let texel = dn_texel(p);
-
-    // gb_surface unprojects the jittered depth where it was sampled (trace/gbuffer.wgsl).
-    let surf = gb_surface(texel);
-    let pos = surf.position;
-    let n = surf.normal;
-
     if !surf.valid {
         guide_cur[i] = vec4<u32>(DN_INVALID);
         for (var s = 0u; s < DN_SIGNALS; s++) {
@@ -362,75 +448,18 @@ fn main(
     }
     guide_cur[i] = dn_pack_guide(pos, n, gb_roughness(texel));
 
-    // Where this surface was in the previous frame (continuous viewport pixel coordinates),
-    // then on the previous frame's grid (below).
-    var prev_xy: vec2<f32>;
-    var pred = pos;
-    let size = vec2<f32>(dp.viewport.zw);
-    if dp.motion_type == 1u {
-        let m = textureLoad(dn_motion, texel, 0).xy * dp.motion_scale.xy;
-        let uv = (vec2<f32>(dn_grid_pixel(p)) + 0.5 - dp.jitter.xy) / size;
-        prev_xy = (uv + m) * size + dp.jitter.zw;
-    } else {
-        if dp.motion_type == 2u {
-            pred = pos + textureLoad(dn_motion, texel, 0).xyz * dp.motion_scale.xyz;
-        }
-        let c = gb_project_prev(pred);
-        prev_xy = c.xy + dp.jitter.zw;
-        if c.w <= 0.0 {
-            prev_xy = vec2<f32>(-1e6);
-        }
-    }
-
-    // Bilinear taps of the previous frame that show this surface, written out: the four
-    // previous guides and history records are loaded before any is used (indices clamped into
-    // the viewport; unusable taps get weight 0), so that their latencies overlap.
-    let use_history = dp.discard_history == 0u && all(abs(prev_xy) < vec2<f32>(1e6));
-    // The previous grid's pixel g covered viewport pixel g · block + its traced pixel.
-    prev_xy = (prev_xy - 0.5 - vec2<f32>(dp.lattice.zw)) / f32(dp.grid.z) + 0.5;
-    let base_f = select(vec2<f32>(0.0), floor(prev_xy - 0.5), use_history);
-    let f = prev_xy - 0.5 - base_f;
-    let base = vec2<i32>(base_f);
-    let q0 = base;
-    let q1 = base + vec2<i32>(1, 0);
-    let q2 = base + vec2<i32>(0, 1);
-    let q3 = base + vec2<i32>(1, 1);
-    let j0 = dn_clamped_index(q0);
-    let j1 = dn_clamped_index(q1);
-    let j2 = dn_clamped_index(q2);
-    let j3 = dn_clamped_index(q3);
-    let pg0 = guide_prev[j0];
-    let pg1 = guide_prev[j1];
-    let pg2 = guide_prev[j2];
-    let pg3 = guide_prev[j3];
-    var h00 = hist_prev0[j0];
-    var h01 = hist_prev0[j1];
-    var h02 = hist_prev0[j2];
-    var h03 = hist_prev0[j3];
-    var h10 = h00;
-    var h11 = h01;
-    var h12 = h02;
-    var h13 = h03;
-    if DN_SIGNALS > 1u {
-        h10 = hist_prev1[j0];
-        h11 = hist_prev1[j1];
-        h12 = hist_prev1[j2];
-        h13 = hist_prev1[j3];
-    }
-    var w0 = 0.0;
-    var w1 = 0.0;
-    var w2 = 0.0;
-    var w3 = 0.0;
-    if use_history {
-        w0 = dn_history_weight(q0, pg0, (1.0 - f.x) * (1.0 - f.y), pos, n, pred);
-        w1 = dn_history_weight(q1, pg1, f.x * (1.0 - f.y), pos, n, pred);
-        w2 = dn_history_weight(q2, pg2, (1.0 - f.x) * f.y, pos, n, pred);
-        w3 = dn_history_weight(q3, pg3, f.x * f.y, pos, n, pred);
-    }
     let wsum = w0 + w1 + w2 + w3;
 
     for (var s = 0u; s < DN_SIGNALS; s++) {
-        var cur = dn_sample(s, p, true, pos, n);
+        // A traced pixel's sample is the tile's centre (the same decoded load); a checkerboard
+        // hole is rebuilt from its neighbours.
+        let tc = (lid.y + 1u) * DN_TILE + lid.x + 1u;
+        var cur: vec4<f32>;
+        if dn_tile_ok[tc] != 0u {
+            cur = dn_tile[s][tc];
+        } else {
+            cur = dn_sample(s, p, true, pos, n);
+        }
 
         // Neighbourhood statistics of the current input (traced pixels only).
         var m1 = vec4<f32>(0.0);
