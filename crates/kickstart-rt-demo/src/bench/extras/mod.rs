@@ -58,9 +58,9 @@ pub struct ExtraArgs {
     pub ray_order: RayOrder,
     /// Before each timed task, keep the GPU busy for about this many milliseconds (a spin
     /// kernel submitted just before it, not timed), as a frame's other work would: short tasks
-    /// (refits, TLAS builds, `--denoisers`) then run at the clocks of a busy GPU, not the lower ones it drops
-    /// to while the CPU prepares the next repetition. 0 (default): no such work, as every
-    /// earlier figure was measured.
+    /// (refits, TLAS builds, the `--denoisers` tasks) then run at the clocks of a busy GPU, not
+    /// the lower ones it drops to while the CPU prepares the next repetition. 0 (default): no
+    /// such work, as every earlier figure was measured.
     #[arg(long, default_value_t = 0.0)]
     pub busy_gpu_ms: f64,
     /// Leave out the default per-scene measurements and the TLAS table (run only the passes
