@@ -1077,6 +1077,67 @@ fn block_modes_reconstruct_a_uniform_signal_exactly_at_every_pixel() {
 }
 
 #[test]
+fn block_modes_upsample_a_horizontal_ramp_exactly() {
+    // A noiseless signal linear in the pixel column, traced at one pixel per block: the
+    // edge-stopping filter keeps it (on one plane its weights are symmetric in the column
+    // offset, whichever rows an edge takes away), and the upsample's bilinear weights between
+    // the four grid pixels around a pixel rebuild it exactly. Checked on the back wall's rows
+    // above the box (one plane from side to side), away from the image's sides. A tap given another tap's record or weight
+    // is off by the ramp's step between them.
+    let g = static_gbuffer();
+    let ramp = |i: usize| {
+        let x = (i as u32 % SIZE) as f32;
+        Vec3::new(1.0 + 0.02 * x, 0.5 + 0.01 * x, 0.8 - 0.005 * x)
+    };
+    let r: Vec<Vec4> = (0..g.surfaces.len())
+        .map(|i| g.surfaces[i].map_or(Vec4::ZERO, |_| ramp(i).extend(1.0)))
+        .collect();
+    // 2×2 only: the same upsample code serves 4×4, whose filter reaches 28 pixels, across
+    // most of this 64-pixel image, so that the image's sides (taps dropped on one side) bias
+    // every pixel by more than the tolerance.
+    let block = 2u32;
+    let mut h = Harness::new(SignalType::Diffuse, DenoisingMethod::Fast);
+    let mut out = Vec::new();
+    for phase in 0..8 {
+        h.half_resolution_mode = block_mode(block, phase);
+        out = h
+            .frame(
+                &g,
+                &[keep_traced(&r, block, phase)],
+                Motion::Matrices,
+                DenoiseMode::Continue,
+            )
+            .remove(0);
+    }
+    let side = 2 * block;
+    let mut checked = 0;
+    let mut worst = 0.0f32;
+    for (i, v) in out.iter().enumerate() {
+        let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
+        // Rows that are wall from side to side (above the box).
+        let wall_row =
+            (0..SIZE).all(|x| g.surfaces[(y * SIZE + x) as usize].is_some_and(|s| s.object == 1));
+        if !wall_row || x < side || x >= SIZE - side {
+            continue;
+        }
+        checked += 1;
+        let e = (v.truncate() - ramp(i)).abs().max_element();
+        worst = worst.max(e);
+    }
+    eprintln!("{block}×{block}: {checked} wall pixels, worst error {worst:.5}");
+    assert!(
+        checked >= 500,
+        "{block}×{block}: only {checked} wall pixels"
+    );
+    // f16 records and the filter's rounding leave 0.008 at worst; a tap given a neighbour's
+    // record or bilinear weight is off by 0.027.
+    assert!(
+        worst < 0.015,
+        "{block}×{block}: the ramp is off by {worst:.5}"
+    );
+}
+
+#[test]
 fn block_modes_are_reconstructed_to_every_pixel_with_edges_kept() {
     let g = static_gbuffer();
     let r = reference_image(&g, reference);

@@ -35,6 +35,34 @@ fn up_match(gq: DnGuide, pos: vec3<f32>, n: vec3<f32>, tol: f32) -> f32 {
     return pow(cos_n, UP_NORMAL_POWER) * exp(-plane * plane);
 }
 
+// The weighted sums of the four taps, and the best-matching tap so far.
+struct UpAcc {
+    sum: vec4<f32>,
+    wsum: f32,
+    best: vec2<u32>,
+    best_match: f32,
+}
+
+// Adds grid pixel `q` (guide `g`, record `h`, bilinear weight `bw`) for the surface `surf`; a
+// pixel outside the grid is left out.
+fn up_tap(acc: UpAcc, q: vec2<i32>, g: vec4<u32>, h: DnRecord, bw: f32, surf: GbSurface,
+          tol: f32) -> UpAcc {
+    if !dn_in_grid(q) {
+        return acc;
+    }
+    var r = acc;
+    let gq = dn_unpack_guide(g);
+    let m = up_match(gq, surf.position, surf.normal, tol);
+    if gq.valid && m > r.best_match {
+        r.best_match = m;
+        r.best = vec2<u32>(q);
+    }
+    let w = bw * m;
+    r.sum += w * dn_value(h);
+    r.wsum += w;
+    return r;
+}
+
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= dp.viewport.z || gid.y >= dp.viewport.w {
@@ -50,34 +78,43 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let base = vec2<i32>(base_f);
     let nearest = dn_clamped(vec2<i32>(round(gc)));
 
+    // The four grid pixels' guides and records, loaded before the G-buffer is decoded and before
+    // any is used (indices clamped into the grid; a tap outside it is left out below), so that
+    // their latencies overlap: loaded in the loop that weighs them, each tap's loads waited on
+    // the last tap's.
+    let q0 = base;
+    let q1 = base + vec2<i32>(1, 0);
+    let q2 = base + vec2<i32>(0, 1);
+    let q3 = base + vec2<i32>(1, 1);
+    let j0 = dn_index(dn_clamped(q0));
+    let j1 = dn_index(dn_clamped(q1));
+    let j2 = dn_index(dn_clamped(q2));
+    let j3 = dn_index(dn_clamped(q3));
+    let g0 = guide[j0];
+    let g1 = guide[j1];
+    let g2 = guide[j2];
+    let g3 = guide[j3];
+    let h0 = src0[j0];
+    let h1 = src0[j1];
+    let h2 = src0[j2];
+    let h3 = src0[j3];
+
     let surf = gb_surface(texel);
     if !surf.valid {
         dn_write_output(0u, texel, dn_value(src0[dn_index(nearest)]));
         return;
     }
     let tol = UP_PLANE * max(dn_view_distance(surf.position), 1e-6) * (1.0 + block);
-    var sum = vec4<f32>(0.0);
-    var wsum = 0.0;
-    var best = nearest;
-    var best_match = -1.0;
-    for (var k = 0; k < 4; k++) {
-        let o = vec2<i32>(k & 1, k >> 1);
-        let q = base + o;
-        if !dn_in_grid(q) {
-            continue;
-        }
-        let j = dn_index(vec2<u32>(q));
-        let gq = dn_unpack_guide(guide[j]);
-        let m = up_match(gq, surf.position, surf.normal, tol);
-        let bw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
-        if gq.valid && m > best_match {
-            best_match = m;
-            best = vec2<u32>(q);
-        }
-        let w = bw * m;
-        sum += w * dn_value(src0[j]);
-        wsum += w;
-    }
+    var acc: UpAcc;
+    acc.best = nearest;
+    acc.best_match = -1.0;
+    acc = up_tap(acc, q0, g0, h0, (1.0 - f.x) * (1.0 - f.y), surf, tol);
+    acc = up_tap(acc, q1, g1, h1, f.x * (1.0 - f.y), surf, tol);
+    acc = up_tap(acc, q2, g2, h2, (1.0 - f.x) * f.y, surf, tol);
+    acc = up_tap(acc, q3, g3, h3, f.x * f.y, surf, tol);
+    let sum = acc.sum;
+    let wsum = acc.wsum;
+    let best = acc.best;
     if wsum > 1e-4 {
         dn_write_output(0u, texel, sum / wsum);
     } else {
