@@ -148,6 +148,16 @@ fn dn_index(p: vec2<u32>) -> u32 {
     return p.y * dp.grid.x + p.x;
 }
 
+// Grid pixel `q` clamped into the grid.
+fn dn_clamped(q: vec2<i32>) -> vec2<u32> {
+    return vec2<u32>(clamp(q, vec2<i32>(0), vec2<i32>(dp.grid.xy) - vec2<i32>(1)));
+}
+
+// Row-major buffer index of grid pixel `q` clamped into the grid.
+fn dn_clamped_index(q: vec2<i32>) -> u32 {
+    return dn_index(dn_clamped(q));
+}
+
 // Viewport-relative pixel of grid pixel `g`: itself, or the traced pixel of block `g` (which
 // may lie past the viewport in its last column or row: see dn_texel_inside).
 fn dn_grid_pixel(g: vec2<u32>) -> vec2<u32> {

@@ -117,12 +117,6 @@ fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) ->
     return any_sum / max(any_count, 1.0);
 }
 
-// Row-major index of grid pixel `q` clamped into the grid.
-fn dn_clamped_index(q: vec2<i32>) -> u32 {
-    let c = clamp(q, vec2<i32>(0), vec2<i32>(dp.grid.xy) - vec2<i32>(1));
-    return dn_index(vec2<u32>(c));
-}
-
 // Weight of the previous frame's pixel `q` (guide `g`, bilinear weight `bw`) for this pixel's
 // history: 0 outside the grid or where it shows another surface.
 fn dn_history_weight(
@@ -450,10 +444,11 @@ fn main(
 
     let wsum = w0 + w1 + w2 + w3;
 
+    // This pixel's entry in the tile.
+    let tc = (lid.y + 1u) * DN_TILE + lid.x + 1u;
     for (var s = 0u; s < DN_SIGNALS; s++) {
         // A traced pixel's sample is the tile's centre (the same decoded load); a checkerboard
         // hole is rebuilt from its neighbours.
-        let tc = (lid.y + 1u) * DN_TILE + lid.x + 1u;
         var cur: vec4<f32>;
         if dn_tile_ok[tc] != 0u {
             cur = dn_tile[s][tc];

@@ -86,10 +86,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let q1 = base + vec2<i32>(1, 0);
     let q2 = base + vec2<i32>(0, 1);
     let q3 = base + vec2<i32>(1, 1);
-    let j0 = dn_index(dn_clamped(q0));
-    let j1 = dn_index(dn_clamped(q1));
-    let j2 = dn_index(dn_clamped(q2));
-    let j3 = dn_index(dn_clamped(q3));
+    let j0 = dn_clamped_index(q0);
+    let j1 = dn_clamped_index(q1);
+    let j2 = dn_clamped_index(q2);
+    let j3 = dn_clamped_index(q3);
     let g0 = guide[j0];
     let g1 = guide[j1];
     let g2 = guide[j2];
@@ -120,9 +120,4 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     } else {
         dn_write_output(0u, texel, dn_value(src0[dn_index(best)]));
     }
-}
-
-// Grid pixel `q` clamped into the grid.
-fn dn_clamped(q: vec2<i32>) -> vec2<u32> {
-    return vec2<u32>(clamp(q, vec2<i32>(0), vec2<i32>(dp.grid.xy) - vec2<i32>(1)));
 }
