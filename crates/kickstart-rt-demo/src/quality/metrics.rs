@@ -82,8 +82,8 @@ fn check_sizes(a: &Srgb8, b: &Srgb8) -> Result<(), String> {
     Ok(())
 }
 
-/// PSNR in dB (peak 255) over the RGB channels; `f64::INFINITY` for identical images.
-pub fn psnr(test: &Srgb8, reference: &Srgb8) -> Result<f64, String> {
+/// Mean squared error over the RGB channels, in 8-bit levels squared.
+pub fn mse(test: &Srgb8, reference: &Srgb8) -> Result<f64, String> {
     check_sizes(test, reference)?;
     let mut sum = 0.0f64;
     for (a, b) in test.pixels.iter().zip(&reference.pixels) {
@@ -92,11 +92,26 @@ pub fn psnr(test: &Srgb8, reference: &Srgb8) -> Result<f64, String> {
             sum += d * d;
         }
     }
-    let mse = sum / (test.pixels.len() * 3) as f64;
-    if mse == 0.0 {
-        return Ok(f64::INFINITY);
+    Ok(sum / (test.pixels.len() * 3) as f64)
+}
+
+/// The PSNR in dB (peak 255) of a mean squared error `mse` in 8-bit levels squared;
+/// `f64::INFINITY` for 0.
+pub fn psnr_of_mse(mse: f64) -> f64 {
+    if mse <= 0.0 {
+        return f64::INFINITY;
     }
-    Ok(10.0 * (255.0 * 255.0 / mse).log10())
+    10.0 * (255.0 * 255.0 / mse).log10()
+}
+
+/// The mean squared error (8-bit levels squared) of a PSNR `psnr` in dB (peak 255).
+pub fn mse_of_psnr(psnr: f64) -> f64 {
+    255.0 * 255.0 / 10f64.powf(psnr / 10.0)
+}
+
+/// PSNR in dB (peak 255) over the RGB channels; `f64::INFINITY` for identical images.
+pub fn psnr(test: &Srgb8, reference: &Srgb8) -> Result<f64, String> {
+    Ok(psnr_of_mse(mse(test, reference)?))
 }
 
 /// A float image of one channel.

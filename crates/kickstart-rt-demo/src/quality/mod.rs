@@ -3,6 +3,7 @@
 //! then the flicker of a still camera.
 
 pub mod accumulate;
+pub mod ceiling;
 pub mod linear;
 pub mod metrics;
 pub mod report;

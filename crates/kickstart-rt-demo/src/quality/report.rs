@@ -1,7 +1,7 @@
 //! The text report of `ksrt quality`: the per-frame table, the summary after it and the still
 //! camera's flicker.
 
-use super::run::{FrameScores, Score, SignalScores};
+use super::run::{FrameScores, ReferenceNoise, Score, SignalScores};
 use super::still::Stability;
 use super::summary::{Summary, SUMMARY_FROM_FRAME};
 
@@ -95,8 +95,25 @@ pub fn summary_lines(summary: &Summary) -> Vec<String> {
             mean_label,
             scores(&s.mean.noisy, &s.mean.denoised)
         ));
+        if let Some(noise) = &s.mean.reference_noise {
+            lines.push(format!("  {:<8} {:<12} {}", "", "", reference_noise(noise)));
+        }
     }
     lines
+}
+
+/// The reference-noise line under a signal's mean: the ceiling its references leave any image,
+/// and the denoised trace's score with their noise taken out.
+fn reference_noise(noise: &ReferenceNoise) -> String {
+    let converged = match noise.denoised_against_converged {
+        Some(p) => format!("{p:.2} dB"),
+        None => "at the ceiling".into(),
+    };
+    format!(
+        "the references' own noise: a noise-free image scores {:.2} dB; the denoised, \
+         against the converged signal: {converged}",
+        noise.ceiling
+    )
 }
 
 /// The flicker's lines: denoised and reference flicker and their ratio per signal.
@@ -143,6 +160,7 @@ mod tests {
                 signal: "diffuse",
                 noisy: score(21.5, Some(0.98765)),
                 denoised: score(30.25, None),
+                reference_noise: None,
             }],
         };
         let header = table_header(&frame.signals);
@@ -161,6 +179,10 @@ mod tests {
         let pair = NoisyDenoised {
             noisy: score(20.0, Some(1.0)),
             denoised: score(25.0, Some(0.5)),
+            reference_noise: Some(ReferenceNoise {
+                ceiling: 30.5,
+                denoised_against_converged: Some(43.25),
+            }),
         };
         let mut summary = Summary {
             last_frame: 31,
@@ -174,6 +196,11 @@ mod tests {
         let lines = summary_lines(&summary);
         assert!(lines[0].contains("frames 8..=31"), "{}", lines[0]);
         assert!(lines[2].contains("last (31)") && lines[3].contains("mean 8..=31"));
+        assert!(
+            lines[4].contains("scores 30.50 dB") && lines[4].ends_with("signal: 43.25 dB"),
+            "{}",
+            lines[4]
+        );
         summary.mean_frames = [0, 5];
         summary.last_frame = 5;
         let lines = summary_lines(&summary);

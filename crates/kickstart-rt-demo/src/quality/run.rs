@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 use glam::{Quat, Vec3};
 
 use super::accumulate::Accumulator;
+use super::ceiling;
 use super::linear;
 use super::metrics::{self, Srgb8};
 pub use super::signal::Signal;
@@ -102,6 +103,20 @@ pub struct SignalScores {
     pub noisy: Score,
     /// The denoised trace against the reference.
     pub denoised: Score,
+    /// How much of those scores is the reference's own noise (`None` for a reference of one
+    /// sample).
+    pub reference_noise: Option<ReferenceNoise>,
+}
+
+/// How much of a score is its reference's own noise ([`super::ceiling`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ReferenceNoise {
+    /// The PSNR (dB) a noise-free image scores against the reference: no denoiser can score
+    /// higher.
+    pub ceiling: f64,
+    /// The denoised trace's PSNR (dB) against the converged signal, the reference's noise taken
+    /// out; `None` where the denoised error is within the estimate of the reference's.
+    pub denoised_against_converged: Option<f64>,
 }
 
 /// One pan frame's scores.
@@ -145,6 +160,8 @@ pub(super) struct Triple {
     pub(super) noisy: Vec<[f32; 3]>,
     pub(super) denoised: Vec<[f32; 3]>,
     pub(super) reference: Vec<[f32; 3]>,
+    /// The mean of the reference's first half of samples (empty for a reference of one sample).
+    pub(super) reference_first_half: Vec<[f32; 3]>,
 }
 
 // A `String` error, not `AnyResult`: it crosses threads. The energy ratio is filled in after.
@@ -175,7 +192,7 @@ fn write_strip(path: &Path, images: [&Srgb8; 3]) -> AnyResult<()> {
 /// Scores every signal of one frame (FLIP is the costly part: one thread per image), the energy
 /// ratios over the pixels `mask` keeps, and writes the strips when `strips` is a folder.
 fn score_frame(
-    frame: u32,
+    (frame, reference_samples): (u32, u32),
     size: (u32, u32),
     triples: &[Triple],
     mask: &[bool],
@@ -212,10 +229,12 @@ fn score_frame(
         noisy.energy_ratio = linear::energy_ratio(&t.signal.scalars(&t.noisy), &reference, mask);
         denoised.energy_ratio =
             linear::energy_ratio(&t.signal.scalars(&t.denoised), &reference, mask);
+        let reference_noise = reference_noise(t, size, reference_samples, denoised.psnr)?;
         signals.push(SignalScores {
             signal: t.signal.name(),
             noisy,
             denoised,
+            reference_noise,
         });
         if let Some(dir) = strips {
             let path = dir.join(format!("{}-{frame:03}.png", t.signal.name()));
@@ -223,6 +242,33 @@ fn score_frame(
         }
     }
     Ok(FrameScores { frame, signals })
+}
+
+/// How much of `t`'s scores is its reference's own noise, the reference of `samples` samples
+/// and the denoised trace scoring `denoised_psnr` against it.
+fn reference_noise(
+    t: &Triple,
+    size: (u32, u32),
+    samples: u32,
+    denoised_psnr: f64,
+) -> AnyResult<Option<ReferenceNoise>> {
+    let first = ceiling::FirstSamples {
+        mean: &t.reference_first_half,
+        count: first_half(samples),
+    };
+    let Some(mse) = ceiling::reference_noise_mse(t.signal, size, &t.reference, &first, samples)?
+    else {
+        return Ok(None);
+    };
+    Ok(Some(ReferenceNoise {
+        ceiling: ceiling::ceiling(mse),
+        denoised_against_converged: ceiling::against_converged(denoised_psnr, mse),
+    }))
+}
+
+/// How many of a reference's `samples` make its first half ([`ceiling`]).
+fn first_half(samples: u32) -> u32 {
+    samples / 2
 }
 
 /// `signal`'s denoised output of the last frame, as linear RGB.
@@ -251,6 +297,7 @@ fn read_measured(
         noisy: raw.iter().map(|&t| signal.raw_texel(t)).collect(),
         denoised: read_denoised(device, queue, r, signal)?,
         reference: Vec::new(),
+        reference_first_half: Vec::new(),
     })
 }
 
@@ -328,24 +375,31 @@ pub fn run(
             .collect::<AnyResult<Vec<Triple>>>()?;
         let mask = surface_mask(device, queue, &r)?;
         // The reference: the same traces on this frame's G-buffer, white noise per sample.
-        accumulate_reference(
+        let first_halves = accumulate_reference(
             device,
             queue,
             &mut r,
             (f, opts.reference_samples),
-            sums,
+            (sums, true),
             &bar,
         )?;
-        for ((signal, acc), t) in sums.iter().zip(triples.iter_mut()) {
+        for (((signal, acc), t), half) in sums.iter().zip(triples.iter_mut()).zip(first_halves) {
             debug_assert_eq!(*signal, t.signal);
             t.reference = acc.mean(device, queue)?;
+            t.reference_first_half = half;
         }
         let strips = match (opts.images, &opts.out) {
             (Images::All, Some(dir)) => Some(dir.as_path()),
             (Images::Last, Some(dir)) if f + 1 == opts.frames => Some(dir.as_path()),
             _ => None,
         };
-        let scores = score_frame(f, opts.size, &triples, &mask, strips)?;
+        let scores = score_frame(
+            (f, opts.reference_samples),
+            opts.size,
+            &triples,
+            &mask,
+            strips,
+        )?;
         bar.suspend(|| on_frame(&scores));
         all.push(scores);
         last = Some((cam, triples, mask));
@@ -401,19 +455,23 @@ fn warm_up(
 
 /// Traces reference `f`'s `samples` samples on the last frame's G-buffer into `sums` (cleared
 /// first), submitting every [`SAMPLES_PER_SUBMIT`], and counts them on `bar`. Each reference `f`
-/// draws its own samples' noise indices, so references of different `f` are independent.
+/// draws its own samples' noise indices, so references of different `f` are independent. With
+/// `halves`, returns per signal of `sums` the mean of the first half of the samples
+/// ([`first_half`]; empty for a reference of one sample), else nothing.
 pub(super) fn accumulate_reference(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     r: &mut Renderer,
     (f, samples): (u32, u32),
-    sums: &[(Signal, Accumulator)],
+    (sums, halves): (&[(Signal, Accumulator)], bool),
     bar: &indicatif::ProgressBar,
-) -> AnyResult<()> {
+) -> AnyResult<Vec<Vec<[f32; 3]>>> {
     let mut encoder = device.create_command_encoder(&Default::default());
     for (_, acc) in sums {
         acc.clear(&mut encoder);
     }
+    let half = if halves { first_half(samples) } else { 0 };
+    let mut first_halves = vec![Vec::new(); if halves { sums.len() } else { 0 }];
     let mut pending = Vec::new();
     for k in 0..samples {
         let sample = 0x8000_0000u32
@@ -423,15 +481,21 @@ pub(super) fn accumulate_reference(
         for (_, acc) in sums {
             acc.add(&mut encoder);
         }
-        if (k + 1) % SAMPLES_PER_SUBMIT == 0 || k + 1 == samples {
+        let at_half = half > 0 && k + 1 == half;
+        if (k + 1) % SAMPLES_PER_SUBMIT == 0 || k + 1 == samples || at_half {
             queue.submit([encoder.finish()]);
             r.finish(device, &pending, false)?;
             pending.clear();
             encoder = device.create_command_encoder(&Default::default());
             bar.set_position(u64::from(f) * u64::from(samples) + u64::from(k + 1));
         }
+        if at_half {
+            for ((_, acc), mean) in sums.iter().zip(first_halves.iter_mut()) {
+                *mean = acc.mean(device, queue)?;
+            }
+        }
     }
-    Ok(())
+    Ok(first_halves)
 }
 
 #[cfg(test)]

@@ -99,7 +99,7 @@ pub(super) fn hold(
         queue,
         r,
         (opts.frames, opts.reference_samples),
-        sums,
+        (sums, false),
         bar,
     )?;
     let both = and(&previous_mask, from.mask);

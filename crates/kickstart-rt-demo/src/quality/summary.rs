@@ -4,7 +4,7 @@
 
 use std::ops::RangeInclusive;
 
-use super::run::{FrameScores, Score};
+use super::run::{FrameScores, ReferenceNoise, Score};
 
 /// The first frame the summary's mean covers, when the pan is longer than this many frames.
 pub const SUMMARY_FROM_FRAME: u32 = 8;
@@ -41,6 +41,18 @@ pub fn mean_score(scores: &[Score]) -> Option<Score> {
     })
 }
 
+/// The mean of `noises`' ceilings (`None` for none) and of their defined denoised scores
+/// against the converged signal.
+pub fn mean_reference_noise(noises: &[ReferenceNoise]) -> Option<ReferenceNoise> {
+    let ceiling = mean_of_defined(noises.iter().map(|n| Some(n.ceiling)))?;
+    Some(ReferenceNoise {
+        ceiling,
+        denoised_against_converged: mean_of_defined(
+            noises.iter().map(|n| n.denoised_against_converged),
+        ),
+    })
+}
+
 /// A signal's noisy and denoised scores.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct NoisyDenoised {
@@ -48,6 +60,9 @@ pub struct NoisyDenoised {
     pub noisy: Score,
     /// The denoised trace against the reference.
     pub denoised: Score,
+    /// How much of those scores is the reference's own noise (means: over the frames that have
+    /// an estimate).
+    pub reference_noise: Option<ReferenceNoise>,
 }
 
 /// One signal's summary.
@@ -93,13 +108,23 @@ pub fn summarize(frames: &[FrameScores]) -> Option<Summary> {
         ) else {
             continue;
         };
+        let noises: Vec<ReferenceNoise> = in_range
+            .iter()
+            .flat_map(|f| f.signals.iter().filter(|x| x.signal == s.signal))
+            .filter_map(|x| x.reference_noise)
+            .collect();
         signals.push(SignalSummary {
             signal: s.signal,
             last: NoisyDenoised {
                 noisy: s.noisy,
                 denoised: s.denoised,
+                reference_noise: s.reference_noise,
             },
-            mean: NoisyDenoised { noisy, denoised },
+            mean: NoisyDenoised {
+                noisy,
+                denoised,
+                reference_noise: mean_reference_noise(&noises),
+            },
         });
     }
     Some(Summary {
@@ -159,6 +184,11 @@ mod tests {
                         signal: "ao",
                         noisy: score(v, v / 100.0, Some(v / 10.0)),
                         denoised: score(2.0 * v, v / 50.0, Some(v / 5.0)),
+                        // Ceiling 40 + f; against the converged signal only on even frames.
+                        reference_noise: Some(ReferenceNoise {
+                            ceiling: 40.0 + v,
+                            denoised_against_converged: (f % 2 == 0).then_some(3.0 * v),
+                        }),
                     }],
                 }
             })
@@ -179,6 +209,14 @@ mod tests {
         assert!((ao.mean.denoised.psnr - 19.0).abs() < 1e-12);
         assert!((ao.mean.noisy.flip - 0.095).abs() < 1e-12);
         assert!((ao.mean.denoised.energy_ratio.unwrap() - 1.9).abs() < 1e-12);
+        let last_noise = ao.last.reference_noise.unwrap();
+        assert_eq!(last_noise.ceiling, 51.0);
+        assert_eq!(last_noise.denoised_against_converged, None);
+        // Ceilings of frames 8..=11, the converged scores of frames 8 and 10 (24, 30).
+        let mean_noise = ao.mean.reference_noise.unwrap();
+        assert!((mean_noise.ceiling - 49.5).abs() < 1e-12);
+        assert_eq!(mean_noise.denoised_against_converged, Some(27.0));
+        assert_eq!(mean_reference_noise(&[]), None);
     }
 
     #[test]
