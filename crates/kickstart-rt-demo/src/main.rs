@@ -20,6 +20,7 @@ mod raster;
 mod readback;
 mod render;
 mod renderer;
+mod rng;
 mod scene;
 mod sdk_glue;
 mod shaders;

@@ -401,7 +401,8 @@ pub fn print(r: &PeerReport) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::rays::{primary_rays, rays, secondary_rays, Rng, Surface};
+    use crate::bench::rays::{primary_rays, rays, secondary_rays, Surface};
+    use crate::rng::Rng;
     use crate::scene;
     use glam::Vec3;
 

@@ -12,6 +12,7 @@ use super::harness::Bench;
 use super::report::{OracleCheck, RayBatch, SceneReport, WorkPerRay};
 use super::Stats;
 use crate::gpu::UploadedMesh;
+use crate::rng::Rng;
 use crate::scene::{Camera, Scene};
 use crate::sdk_glue::{GpuHit, GpuRay, Query};
 use crate::AnyResult;
@@ -81,33 +82,6 @@ fn subgroup_busy(groups: &[Vec<u64>], lanes: usize) -> f64 {
         1.0
     } else {
         work as f64 / issued as f64
-    }
-}
-
-/// A small deterministic generator (SplitMix64): benchmark inputs are the same on every run.
-pub(super) struct Rng(pub(super) u64);
-
-impl Rng {
-    pub(super) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub(super) fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// A cosine-weighted direction about the unit vector `n`.
-    pub(super) fn cosine(&mut self, n: Vec3) -> Vec3 {
-        let (t, b) = n.any_orthonormal_pair();
-        let (r1, r2) = (self.f32(), self.f32());
-        let phi = std::f32::consts::TAU * r1;
-        let r = r2.sqrt();
-        (t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - r2).max(0.0).sqrt()).normalize()
     }
 }
 

@@ -7,11 +7,12 @@ use glam::{Affine3A, Quat, Vec3};
 use kickstart_rt as ksrt;
 
 use super::harness::Bench;
-use super::rays::{rays, Rng};
+use super::rays::rays;
 use super::report::{SahReport, SceneReport, TlasReport, WorkPerRay};
 use super::tasks::trace_tasks;
 use super::{attempt, backends, cache, extras, peer, tree_work, Stats};
 use crate::gpu;
+use crate::rng::Rng;
 use crate::scene::{Camera, Scene};
 use crate::sdk_glue::{self as glue, GpuRay, Query, Tlas};
 use crate::AnyResult;

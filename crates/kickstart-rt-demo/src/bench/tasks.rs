@@ -5,9 +5,10 @@ use kickstart_rt as ksrt;
 use wgpu::util::DeviceExt;
 
 use super::harness::Bench;
-use super::rays::{primary_rays, surface, Rng};
+use super::rays::{primary_rays, surface};
 use super::report::{SceneReport, TraceTaskTime};
 use crate::gpu::UploadedMesh;
+use crate::rng::Rng;
 use crate::scene::{Camera, Scene};
 use crate::sdk_glue::Query;
 use crate::AnyResult;

@@ -87,20 +87,9 @@ pub fn against_converged(measured: f64, reference_mse: f64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::Rng;
 
     const SIZE: (u32, u32) = (96, 96);
-
-    /// A small deterministic generator (xorshift), uniform in [0, 1).
-    struct Uniform(u64);
-
-    impl Uniform {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
 
     /// AO-like grey values in 0.2..0.8 (encoded linearly to 8 bits, so the error is analytic).
     fn converged() -> Vec<[f32; 3]> {
@@ -121,13 +110,13 @@ mod tests {
         amplitude: f32,
         seed: u64,
     ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-        let mut rng = Uniform(seed);
+        let mut rng = Rng(seed);
         let mut head = Vec::new();
         let mut all = Vec::new();
         for t in truth {
             let (mut sum, mut head_sum) = (0.0f32, 0.0f32);
             for k in 0..samples {
-                sum += t[0] + amplitude * (2.0 * rng.next() - 1.0);
+                sum += t[0] + amplitude * (2.0 * rng.f32() - 1.0);
                 if k + 1 == first {
                     head_sum = sum;
                 }

@@ -6,8 +6,9 @@
 
 use glam::{Affine3A, Vec3};
 
-use super::town::{bumpy_box, Rng};
+use super::town::bumpy_box;
 use super::{Instance, Mesh, Scene};
+use crate::rng::Rng;
 
 /// Characters.
 pub const CHARACTERS: usize = 100;

@@ -7,6 +7,7 @@
 use glam::{Affine3A, Vec3};
 
 use super::{Instance, Mesh, Scene};
+use crate::rng::Rng;
 
 /// Buildings.
 pub const BUILDINGS: usize = 1_000;
@@ -16,24 +17,6 @@ const FACE_QUADS: u32 = 13;
 const BLOCKS_X: usize = 40;
 /// Distance between block centres, metres.
 const BLOCK: f32 = 30.0;
-
-/// A small deterministic generator (SplitMix64): the town is the same on every run.
-pub(super) struct Rng(pub(super) u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [lo, hi).
-    pub(super) fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-}
 
 /// A unit box [-0.5, 0.5]³ whose faces are `n` × `n` grids of quads (12 n² triangles), every
 /// vertex moved along its face's normal by up to `bump` (a face's border vertices are shared

@@ -19,11 +19,12 @@ use kickstart_rt as ksrt;
 use serde::{Deserialize, Serialize};
 
 use crate::bench::harness::Bench;
-use crate::bench::rays::{batch, primary_rays, secondary_rays, surface, Rng};
+use crate::bench::rays::{batch, primary_rays, secondary_rays, surface};
 use crate::bench::scenes::bench_tlas;
 use crate::bench::{attempt, issue_camera, Stats};
 use crate::gpu::{self, UploadedMesh};
 use crate::renderer::{Renderer, RendererOptions};
+use crate::rng::Rng;
 use crate::scene::{Camera, Instance, Scene};
 use crate::sdk_glue::{self as glue, GpuRay, Query};
 use crate::AnyResult;
