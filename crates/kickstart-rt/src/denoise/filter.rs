@@ -226,22 +226,15 @@ enum Pass {
 }
 
 /// The WGSL of every pipeline a context of `signal_type` can use, each once (label, source,
-/// pass): the set's temporal and à-trous passes, and per à-trous chain its iterations, its last
-/// iteration and its upsample pass for every writable output format.
+/// pass): the set's temporal pass, and per à-trous chain its iterations, its last iteration and
+/// its upsample pass for every writable output format.
 fn variants(signal_type: SignalType) -> Vec<(String, String, Pass)> {
     let set = SignalSet::of(signal_type);
-    let mut out = vec![
-        (
-            format!("temporal {}", set.label()),
-            temporal_wgsl(set),
-            Pass::Temporal,
-        ),
-        (
-            format!("a-trous {}", set.label()),
-            atrous_wgsl(set, None),
-            Pass::Atrous,
-        ),
-    ];
+    let mut out = vec![(
+        format!("temporal {}", set.label()),
+        temporal_wgsl(set),
+        Pass::Temporal,
+    )];
     for (_, chain) in set.atrous_chains() {
         out.push((
             format!("a-trous {}", chain.label()),
@@ -290,10 +283,13 @@ fn upsample_wgsl(set: SignalSet, format: wgpu::TextureFormat) -> String {
     )
 }
 
-/// The pipelines of one signal set.
+/// The pipelines of one signal set, each created when first used: a two-signal set runs only its
+/// temporal pass (its à-trous chains are single-signal sets), and a single-signal set that is a
+/// chain of a two-signal one runs only its à-trous passes.
+#[derive(Default)]
 struct SetPipelines {
-    temporal: wgpu::ComputePipeline,
-    atrous: wgpu::ComputePipeline,
+    temporal: Option<wgpu::ComputePipeline>,
+    atrous: Option<wgpu::ComputePipeline>,
     /// The last à-trous iteration per output format: the output texture's layout (group 2) and
     /// the pipeline.
     last: Vec<(wgpu::TextureFormat, ReflectedLayout, wgpu::ComputePipeline)>,
@@ -319,33 +315,53 @@ struct Pipelines {
 }
 
 impl Pipelines {
-    /// The temporal and à-trous pipelines of `set`.
-    fn set(&mut self, device: &wgpu::Device, shared: &Shared, set: SignalSet) -> &mut SetPipelines {
-        self.sets.entry(set).or_insert_with(|| SetPipelines {
-            temporal: compute_pipeline_with_layouts(
-                device,
-                "kickstart-rt denoise temporal",
-                &temporal_wgsl(set),
-                "main",
-                &[
-                    shared.gbuffer.layout(),
-                    shared.temporal_inputs.layout(),
-                    shared.temporal_buffers.layout(),
-                ],
-            ),
-            atrous: compute_pipeline_with_layouts(
-                device,
-                "kickstart-rt denoise a-trous",
-                &atrous_wgsl(set, None),
-                "main",
-                &[
-                    shared.atrous_params.layout(),
-                    shared.atrous_buffers.layout(),
-                ],
-            ),
-            last: Vec::new(),
-            upsample: Vec::new(),
-        })
+    /// The temporal pipeline of `set`.
+    fn temporal(
+        &mut self,
+        device: &wgpu::Device,
+        shared: &Shared,
+        set: SignalSet,
+    ) -> wgpu::ComputePipeline {
+        let sp = self.sets.entry(set).or_default();
+        sp.temporal
+            .get_or_insert_with(|| {
+                compute_pipeline_with_layouts(
+                    device,
+                    "kickstart-rt denoise temporal",
+                    &temporal_wgsl(set),
+                    "main",
+                    &[
+                        shared.gbuffer.layout(),
+                        shared.temporal_inputs.layout(),
+                        shared.temporal_buffers.layout(),
+                    ],
+                )
+            })
+            .clone()
+    }
+
+    /// The à-trous iteration (all but the last) of the one-signal chain `set`.
+    fn atrous(
+        &mut self,
+        device: &wgpu::Device,
+        shared: &Shared,
+        set: SignalSet,
+    ) -> wgpu::ComputePipeline {
+        let sp = self.sets.entry(set).or_default();
+        sp.atrous
+            .get_or_insert_with(|| {
+                compute_pipeline_with_layouts(
+                    device,
+                    "kickstart-rt denoise a-trous",
+                    &atrous_wgsl(set, None),
+                    "main",
+                    &[
+                        shared.atrous_params.layout(),
+                        shared.atrous_buffers.layout(),
+                    ],
+                )
+            })
+            .clone()
     }
 
     /// The last à-trous iteration of the one-signal chain `set` writing a texture of `format`
@@ -358,7 +374,7 @@ impl Pipelines {
         format: wgpu::TextureFormat,
     ) -> Option<(ReflectedLayout, wgpu::ComputePipeline)> {
         wgsl_format(format)?;
-        let sp = self.set(device, shared, set);
+        let sp = self.sets.entry(set).or_default();
         if let Some((_, l, p)) = sp.last.iter().find(|(f, _, _)| *f == format) {
             return Some((l.clone(), p.clone()));
         }
@@ -392,7 +408,7 @@ impl Pipelines {
         format: wgpu::TextureFormat,
         out_layout: &ReflectedLayout,
     ) -> wgpu::ComputePipeline {
-        let sp = self.set(device, shared, set);
+        let sp = self.sets.entry(set).or_default();
         if let Some((_, p)) = sp.upsample.iter().find(|(f, _)| *f == format) {
             return p.clone();
         }
@@ -425,7 +441,7 @@ impl Pipelines {
             let format = job.outputs[s].texture().format();
             let (out_layout, last) = self.last(device, shared, chain_set, format)?;
             let upsample = self.upsample(device, shared, chain_set, format, &out_layout);
-            let atrous = self.set(device, shared, chain_set).atrous.clone();
+            let atrous = self.atrous(device, shared, chain_set);
             chains.push(Chain {
                 signal: s,
                 atrous,
@@ -485,8 +501,9 @@ impl Filter {
     pub fn prepare(&mut self, device: &wgpu::Device, shared: &Shared) {
         for &signal_type in self.signal_types {
             let set = SignalSet::of(signal_type);
-            let _ = self.pipelines.set(device, shared, set);
+            let _ = self.pipelines.temporal(device, shared, set);
             for (_, chain) in set.atrous_chains() {
+                let _ = self.pipelines.atrous(device, shared, chain);
                 for f in crate::WRITABLE_OUTPUT_FORMATS {
                     if let Some((out_layout, _)) = self.pipelines.last(device, shared, chain, f) {
                         let _ = self
@@ -506,7 +523,7 @@ impl Filter {
         };
         let device = rec.device;
         let set = SignalSet::of(h.input.signal_type);
-        let temporal = self.pipelines.set(device, shared, set).temporal.clone();
+        let temporal = self.pipelines.temporal(device, shared, set);
         let Some(chains) = self.pipelines.chains(device, shared, set, job) else {
             return; // unreachable: validation admits writable formats only
         };

@@ -113,9 +113,10 @@ fn every_denoiser_variant_validates_and_matches_the_rust_layouts() {
             }
         }
     }
-    // Per signal set: temporal, à-trous; per single-signal chain: 4 last iterations and 4
-    // upsample passes (the SpecularAndDiffuse chains are the Specular and Diffuse sets' own).
-    assert_eq!(seen.len(), 6 * 2 + 5 * 4 * 2);
+    // Per signal set its temporal pass; per single-signal chain an à-trous iteration, 4 last
+    // iterations and 4 upsample passes (the SpecularAndDiffuse chains are the Specular and
+    // Diffuse sets' own, so no two-signal à-trous exists).
+    assert_eq!(seen.len(), 6 + 5 * (1 + 4 * 2));
     // Formats without a WGSL name get no pipeline.
     assert_eq!(wgsl_format(wgpu::TextureFormat::Rgba8Unorm), None);
 }
