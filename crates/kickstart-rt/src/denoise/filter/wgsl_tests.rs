@@ -1,5 +1,6 @@
 //! Every pass variant the denoisers can create (`Filter::prepare`, `Pipelines::chains`),
-//! validated with naga without a device, and the uniforms and record strides against the WGSL.
+//! validated with naga without a device, and the uniforms and record strides against the WGSL;
+//! and which of them `Filter::prepare` creates (on the test device).
 //! The denoising method picks no variant: iterations, history length and radius are uniforms
 //! or loop counts on the CPU, so Fast and HighQuality share every pipeline.
 
@@ -119,4 +120,48 @@ fn every_denoiser_variant_validates_and_matches_the_rust_layouts() {
     assert_eq!(seen.len(), 6 + 5 * (1 + 4 * 2));
     // Formats without a WGSL name get no pipeline.
     assert_eq!(wgsl_format(wgpu::TextureFormat::Rgba8Unorm), None);
+}
+
+/// What `prepare` creates per signal set: a two-signal set only its temporal pass, its chains
+/// only their à-trous passes (a SpecularAndDiffuse context runs no single-signal temporal pass
+/// and no two-signal à-trous); a single-signal set both, being its own chain.
+#[test]
+fn prepare_creates_only_the_pipelines_a_context_dispatches() {
+    let g = crate::gpu::testing::gpu();
+    let shared = Shared::new(&g.device);
+    let mut radiance = super::super::radiance::new();
+    radiance.prepare(&g.device, &shared);
+    let sets = &radiance.pipelines.sets;
+    let both = SignalSet::of(SignalType::SpecularAndDiffuse);
+    let two = &sets[&both];
+    assert!(two.temporal.is_some() && two.atrous.is_none());
+    assert!(two.last.is_empty() && two.upsample.is_empty());
+    // The Specular and Diffuse sets are the chains of both and contexts of their own.
+    for st in [SignalType::Specular, SignalType::Diffuse] {
+        let one = &sets[&SignalSet::of(st)];
+        assert!(one.temporal.is_some() && one.atrous.is_some(), "{st:?}");
+        assert_eq!(
+            one.last.len(),
+            crate::WRITABLE_OUTPUT_FORMATS.len(),
+            "{st:?}"
+        );
+        assert_eq!(
+            one.upsample.len(),
+            crate::WRITABLE_OUTPUT_FORMATS.len(),
+            "{st:?}"
+        );
+    }
+    assert_eq!(sets.len(), 3);
+
+    // A denoiser serving SpecularAndDiffuse alone: its chains' sets hold no temporal pass.
+    let mut alone = Filter::new(&[SignalType::SpecularAndDiffuse]);
+    alone.prepare(&g.device, &shared);
+    for (_, chain) in both.atrous_chains() {
+        let p = &alone.pipelines.sets[&chain];
+        assert!(
+            p.temporal.is_none() && p.atrous.is_some(),
+            "{}",
+            chain.label()
+        );
+    }
 }
