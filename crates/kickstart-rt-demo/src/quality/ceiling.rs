@@ -16,7 +16,11 @@
 //! and the denoised image's PSNR **against the converged signal**, the PSNR of the difference.
 //! Both are taken on the 8-bit images the PSNR compares: at a converged reference's small noise
 //! the tone curve is close to linear over the noise, so the halves' difference scales as the
-//! linear one does.
+//! linear one does. Where the noise is large the curve's bend also biases the tone-mapped
+//! reference (a mean of noisy samples maps darker than the converged value), which the halves'
+//! difference does not see: then the ceiling errs high and the score against the converged
+//! signal errs low (the Cornell box's specular at 256 spp: 37.2 dB, against 40.0 dB from
+//! 2048-spp references).
 
 use super::metrics;
 use super::signal::Signal;
