@@ -10,11 +10,14 @@
 //!    per pixel, and their denoisers); the pan's first frame drops the denoisers' history, so the
 //!    figures show them converging.
 //! 3. Its reference: the same trace tasks on the same G-buffer, `reference_samples` times with
-//!    white noise, averaged on the GPU.
+//!    white noise, averaged on the GPU; the mean of the first half of them is kept too, for the
+//!    reference's own noise ([`super::ceiling`]).
 //! 4. Noisy, denoised and reference are tone mapped to 8-bit sRGB ([`metrics::tone_map`]:
 //!    exposure [`metrics::EXPOSURE`], Reinhard, sRGB; AO and shadow visibility map linearly to
 //!    0–255) and compared with PSNR and FLIP; each frame's noisy | denoised | reference strip is
-//!    written as PNG. The energy ratio compares their linear means ([`super::linear`]).
+//!    written as PNG. The energy ratio compares their linear means ([`super::linear`]). The two
+//!    halves of the reference give its own error, hence the score a noise-free image would get
+//!    (the ceiling) and the denoised trace's score against the converged signal.
 //! 5. After the pan, the summary ([`super::summary`]) and the still camera's flicker
 //!    ([`super::still`]).
 
@@ -111,8 +114,9 @@ pub struct SignalScores {
 /// How much of a score is its reference's own noise ([`super::ceiling`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ReferenceNoise {
-    /// The PSNR (dB) a noise-free image scores against the reference: no denoiser can score
-    /// higher.
+    /// The PSNR (dB) a noise-free image scores against the reference, which no denoiser can
+    /// exceed (an estimate from the reference's two halves; see [`super::ceiling`] for where it
+    /// errs).
     pub ceiling: f64,
     /// The denoised trace's PSNR (dB) against the converged signal, the reference's noise taken
     /// out; `None` where the denoised error is within the estimate of the reference's.
