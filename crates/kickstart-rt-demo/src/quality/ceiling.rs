@@ -135,24 +135,29 @@ mod tests {
         Signal::Ao.encode(SIZE.0, SIZE.1, v)
     }
 
+    /// The AO reference error estimated from `all` (mean of `samples`) and `head` (mean of the
+    /// first `count`).
+    fn estimate(
+        head: &[[f32; 3]],
+        count: u32,
+        all: &[[f32; 3]],
+        samples: u32,
+    ) -> Result<Option<f64>, String> {
+        let first = FirstSamples { mean: head, count };
+        reference_noise_mse(Signal::Ao, SIZE, all, &first, samples)
+    }
+
     #[test]
     fn estimates_the_reference_error_from_halves_equal_or_not() {
         let truth = converged();
         for (samples, first) in [(64, 32), (64, 21), (16, 8)] {
             let (head, all) = reference(&truth, samples, first, 0.3, 7);
             let actual = metrics::mse(&encode(&all), &encode(&truth)).unwrap();
-            let first = FirstSamples {
-                mean: &head,
-                count: first,
-            };
-            let estimate = reference_noise_mse(Signal::Ao, SIZE, &all, &first, samples)
-                .unwrap()
-                .unwrap();
+            let estimate = estimate(&head, first, &all, samples).unwrap().unwrap();
             let ratio = estimate / actual;
             assert!(
                 (0.9..1.1).contains(&ratio),
-                "{samples} samples, first {}: estimated {estimate:.3}, actual {actual:.3}",
-                first.count
+                "{samples} samples, first {first}: estimated {estimate:.3}, actual {actual:.3}"
             );
         }
     }
@@ -161,13 +166,7 @@ mod tests {
     fn scores_an_image_against_the_converged_signal_through_a_noisy_reference() {
         let truth = converged();
         let (head, all) = reference(&truth, 16, 8, 0.4, 11);
-        let first = FirstSamples {
-            mean: &head,
-            count: 8,
-        };
-        let reference_mse = reference_noise_mse(Signal::Ao, SIZE, &all, &first, 16)
-            .unwrap()
-            .unwrap();
+        let reference_mse = estimate(&head, 8, &all, 16).unwrap().unwrap();
         // A "denoised" image with an error of its own, about as large as the reference's.
         let (_, denoised) = reference(&truth, 12, 12, 0.4, 23);
         let measured = metrics::psnr(&encode(&denoised), &encode(&all)).unwrap();
@@ -202,18 +201,7 @@ mod tests {
     fn a_reference_of_one_sample_or_mismatched_means_has_no_estimate() {
         let truth = converged();
         let (head, all) = reference(&truth, 1, 1, 0.3, 3);
-        let first = FirstSamples {
-            mean: &head,
-            count: 1,
-        };
-        assert_eq!(
-            reference_noise_mse(Signal::Ao, SIZE, &all, &first, 1),
-            Ok(None)
-        );
-        let short = FirstSamples {
-            mean: &head[..10],
-            count: 1,
-        };
-        assert!(reference_noise_mse(Signal::Ao, SIZE, &all, &short, 2).is_err());
+        assert_eq!(estimate(&head, 1, &all, 1), Ok(None));
+        assert!(estimate(&head[..10], 1, &all, 2).is_err());
     }
 }

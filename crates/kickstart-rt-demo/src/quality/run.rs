@@ -387,9 +387,11 @@ pub fn run(
             (sums, true),
             &bar,
         )?;
-        for (((signal, acc), t), half) in sums.iter().zip(triples.iter_mut()).zip(first_halves) {
+        for ((signal, acc), t) in sums.iter().zip(triples.iter_mut()) {
             debug_assert_eq!(*signal, t.signal);
             t.reference = acc.mean(device, queue)?;
+        }
+        for (t, half) in triples.iter_mut().zip(first_halves) {
             t.reference_first_half = half;
         }
         let strips = match (opts.images, &opts.out) {
@@ -461,7 +463,7 @@ fn warm_up(
 /// first), submitting every [`SAMPLES_PER_SUBMIT`], and counts them on `bar`. Each reference `f`
 /// draws its own samples' noise indices, so references of different `f` are independent. With
 /// `halves`, returns per signal of `sums` the mean of the first half of the samples
-/// ([`first_half`]; empty for a reference of one sample), else nothing.
+/// ([`first_half`]); nothing without, or for a reference of one sample.
 pub(super) fn accumulate_reference(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -475,7 +477,7 @@ pub(super) fn accumulate_reference(
         acc.clear(&mut encoder);
     }
     let half = if halves { first_half(samples) } else { 0 };
-    let mut first_halves = vec![Vec::new(); if halves { sums.len() } else { 0 }];
+    let mut first_halves = Vec::new();
     let mut pending = Vec::new();
     for k in 0..samples {
         let sample = 0x8000_0000u32
@@ -494,9 +496,10 @@ pub(super) fn accumulate_reference(
             bar.set_position(u64::from(f) * u64::from(samples) + u64::from(k + 1));
         }
         if at_half {
-            for ((_, acc), mean) in sums.iter().zip(first_halves.iter_mut()) {
-                *mean = acc.mean(device, queue)?;
-            }
+            first_halves = sums
+                .iter()
+                .map(|(_, acc)| acc.mean(device, queue))
+                .collect::<AnyResult<_>>()?;
         }
     }
     Ok(first_halves)
