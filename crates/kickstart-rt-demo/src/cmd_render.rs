@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use crate::debug_view::DebugView;
-use crate::{bench, defaults, frame, frames_in_flight, gpu, lit, render, scene, AnyResult};
+use crate::{defaults, frame, frames_in_flight, gpu, lit, render, scene, AnyResult};
 
 /// `ksrt render`'s options; `None`: the default for the adapter ([`crate::defaults`]).
 pub struct RenderArgs {
@@ -82,7 +82,7 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
     let (device, queue) = gpu::device(&adapter)?;
     let mut scene = load_scene(&args.scene, args.scenes.clone())?;
     // The benchmark cameras of the issue frame the dragon and the apartment interior well.
-    let camera = scene.prepare_view(camera.or_else(|| bench::issue_camera(&args.scene)));
+    let camera = scene.prepare_view(camera.or_else(|| crate::scene::benchmark_camera(&args.scene)));
     let views = match (args.no_reference, args.debug_view) {
         (true, _) => Vec::new(),
         (false, Some(v)) => vec![v],

@@ -230,16 +230,12 @@ mod tests {
         assert_eq!(img.get_pixel(2, 0).0, [0, 0, 0]);
     }
 
-    /// `ksrt render --debug-view` on the built-in scenes and every scene of the shared folder:
+    /// `ksrt render --debug-view` on the built-in scenes and every scene of the repository:
     /// each is registered, built on the GPU and traced, and shows geometry (hits with finite
     /// distances, at least two instance colours where it has several instances) and sky.
     #[test]
     fn debug_views_render_every_scene() {
-        let dir = std::env::var_os("KSRT_SCENES")
-            .map(std::path::PathBuf::from)
-            .unwrap_or_else(|| {
-                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes")
-            });
+        let dir = crate::scene::repository_scenes_dir();
         let adapter =
             crate::gpu::adapter().expect("GPU tests need an adapter (mesa-vulkan-drivers)");
         let (device, queue) = crate::gpu::device(&adapter).expect("device");
@@ -248,13 +244,12 @@ mod tests {
             "cornell",
             "cornell-obj",
             "cornell-gltf",
-            "bunny",
             "apartment",
-            "dragon",
+            "statue",
         ];
         for name in names {
             let scene = crate::scene::load(name, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
-            let camera = scene.camera_or_default(crate::bench::issue_camera(name));
+            let camera = scene.camera_or_default(crate::scene::benchmark_camera(name));
             let (w, h) = (48, 27);
             let t = trace(&device, &queue, &scene, &camera, DebugView::HitT, (w, h))
                 .unwrap_or_else(|e| panic!("{name}: {e}"));

@@ -11,11 +11,7 @@ use crate::scene::{self, Camera, Scene};
 use crate::testing;
 
 fn scenes_dir() -> PathBuf {
-    std::env::var_os("KSRT_SCENES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes")
-        })
+    scene::repository_scenes_dir()
 }
 
 fn render(
@@ -174,15 +170,15 @@ fn a_scene_without_camera_or_lights_is_framed_from_inside_and_lit() {
     };
     let lit_mean = mean(&r);
     let dark_mean = mean(&render(&sun_only, &camera, size, 2, &[]));
-    // The issue's camera, inside, where the sun alone left the room nearly black.
-    let inside = crate::bench::issue_camera("apartment").expect("issue camera");
-    let mut issue_lit = sun_only.clone();
-    issue_lit.light_the_view(&inside);
-    let issue_mean = mean(&render(&issue_lit, &inside, size, 2, &[]));
-    let issue_dark = mean(&render(&sun_only, &inside, size, 2, &[]));
+    // The benchmark camera, inside, where the sun alone left the room nearly black.
+    let inside = scene::benchmark_camera("apartment").expect("benchmark camera");
+    let mut inside_lit = sun_only.clone();
+    inside_lit.light_the_view(&inside);
+    let inside_mean = mean(&render(&inside_lit, &inside, size, 2, &[]));
+    let inside_dark = mean(&render(&sun_only, &inside, size, 2, &[]));
     for (what, lit, dark) in [
         ("default view", lit_mean, dark_mean),
-        ("issue camera", issue_mean, issue_dark),
+        ("benchmark camera", inside_mean, inside_dark),
     ] {
         assert!(
             lit > MIN_MEAN_DISPLAY && lit > 1.3 * dark,
@@ -191,11 +187,21 @@ fn a_scene_without_camera_or_lights_is_framed_from_inside_and_lit() {
     }
 }
 
-/// An object (the bunny: surfaces facing away from its centre) is framed from outside, looking
+/// An object (a sphere: surfaces facing away from its centre) is framed from outside, looking
 /// at it, and gets the light at the camera too.
 #[test]
 fn an_object_is_framed_from_outside() {
-    let mut scene = scene::load("bunny", &scenes_dir()).expect("bunny");
+    let (positions, indices) = scene::builtin::icosphere(3);
+    let mesh = scene::Mesh::new("sphere", positions, indices, glam::Vec3::ONE).expect("sphere");
+    let mut scene = Scene {
+        name: "sphere".into(),
+        meshes: vec![mesh],
+        instances: vec![scene::Instance {
+            mesh: 0,
+            transform: glam::Affine3A::from_translation(glam::Vec3::new(0.3, 1.0, -2.0)),
+        }],
+        ..Default::default()
+    };
     assert_eq!(scene.interior_camera(), None);
     let camera = scene.prepare_view(None);
     let (lo, hi) = scene.bounds();

@@ -394,25 +394,22 @@ fn perceptual_diff_passes_noise_and_fails_real_changes() {
     );
 }
 
-/// `ksrt render` completes on the built-in scenes and every scene of the shared folder (tiny
+/// `ksrt render` completes on the built-in scenes and every scene of the repository (tiny
 /// images, one frame): each writes a final image with geometry and sky in it and a finite,
 /// non-negative direct light.
 #[test]
 fn lit_render_completes_on_every_scene() {
-    let dir = std::env::var_os("KSRT_SCENES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes"));
+    let dir = crate::scene::repository_scenes_dir();
     for name in [
         "default",
         "cornell",
         "cornell-obj",
         "cornell-gltf",
-        "bunny",
         "apartment",
-        "dragon",
+        "statue",
     ] {
         let scene = scene::load(name, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let camera = scene.camera_or_default(crate::bench::issue_camera(name));
+        let camera = scene.camera_or_default(crate::scene::benchmark_camera(name));
         let r = render(&scene, &camera, (48, 27), 1);
         let img = final_image(&r);
         let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();

@@ -103,7 +103,7 @@ enum Command {
         /// cornell-gltf, or a path to a .gltf/.glb/.obj file.
         #[arg(long, default_value = "default")]
         scene: String,
-        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
         #[arg(long)]
         scenes: Option<PathBuf>,
         /// Camera: eye_x,eye_y,eye_z,at_x,at_y,at_z,fov_deg (y up); default: the file's, else one
@@ -147,7 +147,7 @@ enum Command {
         /// Scene (as for `render`).
         #[arg(long, default_value = "default")]
         scene: String,
-        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
         #[arg(long)]
         scenes: Option<PathBuf>,
         /// Window size, WIDTHxHEIGHT [default: 1280x720; 640x360 on a CPU device].
@@ -179,7 +179,7 @@ enum Command {
         /// Scene (as for `render`).
         #[arg(long, default_value = "apartment")]
         scene: String,
-        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
         #[arg(long)]
         scenes: Option<PathBuf>,
         /// Image size, WIDTHxHEIGHT [default: 1920x1080; 320x180 on a CPU device].
@@ -229,7 +229,7 @@ enum Command {
         /// Scene (as for `render`).
         #[arg(long, default_value = "default")]
         scene: String,
-        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
         #[arg(long)]
         scenes: Option<PathBuf>,
         /// Frames of churn.
@@ -244,7 +244,7 @@ enum Command {
     },
     /// Benchmark BLAS/TLAS builds and refits, BVH quality and ray throughput on the GPU.
     Bench {
-        /// Scenes folder [default: $KSRT_SCENES, else ../shared/scenes].
+        /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
         #[arg(long)]
         scenes: Option<PathBuf>,
         /// Scenes to benchmark (repeatable) [default: dragon and apartment].
@@ -342,7 +342,7 @@ fn quality_command(args: QualityArgs) -> AnyResult<()> {
         eprintln!("{notice}");
     }
     let scene = cmd_render::load_scene(&args.scene, args.scenes)?;
-    let camera = scene.camera_or_default(camera.or_else(|| bench::issue_camera(&args.scene)));
+    let camera = scene.camera_or_default(camera.or_else(|| scene::benchmark_camera(&args.scene)));
     let (device, queue) = gpu::device(&adapter)?;
     println!(
         "ksrt quality: {} at {}x{}, preset {}, {} frames panning {}°, cache warmed {} frames then \

@@ -145,7 +145,7 @@ pub fn run(args: ViewArgs) -> AnyResult<()> {
         crate::scene::load(&args.scene, &args.scenes_dir)
     })?;
     let fly = FlyCamera::from_camera(
-        &scene.prepare_view(start.or_else(|| crate::bench::issue_camera(&args.scene))),
+        &scene.prepare_view(start.or_else(|| crate::scene::benchmark_camera(&args.scene))),
     );
     let event_loop = EventLoop::new().map_err(|e| {
         format!("ksrt view: cannot open a window ({e}); is there a display (DISPLAY, or Xvfb)?")

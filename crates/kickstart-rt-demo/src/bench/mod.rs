@@ -41,20 +41,10 @@ use report::{print_scene, Report, TlasReport};
 use scenes::{bench_scene, bench_tlas};
 
 /// Scenes benchmarked when no `--scene` is given.
-pub const DEFAULT_SCENES: [&str; 2] = ["dragon", "apartment"];
+pub const DEFAULT_SCENES: [&str; 2] = ["statue", "apartment"];
 
 /// Instance counts of the TLAS measurements.
 pub const TLAS_INSTANCE_COUNTS: [u32; 3] = [1_000, 10_000, 100_000];
-
-/// The cameras of the ray tracing core issue for its benchmark scenes (eye, target, fov).
-pub fn issue_camera(scene: &str) -> Option<Camera> {
-    let c = match scene {
-        "dragon" => "-0.006,0.125,0.32,-0.006,0.125,-0.005,30",
-        "apartment" => "9.2,1.6,-7.3,9.2,1.0,-3.0,75",
-        _ => return None,
-    };
-    scene::parse_camera(c).ok()
-}
 
 /// Options of `ksrt bench`.
 pub struct BenchOptions {
@@ -247,7 +237,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         bar.set_message(format!("bench {name}"));
         let camera = opts
             .camera
-            .or_else(|| issue_camera(name))
+            .or_else(|| scene::benchmark_camera(name))
             .unwrap_or_else(|| scene.camera_or_default(None));
         let r = bench_scene(
             &bench,
@@ -359,9 +349,10 @@ mod tests {
     }
 
     #[test]
-    fn issue_cameras_parse() {
-        assert!(issue_camera("dragon").is_some());
-        assert!(issue_camera("apartment").is_some());
-        assert!(issue_camera("bunny").is_none());
+    fn benchmark_cameras_parse() {
+        assert!(scene::benchmark_camera("dragon").is_some());
+        assert!(scene::benchmark_camera("statue").is_some());
+        assert!(scene::benchmark_camera("apartment").is_some());
+        assert!(scene::benchmark_camera("bunny").is_none());
     }
 }

@@ -9,6 +9,7 @@ pub mod crowd;
 mod framing;
 mod gltf;
 mod obj;
+pub mod statue;
 pub mod town;
 
 use std::path::{Path, PathBuf};
@@ -504,8 +505,9 @@ pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("window-room", None),
     ("town", None),
     ("crowd", None),
+    ("statue", None),
     ("dragon", Some("stanford_dragon/dragon_vrip.glb")),
-    ("apartment", Some("dream_apartment/dream_apartment.glb")),
+    ("apartment", Some("dream_apartment/dream_apartment.gltf")),
     ("bunny", Some("stanford_bunny/bunny.obj")),
     (
         "cornell-obj",
@@ -514,11 +516,48 @@ pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("cornell-gltf", Some("cornell_box/gltf_kajiya/scene.gltf")),
 ];
 
-/// The scenes folder: `--scenes` when given, else `$KSRT_SCENES`, else `../shared/scenes` (the
-/// workplace layout: the shared data beside the repository).
+/// The repository's own `scenes/` folder, where this program was built from (found from the
+/// crate's location, so `ksrt` and the tests find it from any working directory).
+pub fn repository_scenes_dir() -> PathBuf {
+    // The crate sits at `crates/<name>/` of the repository.
+    let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    crate_dir.parent().and_then(Path::parent).map_or_else(
+        || crate_dir.join("../../scenes"),
+        |root| root.join("scenes"),
+    )
+}
+
+/// The scenes folder: `--scenes` when given, else `$KSRT_SCENES` when set and not empty, else
+/// the repository's `scenes/` ([`repository_scenes_dir`]) when it exists (a binary copied off
+/// the machine that built it has none), else `scenes` in the working directory.
 pub fn scenes_dir(arg: Option<PathBuf>) -> PathBuf {
-    arg.or_else(|| std::env::var_os("KSRT_SCENES").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("../shared/scenes"))
+    scenes_dir_from(arg, std::env::var_os("KSRT_SCENES"))
+}
+
+/// [`scenes_dir`] with the environment variable's value passed in.
+fn scenes_dir_from(arg: Option<PathBuf>, env: Option<std::ffi::OsString>) -> PathBuf {
+    arg.or_else(|| env.filter(|v| !v.is_empty()).map(PathBuf::from))
+        .unwrap_or_else(|| {
+            let repo = repository_scenes_dir();
+            if repo.is_dir() {
+                repo
+            } else {
+                PathBuf::from("scenes")
+            }
+        })
+}
+
+/// The camera the benchmarks and the tests view a scene from, for the scenes that have one
+/// (eye, target, vertical field of view): the dragon and the statue from the front, the
+/// apartment from inside its living room.
+pub fn benchmark_camera(scene: &str) -> Option<Camera> {
+    let c = match scene {
+        "dragon" => "-0.006,0.125,0.32,-0.006,0.125,-0.005,30",
+        "statue" => "0.0,0.125,0.62,0.0,0.125,0.0,30",
+        "apartment" => "9.2,1.6,-7.3,9.2,1.0,-3.0,75",
+        _ => return None,
+    };
+    parse_camera(c).ok()
 }
 
 /// Loads `--scene NAME|PATH`: a name of [`SCENE_NAMES`] (files looked up in `scenes_dir`) or a
@@ -530,6 +569,7 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
         "window-room" => return Ok(builtin::window_room()),
         "town" => return Ok(town::town()),
         "crowd" => return Ok(crowd::crowd()),
+        "statue" => return Ok(statue::statue()),
         _ => {}
     }
     if let Some((name, Some(file))) = SCENE_NAMES.iter().find(|(n, _)| *n == name_or_path) {
@@ -538,8 +578,14 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
             return Err(SceneError::new(
                 &path,
                 format!(
-                    "scene {name:?} not found (scenes folder {}; set --scenes DIR or KSRT_SCENES)",
-                    scenes_dir.display()
+                    "scene {name:?} not found (scenes folder {}; set --scenes DIR or KSRT_SCENES){}",
+                    scenes_dir.display(),
+                    if matches!(*name, "dragon" | "bunny") {
+                        "; the Stanford scans are not in the repository (their terms forbid \
+                         shipping them): use a folder that has them, or the built-in `statue`"
+                    } else {
+                        ""
+                    }
                 ),
             ));
         }

@@ -1,15 +1,13 @@
-//! Loader tests on the shared Cornell boxes (`$KSRT_SCENES`, else `../shared/scenes` beside the
-//! repository, where CI has them) and on the built-in scenes.
+//! Loader tests on the repository's Cornell boxes and apartment (`scenes/`) and on the built-in
+//! scenes.
 
 use super::*;
 
 fn scenes() -> PathBuf {
-    let dir = std::env::var_os("KSRT_SCENES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes"));
+    let dir = super::repository_scenes_dir();
     assert!(
-        dir.join("README.txt").exists(),
-        "scenes folder {} not found: set KSRT_SCENES",
+        dir.join("README.md").exists(),
+        "the repository's scenes folder {} is missing",
         dir.display()
     );
     dir
@@ -444,4 +442,39 @@ fn window_room_is_closed_but_for_the_window_the_sun_shines_through_onto_the_floo
             && to_patch.dot(right).abs() / along < tan * 16.0 / 9.0 * 0.8,
         "the patch is not well inside the view"
     );
+}
+
+/// `--scenes` wins, then a non-empty `KSRT_SCENES`; an empty one means unset, and the default is
+/// the repository's folder whatever the working directory.
+#[test]
+fn scenes_folder_resolution() {
+    let given = Some(PathBuf::from("/given"));
+    let env = Some(std::ffi::OsString::from("/env"));
+    let empty = Some(std::ffi::OsString::new());
+    assert_eq!(
+        scenes_dir_from(given.clone(), env.clone()),
+        PathBuf::from("/given")
+    );
+    assert_eq!(scenes_dir_from(None, env), PathBuf::from("/env"));
+    assert_eq!(scenes_dir_from(None, empty), repository_scenes_dir());
+    assert_eq!(scenes_dir_from(None, None), repository_scenes_dir());
+    assert!(repository_scenes_dir().is_absolute());
+    assert!(repository_scenes_dir().join("cornell_box").is_dir());
+}
+
+/// The named scenes a clone has load from the default folder: the repository's own files and
+/// the built-in ones, with the triangle counts of their sources.
+#[test]
+fn repository_scenes_load_by_name() {
+    let dir = repository_scenes_dir();
+    for (name, triangles) in [
+        ("cornell-obj", 36),
+        ("cornell-gltf", 32),
+        ("apartment", 177_934),
+    ] {
+        let scene = load(name, &dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(scene.triangle_count(), triangles, "{name}");
+    }
+    let e = load("dragon", &dir).expect_err("the dragon is not in the repository");
+    assert!(e.to_string().contains("statue"), "{e}");
 }

@@ -18,7 +18,7 @@ use crate::sdk_glue as glue;
 use crate::AnyResult;
 
 /// Scenes of the comparison.
-pub const CPU_PEER_SCENES: [&str; 4] = ["bunny", "cornell-obj", "apartment", "dragon"];
+pub const CPU_PEER_SCENES: [&str; 3] = ["cornell-obj", "apartment", "statue"];
 
 /// Timed CPU repetitions stop once they have taken this long (at least one runs).
 const CPU_BUDGET_S: f64 = 15.0;
@@ -233,7 +233,7 @@ fn print_mesh(m: &PeerMesh) {
 }
 
 /// Scenes of `--cpu-peers --quick` (a smoke test).
-pub const QUICK_SCENES: [&str; 2] = ["cornell-obj", "bunny"];
+pub const QUICK_SCENES: [&str; 2] = ["cornell-obj", "cornell-gltf"];
 
 /// `--cpu-peers` over `scenes`; a scene that fails to load is an error in the report, the others
 /// still run.

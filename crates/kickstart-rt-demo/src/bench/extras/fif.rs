@@ -8,10 +8,11 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::bench::attempt;
 use crate::bench::harness::Bench;
-use crate::bench::{attempt, issue_camera};
 use crate::frames_in_flight::{self as fif, FifSummary, FrameRecord, LoopOptions};
 use crate::renderer::{Renderer, RendererOptions};
+use crate::scene::benchmark_camera;
 
 /// The scene of the measurement.
 pub const FIF_SCENE: &str = "apartment";
@@ -64,7 +65,7 @@ pub(in crate::bench) fn run(
     }) else {
         return report;
     };
-    let camera = issue_camera(scene_name).unwrap_or_else(|| scene.camera_or_default(None));
+    let camera = benchmark_camera(scene_name).unwrap_or_else(|| scene.camera_or_default(None));
     for depth in DEPTHS {
         let records = attempt(
             &mut report.errors,

@@ -21,18 +21,19 @@ use serde::{Deserialize, Serialize};
 use crate::bench::harness::Bench;
 use crate::bench::rays::{batch, primary_rays, secondary_rays, surface};
 use crate::bench::scenes::bench_tlas;
-use crate::bench::{attempt, issue_camera, Stats};
+use crate::bench::{attempt, Stats};
 use crate::gpu::{self, UploadedMesh};
 use crate::renderer::{Renderer, RendererOptions};
 use crate::rng::Rng;
+use crate::scene::benchmark_camera;
 use crate::scene::{Camera, Instance, Scene};
 use crate::sdk_glue::{self as glue, GpuRay, Query};
 use crate::AnyResult;
 
 /// Scenes of the triangle series.
-pub const SCALING_SCENES: [&str; 4] = ["cornell-obj", "bunny", "apartment", "dragon"];
+pub const SCALING_SCENES: [&str; 4] = ["cornell-obj", "cornell-gltf", "apartment", "statue"];
 /// The instanced scene.
-pub const INSTANCED_SCENE: &str = "dragon";
+pub const INSTANCED_SCENE: &str = "statue";
 /// Copies of the instanced dragon.
 pub const DRAGON_COPIES: [u32; 4] = [1, 10, 100, 1000];
 /// Frame sizes of the resolution series.
@@ -88,8 +89,8 @@ impl Plan {
     /// Tiny series on the small scenes (seconds on lavapipe).
     pub fn quick() -> Plan {
         Plan {
-            scenes: vec!["cornell-obj", "bunny"],
-            instanced: "bunny",
+            scenes: vec!["cornell-obj", "cornell-gltf"],
+            instanced: "cornell-obj",
             copies: vec![1, 4],
             resolutions: vec![(64, 36), (128, 72)],
             light_size: (64, 36),
@@ -434,7 +435,7 @@ pub(in crate::bench) fn run(
         }) else {
             continue;
         };
-        let camera = issue_camera(name).unwrap_or_else(|| scene.camera_or_default(None));
+        let camera = benchmark_camera(name).unwrap_or_else(|| scene.camera_or_default(None));
         let p = triangle_point(bench, name, &scene, 0, &camera, size, errors);
         report.triangles.push(p);
         if name == plan.frame_scene {
@@ -458,7 +459,7 @@ pub(in crate::bench) fn run(
     }
     if let Some(scene) = &frame_scene {
         let camera =
-            issue_camera(plan.frame_scene).unwrap_or_else(|| scene.camera_or_default(None));
+            benchmark_camera(plan.frame_scene).unwrap_or_else(|| scene.camera_or_default(None));
         println!(
             "  SDK frame time of `ksrt render` ({}) against resolution:",
             plan.frame_scene
