@@ -2,8 +2,9 @@
 //! finite and infinite far planes and both handednesses work): used by the debug views and by
 //! the lighting cache's injection, which unprojects the G-buffer.
 
-use crate::ViewInfo;
 use glam::{DVec3, DVec4};
+
+use crate::tasks::ViewInfo;
 
 /// Camera parameters of the shader, computed in f64 (inverting a reverse-Z or infinite
 /// projection in f32 loses digits the debug views show).

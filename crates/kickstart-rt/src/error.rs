@@ -63,9 +63,9 @@ pub enum Error {
     )]
     IncompatibleVersion {
         /// The version in `InitSettings`.
-        app: crate::Version,
+        app: crate::version::Version,
         /// `kickstart_rt::VERSION`.
-        library: crate::Version,
+        library: crate::version::Version,
     },
     /// A shared pool or table would exceed what one storage binding of this device may hold.
     /// Found by `build_gpu_task`'s plan, before anything is recorded: the context is unchanged.

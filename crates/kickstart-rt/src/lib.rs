@@ -107,7 +107,8 @@
 #![warn(missing_docs)]
 
 // The SDK's layers, lowest first; a module imports only from its own layer and those before it,
-// and no two files or folders import each other (checked by `layering.rs`'s tests):
+// no two files or folders import each other, and every import names the module that owns the
+// item, never the crate root's re-export (checked by `layering.rs`'s tests):
 //
 // 1. foundation: `error`, `version`, `handles`, `tasks` (every public task and input type),
 //    `logging`, `allocations`, `container`, `camera`

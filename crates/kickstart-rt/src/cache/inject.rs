@@ -19,7 +19,7 @@ use crate::gpu::reflect::{ReflectedLayout, ReflectedPipeline, ReflectedShader};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
 use crate::scene::traversal::{self, SceneBuffers};
-use crate::{DepthType, DirectLightingInjectionTask};
+use crate::tasks::{DepthType, DirectLightingInjectionTask, Viewport};
 
 const TASK: &str = "DirectLightingInjectionTask";
 /// Relative distance within which a traced hit counts as the surface the depth shows.
@@ -151,9 +151,9 @@ pub(crate) fn float_kind(format: wgpu::TextureFormat) -> Option<bool> {
 }
 
 /// The injection's viewport, its stride, and the number of injected grid slots.
-fn grid(task: &DirectLightingInjectionTask) -> (crate::Viewport, u32, u64) {
+fn grid(task: &DirectLightingInjectionTask) -> (Viewport, u32, u64) {
     let size = task.direct_lighting.texture().size();
-    let vp = task.viewport.unwrap_or(crate::Viewport {
+    let vp = task.viewport.unwrap_or(Viewport {
         x: 0,
         y: 0,
         width: size.width,

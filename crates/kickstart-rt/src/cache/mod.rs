@@ -68,6 +68,8 @@ pub(crate) mod transfer;
 
 pub(crate) use alloc::{AllocJob, DirectLightingCache};
 
+use crate::tasks::{GeometryInput, SurfelType};
+
 /// How much of its lighting cache an instance got.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CacheLevel {
@@ -120,9 +122,9 @@ pub(crate) struct CacheParams {
 
 impl CacheParams {
     /// The settings of `input`.
-    pub fn of(input: &crate::GeometryInput) -> Self {
+    pub fn of(input: &GeometryInput) -> Self {
         CacheParams {
-            mesh_colors: input.surfel_type == crate::SurfelType::MeshColors,
+            mesh_colors: input.surfel_type == SurfelType::MeshColors,
             tile_unit_length: input.tile_unit_length,
             tile_resolution_limit: input.tile_resolution_limit.max(1),
             direct_tile_mapping_threshold: input.direct_tile_mapping_threshold,

@@ -71,19 +71,19 @@ impl ExecuteContext {
     /// difference is logged as a warning).
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, settings: InitSettings) -> Result<Self> {
         let logger = Logger::new(settings.log_callback.clone(), settings.min_log_severity);
-        if settings.version.major != crate::VERSION.major {
+        if settings.version.major != crate::version::VERSION.major {
             return Err(Error::IncompatibleVersion {
                 app: settings.version,
-                library: crate::VERSION,
+                library: crate::version::VERSION,
             });
         }
-        if settings.version.minor != crate::VERSION.minor {
+        if settings.version.minor != crate::version::VERSION.minor {
             logger.message(
                 Severity::Warning,
                 &format!(
                     "application built against kickstart-rt {}, library is {}",
                     settings.version,
-                    crate::VERSION
+                    crate::version::VERSION
                 ),
             );
         }
@@ -353,7 +353,7 @@ impl ExecuteContext {
     pub fn lighting_cache_allocation(
         &self,
         handle: InstanceHandle,
-    ) -> Result<Option<crate::CacheAllocation>> {
+    ) -> Result<Option<crate::cache::CacheAllocation>> {
         let mut s = self.state();
         self.collect_invoked(&mut s);
         s.instances.get(handle)?;

@@ -42,7 +42,7 @@ impl Default for InitSettings {
     fn default() -> Self {
         InitSettings {
             supported_working_sets: 4,
-            version: crate::VERSION,
+            version: crate::version::VERSION,
             log_callback: None,
             min_log_severity: Severity::Warning,
             gpu_timing: false,

@@ -107,7 +107,7 @@ mod tests {
         }
         // 2 sort + 3 scene + 4 cache + 1 rays + 4 debug views + 48 trace tasks + the denoisers.
         assert!(variants.len() > 62, "{} variants", variants.len());
-        for module in crate::shader_modules() {
+        for module in crate::gpu::compose::shader_modules() {
             let header = crate::gpu::compose::module_header(module);
             assert!(
                 variants.iter().any(|v| v.wgsl.contains(&header)),

@@ -241,7 +241,7 @@ fn variants(signal_type: SignalType) -> Vec<(String, String, Pass)> {
             atrous_wgsl(chain, None),
             Pass::Atrous,
         ));
-        for f in crate::WRITABLE_OUTPUT_FORMATS {
+        for f in crate::tasks::WRITABLE_OUTPUT_FORMATS {
             let label = format!("a-trous {} (last, {f:?})", chain.label());
             out.push((label, atrous_wgsl(chain, Some(f)), Pass::Atrous));
             let label = format!("upsample {} ({f:?})", chain.label());
@@ -504,7 +504,7 @@ impl Filter {
             let _ = self.pipelines.temporal(device, shared, set);
             for (_, chain) in set.atrous_chains() {
                 let _ = self.pipelines.atrous(device, shared, chain);
-                for f in crate::WRITABLE_OUTPUT_FORMATS {
+                for f in crate::tasks::WRITABLE_OUTPUT_FORMATS {
                     if let Some((out_layout, _)) = self.pipelines.last(device, shared, chain, f) {
                         let _ = self
                             .pipelines

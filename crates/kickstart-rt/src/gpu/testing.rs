@@ -28,7 +28,8 @@ pub(crate) fn gpu() -> &'static TestGpu {
             (
                 // What the SDK can use, not every adapter feature: wgpu refuses experimental
                 // ones (NVIDIA lists mesh shaders and ray-tracing pipelines) unless opted in.
-                crate::required_features() | crate::optional_features_supported(&adapter),
+                crate::device::required_features()
+                    | crate::device::optional_features_supported(&adapter),
                 adapter.limits(),
             )
         };
@@ -125,7 +126,7 @@ pub(crate) fn texture_with(
     let mut usage = wgpu::TextureUsages::TEXTURE_BINDING
         | wgpu::TextureUsages::COPY_DST
         | wgpu::TextureUsages::COPY_SRC;
-    if crate::WRITABLE_OUTPUT_FORMATS.contains(&format) {
+    if crate::tasks::WRITABLE_OUTPUT_FORMATS.contains(&format) {
         usage |= wgpu::TextureUsages::STORAGE_BINDING;
     }
     let size = wgpu::Extent3d {

@@ -8,7 +8,7 @@
 
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
-use crate::{IndexFormat, VertexFormat};
+use crate::tasks::{IndexFormat, VertexFormat};
 
 /// Threads per workgroup of `scene/ingest.wgsl` (one triangle each).
 const WORKGROUP: u32 = 64;

@@ -15,10 +15,11 @@
 
 use crate::camera::camera;
 use crate::device::TraversalBackend;
+use crate::error::{Error, Result};
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 use crate::scene::traversal::{self, SceneBuffers};
-use crate::{DebugOutputType, Error, InstanceInclusionMask, Result, ViewInfo};
+use crate::tasks::{DebugOutputType, InstanceInclusionMask, ViewInfo, WRITABLE_OUTPUT_FORMATS};
 use bytemuck::{Pod, Zeroable};
 
 /// Invocations per workgroup of the debug view shader (its `@workgroup_size`): `RT_WORKGROUP_SIZE`
@@ -101,7 +102,7 @@ impl DebugView {
 
 /// The WGSL of the debug view pass with `backend` for every writable output format, labelled.
 pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
-    crate::WRITABLE_OUTPUT_FORMATS
+    WRITABLE_OUTPUT_FORMATS
         .iter()
         .filter_map(|&f| {
             let name = wgsl_format(f)?;
@@ -160,7 +161,7 @@ impl DebugViewPass {
 
     /// Creates every pipeline now (so the first frame that uses one does not stall).
     pub fn prepare(&mut self, device: &wgpu::Device) {
-        for format in crate::WRITABLE_OUTPUT_FORMATS {
+        for format in WRITABLE_OUTPUT_FORMATS {
             // Every writable format has a WGSL name, so this cannot fail.
             let _ = self.pipeline(device, format);
         }
@@ -253,7 +254,7 @@ mod tests {
     #[test]
     fn every_variant_validates_and_matches_the_rust_layout() {
         use crate::gpu::wgsl_check::{assert_wgsl_layout, validate};
-        for format in crate::WRITABLE_OUTPUT_FORMATS {
+        for format in WRITABLE_OUTPUT_FORMATS {
             let name = wgsl_format(format).unwrap();
             let module = validate(
                 &format!("debug view ({format:?})"),
@@ -569,7 +570,7 @@ mod tests {
         let mut pass = DebugViewPass::new(TraversalBackend::Software);
         // Every writable output format compiles (also on the minimal device).
         pass.prepare(&g.device);
-        assert_eq!(pass.pipelines.len(), crate::WRITABLE_OUTPUT_FORMATS.len());
+        assert_eq!(pass.pipelines.len(), WRITABLE_OUTPUT_FORMATS.len());
         // A view this pass does not write is no debug view (the task is unsupported).
         assert_eq!(
             DebugView::new(DebugOutputType::Normal, (0, 0, 4, 4)),

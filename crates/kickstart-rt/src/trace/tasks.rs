@@ -13,14 +13,15 @@ use super::gbuffer::{GBufferBinder, GBufferInputs};
 use super::lights::{pack_lights, GpuLight};
 use super::sampling::blue_noise_texture;
 use crate::device::TraversalBackend;
+use crate::error::{Error, Result};
 use crate::gpu::compose::ShaderLibrary;
 use crate::gpu::layout::BoundLayout;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedShader, ShaderReflection};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
 use crate::scene::traversal::{self, SceneBuffers};
+use crate::tasks::InstanceInclusionMask;
 use crate::tasks::*;
-use crate::{Error, InstanceInclusionMask, Result};
 use bytemuck::{Pod, Zeroable};
 
 /// Invocations per workgroup (`RT_WORKGROUP_SIZE` of the traversal module): one workgroup traces

@@ -142,12 +142,12 @@ fn prepare_creates_only_the_pipelines_a_context_dispatches() {
         assert!(one.temporal.is_some() && one.atrous.is_some(), "{st:?}");
         assert_eq!(
             one.last.len(),
-            crate::WRITABLE_OUTPUT_FORMATS.len(),
+            crate::tasks::WRITABLE_OUTPUT_FORMATS.len(),
             "{st:?}"
         );
         assert_eq!(
             one.upsample.len(),
-            crate::WRITABLE_OUTPUT_FORMATS.len(),
+            crate::tasks::WRITABLE_OUTPUT_FORMATS.len(),
             "{st:?}"
         );
     }

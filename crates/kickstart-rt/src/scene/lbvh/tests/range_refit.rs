@@ -200,7 +200,7 @@ pub(super) fn raw_geometry(
     let component = |offset, stride, count, index, triangles, transform, base| ComponentIngest {
         vertex_byte_offset: offset,
         vertex_stride: stride,
-        vertex_format: crate::VertexFormat::Float32x3,
+        vertex_format: crate::tasks::VertexFormat::Float32x3,
         vertex_count: count,
         index,
         first_index: 0,
@@ -218,7 +218,7 @@ pub(super) fn raw_geometry(
             a_offset,
             16,
             verts_a,
-            Some((index_offset, crate::IndexFormat::Uint32)),
+            Some((index_offset, crate::tasks::IndexFormat::Uint32)),
             n_a,
             None,
             0,

@@ -14,7 +14,7 @@ fn every_pipeline_compiles_including_prepared_ones() {
     passes.prepare(&g.device);
     // Eight kinds × formats, and the diffuse pass writing AO in two formats.
     assert_eq!(passes.pipelines.len(), 10);
-    for f in crate::WRITABLE_OUTPUT_FORMATS {
+    for f in crate::tasks::WRITABLE_OUTPUT_FORMATS {
         passes
             .pipeline(&g.device, TraceKind::AmbientOcclusion, (f, None))
             .unwrap();
@@ -36,7 +36,7 @@ fn every_pipeline_compiles_including_prepared_ones() {
 
 #[test]
 fn a_dispatch_has_one_workgroup_per_tile_of_the_traced_grid() {
-    use crate::HalfResolutionMode::{Checkerboard, Off, OnePer2x2, OnePer4x4};
+    use crate::tasks::HalfResolutionMode::{Checkerboard, Off, OnePer2x2, OnePer4x4};
     // 21 × 13 pixels: 3 × 2 tiles of 8; checkerboard traces a grid of 11 × 13, 2 × 2 tiles;
     // one per 2×2 a grid of 11 × 7 (2 × 1 tiles), one per 4×4 6 × 4 (1 tile).
     assert_eq!(traced_tiles(21, 13, Off), Some(6));
