@@ -1,0 +1,28 @@
+//! Parsing the command-line values the commands share.
+
+use kickstart_rt_renderer::error::AnyResult;
+
+/// Parses `--size WIDTHxHEIGHT`, each side in 1..=16384.
+pub fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+        .ok_or_else(|| format!("--size {size:?}: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("--size {w}x{h}: each side must be in 1..=16384").into());
+    }
+    Ok((w, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn size_parsing() {
+        assert_eq!(parse_size("320x180").ok(), Some((320, 180)));
+        assert!(parse_size("320").is_err());
+        assert!(parse_size("0x10").is_err());
+        assert!(parse_size("axb").is_err());
+    }
+}

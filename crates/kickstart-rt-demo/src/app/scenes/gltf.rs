@@ -1,0 +1,597 @@
+//! glTF 2.0 (`.gltf` + buffers, `.glb`) loading: the default scene's node hierarchy, every
+//! triangle primitive as a mesh, one instance per node that uses it, base colour factors, and the
+//! first perspective camera, and the `KHR_lights_punctual` lights.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use glam::{Affine3A, Mat4, Vec3};
+use gltf::mesh::Mode;
+
+use kickstart_rt_renderer::scene::{
+    check_indices, compute_normals, drop_non_finite_triangles, Camera, Instance, Light, Material,
+    Mesh, Scene, Texture,
+};
+
+use super::SceneError;
+
+/// Loads a `.gltf` or `.glb` file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| SceneError::new(path, format!("cannot read: {e}")))?;
+    load_from_bytes(path, &bytes)
+}
+
+/// Loads a glTF from its bytes (`path` names it in errors and locates external buffers).
+/// The gltf crate validates the JSON and reads accessors through bounds-checked slices, and
+/// [`check_accessor`] checks every accessor this loader reads before it is read; but the crate
+/// is third-party code fed arbitrary files (its validator indexes arrays a damaged file leaves
+/// empty): a panic inside it must still become an error that names the file rather than abort
+/// `ksrt`.
+pub(super) fn load_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
+    match std::panic::catch_unwind(|| load_bytes(path, bytes)) {
+        Ok(r) => r,
+        Err(_) => Err(SceneError::new(
+            path,
+            "the glTF reader failed on malformed data",
+        )),
+    }
+}
+
+fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
+    let err = |what: String| SceneError::new(path, what);
+    let file = gltf::Gltf::from_slice(bytes)
+        .map_err(|e| err(format!("not a valid glTF 2.0 file: {e}")))?;
+    let buffers = file
+        .buffers()
+        .map(|b| load_buffer(path, &b, file.blob.as_deref()))
+        .collect::<Result<Vec<_>, _>>()?;
+
+    let mut scene = Scene::default();
+    let mut textures = TextureCache::default();
+    let mut skipped = 0usize;
+    // glTF mesh index → the scene meshes of its triangle primitives, converted on first use so
+    // meshes no node references cost nothing.
+    let mut converted: HashMap<usize, Vec<usize>> = HashMap::new();
+    let roots: Vec<gltf::Node> = match file.default_scene().or_else(|| file.scenes().next()) {
+        Some(s) => s.nodes().collect(),
+        None => {
+            // No scene: every node that is nobody's child is a root.
+            let children: std::collections::HashSet<usize> = file
+                .nodes()
+                .flat_map(|n| n.children().map(|c| c.index()).collect::<Vec<_>>())
+                .collect();
+            file.nodes()
+                .filter(|n| !children.contains(&n.index()))
+                .collect()
+        }
+    };
+    let mut visited = vec![false; file.nodes().len()];
+    let mut stack: Vec<(gltf::Node, Affine3A)> = roots
+        .into_iter()
+        .rev()
+        .map(|n| (n, Affine3A::IDENTITY))
+        .collect();
+    while let Some((node, parent)) = stack.pop() {
+        // A valid hierarchy is a forest: a node seen twice means a cycle or two parents, which
+        // would otherwise loop forever.
+        if std::mem::replace(&mut visited[node.index()], true) {
+            return Err(err(format!(
+                "node {} appears twice in the hierarchy (a cycle or two parents)",
+                node.index()
+            )));
+        }
+        let local = Affine3A::from_mat4(Mat4::from_cols_array_2d(&node.transform().matrix()));
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(err(format!(
+                "node {} has a non-finite transform",
+                node.index()
+            )));
+        }
+        if let Some(mesh) = node.mesh() {
+            let ids = match converted.get(&mesh.index()) {
+                Some(ids) => ids.clone(),
+                None => {
+                    let mut ids = Vec::new();
+                    for prim in mesh.primitives() {
+                        match convert_primitive(&mesh, &prim, &buffers).map_err(err)? {
+                            Some(mut m) => {
+                                m.material = textures.material(
+                                    path,
+                                    &prim.material(),
+                                    &buffers,
+                                    &mut scene,
+                                )?;
+                                ids.push(scene.meshes.len());
+                                scene.meshes.push(m);
+                            }
+                            None => skipped += 1,
+                        }
+                    }
+                    converted.insert(mesh.index(), ids.clone());
+                    ids
+                }
+            };
+            scene.instances.extend(ids.into_iter().map(|mesh| Instance {
+                mesh,
+                transform: world,
+            }));
+        }
+        if scene.camera.is_none() {
+            if let Some(cam) = node.camera() {
+                match cam.projection() {
+                    gltf::camera::Projection::Perspective(p) => {
+                        // A glTF camera looks down its local −Z with +Y up.
+                        let eye = world.transform_point3(Vec3::ZERO);
+                        scene.camera = Some(Camera {
+                            eye,
+                            at: eye + world.transform_vector3(Vec3::NEG_Z),
+                            up: world.transform_vector3(Vec3::Y),
+                            fov_y_deg: p.yfov().to_degrees(),
+                        });
+                    }
+                    gltf::camera::Projection::Orthographic(_) => log::warn!(
+                        "{}: orthographic camera of node {} ignored",
+                        path.display(),
+                        node.index()
+                    ),
+                }
+            }
+        }
+        if let Some(light) = node.light() {
+            scene.lights.push(punctual_light(&light, world));
+        }
+        for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+            stack.push((child, world));
+        }
+    }
+    bound_light_ranges(&mut scene);
+    if scene.instances.is_empty() && skipped > 0 {
+        return Err(err(format!(
+            "no triangles to render: all {skipped} primitive(s) the scene uses are points or lines (or lack positions)"
+        )));
+    }
+    Ok(scene)
+}
+
+/// The scene textures made from the file's images, each decoded once however many materials use
+/// it.
+#[derive(Default)]
+struct TextureCache {
+    /// glTF image index → index in `Scene::textures`.
+    decoded: HashMap<usize, usize>,
+}
+
+impl TextureCache {
+    /// The metallic-roughness material of a glTF material, decoding the textures it references.
+    fn material(
+        &mut self,
+        path: &Path,
+        m: &gltf::Material,
+        buffers: &[Vec<u8>],
+        scene: &mut Scene,
+    ) -> Result<Material, SceneError> {
+        let pbr = m.pbr_metallic_roughness();
+        let mut texture = |info: Option<gltf::texture::Info>, what: &str| {
+            info.map(|i| self.texture(path, &i.texture(), buffers, scene, what))
+                .transpose()
+        };
+        let base_color_texture = texture(pbr.base_color_texture(), "base colour")?;
+        let metallic_roughness_texture =
+            texture(pbr.metallic_roughness_texture(), "metallic-roughness")?;
+        let emissive_texture = texture(m.emissive_texture(), "emissive")?;
+        Ok(Material {
+            base_color_texture,
+            metallic: pbr.metallic_factor().clamp(0.0, 1.0),
+            roughness: pbr.roughness_factor().clamp(0.0, 1.0),
+            metallic_roughness_texture,
+            emissive: Vec3::from(m.emissive_factor()).max(Vec3::ZERO),
+            emissive_texture,
+        })
+    }
+
+    /// Decodes the image of `texture` (PNG or JPEG: from a buffer view, a data URI or a file
+    /// next to the glTF) into `scene.textures` and returns its index.
+    fn texture(
+        &mut self,
+        path: &Path,
+        texture: &gltf::Texture,
+        buffers: &[Vec<u8>],
+        scene: &mut Scene,
+        what: &str,
+    ) -> Result<usize, SceneError> {
+        let img = texture.source();
+        if let Some(&k) = self.decoded.get(&img.index()) {
+            return Ok(k);
+        }
+        let name = img
+            .name()
+            .map_or_else(|| format!("image {}", img.index()), str::to_string);
+        let err = |e: String| SceneError::new(path, format!("{what} texture {name}: {e}"));
+        let bytes: Vec<u8> = match img.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buf = buffers
+                    .get(view.buffer().index())
+                    .ok_or_else(|| err("its buffer is missing".into()))?;
+                buf.get(view.offset()..view.offset() + view.length())
+                    .ok_or_else(|| err("its buffer view is out of its buffer".into()))?
+                    .to_vec()
+            }
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => uri
+                .split_once(";base64,")
+                .and_then(|(_, p)| decode_base64(p))
+                .ok_or_else(|| err("invalid data URI (only base64 is supported)".into()))?,
+            gltf::image::Source::Uri { uri, .. } => {
+                let file = path
+                    .parent()
+                    .unwrap_or_else(|| Path::new("."))
+                    .join(percent_decode(uri));
+                std::fs::read(&file)
+                    .map_err(|e| err(format!("cannot read {}: {e}", file.display())))?
+            }
+        };
+        let decoded = image::load_from_memory(&bytes)
+            .map_err(|e| err(format!("cannot decode the image: {e}")))?
+            .to_rgba8();
+        let k = scene.textures.len();
+        scene.textures.push(Texture {
+            name,
+            image: decoded,
+            nearest: texture.sampler().mag_filter() == Some(gltf::texture::MagFilter::Nearest),
+        });
+        self.decoded.insert(img.index(), k);
+        Ok(k)
+    }
+}
+
+/// The bytes of one buffer: the GLB binary chunk, a file next to the `.gltf`, or a base64
+/// `data:` URI.
+fn load_buffer(path: &Path, b: &gltf::Buffer, blob: Option<&[u8]>) -> Result<Vec<u8>, SceneError> {
+    let data = match b.source() {
+        gltf::buffer::Source::Bin => blob
+            .ok_or_else(|| {
+                SceneError::new(
+                    path,
+                    format!("buffer {} refers to a missing GLB binary chunk", b.index()),
+                )
+            })?
+            .to_vec(),
+        gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+            let payload = uri.split_once(";base64,").map(|(_, p)| p).ok_or_else(|| {
+                SceneError::new(
+                    path,
+                    format!("buffer {}: only base64 data URIs are supported", b.index()),
+                )
+            })?;
+            decode_base64(payload).ok_or_else(|| {
+                SceneError::new(
+                    path,
+                    format!("buffer {}: invalid base64 data URI", b.index()),
+                )
+            })?
+        }
+        gltf::buffer::Source::Uri(uri) => {
+            let file = path
+                .parent()
+                .unwrap_or_else(|| Path::new("."))
+                .join(percent_decode(uri));
+            std::fs::read(&file).map_err(|e| {
+                SceneError::new(
+                    &file,
+                    format!(
+                        "buffer {} of {}: cannot read: {e}",
+                        b.index(),
+                        path.display()
+                    ),
+                )
+            })?
+        }
+    };
+    if data.len() < b.length() {
+        return Err(SceneError::new(
+            path,
+            format!(
+                "buffer {} has {} bytes, the file declares {}",
+                b.index(),
+                data.len(),
+                b.length()
+            ),
+        ));
+    }
+    Ok(data)
+}
+
+/// Relative URIs in glTF are percent-encoded (a space is `%20`).
+fn percent_decode(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        if b[i] == b'%' && i + 2 < b.len() {
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Standard base64 (RFC 4648, padding optional); `None` on any other character.
+fn decode_base64(s: &str) -> Option<Vec<u8>> {
+    let mut out = Vec::with_capacity(s.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0u32);
+    for c in s.bytes().filter(|&c| c != b'=') {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => return None,
+        } as u32;
+        acc = (acc << 6) | v;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    Some(out)
+}
+
+/// One primitive as a triangle-list mesh, or `None` (with a warning) for modes that have no
+/// triangles. Strips and fans are converted to lists.
+fn convert_primitive(
+    mesh: &gltf::Mesh,
+    prim: &gltf::Primitive,
+    buffers: &[Vec<u8>],
+) -> Result<Option<Mesh>, String> {
+    let name = format!(
+        "{}#{}",
+        mesh.name()
+            .map_or_else(|| format!("mesh {}", mesh.index()), str::to_string),
+        prim.index()
+    );
+    let mode = prim.mode();
+    if matches!(
+        mode,
+        Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
+    ) {
+        log::warn!("{name}: primitive mode {mode:?} has no triangles; skipped");
+        return Ok(None);
+    }
+    // The reader assumes each accessor has the type the specification gives its semantic (an
+    // index accessor of floats reaches an `unreachable!`, a position accessor of bytes is
+    // misread): check before reading.
+    use gltf::accessor::{DataType, Dimensions};
+    let typed = |a: &gltf::Accessor, types: &[DataType], dims: Dimensions| {
+        if types.contains(&a.data_type()) && a.dimensions() == dims {
+            Ok(())
+        } else {
+            Err(format!(
+                "{name}: accessor {} holds {:?} {:?}, expected {types:?} {dims:?}",
+                a.index(),
+                a.data_type(),
+                a.dimensions()
+            ))
+        }
+    };
+    for (semantic, accessor) in prim.attributes() {
+        match semantic {
+            gltf::Semantic::Positions | gltf::Semantic::Normals => {
+                typed(&accessor, &[DataType::F32], Dimensions::Vec3)?
+            }
+            gltf::Semantic::TexCoords(_) => typed(
+                &accessor,
+                &[DataType::F32, DataType::U8, DataType::U16],
+                Dimensions::Vec2,
+            )?,
+            _ => {}
+        }
+        check_accessor(&accessor, buffers)
+            .map_err(|e| format!("{name}: attribute {semantic:?}: {e}"))?;
+    }
+    if let Some(accessor) = prim.indices() {
+        typed(
+            &accessor,
+            &[DataType::U8, DataType::U16, DataType::U32],
+            Dimensions::Scalar,
+        )?;
+        check_accessor(&accessor, buffers).map_err(|e| format!("{name}: indices: {e}"))?;
+    }
+    let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let Some(positions) = reader.read_positions() else {
+        log::warn!("{name}: no readable POSITION attribute; skipped");
+        return Ok(None);
+    };
+    let positions: Vec<[f32; 3]> = positions.collect();
+    let raw: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None if prim.indices().is_some() => {
+            return Err(format!(
+                "{name}: the index accessor's data is out of its buffer"
+            ))
+        }
+        None => (0..positions.len() as u32).collect(),
+    };
+    let indices = match mode {
+        Mode::TriangleStrip => strip_to_list(&raw),
+        Mode::TriangleFan => fan_to_list(&raw),
+        _ => raw,
+    };
+    check_indices(&name, positions.len(), &indices)?;
+    let indices = drop_non_finite_triangles(&name, &positions, indices);
+    let normals = match reader.read_normals() {
+        Some(n) => {
+            let n: Vec<[f32; 3]> = n.collect();
+            if n.len() == positions.len() {
+                n
+            } else {
+                compute_normals(&positions, &indices)
+            }
+        }
+        None => compute_normals(&positions, &indices),
+    };
+    let [r, g, b, _] = prim.material().pbr_metallic_roughness().base_color_factor();
+    // Every texture of a material uses one coordinate set here: the base colour's (set 0 in
+    // practice).
+    let set = prim
+        .material()
+        .pbr_metallic_roughness()
+        .base_color_texture()
+        .map_or(0, |t| t.tex_coord());
+    let uvs: Vec<[f32; 2]> = reader
+        .read_tex_coords(set)
+        .map(|t| t.into_f32().collect())
+        .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len())
+        .unwrap_or_default();
+    Ok(Some(Mesh {
+        name: prim
+            .material()
+            .name()
+            .map_or(name.clone(), |m| format!("{name} ({m})")),
+        positions,
+        normals,
+        indices,
+        color: Vec3::new(r, g, b),
+        uvs,
+        material: Material::default(),
+    }))
+}
+
+/// Checks that `accessor`'s elements lie inside its buffer view and the view inside its buffer,
+/// with checked arithmetic: the gltf crate computes the end of an accessor's data as
+/// `offset + stride · (count − 1) + size` unchecked, which a count of 0 or a huge count
+/// overflows. Sparse accessors and accessors without a view are left to the reader, which
+/// bounds-checks them.
+fn check_accessor(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), String> {
+    let count = accessor.count();
+    if count == 0 {
+        return Err(format!("accessor {} has a count of 0", accessor.index()));
+    }
+    let Some(view) = accessor.view() else {
+        return Ok(());
+    };
+    if accessor.sparse().is_some() {
+        return Ok(());
+    }
+    let size = accessor.size();
+    let stride = view.stride().unwrap_or(size).max(size);
+    let end = (count - 1)
+        .checked_mul(stride)
+        .and_then(|x| x.checked_add(size))
+        .and_then(|x| x.checked_add(accessor.offset()));
+    let buffer_len = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+    let view_end = view.offset().checked_add(view.length());
+    match (end, view_end) {
+        (Some(end), Some(view_end)) if end <= view.length() && view_end <= buffer_len => Ok(()),
+        _ => Err(format!(
+            "accessor {} ({count} elements of {size} bytes, stride {stride}, offset {}) does not \
+             fit its buffer view {} ({} bytes at {} of a {buffer_len}-byte buffer)",
+            accessor.index(),
+            accessor.offset(),
+            view.index(),
+            view.length(),
+            view.offset()
+        )),
+    }
+}
+
+/// Triangle `k` of a strip is `(k, k+1, k+2)`, with every odd one's first two vertices swapped so
+/// that all keep the strip's winding.
+fn strip_to_list(s: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(s.len().saturating_sub(2) * 3);
+    for k in 0..s.len().saturating_sub(2) {
+        if k % 2 == 0 {
+            out.extend([s[k], s[k + 1], s[k + 2]]);
+        } else {
+            out.extend([s[k + 1], s[k], s[k + 2]]);
+        }
+    }
+    out
+}
+
+/// Triangle `k` of a fan is `(k+1, k+2, 0)` (the glTF 2.0 specification's order).
+fn fan_to_list(s: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(s.len().saturating_sub(2) * 3);
+    for k in 0..s.len().saturating_sub(2) {
+        out.extend([s[k + 1], s[k + 2], s[0]]);
+    }
+    out
+}
+
+/// Gives every point and spot light without a range (glTF: infinite) one: twice the scene's size,
+/// past which the windowed falloff has nothing left to light.
+fn bound_light_ranges(scene: &mut Scene) {
+    let reach = scene.size() * 2.0;
+    for light in &mut scene.lights {
+        if let Light::Point { range, .. } | Light::Spot { range, .. } = light {
+            if !range.is_finite() || *range <= 0.0 {
+                *range = reach;
+            }
+        }
+    }
+}
+
+/// A `KHR_lights_punctual` light placed by its node's `world` transform (it shines along its
+/// local −Z). glTF's photometric units (lux, candela) are taken as the rasteriser's irradiance
+/// and radiant intensity at exposure 1, so a file lit for a physically based viewer looks about
+/// as bright here.
+fn punctual_light(light: &gltf::khr_lights_punctual::Light, world: Affine3A) -> Light {
+    use gltf::khr_lights_punctual::Kind;
+    let colour = Vec3::from(light.color()) * light.intensity().max(0.0);
+    let position = world.transform_point3(Vec3::ZERO);
+    let direction = world
+        .transform_vector3(Vec3::NEG_Z)
+        .normalize_or(Vec3::NEG_Y);
+    let range = light.range().unwrap_or(f32::INFINITY);
+    match light.kind() {
+        Kind::Directional => Light::Sun {
+            direction,
+            irradiance: colour,
+            angular_diameter: 0.0093,
+        },
+        Kind::Point => Light::Point {
+            position,
+            intensity: colour,
+            range,
+        },
+        Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => Light::Spot {
+            position,
+            direction,
+            intensity: colour,
+            range,
+            inner_angle: inner_cone_angle,
+            outer_angle: outer_cone_angle,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_become_lists() {
+        assert_eq!(strip_to_list(&[0, 1, 2, 3]), vec![0, 1, 2, 2, 1, 3]);
+        assert_eq!(fan_to_list(&[0, 1, 2, 3]), vec![1, 2, 0, 2, 3, 0]);
+        assert!(strip_to_list(&[0, 1]).is_empty());
+    }
+
+    #[test]
+    fn base64_and_percent_decoding() {
+        assert_eq!(decode_base64("aGVsbG8=").as_deref(), Some(&b"hello"[..]));
+        assert_eq!(decode_base64("a?"), None);
+        assert_eq!(percent_decode("my%20scene.bin"), "my scene.bin");
+        assert_eq!(percent_decode("100%"), "100%");
+    }
+}

@@ -1,0 +1,358 @@
+//! What `ksrt bench` reports: the types of the `--json` report (their field names are its keys)
+//! and the printed figures of a scene.
+
+use serde::Serialize;
+
+use super::profile::{self as prof, PassProfile};
+use super::rays::SUBGROUP_LANES;
+use super::{cache, extras, peer, tree_work, Stats};
+use kickstart_rt_renderer::scene::{Camera, Scene};
+
+/// BVH quality of the largest geometry.
+#[derive(Debug, Clone, Serialize)]
+pub struct SahReport {
+    /// The geometry's name.
+    pub geometry: String,
+    /// Its triangles.
+    pub triangles: usize,
+    /// SAH cost of the SDK's GPU BLAS.
+    pub gpu_sah_cost: f64,
+    /// SAH cost of `kickstart_rt::cpu::CpuBvh` (binned SAH) on the same triangles.
+    pub cpu_sah_cost: f64,
+    /// GPU / CPU: 1 = as good as the reference builder; higher traces slower.
+    pub ratio: f64,
+}
+
+/// One timed ray batch.
+#[derive(Debug, Clone, Serialize)]
+pub struct RayBatch {
+    /// `primary`, `ao` or `diffuse`.
+    pub kind: &'static str,
+    /// Rays in the batch.
+    pub rays: u64,
+    /// Rays that hit nothing.
+    pub misses: u64,
+    /// GPU time of the batch (`trace rays` passes).
+    pub time: Stats,
+    /// Rays per second at the median time, millions.
+    pub mrays_per_s: f64,
+    /// Mean traversal work per ray (scenes of one instance only), from the read-back BLAS
+    /// traced on the CPU in the GPU's order: with the time, the cost of one traversal step.
+    pub work: Option<WorkPerRay>,
+}
+
+/// Mean work per ray of a sample of a batch's rays in the scene's one BLAS.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct WorkPerRay {
+    /// Rays traced on the CPU (every n-th ray of the batch).
+    pub sampled: u64,
+    /// Inner BLAS nodes fetched per ray (each tests its two child boxes).
+    pub nodes: f64,
+    /// Ray/triangle tests per ray.
+    pub triangles: f64,
+    /// Share of the lanes of a [`SUBGROUP_LANES`]-lane subgroup that have work in an iteration of
+    /// the traversal loop, when consecutive rays of the batch share a subgroup and it runs until
+    /// its longest ray is done (one loop iteration a node or a triangle test), from about 20 000
+    /// rays in whole groups; 1 means every ray of a subgroup takes as many steps as the longest.
+    pub subgroup_busy: f64,
+}
+
+/// Everything measured on one scene; a measurement that failed is `None` with its error in
+/// `errors`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SceneReport {
+    /// Scene name or path.
+    pub scene: String,
+    /// Geometries (one BLAS each).
+    pub meshes: usize,
+    /// Instances.
+    pub instances: usize,
+    /// Triangles of the geometries, each counted once (what the BLAS builds process).
+    pub geometry_triangles: usize,
+    /// Triangles in the world (instanced ones counted per instance).
+    pub world_triangles: usize,
+    /// Camera of the ray batches: eye, target, vertical fov (degrees).
+    pub camera: [f32; 7],
+    /// All BLASes built in one task (`ingest` + `blas build` passes), fast-trace (`BuildHint::Auto`
+    /// without `allow_update`).
+    pub blas_build: Option<Stats>,
+    /// Where the last timed BLAS build's GPU time went.
+    pub blas_build_profile: Vec<PassProfile>,
+    /// Geometry triangles / median BLAS build time, millions per second.
+    pub blas_build_mtri_per_s: Option<f64>,
+    /// The same build with `BuildHint::PreferFastBuild` (the Karras tree, one triangle a leaf).
+    pub blas_build_fast_build: Option<Stats>,
+    /// Where the last timed fast-build BLAS build's GPU time went.
+    pub blas_build_fast_build_profile: Vec<PassProfile>,
+    /// All BLASes refit after a vertex update (`ingest` + `blas refit` passes).
+    pub blas_refit: Option<Stats>,
+    /// Where the last timed refit's GPU time went.
+    pub blas_refit_profile: Vec<PassProfile>,
+    /// TLAS rebuild over the scene's instances (`tlas build` passes).
+    pub tlas_build: Option<Stats>,
+    /// Where the last timed TLAS rebuild's GPU time went.
+    pub tlas_build_profile: Vec<PassProfile>,
+    /// BVH quality of the largest geometry.
+    pub sah: Option<SahReport>,
+    /// Primary, AO and diffuse batches.
+    pub rays: Vec<RayBatch>,
+    /// (pixels + primary hits) / (primary batch time + diffuse batch time), millions of rays per
+    /// second: the workload the issue compares with its peers.
+    pub peer_mrays_per_s: Option<f64>,
+    /// Primary rays checked against the CPU reference BVH on this GPU (untimed).
+    pub oracle: Option<OracleCheck>,
+    /// Direct lighting cache: bytes, injection time, cache error (`cache`).
+    pub cache: Option<cache::CacheReport>,
+    /// The SDK's trace tasks on a G-buffer of the primary hits (`trace …` passes).
+    pub trace_tasks: Vec<TraceTaskTime>,
+    /// Specular + diffuse + AO + one shadow in one GPU task, full resolution (first trace pass's
+    /// start to the last one's end).
+    pub trace_combined: Option<Stats>,
+    /// The peer's figures on the same meshes and rays (`--peer`), or why it was skipped.
+    pub peer: Option<peer::PeerReport>,
+    /// The traversal backend of this scene's figures.
+    pub traversal_backend: Option<String>,
+    /// Where the device has both backends: the other one on the same scene and rays.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backends: Option<super::backends::BackendComparison>,
+    /// `--tree-work`: other builders' trees on the same rays.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub tree_work: Vec<tree_work::TreeWork>,
+    /// Measurements that failed, and why.
+    pub errors: Vec<String>,
+}
+
+impl SceneReport {
+    /// The report of `scene` before anything is measured.
+    pub(super) fn new(name: &str, scene: &Scene, camera: &Camera) -> SceneReport {
+        SceneReport {
+            scene: name.to_string(),
+            meshes: scene.meshes.len(),
+            instances: scene.instances.len(),
+            geometry_triangles: scene.meshes.iter().map(|m| m.triangle_count()).sum(),
+            world_triangles: scene.triangle_count(),
+            camera: [
+                camera.eye.x,
+                camera.eye.y,
+                camera.eye.z,
+                camera.at.x,
+                camera.at.y,
+                camera.at.z,
+                camera.fov_y_deg,
+            ],
+            blas_build: None,
+            blas_build_profile: Vec::new(),
+            blas_build_mtri_per_s: None,
+            blas_build_fast_build: None,
+            blas_build_fast_build_profile: Vec::new(),
+            blas_refit: None,
+            blas_refit_profile: Vec::new(),
+            tlas_build: None,
+            tlas_build_profile: Vec::new(),
+            sah: None,
+            rays: Vec::new(),
+            peer_mrays_per_s: None,
+            oracle: None,
+            cache: None,
+            trace_tasks: Vec::new(),
+            trace_combined: None,
+            peer: None,
+            traversal_backend: None,
+            backends: None,
+            tree_work: Vec::new(),
+            errors: Vec::new(),
+        }
+    }
+}
+
+/// GPU time of one trace task at the bench size.
+#[derive(Debug, Clone, Serialize)]
+pub struct TraceTaskTime {
+    /// `specular`, `diffuse`, `ao`, `shadow` or `multi_shadow`.
+    pub task: &'static str,
+    /// Checkerboard half resolution.
+    pub checkerboard: bool,
+    /// Lights (shadow tasks; 0 otherwise).
+    pub lights: u32,
+    /// GPU time of the task's pass.
+    pub time: Stats,
+}
+
+/// A sample of primary rays traced again on the CPU reference BVH (world-space triangles): the
+/// evidence that the measured tracer is also right on this GPU.
+#[derive(Debug, Clone, Serialize)]
+pub struct OracleCheck {
+    /// Rays compared.
+    pub rays: usize,
+    /// Rays where hit/miss differs, or the distances differ by more than 1e-3 relative.
+    pub disagreements: usize,
+}
+
+/// TLAS build and refit over `instances` instances of one small mesh with random transforms.
+#[derive(Debug, Clone, Serialize)]
+pub struct TlasReport {
+    /// Instances.
+    pub instances: u32,
+    /// Rebuild after every transform changed (`tlas build` passes).
+    pub build: Option<Stats>,
+    /// Where the last timed rebuild's GPU time went.
+    pub build_profile: Vec<PassProfile>,
+    /// Refit after every transform changed (`tlas refit` passes).
+    pub refit: Option<Stats>,
+    /// Where the last timed refit's GPU time went.
+    pub refit_profile: Vec<PassProfile>,
+    /// Measurements that failed, and why.
+    pub errors: Vec<String>,
+}
+
+/// The whole `--json` report.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// kickstart-rt version.
+    pub sdk_version: String,
+    /// Adapter name.
+    pub adapter: String,
+    /// Driver name and version, as wgpu reports them.
+    pub driver: String,
+    /// The commit `ksrt` was built from (embedded at build time; `-dirty` with local changes).
+    pub commit: String,
+    /// wgpu backend.
+    pub backend: String,
+    /// Whether the device has timestamp queries (without them nothing is timed).
+    pub timestamp_query: bool,
+    /// Ray batch image width.
+    pub width: u32,
+    /// Ray batch image height.
+    pub height: u32,
+    /// Timed repetitions per measurement.
+    pub iterations: u32,
+    /// Order of the ray batches' primary rays.
+    pub ray_order: extras::RayOrder,
+    /// GPU work (milliseconds at full clocks) submitted untimed before each timed task
+    /// (`--busy-gpu-ms`; 0: none).
+    pub busy_gpu_ms: f64,
+    /// Per scene.
+    pub scenes: Vec<SceneReport>,
+    /// Per instance count.
+    pub tlas: Vec<TlasReport>,
+    /// The optional passes' results (`cpu_peers`, `scaling`, `frames_in_flight`).
+    #[serde(flatten)]
+    pub extras: extras::ExtrasReport,
+}
+
+/// Prints one scene's figures at the ray batches' size `w`×`h`.
+pub(super) fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
+    let opt = |s: &Option<Stats>| s.as_ref().map_or("—".to_string(), Stats::show);
+    println!(
+        "\n{}: {} geometries, {} instances, {} geometry triangles ({} in the world)",
+        r.scene, r.meshes, r.instances, r.geometry_triangles, r.world_triangles
+    );
+    if let Some(b) = &r.traversal_backend {
+        println!("  traversal backend: {b}");
+    }
+    println!(
+        "  BLAS build   {}{}",
+        opt(&r.blas_build),
+        r.blas_build_mtri_per_s
+            .map_or(String::new(), |m| format!("  {m:.1} Mtri/s"))
+    );
+    if !r.blas_build_profile.is_empty() {
+        println!("    profile    {}", prof::show(&r.blas_build_profile));
+    }
+    println!("  fast-build   {}", opt(&r.blas_build_fast_build));
+    if !r.blas_build_fast_build_profile.is_empty() {
+        println!(
+            "    profile    {}",
+            prof::show(&r.blas_build_fast_build_profile)
+        );
+    }
+    println!("  BLAS refit   {}", opt(&r.blas_refit));
+    if !r.blas_refit_profile.is_empty() {
+        println!("    profile    {}", prof::show(&r.blas_refit_profile));
+    }
+    println!("  TLAS build   {}", opt(&r.tlas_build));
+    if !r.tlas_build_profile.is_empty() {
+        println!("    profile    {}", prof::show(&r.tlas_build_profile));
+    }
+    match &r.sah {
+        Some(s) => println!(
+            "  SAH cost     GPU {:.2} / CPU {:.2} = {:.3} ({}, {} triangles)",
+            s.gpu_sah_cost, s.cpu_sah_cost, s.ratio, s.geometry, s.triangles
+        ),
+        None => println!("  SAH cost     —"),
+    }
+    println!("  rays at {w}x{h}:");
+    for b in &r.rays {
+        println!(
+            "    {:<8} {:>9} rays {:>9} misses  {}  {:.1} Mrays/s",
+            b.kind,
+            b.rays,
+            b.misses,
+            b.time.show(),
+            b.mrays_per_s
+        );
+        if let Some(w) = b.work {
+            // Node fetches of the whole batch per second: the traversal's step rate.
+            let g_nodes_per_s = b.rays as f64 * w.nodes / (b.time.median_ms * 1e6);
+            println!(
+                "      work     {:.1} BLAS nodes + {:.1} triangle tests per ray ({} sampled): \
+                 {:.1} G node fetches/s; {}-lane subgroups {:.0} % busy",
+                w.nodes,
+                w.triangles,
+                w.sampled,
+                g_nodes_per_s,
+                SUBGROUP_LANES,
+                w.subgroup_busy * 100.0
+            );
+        }
+    }
+    if let Some(p) = r.peer_mrays_per_s {
+        println!("    peer workload (primary + diffuse from hits): {p:.1} Mrays/s");
+    }
+    if let Some(o) = &r.oracle {
+        println!(
+            "  CPU oracle   {} of {} sampled primary rays disagree (hit/miss, or t beyond 1e-3)",
+            o.disagreements, o.rays
+        );
+    }
+    if let Some(c) = &r.cache {
+        println!(
+            "  cache        {:.1} MiB of surfels ({:.1} MiB held), {} degraded instances",
+            c.surfel_bytes as f64 / 1048576.0,
+            c.cache_bytes as f64 / 1048576.0,
+            c.degraded_instances
+        );
+        for (stride, t) in &c.injection {
+            println!("  injection    stride {stride}: {}", t.show());
+        }
+        for (tasks, e) in &c.error {
+            println!("  cache error  after {tasks:>2} injections: {:.4}", e);
+        }
+    }
+    if !r.trace_tasks.is_empty() {
+        println!("  trace tasks at {w}x{h} (G-buffer of the primary hits):");
+    }
+    for t in &r.trace_tasks {
+        let lights = if t.lights > 0 {
+            format!(" {:>2} lights", t.lights)
+        } else {
+            String::new()
+        };
+        println!(
+            "    {:<12}{:<10}{}  {}",
+            t.task,
+            lights,
+            if t.checkerboard { " checkerboard" } else { "" },
+            t.time.show()
+        );
+    }
+    if let Some(c) = &r.trace_combined {
+        println!(
+            "    specular + diffuse + AO + shadow together: {}",
+            c.show()
+        );
+    }
+    for e in &r.errors {
+        println!("  failed: {e}");
+    }
+}
