@@ -1,5 +1,5 @@
 // One block's counts of an 8-bit sort digit, in workgroup memory, and where they go in the radix
-// sort's histogram. Shared by gpu/radix_sort.wgsl's `histogram` and scene/lbvh/lbvh.wgsl's
+// sort's histogram. Shared by gpu/radix_sort.wgsl's `histogram` and scene/lbvh/morton.wgsl's
 // `lbvh_morton_histogram` (which counts the first digit while it makes the keys), so the two
 // write the same layout: imported by both (src/gpu/radix_sort.rs, src/scene/lbvh/).
 // Every function here must be called by all 256 invocations of the workgroup, each passing its

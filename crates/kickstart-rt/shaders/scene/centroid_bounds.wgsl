@@ -1,6 +1,7 @@
-// Centroid bounds of a BVH build's primitives, shared by scene/lbvh/lbvh.wgsl (its `lbvh_bounds` pass) and
-// scene/prims.wgsl (the TLAS's instance-box pass merges them as it writes the boxes, so a TLAS build
-// skips `lbvh_bounds`). Both must count the same primitives in the same way, hence one copy.
+// Centroid bounds of a BVH build's primitives, shared by scene/lbvh/bounds.wgsl (the `lbvh_bounds`
+// pass) and scene/prims.wgsl (the TLAS's instance-box pass merges them as it writes the boxes, so a
+// TLAS build skips `lbvh_bounds`). Both must count the same primitives in the same way, hence one
+// copy.
 //
 // Six u32 words: ~enc(min.xyz), enc(max.xyz), merged with atomicMax, so zero (a cleared buffer)
 // is the identity. A primitive counts when its box (as stored in an AABB buffer) is not empty

@@ -1,7 +1,8 @@
-// Decoding of application vertex/index bytes (copied raw into SDK memory) into triangles:
-// the component table row, the vertex fetch with its checks, and the triangle as stored. Shared
-// by scene/ingest.wgsl (the ingestion pass) and scene/lbvh/lbvh.wgsl (lbvh_refit_ingest, the refit that decodes
-// its triangles itself). The module that includes it declares `raw: array<u32>` (the bytes).
+// Decoding of application vertex/index bytes (copied raw into SDK memory) into triangles: the
+// component table row, the vertex fetch with its checks, and the triangle as stored. Shared by
+// scene/ingest.wgsl (the ingestion pass) and scene/lbvh/range_refit.wgsl (lbvh_refit_ingest, the
+// refit that decodes its triangles itself). The module that includes it declares `raw: array<u32>`
+// (the bytes).
 // Layouts: docs/ray-tracing-core.md.
 
 // One component (112 bytes; mirrors `ComponentRow` in ingest.rs).

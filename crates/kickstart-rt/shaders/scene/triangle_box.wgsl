@@ -1,5 +1,6 @@
-// A staged triangle's box as the BVH builds store it, shared by scene/prims.wgsl (triangle_aabbs, the
-// refit's gather) and scene/lbvh/lbvh.wgsl (lbvh_refit_gather): the same box wherever it is made.
+// A staged triangle's box as the BVH builds store it, shared by scene/prims.wgsl (triangle_aabbs,
+// the refit's gather) and scene/lbvh/range_refit.wgsl (lbvh_refit_gather): the same box wherever it
+// is made.
 
 // The stored empty box (documented in docs/ray-tracing-core.md).
 const EMPTY_MIN: vec4<f32> = vec4<f32>(1e30, 1e30, 1e30, 0.0);

@@ -1,7 +1,7 @@
 // Clustered BVH build over the LBVH's Morton order: locally-ordered clustering (PLOC, Meister &
 // Bittner 2018) done hierarchically while climbing the Karras tree, after H-PLOC (Benthin et al.
-// 2024). Imports scene/lbvh/lbvh (its boxes, SAH summaries, node writer and workgroup vote);
-// driven by src/scene/lbvh.rs, which documents the pass order.
+// 2024). Imports scene/lbvh/climb (its boxes, SAH summaries, node writer and workgroup vote);
+// driven by src/scene/lbvh/mod.rs, which documents the pass order.
 //
 // Entry point (32 invocations, one per Karras inner node; the Karras hierarchy of lbvh_hierarchy
 // is bound at `topology`, base 0, with its range ends):
@@ -13,7 +13,7 @@
 //                all 32 invocations.
 //                Each merge makes one node of the output tree, written in the final node format
 //                (boxes, SAH leaf collapsing) and, in `topo_out`, in the topology format of
-//                scene/lbvh/lbvh.wgsl (so lbvh_climb refits it).
+//                scene/lbvh/common.wgsl (so lbvh_climb refits it).
 //
 // Why 32 invocations: a merge needs at most 32 lanes, and the climbers of a workgroup step
 // through every merge's barriers together. In workgroups of 256 (eight merges side by side),
@@ -55,7 +55,7 @@
 // starts. Merges take slots in the order of their lanes, so the tree is the same on every
 // build of the same input (no global counter; its contention cost nothing measurable).
 
-#import scene/lbvh/lbvh
+#import scene/lbvh/climb
 
 @group(0) @binding(9) var<storage, read_write> topo_out: array<u32>;
 

@@ -1,4 +1,5 @@
-//! GPU LBVH (Karras 2012) over primitive AABBs, and its refit. Shaders: `shaders/scene/lbvh/lbvh.wgsl`;
+//! GPU LBVH (Karras 2012) over primitive AABBs, and its refit. Shaders: `shaders/scene/lbvh/`, one module a
+//! pass (`lbvh.wgsl` imports them all);
 //! layouts: `docs/ray-tracing-core.md` (AABB input, BVH2 node format).
 //!
 //! Build, all recorded into the caller's encoder:
@@ -38,7 +39,7 @@
 //! instead ([`Lbvh::refit_triangles`]), which starts from the re-ingested triangles: every inner
 //! node covers one range of sorted positions (the hierarchy pass stores each node's other range
 //! end in the topology), and the box of a range is the union of at most two boxes per level of a
-//! pyramid over the sorted leaf boxes (`shaders/scene/lbvh/lbvh.wgsl`, "Range refit"). `lbvh refit gather`
+//! pyramid over the sorted leaf boxes (`shaders/scene/lbvh/range_refit.wgsl`). `lbvh refit gather`
 //! gathers the triangles into sorted order, makes the pyramid's lowest 8 levels over each block of
 //! 256 in workgroup memory, writes every node whose range lies inside its block, lists the others
 //! and merges its top box into the levels above with atomics. `lbvh range refit` then writes the
@@ -266,7 +267,7 @@ pub(crate) struct RawTriangles<'a> {
 }
 
 /// Component rows one `lbvh refit ingest` dispatch takes, for all of its refits
-/// (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/lbvh.wgsl`: its uniform table, 56 KiB of WebGPU's
+/// (`REFIT_INGEST_ROWS` in `shaders/scene/lbvh/range_refit.wgsl`: its uniform table, 56 KiB of WebGPU's
 /// default 64 KiB uniform binding), and so the most one refit from raw bytes may have.
 pub(crate) const REFIT_INGEST_ROWS: usize = 512;
 
@@ -352,8 +353,8 @@ pub(crate) struct Lbvh {
 /// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/scene/lbvh/hploc.wgsl`).
 const HPLOC_WORKGROUP: u32 = 32;
 
-/// Buffers of one dispatch by the shader's names for them (`shaders/scene/lbvh/lbvh.wgsl`,
-/// `shaders/scene/lbvh/hploc.wgsl`): each pass binds those its entry point uses, at the binding numbers the
+/// Buffers of one dispatch by the shader's names for them (`shaders/scene/lbvh/common.wgsl`
+/// declares most, `shaders/scene/lbvh/hploc.wgsl` one): each pass binds those its entry point uses, at the binding numbers the
 /// shader declares ([`ReflectedPipeline::bind_group`]); a later entry of a name overrides an
 /// earlier one.
 type Buffers<'a> = Vec<(&'static str, &'a wgpu::Buffer)>;
@@ -384,18 +385,21 @@ fn effective_max_leaf(max_leaf: u32, leaf_refs: LeafRefs) -> u32 {
     }
 }
 
+/// The modules of the builder's one shader: the LBVH's passes (`lbvh` imports each pass's module)
+/// and the clustered climb, with the digit counting, centroid bounds, triangle boxes and vertex
+/// decoding they share with other passes.
+const SHADER_ROOTS: &[&str] = &["scene/lbvh/lbvh", "scene/lbvh/hploc"];
+
 /// The WGSL of the builder's passes, labelled.
 pub(crate) fn shader_variants() -> Vec<(String, String)> {
-    let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
+    let shader = ReflectedShader::compose(SHADER_ROOTS, &[]);
     vec![("scene/lbvh".into(), shader.source().to_string())]
 }
 
 impl Lbvh {
     /// Creates the pipelines (no buffers until the first build).
     pub fn new(device: &wgpu::Device) -> Self {
-        // The LBVH and its clustered variant (which imports it), with the digit counting, centroid
-        // bounds, triangle boxes and vertex decoding they share with other passes.
-        let shader = ReflectedShader::compose(&["scene/lbvh/hploc"], &[]);
+        let shader = ReflectedShader::compose(SHADER_ROOTS, &[]);
         let pipeline = |label, entry| shader.pipeline(device, label, entry);
         Lbvh {
             bounds: pipeline("lbvh bounds", "lbvh_bounds"),

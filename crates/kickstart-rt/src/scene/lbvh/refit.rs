@@ -10,7 +10,7 @@ use crate::gpu::Recorder;
 use crate::scene::ingest::ROW_WORDS;
 use bytemuck::Zeroable;
 
-/// Boxes of the box pyramid over `n` boxes (`shaders/scene/lbvh/lbvh.wgsl`, "Range refit"): level 0 (the
+/// Boxes of the box pyramid over `n` boxes (`shaders/scene/lbvh/range_refit.wgsl`): level 0 (the
 /// boxes), then `ceil(n / 2^L)` a level up to the level of one box.
 pub(super) fn pyramid_boxes(n: u32) -> u64 {
     let mut total = u64::from(n);
@@ -27,7 +27,7 @@ pub(super) fn pyramid_boxes(n: u32) -> u64 {
 #[cfg(test)]
 pub(super) const REFIT_GATHER_LEVELS: u32 = WORKGROUP.trailing_zeros();
 
-/// Words of the range refit's layout in `work` (`shaders/scene/lbvh/lbvh.wgsl`, above
+/// Words of the range refit's layout in `work` (`shaders/scene/lbvh/range_refit.wgsl`, above
 /// `straddle_list_at`) for `n` triangles in `nb` blocks of 256: the header, the straddling nodes'
 /// lists and counts, then the pyramid's levels above the blocks' 8 (6 words a box).
 fn range_refit_work(n: u32) -> u64 {
@@ -233,7 +233,7 @@ impl Lbvh {
     }
 }
 
-/// Range refits one dispatch takes (`REFIT_BATCH` in `shaders/scene/lbvh/lbvh.wgsl`: the size of
+/// Range refits one dispatch takes (`REFIT_BATCH` in `shaders/scene/lbvh/range_refit.wgsl`: the size of
 /// its uniform table of refits, 40 KiB of WebGPU's default 64 KiB uniform binding).
 pub(crate) const REFIT_BATCH: usize = 512;
 

@@ -15,13 +15,13 @@ mod hploc;
 mod range_refit;
 mod refit_batch;
 
-/// The builder's shader (the clustered climb and the LBVH it imports) composed and validated with
+/// The builder's shader (the LBVH's passes and the clustered climb) composed and validated with
 /// naga without a device; its uniform and the constants the Rust side mirrors checked against it.
 #[test]
 fn the_shader_validates_and_matches_the_rust_side() {
     use crate::gpu::compose::compose;
     use crate::gpu::wgsl_check::{assert_wgsl_layout, const_u32, validate};
-    let module = validate("scene/lbvh/hploc", &compose(&["scene/lbvh/hploc"], &[]));
+    let module = validate("scene/lbvh", &compose(SHADER_ROOTS, &[]));
     assert_wgsl_layout!(
         module,
         "Params",
@@ -65,6 +65,51 @@ fn the_shader_validates_and_matches_the_rust_side() {
         REFIT_INGEST_ROWS
     );
     assert_eq!(const_u32(&module, "REFIT_BATCH") as usize, REFIT_BATCH);
+}
+
+/// Each pass's module composes and validates on its own (it imports all it uses, not relying on
+/// another pass's module in the same shader) and holds its entry points; together they hold every
+/// pipeline's entry point once.
+#[test]
+fn every_pass_module_stands_alone() {
+    use crate::gpu::compose::compose;
+    use crate::gpu::wgsl_check::validate;
+    let passes: &[(&str, &[&str])] = &[
+        ("scene/lbvh/bounds", &["lbvh_bounds"]),
+        (
+            "scene/lbvh/morton",
+            &[
+                "lbvh_morton",
+                "lbvh_morton_histogram",
+                "lbvh_segment_keys",
+                "lbvh_rekey",
+            ],
+        ),
+        ("scene/lbvh/gather", &["lbvh_gather"]),
+        ("scene/lbvh/hierarchy", &["lbvh_hierarchy"]),
+        ("scene/lbvh/climb", &["lbvh_climb"]),
+        (
+            "scene/lbvh/range_refit",
+            &["lbvh_refit_gather", "lbvh_refit_ingest", "lbvh_range_refit"],
+        ),
+        ("scene/lbvh/hploc", &["lbvh_climb", "hploc_climb"]),
+    ];
+    for &(name, entries) in passes {
+        let module = validate(name, &compose(&[name], &[]));
+        let got: Vec<&str> = module
+            .entry_points
+            .iter()
+            .map(|e| e.name.as_str())
+            .collect();
+        assert_eq!(got, entries, "{name}");
+    }
+    let all = validate("scene/lbvh", &compose(SHADER_ROOTS, &[]));
+    let mut got: Vec<&str> = all.entry_points.iter().map(|e| e.name.as_str()).collect();
+    got.sort_unstable();
+    let mut want: Vec<&str> = passes.iter().flat_map(|(_, e)| e.iter().copied()).collect();
+    want.sort_unstable();
+    want.dedup();
+    assert_eq!(got, want);
 }
 
 /// A primitive box (min, max) as the AABB input holds it.
