@@ -1,7 +1,8 @@
 //! The denoisers on synthetic inputs: an analytic scene's G-buffer, a converged reference signal
-//! and noisy inputs (reference × per-pixel noise of mean 1, new every frame). Issue 7's
-//! acceptance list: convergence, edges, flat walls, camera cuts, moving objects, hard and soft
-//! shadows, checkerboard input; plus the contexts' memory and validation.
+//! and noisy inputs (reference × per-pixel noise of mean 1, new every frame). What the denoisers
+//! must do: converge, keep edges, smooth flat walls, restart at camera cuts, follow moving
+//! objects, keep hard and soft shadows, take checkerboard input; plus the contexts' memory and
+//! validation.
 
 mod common;
 

@@ -7,6 +7,7 @@
 
 #import scene/traversal
 #import cache/sample
+#import gpu/uniform_branch
 
 struct InjectParams {
     clip_to_world: mat4x4<f32>,
@@ -32,12 +33,9 @@ struct InjectParams {
 const FIXED_SCALE: f32 = 65536.0;
 const MAX_RADIANCE: f32 = 65504.0;
 
-// Branches on the task's parameters go through this: Mesa's lavapipe 22.x (the CI's Vulkan
-// driver) compiles a specialised copy of a shader at every dispatch whose branches depend on
-// uniform values alone, and keeps each copy as long as the pipeline (see trace/gbuffer.wgsl,
-// gb_branch). XOR with a zero it cannot know keeps the value and the shader unspecialised.
+// Branches on the task's parameters go through this (gpu/uniform_branch.wgsl says why).
 fn inject_branch(x: u32) -> u32 {
-    return x ^ (textureNumLevels(light_tex) >> 16u);
+    return uniform_branch(x, light_tex);
 }
 
 fn unproject(ndc: vec2<f32>, z: f32) -> vec3<f32> {

@@ -5,6 +5,7 @@
 
 #import scene/traversal
 #import trace/gbuffer
+#import gpu/uniform_branch
 
 struct TrLight {
     // Point/spot: position (xyz) and emitter radius (w). Directional: the direction the light
@@ -49,15 +50,9 @@ const TR_BN_SIZE: u32 = 64u;
 @group(2) @binding(2) var tr_env: texture_2d<f32>;
 @group(2) @binding(3) var tr_direct_lighting: texture_2d<f32>;
 
-// Branches on uniform values go through `tr_branch`: Mesa's lavapipe 22.x (Debian 12, the CI's Vulkan
-// driver) specialises a shader whose `if`s, `switch`es or loop bounds depend on uniform-buffer
-// values alone by compiling a new copy of it for that dispatch, at every dispatch, and frees none
-// of them until the pipeline goes: a trace task then cost an LLVM compile and about 2 MB for the
-// life of the context (`ksrt quality`'s reference samples reached 20 GB; issue 35). XOR with
-// a zero the driver cannot know (a texture's level count is below 2^16) keeps the value the
-// same and the shader unspecialised; on a GPU it is one texture query.
+// Branches on uniform values go through `tr_branch` (gpu/uniform_branch.wgsl says why).
 fn tr_branch(x: u32) -> u32 {
-    return x ^ (textureNumLevels(tr_blue_noise) >> 16u);
+    return uniform_branch(x, tr_blue_noise);
 }
 
 fn tr_flag(f: u32) -> bool {

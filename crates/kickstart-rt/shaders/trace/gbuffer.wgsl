@@ -10,6 +10,7 @@
 // rectangle into them. NDC: x right, y up, z as the projection writes it (normal or reverse Z).
 
 #param GBUFFER_GROUP
+#import gpu/uniform_branch
 
 struct GBufferParams {
     // inverse(view_to_clip * world_to_view) (computed in f64 on the CPU).
@@ -102,15 +103,9 @@ fn gb_unproject(ndc: vec2<f32>, z: f32) -> vec3<f32> {
     return p.xyz / p.w;
 }
 
-// Branches on uniform values go through `gb_branch`: Mesa's lavapipe 22.x (Debian 12, the CI's Vulkan
-// driver) specialises a shader whose `if`s, `switch`es or loop bounds depend on uniform-buffer
-// values alone by compiling a new copy of it for that dispatch, at every dispatch, and frees none
-// of them until the pipeline goes: a trace task then cost an LLVM compile and about 2 MB for the
-// life of the context (`ksrt quality`'s reference samples reached 20 GB; issue 35). XOR with
-// a zero the driver cannot know (a texture's level count is below 2^16) keeps the value the
-// same and the shader unspecialised; on a GPU it is one texture query.
+// Branches on uniform values go through `gb_branch` (gpu/uniform_branch.wgsl says why).
 fn gb_branch(x: u32) -> u32 {
-    return x ^ (textureNumLevels(gb_depth) >> 16u);
+    return uniform_branch(x, gb_depth);
 }
 
 // Whether the view is a perspective one (the eye is a point), for a branch (gb_branch).

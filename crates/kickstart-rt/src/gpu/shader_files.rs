@@ -31,6 +31,7 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "gpu/digit_histogram",
     "gpu/radix_sort",
     "gpu/radix_sort_small",
+    "gpu/uniform_branch",
     "scene/centroid_bounds",
     "scene/ingest",
     "scene/ingest_decode",
