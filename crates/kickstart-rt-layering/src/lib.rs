@@ -168,9 +168,9 @@ pub fn graph(src_dir: &Path) -> Result<Graph, String> {
             .iter()
             .filter_map(|p| resolve(&files, p))
             .filter(|t| t != module)
-            // A parent module naming its children is not an import.
-            .filter(|t| module.is_empty() || !t.starts_with(module))
-            .filter(|t| !(module.is_empty() && !t.is_empty()))
+            // A parent module naming its children is not an import; the root stands above every
+            // module, so its imports are not checked.
+            .filter(|t| !module.is_empty() && !t.starts_with(module))
             .collect();
         edges.insert(module.clone(), targets);
     }

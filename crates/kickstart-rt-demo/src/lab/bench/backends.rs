@@ -5,12 +5,11 @@
 
 use kickstart_rt as ksrt;
 use kickstart_rt_peer_vulkan as vkrt;
-use serde::Serialize;
 
 use super::harness::Bench;
-use super::peer::{peer_hit, query_kind, AgreementReport};
+use super::peer::{peer_hit, query_kind};
 use super::rays::RayBatches;
-use super::report::SceneReport;
+pub use super::report::{BackendComparison, BackendRays, SceneReport};
 use super::{attempt, Stats};
 use kickstart_rt_renderer::scene::Scene;
 use kickstart_rt_renderer::upload::UploadedMesh;
@@ -19,45 +18,6 @@ use kickstart_rt_renderer::upload::UploadedMesh;
 /// another triangle beyond a tie) before the comparison counts as failed: rays grazing a shared
 /// edge or lying in a triangle's plane, which each backend's triangle test may decide otherwise.
 const MAX_DISAGREEMENT: f64 = 1e-4;
-
-/// One ray batch on both backends.
-#[derive(Debug, Clone, Serialize)]
-pub struct BackendRays {
-    /// `primary`, `ao` or `diffuse`.
-    pub kind: &'static str,
-    /// Rays in the batch (the same for both).
-    pub rays: u64,
-    /// The measured backend's rays per second, millions (the scene's own figure).
-    pub this_mrays_per_s: f64,
-    /// The other backend's.
-    pub other_mrays_per_s: f64,
-    /// The other backend's GPU times.
-    pub other_time: Stats,
-    /// Ray-by-ray comparison of the hits (the other backend as "theirs").
-    pub agreement: AgreementReport,
-    /// The largest |t − t'| / max(|t|, 1) over rays both backends hit on the same triangle.
-    pub max_relative_distance: f64,
-}
-
-/// The scene traced by the other backend, against the measured one.
-#[derive(Debug, Clone, Serialize)]
-pub struct BackendComparison {
-    /// The backend of the scene's own figures.
-    pub this: String,
-    /// The backend measured here.
-    pub other: String,
-    /// Every BLAS in one task (fast-trace), the other backend; the scene's `blas_build` is this
-    /// backend's.
-    pub other_blas_build: Option<Stats>,
-    /// The TLAS rebuild over the scene's instances, the measured backend.
-    pub this_tlas_build: Option<Stats>,
-    /// The same, the other backend.
-    pub other_tlas_build: Option<Stats>,
-    /// The ray batches.
-    pub rays: Vec<BackendRays>,
-    /// Measurements that failed, and why.
-    pub errors: Vec<String>,
-}
 
 /// The backend a context made with `choice` on the bench's device takes.
 pub(super) fn backend_of(

@@ -16,12 +16,11 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 use kickstart_rt as ksrt;
-use serde::Serialize;
 use wgpu::util::DeviceExt;
 
 use super::harness::Bench;
 use super::rays::surface;
-use super::Stats;
+pub use super::report::CacheReport;
 use crate::app::gpu;
 use kickstart_rt_renderer::error::AnyResult;
 use kickstart_rt_renderer::scene::{Camera, Scene};
@@ -30,22 +29,6 @@ use kickstart_rt_renderer::upload::{self, UploadedMesh};
 
 /// Direction towards the bench's directional light.
 const LIGHT: Vec3 = Vec3::new(0.3, 1.0, 0.2);
-
-/// The cache measurements of one scene.
-#[derive(Debug, Clone, Serialize)]
-pub struct CacheReport {
-    /// Σ surfels × 16 bytes over the instances (full resolution).
-    pub surfel_bytes: u64,
-    /// `resource_allocations().cache`: the surfel pool (with its reserve), triangle records,
-    /// headers, allocation and injection buffers.
-    pub cache_bytes: u64,
-    /// Instances still coarse after the pool grew (should be 0).
-    pub degraded_instances: usize,
-    /// (stride, injection time).
-    pub injection: Vec<(u32, Stats)>,
-    /// (injection tasks, mean relative error).
-    pub error: Vec<(u32, f64)>,
-}
 
 fn texture(
     bench: &Bench,

@@ -39,7 +39,7 @@ mod tree_work;
 use harness::Bench;
 pub use peer::PeerKind;
 use profile as prof;
-use report::{print_scene, Report, TlasReport};
+use report::{print_scene, SceneReport, TlasReport};
 use scenes::{bench_scene, bench_tlas};
 
 /// Scenes benchmarked when no `--scene` is given.
@@ -47,6 +47,41 @@ pub const DEFAULT_SCENES: [&str; 2] = ["statue", "apartment"];
 
 /// Instance counts of the TLAS measurements.
 pub const TLAS_INSTANCE_COUNTS: [u32; 3] = [1_000, 10_000, 100_000];
+
+/// The whole `--json` report.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// kickstart-rt version.
+    pub sdk_version: String,
+    /// Adapter name.
+    pub adapter: String,
+    /// Driver name and version, as wgpu reports them.
+    pub driver: String,
+    /// The commit `ksrt` was built from (embedded at build time; `-dirty` with local changes).
+    pub commit: String,
+    /// wgpu backend.
+    pub backend: String,
+    /// Whether the device has timestamp queries (without them nothing is timed).
+    pub timestamp_query: bool,
+    /// Ray batch image width.
+    pub width: u32,
+    /// Ray batch image height.
+    pub height: u32,
+    /// Timed repetitions per measurement.
+    pub iterations: u32,
+    /// Order of the ray batches' primary rays.
+    pub ray_order: extras::RayOrder,
+    /// GPU work (milliseconds at full clocks) submitted untimed before each timed task
+    /// (`--busy-gpu-ms`; 0: none).
+    pub busy_gpu_ms: f64,
+    /// Per scene.
+    pub scenes: Vec<SceneReport>,
+    /// Per instance count.
+    pub tlas: Vec<TlasReport>,
+    /// The optional passes' results (`cpu_peers`, `scaling`, `frames_in_flight`).
+    #[serde(flatten)]
+    pub extras: extras::ExtrasReport,
+}
 
 /// Options of `ksrt bench`.
 pub struct BenchOptions {

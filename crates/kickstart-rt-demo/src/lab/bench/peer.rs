@@ -9,11 +9,12 @@
 use std::time::Duration;
 
 use kickstart_rt_peer_vulkan as vkrt;
-use serde::Serialize;
 
 use super::harness::Bench;
 use super::rays::RayBatches;
-use super::report::SceneReport;
+pub use super::report::{
+    AgreementReport, PeerReport, RateComparison, RayComparison, SceneReport, TimeComparison,
+};
 use super::{attempt, Stats};
 use kickstart_rt_renderer::scene::Scene;
 use kickstart_rt_renderer::sdk_glue::{GpuHit, Query};
@@ -57,17 +58,6 @@ pub fn open(kind: PeerKind, info: &wgpu::AdapterInfo) -> PeerState {
     }
 }
 
-/// A GPU time, ours against theirs.
-#[derive(Debug, Clone, Serialize)]
-pub struct TimeComparison {
-    /// Our median, milliseconds (`None` where our measurement failed).
-    pub ours_ms: Option<f64>,
-    /// Their times.
-    pub theirs: Stats,
-    /// Their median / ours: our speed-up (above 1: we are faster).
-    pub ratio: Option<f64>,
-}
-
 impl TimeComparison {
     fn new(ours_ms: Option<f64>, theirs: vkrt::Samples) -> TimeComparison {
         let theirs = Stats::new(theirs.0);
@@ -77,23 +67,6 @@ impl TimeComparison {
             theirs,
         }
     }
-}
-
-/// Where the two tracers disagree on one batch (`kickstart_rt_peer_vulkan::compare_hits`).
-#[derive(Debug, Clone, Serialize)]
-pub struct AgreementReport {
-    /// Disagreeing rays: hit vs miss, or (closest hit) another triangle beyond a tie.
-    pub disagreements: u64,
-    /// Disagreements in percent of the batch (the goal: at most 0.01 %).
-    pub disagreement_percent: f64,
-    /// One hit, the other missed.
-    pub hit_miss: u64,
-    /// Both hit, other triangles at distances beyond the tie tolerance.
-    pub different_triangle: u64,
-    /// Both hit other triangles at equal distances (agreeing: shared edges, coincident faces).
-    pub ties: u64,
-    /// Same triangle, distances beyond 1e-3 relative (agreeing on the hit; counted apart).
-    pub distance_mismatches: u64,
 }
 
 impl From<vkrt::Agreement> for AgreementReport {
@@ -107,65 +80,6 @@ impl From<vkrt::Agreement> for AgreementReport {
             distance_mismatches: a.distance_mismatches,
         }
     }
-}
-
-/// One ray batch, ours against theirs.
-#[derive(Debug, Clone, Serialize)]
-pub struct RayComparison {
-    /// `primary`, `ao` or `diffuse`.
-    pub kind: &'static str,
-    /// Rays in the batch (the same rays for both).
-    pub rays: u64,
-    /// Our rays per second, millions.
-    pub ours_mrays_per_s: Option<f64>,
-    /// Theirs.
-    pub theirs_mrays_per_s: f64,
-    /// Ours / theirs (above 1: we are faster).
-    pub ratio: Option<f64>,
-    /// Their GPU times (`vkCmdTraceRaysKHR`).
-    pub theirs_time: Stats,
-    /// Their misses.
-    pub theirs_misses: u64,
-    /// Ray-by-ray comparison of the hits.
-    pub agreement: AgreementReport,
-}
-
-/// A rate, ours against theirs.
-#[derive(Debug, Clone, Serialize)]
-pub struct RateComparison {
-    /// Ours, millions per second.
-    pub ours: Option<f64>,
-    /// Theirs.
-    pub theirs: f64,
-    /// Ours / theirs (above 1: we are faster).
-    pub ratio: Option<f64>,
-}
-
-/// The peer's figures on one scene.
-#[derive(Debug, Clone, Serialize)]
-pub struct PeerReport {
-    /// `vulkan-rt`.
-    pub peer: &'static str,
-    /// The peer's device, when it ran.
-    pub device: Option<String>,
-    /// Its driver.
-    pub driver: Option<String>,
-    /// Why the peer was skipped, when it was.
-    pub skipped: Option<String>,
-    /// Every BLAS in one build command, `PREFER_FAST_TRACE`, against our BLAS build.
-    pub blas_build_fast_trace: Option<TimeComparison>,
-    /// The same with `PREFER_FAST_BUILD`.
-    pub blas_build_fast_build: Option<TimeComparison>,
-    /// Bytes of their fast-trace BLASes (uncompacted).
-    pub blas_bytes_fast_trace: Option<u64>,
-    /// TLAS build over the scene's instances, against our TLAS rebuild of the same instances.
-    pub tlas_build: Option<TimeComparison>,
-    /// Primary, AO and diffuse: the same rays, traced against their fast-trace BLASes.
-    pub rays: Vec<RayComparison>,
-    /// The peer workload, (pixels + primary hits) / (primary time + diffuse time), Mrays/s.
-    pub workload: Option<RateComparison>,
-    /// Measurements that failed, and why.
-    pub errors: Vec<String>,
 }
 
 impl PeerReport {

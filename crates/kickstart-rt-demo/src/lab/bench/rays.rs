@@ -7,18 +7,15 @@ use std::collections::HashMap;
 use glam::{Affine3A, Vec3};
 use kickstart_rt as ksrt;
 
-use super::extras;
 use super::harness::Bench;
-use super::report::{OracleCheck, RayBatch, SceneReport, WorkPerRay};
+use super::options::RayOrder;
+use super::report::{OracleCheck, RayBatch, SceneReport, WorkPerRay, SUBGROUP_LANES};
 use super::Stats;
 use kickstart_rt_renderer::error::AnyResult;
 use kickstart_rt_renderer::rng::Rng;
 use kickstart_rt_renderer::scene::{Camera, Scene};
 use kickstart_rt_renderer::sdk_glue::{GpuHit, GpuRay, Query};
 use kickstart_rt_renderer::upload::UploadedMesh;
-
-/// Lanes of the subgroup that [`WorkPerRay::subgroup_busy`] models (NVIDIA's warp).
-pub(super) const SUBGROUP_LANES: usize = 32;
 
 /// The CPU ray of `r` in the instance's object space.
 fn object_ray(r: &GpuRay, world_to_object: Affine3A) -> ksrt::cpu::Ray {
@@ -212,14 +209,14 @@ pub(super) struct RayBatches {
 /// One primary ray per pixel through `camera`, row by row from the top: their directions and the
 /// rays (from the eye, t in [0, ∞)).
 pub(super) fn primary_rays(camera: &Camera, size: (u32, u32)) -> (Vec<Vec3>, Vec<GpuRay>) {
-    primary_rays_in(camera, size, extras::RayOrder::Rows)
+    primary_rays_in(camera, size, RayOrder::Rows)
 }
 
 /// [`primary_rays`] with the pixels in `order`.
 fn primary_rays_in(
     camera: &Camera,
     (width, height): (u32, u32),
-    order: extras::RayOrder,
+    order: RayOrder,
 ) -> (Vec<Vec3>, Vec<GpuRay>) {
     let dirs: Vec<Vec3> = order
         .pixels((width, height))

@@ -4,9 +4,11 @@
 use serde::Serialize;
 
 use super::profile::{self as prof, PassProfile};
-use super::rays::SUBGROUP_LANES;
-use super::{cache, extras, peer, tree_work, Stats};
+use super::Stats;
 use kickstart_rt_renderer::scene::{Camera, Scene};
+
+/// Lanes of the subgroup that [`WorkPerRay::subgroup_busy`] models (NVIDIA's warp).
+pub(super) const SUBGROUP_LANES: usize = 32;
 
 /// BVH quality of the largest geometry.
 #[derive(Debug, Clone, Serialize)]
@@ -102,22 +104,22 @@ pub struct SceneReport {
     /// Primary rays checked against the CPU reference BVH on this GPU (untimed).
     pub oracle: Option<OracleCheck>,
     /// Direct lighting cache: bytes, injection time, cache error (`cache`).
-    pub cache: Option<cache::CacheReport>,
+    pub cache: Option<CacheReport>,
     /// The SDK's trace tasks on a G-buffer of the primary hits (`trace …` passes).
     pub trace_tasks: Vec<TraceTaskTime>,
     /// Specular + diffuse + AO + one shadow in one GPU task, full resolution (first trace pass's
     /// start to the last one's end).
     pub trace_combined: Option<Stats>,
     /// The peer's figures on the same meshes and rays (`--peer`), or why it was skipped.
-    pub peer: Option<peer::PeerReport>,
+    pub peer: Option<PeerReport>,
     /// The traversal backend of this scene's figures.
     pub traversal_backend: Option<String>,
     /// Where the device has both backends: the other one on the same scene and rays.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub backends: Option<super::backends::BackendComparison>,
+    pub backends: Option<BackendComparison>,
     /// `--tree-work`: other builders' trees on the same rays.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub tree_work: Vec<tree_work::TreeWork>,
+    pub tree_work: Vec<TreeWork>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
 }
@@ -203,41 +205,6 @@ pub struct TlasReport {
     pub refit_profile: Vec<PassProfile>,
     /// Measurements that failed, and why.
     pub errors: Vec<String>,
-}
-
-/// The whole `--json` report.
-#[derive(Debug, Clone, Serialize)]
-pub struct Report {
-    /// kickstart-rt version.
-    pub sdk_version: String,
-    /// Adapter name.
-    pub adapter: String,
-    /// Driver name and version, as wgpu reports them.
-    pub driver: String,
-    /// The commit `ksrt` was built from (embedded at build time; `-dirty` with local changes).
-    pub commit: String,
-    /// wgpu backend.
-    pub backend: String,
-    /// Whether the device has timestamp queries (without them nothing is timed).
-    pub timestamp_query: bool,
-    /// Ray batch image width.
-    pub width: u32,
-    /// Ray batch image height.
-    pub height: u32,
-    /// Timed repetitions per measurement.
-    pub iterations: u32,
-    /// Order of the ray batches' primary rays.
-    pub ray_order: extras::RayOrder,
-    /// GPU work (milliseconds at full clocks) submitted untimed before each timed task
-    /// (`--busy-gpu-ms`; 0: none).
-    pub busy_gpu_ms: f64,
-    /// Per scene.
-    pub scenes: Vec<SceneReport>,
-    /// Per instance count.
-    pub tlas: Vec<TlasReport>,
-    /// The optional passes' results (`cpu_peers`, `scaling`, `frames_in_flight`).
-    #[serde(flatten)]
-    pub extras: extras::ExtrasReport,
 }
 
 /// Prints one scene's figures at the ray batches' size `w`×`h`.
@@ -355,4 +322,159 @@ pub(super) fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
     for e in &r.errors {
         println!("  failed: {e}");
     }
+}
+
+/// The cache measurements of one scene.
+#[derive(Debug, Clone, Serialize)]
+pub struct CacheReport {
+    /// Σ surfels × 16 bytes over the instances (full resolution).
+    pub surfel_bytes: u64,
+    /// `resource_allocations().cache`: the surfel pool (with its reserve), triangle records,
+    /// headers, allocation and injection buffers.
+    pub cache_bytes: u64,
+    /// Instances still coarse after the pool grew (should be 0).
+    pub degraded_instances: usize,
+    /// (stride, injection time).
+    pub injection: Vec<(u32, Stats)>,
+    /// (injection tasks, mean relative error).
+    pub error: Vec<(u32, f64)>,
+}
+
+/// A GPU time, ours against theirs.
+#[derive(Debug, Clone, Serialize)]
+pub struct TimeComparison {
+    /// Our median, milliseconds (`None` where our measurement failed).
+    pub ours_ms: Option<f64>,
+    /// Their times.
+    pub theirs: Stats,
+    /// Their median / ours: our speed-up (above 1: we are faster).
+    pub ratio: Option<f64>,
+}
+
+/// Where the two tracers disagree on one batch (`kickstart_rt_peer_vulkan::compare_hits`).
+#[derive(Debug, Clone, Serialize)]
+pub struct AgreementReport {
+    /// Disagreeing rays: hit vs miss, or (closest hit) another triangle beyond a tie.
+    pub disagreements: u64,
+    /// Disagreements in percent of the batch (the goal: at most 0.01 %).
+    pub disagreement_percent: f64,
+    /// One hit, the other missed.
+    pub hit_miss: u64,
+    /// Both hit, other triangles at distances beyond the tie tolerance.
+    pub different_triangle: u64,
+    /// Both hit other triangles at equal distances (agreeing: shared edges, coincident faces).
+    pub ties: u64,
+    /// Same triangle, distances beyond 1e-3 relative (agreeing on the hit; counted apart).
+    pub distance_mismatches: u64,
+}
+
+/// One ray batch, ours against theirs.
+#[derive(Debug, Clone, Serialize)]
+pub struct RayComparison {
+    /// `primary`, `ao` or `diffuse`.
+    pub kind: &'static str,
+    /// Rays in the batch (the same rays for both).
+    pub rays: u64,
+    /// Our rays per second, millions.
+    pub ours_mrays_per_s: Option<f64>,
+    /// Theirs.
+    pub theirs_mrays_per_s: f64,
+    /// Ours / theirs (above 1: we are faster).
+    pub ratio: Option<f64>,
+    /// Their GPU times (`vkCmdTraceRaysKHR`).
+    pub theirs_time: Stats,
+    /// Their misses.
+    pub theirs_misses: u64,
+    /// Ray-by-ray comparison of the hits.
+    pub agreement: AgreementReport,
+}
+
+/// A rate, ours against theirs.
+#[derive(Debug, Clone, Serialize)]
+pub struct RateComparison {
+    /// Ours, millions per second.
+    pub ours: Option<f64>,
+    /// Theirs.
+    pub theirs: f64,
+    /// Ours / theirs (above 1: we are faster).
+    pub ratio: Option<f64>,
+}
+
+/// The peer's figures on one scene.
+#[derive(Debug, Clone, Serialize)]
+pub struct PeerReport {
+    /// `vulkan-rt`.
+    pub peer: &'static str,
+    /// The peer's device, when it ran.
+    pub device: Option<String>,
+    /// Its driver.
+    pub driver: Option<String>,
+    /// Why the peer was skipped, when it was.
+    pub skipped: Option<String>,
+    /// Every BLAS in one build command, `PREFER_FAST_TRACE`, against our BLAS build.
+    pub blas_build_fast_trace: Option<TimeComparison>,
+    /// The same with `PREFER_FAST_BUILD`.
+    pub blas_build_fast_build: Option<TimeComparison>,
+    /// Bytes of their fast-trace BLASes (uncompacted).
+    pub blas_bytes_fast_trace: Option<u64>,
+    /// TLAS build over the scene's instances, against our TLAS rebuild of the same instances.
+    pub tlas_build: Option<TimeComparison>,
+    /// Primary, AO and diffuse: the same rays, traced against their fast-trace BLASes.
+    pub rays: Vec<RayComparison>,
+    /// The peer workload, (pixels + primary hits) / (primary time + diffuse time), Mrays/s.
+    pub workload: Option<RateComparison>,
+    /// Measurements that failed, and why.
+    pub errors: Vec<String>,
+}
+
+/// One ray batch on both backends.
+#[derive(Debug, Clone, Serialize)]
+pub struct BackendRays {
+    /// `primary`, `ao` or `diffuse`.
+    pub kind: &'static str,
+    /// Rays in the batch (the same for both).
+    pub rays: u64,
+    /// The measured backend's rays per second, millions (the scene's own figure).
+    pub this_mrays_per_s: f64,
+    /// The other backend's.
+    pub other_mrays_per_s: f64,
+    /// The other backend's GPU times.
+    pub other_time: Stats,
+    /// Ray-by-ray comparison of the hits (the other backend as "theirs").
+    pub agreement: AgreementReport,
+    /// The largest |t − t'| / max(|t|, 1) over rays both backends hit on the same triangle.
+    pub max_relative_distance: f64,
+}
+
+/// The scene traced by the other backend, against the measured one.
+#[derive(Debug, Clone, Serialize)]
+pub struct BackendComparison {
+    /// The backend of the scene's own figures.
+    pub this: String,
+    /// The backend measured here.
+    pub other: String,
+    /// Every BLAS in one task (fast-trace), the other backend; the scene's `blas_build` is this
+    /// backend's.
+    pub other_blas_build: Option<Stats>,
+    /// The TLAS rebuild over the scene's instances, the measured backend.
+    pub this_tlas_build: Option<Stats>,
+    /// The same, the other backend.
+    pub other_tlas_build: Option<Stats>,
+    /// The ray batches.
+    pub rays: Vec<BackendRays>,
+    /// Measurements that failed, and why.
+    pub errors: Vec<String>,
+}
+
+/// The work of one tree on every batch of rays.
+#[derive(Debug, Clone, Serialize)]
+pub struct TreeWork {
+    /// The builder.
+    pub tree: String,
+    /// CPU time of its build, seconds (16 threads for obvhs, one for ours).
+    pub build_s: f64,
+    /// SAH cost with our constants (`BlasReadback::sah_cost`).
+    pub sah_cost: f64,
+    /// `(batch kind, work per ray)` for each batch.
+    pub batches: Vec<(String, WorkPerRay)>,
 }

@@ -11,7 +11,7 @@ use super::harness::Bench;
 use super::rays::rays;
 use super::report::{SahReport, SceneReport, TlasReport, WorkPerRay};
 use super::tasks::trace_tasks;
-use super::{attempt, backends, cache, extras, peer, tree_work, Stats};
+use super::{attempt, backends, cache, options, peer, tree_work, Stats};
 use crate::app::gpu;
 use kickstart_rt_renderer::error::AnyResult;
 use kickstart_rt_renderer::rng::Rng;
@@ -32,8 +32,8 @@ pub(super) fn bench_scene(
     r.traversal_backend = backends::backend_of(bench, bench.backend.get()).map(|b| b.to_string());
     let uploads = upload::upload_scene(bench.device, scene);
     let mut errors = Vec::new();
-    let runs = |s: extras::Section| s.runs_in(&bench.sections);
-    let builds = runs(extras::Section::Builds);
+    let runs = |s: options::Section| s.runs_in(&bench.sections);
+    let builds = runs(options::Section::Builds);
     if let Some((stats, ctx, h)) = builds
         .then(|| {
             attempt(&mut errors, "BLAS build", || {
@@ -92,7 +92,7 @@ pub(super) fn bench_scene(
             r.tlas_build_profile = bench.last_profile();
         }
     }
-    let batches = runs(extras::Section::Rays)
+    let batches = runs(options::Section::Rays)
         .then(|| {
             attempt(&mut errors, "rays", || {
                 rays(bench, scene, &uploads, &camera, size, &mut r)
@@ -130,12 +130,12 @@ pub(super) fn bench_scene(
             &r,
         ));
     }
-    if runs(extras::Section::Cache) {
+    if runs(options::Section::Cache) {
         r.cache = attempt(&mut errors, "lighting cache", || {
             cache::cache_bench(bench, scene, &uploads, &camera, size)
         });
     }
-    if runs(extras::Section::Tasks) {
+    if runs(options::Section::Tasks) {
         attempt(&mut errors, "trace tasks", || {
             trace_tasks(bench, scene, &uploads, &camera, size, &mut r)
         });

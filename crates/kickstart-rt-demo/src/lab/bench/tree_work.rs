@@ -5,10 +5,9 @@
 //! builder would buy the traversal before anyone writes it on the GPU.
 
 use glam::{Affine3A, Vec3};
-use serde::Serialize;
 
 use super::rays::work_per_ray;
-use super::report::WorkPerRay;
+pub use super::report::{TreeWork, WorkPerRay};
 use crate::lab::obvhs_peer::{self, Preset};
 use kickstart_rt as ksrt;
 use kickstart_rt_renderer::error::AnyResult;
@@ -141,19 +140,6 @@ pub fn gpu_bvh2_raw(
         }
     }
     Ok((raw_nodes, raw_tris))
-}
-
-/// The work of one tree on every batch of rays.
-#[derive(Debug, Clone, Serialize)]
-pub struct TreeWork {
-    /// The builder.
-    pub tree: String,
-    /// CPU time of its build, seconds (16 threads for obvhs, one for ours).
-    pub build_s: f64,
-    /// SAH cost with our constants (`BlasReadback::sah_cost`).
-    pub sah_cost: f64,
-    /// `(batch kind, work per ray)` for each batch.
-    pub batches: Vec<(String, WorkPerRay)>,
 }
 
 /// Builds the scene's one geometry with each CPU builder and counts the work of `batches`' rays

@@ -22,116 +22,25 @@
 //!    ([`super::still`]).
 
 use crate::app::frames::RendererExt;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{Quat, Vec3};
 
 use super::accumulate::Accumulator;
+use super::capture::{accumulate_reference, first_half, read_measured, surface_mask, Triple};
 use super::ceiling;
 use super::linear;
 use super::metrics::{self, Srgb8};
+pub use super::options::{Images, QualityOptions, SPECULAR_ROUGHNESS};
+pub use super::scores::{FrameScores, ReferenceNoise, Score, SignalScores};
 pub use super::signal::Signal;
 use super::still::{self, Stability};
 use super::summary::{self, Summary};
 use crate::app::progress;
-use crate::app::readback::read_texture;
 use kickstart_rt_renderer::error::AnyResult;
 use kickstart_rt_renderer::frame::Effects;
 use kickstart_rt_renderer::renderer::Renderer;
 use kickstart_rt_renderer::scene::{Camera, Scene};
-
-/// The specular trace's roughness everywhere (the glossy case).
-pub const SPECULAR_ROUGHNESS: f32 = 0.3;
-
-/// Reference samples traced per submission: each is a GPU task holding one of the context's
-/// working sets until the submission completes, and `ksrt`'s context has the default four.
-const SAMPLES_PER_SUBMIT: u32 = 3;
-
-/// Which strips to write.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Images {
-    /// Every frame's.
-    All,
-    /// The last frame's.
-    Last,
-    /// None.
-    None,
-}
-
-/// Options of `ksrt quality`.
-#[derive(Debug, Clone)]
-pub struct QualityOptions {
-    /// Image size.
-    pub size: (u32, u32),
-    /// Measured frames along the pan.
-    pub frames: u32,
-    /// Frames of cache warm-up before the pan.
-    pub warmup: u32,
-    /// Samples per pixel of each frame's reference.
-    pub reference_samples: u32,
-    /// Yaw of the whole pan, degrees (turning left about the eye).
-    pub pan_degrees: f32,
-    /// Frames held still at the pan's last camera after it, for the flicker (0: none).
-    pub still_frames: u32,
-    /// Seed of the measured frames' noise.
-    pub seed: u32,
-    /// Where to write the strips (`None`: nowhere).
-    pub out: Option<PathBuf>,
-    /// Which strips to write.
-    pub images: Images,
-    /// Progress bars on stderr for the warm-up and the reference samples.
-    pub progress: bool,
-    /// Rays per pixel of the measured frames and the denoising method (the reference traces
-    /// every pixel whatever the preset).
-    pub preset: kickstart_rt::Preset,
-}
-
-/// PSNR (dB), FLIP (mean, 0 = identical) and energy ratio of one image against the reference.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct Score {
-    /// PSNR, dB, of the 8-bit sRGB images (∞ when identical).
-    pub psnr: f64,
-    /// Mean FLIP error.
-    pub flip: f64,
-    /// Mean of the linear values over the reference's, over the pixels with a surface
-    /// ([`linear::energy_ratio`]); `None` where the reference is ≈ 0.
-    pub energy_ratio: Option<f64>,
-}
-
-/// One signal's scores in one frame.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct SignalScores {
-    /// The signal's name.
-    pub signal: &'static str,
-    /// The 1-spp trace against the reference.
-    pub noisy: Score,
-    /// The denoised trace against the reference.
-    pub denoised: Score,
-    /// How much of those scores is the reference's own noise (`None` for a reference of one
-    /// sample).
-    pub reference_noise: Option<ReferenceNoise>,
-}
-
-/// How much of a score is its reference's own noise ([`super::ceiling`]).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct ReferenceNoise {
-    /// The PSNR (dB) a noise-free image scores against the reference, which no denoiser can
-    /// exceed (an estimate from the reference's two halves; see [`super::ceiling`] for where it
-    /// errs).
-    pub ceiling: f64,
-    /// The denoised trace's PSNR (dB) against the converged signal, the reference's noise taken
-    /// out; `None` where the denoised error is within the estimate of the reference's.
-    pub denoised_against_converged: Option<f64>,
-}
-
-/// One pan frame's scores.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct FrameScores {
-    /// Frame of the pan, from 0.
-    pub frame: u32,
-    /// Per signal the scene renders (the shadow needs a light).
-    pub signals: Vec<SignalScores>,
-}
 
 /// Everything a run measured.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -157,16 +66,6 @@ pub fn pan_camera(camera: &Camera, f: u32, frames: u32, pan_degrees: f32) -> Cam
         at: camera.eye + turn * (camera.at - camera.eye),
         ..*camera
     }
-}
-
-/// Noisy, denoised and reference images of one signal as linear RGB per pixel.
-pub(super) struct Triple {
-    pub(super) signal: Signal,
-    pub(super) noisy: Vec<[f32; 3]>,
-    pub(super) denoised: Vec<[f32; 3]>,
-    pub(super) reference: Vec<[f32; 3]>,
-    /// The mean of the reference's first half of samples (empty for a reference of one sample).
-    pub(super) reference_first_half: Vec<[f32; 3]>,
 }
 
 // A `String` error, not `AnyResult`: it crosses threads. The energy ratio is filled in after.
@@ -269,51 +168,6 @@ fn reference_noise(
         ceiling: ceiling::ceiling(mse),
         denoised_against_converged: ceiling::against_converged(denoised_psnr, mse),
     }))
-}
-
-/// How many of a reference's `samples` make its first half ([`ceiling`]).
-fn first_half(samples: u32) -> u32 {
-    samples / 2
-}
-
-/// `signal`'s denoised output of the last frame, as linear RGB.
-pub(super) fn read_denoised(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    r: &Renderer,
-    signal: Signal,
-) -> AnyResult<Vec<[f32; 3]>> {
-    let (_, denoised) = signal.outputs(&r.sdk.outputs);
-    let texels = read_texture(device, queue, denoised)?.data;
-    Ok(texels.iter().map(|&t| signal.denoised_texel(t)).collect())
-}
-
-/// `signal`'s raw and denoised outputs of the last frame (the reference still to come).
-fn read_measured(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    r: &Renderer,
-    signal: Signal,
-) -> AnyResult<Triple> {
-    let (raw, _) = signal.outputs(&r.sdk.outputs);
-    let raw = read_texture(device, queue, raw)?.data;
-    Ok(Triple {
-        signal,
-        noisy: raw.iter().map(|&t| signal.raw_texel(t)).collect(),
-        denoised: read_denoised(device, queue, r, signal)?,
-        reference: Vec::new(),
-        reference_first_half: Vec::new(),
-    })
-}
-
-/// The pixels of the last frame that show a surface (depth short of the far plane).
-pub(super) fn surface_mask(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    r: &Renderer,
-) -> AnyResult<Vec<bool>> {
-    let depth = read_texture(device, queue, &r.main.depth)?;
-    Ok(depth.data.iter().map(|d| d[0] < 1.0).collect())
 }
 
 /// Runs the yardstick on `scene` from `camera`; `on_frame` sees each pan frame's scores as they
@@ -458,52 +312,6 @@ fn warm_up(
             .map_err(|e| format!("--out {}: cannot create: {e}", dir.display()))?;
     }
     Ok(())
-}
-
-/// Traces reference `f`'s `samples` samples on the last frame's G-buffer into `sums` (cleared
-/// first), submitting every [`SAMPLES_PER_SUBMIT`], and counts them on `bar`. Each reference `f`
-/// draws its own samples' noise indices, so references of different `f` are independent. With
-/// `halves`, returns per signal of `sums` the mean of the first half of the samples
-/// ([`first_half`]); nothing without, or for a reference of one sample.
-pub(super) fn accumulate_reference(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    r: &mut Renderer,
-    (f, samples): (u32, u32),
-    (sums, halves): (&[(Signal, Accumulator)], bool),
-    bar: &indicatif::ProgressBar,
-) -> AnyResult<Vec<Vec<[f32; 3]>>> {
-    let mut encoder = device.create_command_encoder(&Default::default());
-    for (_, acc) in sums {
-        acc.clear(&mut encoder);
-    }
-    let half = if halves { first_half(samples) } else { 0 };
-    let mut first_halves = Vec::new();
-    let mut pending = Vec::new();
-    for k in 0..samples {
-        let sample = 0x8000_0000u32
-            .wrapping_add(f.wrapping_mul(samples))
-            .wrapping_add(k);
-        pending.extend(r.record_traces(&mut encoder, sample)?);
-        for (_, acc) in sums {
-            acc.add(&mut encoder);
-        }
-        let at_half = half > 0 && k + 1 == half;
-        if (k + 1) % SAMPLES_PER_SUBMIT == 0 || k + 1 == samples || at_half {
-            queue.submit([encoder.finish()]);
-            r.finish(device, &pending, false)?;
-            pending.clear();
-            encoder = device.create_command_encoder(&Default::default());
-            bar.set_position(u64::from(f) * u64::from(samples) + u64::from(k + 1));
-        }
-        if at_half {
-            first_halves = sums
-                .iter()
-                .map(|(_, acc)| acc.mean(device, queue))
-                .collect::<AnyResult<_>>()?;
-        }
-    }
-    Ok(first_halves)
 }
 
 #[cfg(test)]

@@ -17,8 +17,9 @@
 //! together; a denoiser at or below it is as steady as such references.
 
 use super::accumulate::Accumulator;
+use super::capture::{accumulate_reference, read_denoised, surface_mask, Triple};
 use super::linear;
-use super::run::{accumulate_reference, read_denoised, surface_mask, QualityOptions, Triple};
+use super::options::QualityOptions;
 use super::signal::Signal;
 use super::summary::mean_of_defined;
 use crate::app::frames::RendererExt;

@@ -4,7 +4,7 @@
 
 use std::ops::RangeInclusive;
 
-use super::run::{FrameScores, ReferenceNoise, Score};
+use super::scores::{FrameScores, ReferenceNoise, Score};
 
 /// The first frame the summary's mean covers, when the pan is longer than this many frames.
 pub const SUMMARY_FROM_FRAME: u32 = 8;
@@ -95,7 +95,7 @@ pub fn summarize(frames: &[FrameScores]) -> Option<Summary> {
     let in_range: Vec<&FrameScores> = frames.iter().filter(|f| range.contains(&f.frame)).collect();
     let mut signals = Vec::new();
     for s in &last.signals {
-        let of_signal = |pick: fn(&super::run::SignalScores) -> Score| -> Vec<Score> {
+        let of_signal = |pick: fn(&super::scores::SignalScores) -> Score| -> Vec<Score> {
             in_range
                 .iter()
                 .flat_map(|f| f.signals.iter().filter(|x| x.signal == s.signal))
@@ -136,7 +136,7 @@ pub fn summarize(frames: &[FrameScores]) -> Option<Summary> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::run::SignalScores;
+    use super::super::scores::SignalScores;
     use super::*;
 
     fn score(psnr: f64, flip: f64, energy_ratio: Option<f64>) -> Score {
