@@ -199,6 +199,128 @@ fn missing_on(
     Ok((missing, family))
 }
 
+/// The build of one BLAS over geometry `g` (destination and scratch still to set).
+fn blas_info<'a>(
+    g: &'a [vk::AccelerationStructureGeometryKHR<'a>; 1],
+    flags: vk::BuildAccelerationStructureFlagsKHR,
+) -> vk::AccelerationStructureBuildGeometryInfoKHR<'a> {
+    vk::AccelerationStructureBuildGeometryInfoKHR::default()
+        .ty(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL)
+        .flags(flags)
+        .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+        .geometries(g)
+}
+
+/// Where the BLASes of one build go: each one's offset and size in the storage buffer and its
+/// offset in the scratch buffer, and both buffers' sizes.
+#[derive(Default)]
+struct BlasLayout {
+    as_offsets: Vec<u64>,
+    as_sizes: Vec<u64>,
+    scratch_offsets: Vec<u64>,
+    as_total: u64,
+    scratch_total: u64,
+}
+
+/// The logical device on `pd` with one queue of `family`, the ray-tracing extensions and the
+/// features they need.
+fn create_device(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    family: u32,
+) -> std::result::Result<ash::Device, vk::Result> {
+    let priorities = [1.0f32];
+    let queue_info = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(family)
+        .queue_priorities(&priorities)];
+    let ext_names: Vec<*const c_char> = [
+        khr::acceleration_structure::NAME,
+        khr::ray_tracing_pipeline::NAME,
+        khr::deferred_host_operations::NAME,
+    ]
+    .iter()
+    .map(|n| n.as_ptr())
+    .collect();
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default().buffer_device_address(true);
+    let mut fas =
+        vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
+    let mut frt =
+        vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default().ray_tracing_pipeline(true);
+    let info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queue_info)
+        .enabled_extension_names(&ext_names)
+        .push_next(&mut f12)
+        .push_next(&mut fas)
+        .push_next(&mut frt);
+    // SAFETY: the device was checked for these extensions and features.
+    unsafe { instance.create_device(pd, &info, None) }
+}
+
+/// What the peer keeps of a device's properties.
+struct DeviceInfo {
+    name: String,
+    /// Driver name and info.
+    driver: String,
+    memory: vk::PhysicalDeviceMemoryProperties,
+    props: Props,
+}
+
+/// The properties of `pd` (with the ray-tracing extensions) and of its queue `family`.
+fn device_info(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> DeviceInfo {
+    let mut rt_props = vk::PhysicalDeviceRayTracingPipelinePropertiesKHR::default();
+    let mut as_props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut p2 = vk::PhysicalDeviceProperties2::default()
+        .push_next(&mut rt_props)
+        .push_next(&mut as_props)
+        .push_next(&mut driver);
+    // SAFETY: a valid chain; the extensions are supported.
+    unsafe { instance.get_physical_device_properties2(pd, &mut p2) };
+    let base = p2.properties;
+    // SAFETY: as above.
+    let memory = unsafe { instance.get_physical_device_memory_properties(pd) };
+    // SAFETY: as above.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    let bits = families
+        .get(family as usize)
+        .map_or(0, |f| f.timestamp_valid_bits);
+    let limits = base.limits;
+    let props = Props {
+        timestamp_period: f64::from(limits.timestamp_period),
+        timestamp_mask: if bits >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << bits) - 1
+        },
+        handle_size: rt_props.shader_group_handle_size,
+        handle_alignment: rt_props.shader_group_handle_alignment.max(1),
+        base_alignment: rt_props.shader_group_base_alignment.max(1),
+        scratch_alignment: u64::from(
+            as_props
+                .min_acceleration_structure_scratch_offset_alignment
+                .max(1),
+        ),
+        max_dispatch: u64::from(rt_props.max_ray_dispatch_invocation_count),
+        max_launch: [
+            u64::from(limits.max_compute_work_group_count[0])
+                * u64::from(limits.max_compute_work_group_size[0]),
+            u64::from(limits.max_compute_work_group_count[1])
+                * u64::from(limits.max_compute_work_group_size[1]),
+        ],
+        max_storage_range: u64::from(limits.max_storage_buffer_range),
+    };
+    DeviceInfo {
+        name: c_str_lossy(base.device_name_as_c_str()),
+        driver: format!(
+            "{} {}",
+            c_str_lossy(driver.driver_name_as_c_str()),
+            c_str_lossy(driver.driver_info_as_c_str())
+        ),
+        memory,
+        props,
+    }
+}
+
 fn c_str_lossy(r: std::result::Result<&CStr, std::ffi::FromBytesUntilNulError>) -> String {
     r.map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|_| "?".to_string())
@@ -281,31 +403,7 @@ impl VulkanRtPeer {
         pd: vk::PhysicalDevice,
         family: u32,
     ) -> Result<VulkanRtPeer> {
-        let priorities = [1.0f32];
-        let queue_info = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(family)
-            .queue_priorities(&priorities)];
-        let ext_names: Vec<*const c_char> = [
-            khr::acceleration_structure::NAME,
-            khr::ray_tracing_pipeline::NAME,
-            khr::deferred_host_operations::NAME,
-        ]
-        .iter()
-        .map(|n| n.as_ptr())
-        .collect();
-        let mut f12 = vk::PhysicalDeviceVulkan12Features::default().buffer_device_address(true);
-        let mut fas = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
-            .acceleration_structure(true);
-        let mut frt =
-            vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default().ray_tracing_pipeline(true);
-        let info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queue_info)
-            .enabled_extension_names(&ext_names)
-            .push_next(&mut f12)
-            .push_next(&mut fas)
-            .push_next(&mut frt);
-        // SAFETY: the device was checked for these extensions and features.
-        let device = match unsafe { instance.create_device(pd, &info, None) } {
+        let device = match create_device(&instance, pd, family) {
             Ok(d) => d,
             Err(e) => {
                 // SAFETY: nothing else was created from the instance.
@@ -313,60 +411,20 @@ impl VulkanRtPeer {
                 return Err(vkerr("vkCreateDevice")(e));
             }
         };
-        let mut rt_props = vk::PhysicalDeviceRayTracingPipelinePropertiesKHR::default();
-        let mut as_props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
-        let mut driver = vk::PhysicalDeviceDriverProperties::default();
-        let mut p2 = vk::PhysicalDeviceProperties2::default()
-            .push_next(&mut rt_props)
-            .push_next(&mut as_props)
-            .push_next(&mut driver);
-        // SAFETY: a valid chain; the extensions are supported.
-        unsafe { instance.get_physical_device_properties2(pd, &mut p2) };
-        let base = p2.properties;
-        // SAFETY: as above.
-        let memory = unsafe { instance.get_physical_device_memory_properties(pd) };
-        // SAFETY: as above.
-        let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
-        let bits = families
-            .get(family as usize)
-            .map_or(0, |f| f.timestamp_valid_bits);
-        let limits = base.limits;
-        let props = Props {
-            timestamp_period: f64::from(limits.timestamp_period),
-            timestamp_mask: if bits >= 64 {
-                u64::MAX
-            } else {
-                (1u64 << bits) - 1
-            },
-            handle_size: rt_props.shader_group_handle_size,
-            handle_alignment: rt_props.shader_group_handle_alignment.max(1),
-            base_alignment: rt_props.shader_group_base_alignment.max(1),
-            scratch_alignment: u64::from(
-                as_props
-                    .min_acceleration_structure_scratch_offset_alignment
-                    .max(1),
-            ),
-            max_dispatch: u64::from(rt_props.max_ray_dispatch_invocation_count),
-            max_launch: [
-                u64::from(limits.max_compute_work_group_count[0])
-                    * u64::from(limits.max_compute_work_group_size[0]),
-                u64::from(limits.max_compute_work_group_count[1])
-                    * u64::from(limits.max_compute_work_group_size[1]),
-            ],
-            max_storage_range: u64::from(limits.max_storage_buffer_range),
-        };
+        let DeviceInfo {
+            name,
+            driver,
+            memory,
+            props,
+        } = device_info(&instance, pd, family);
         // SAFETY: family was used to create the device with one queue.
         let queue = unsafe { device.get_device_queue(family, 0) };
         let accel = khr::acceleration_structure::Device::new(&instance, &device);
         let rt = khr::ray_tracing_pipeline::Device::new(&instance, &device);
         let mut peer = VulkanRtPeer {
             _entry: entry,
-            name: c_str_lossy(base.device_name_as_c_str()),
-            driver: format!(
-                "{} {}",
-                c_str_lossy(driver.driver_name_as_c_str()),
-                c_str_lossy(driver.driver_info_as_c_str())
-            ),
+            name,
+            driver,
             instance,
             device,
             accel,
@@ -991,102 +1049,15 @@ impl VulkanRtPeer {
             .copied()
             .filter(|m| m.triangles > 0)
             .collect();
-        let geometries: Vec<[vk::AccelerationStructureGeometryKHR; 1]> = built
-            .iter()
-            .map(|m| {
-                let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
-                    .vertex_format(vk::Format::R32G32B32_SFLOAT)
-                    .vertex_data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: self.vertices.address + m.first_vertex * 12,
-                    })
-                    .vertex_stride(12)
-                    .max_vertex(m.vertices.saturating_sub(1))
-                    .index_type(vk::IndexType::UINT32)
-                    .index_data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: self.indices.address + m.first_index * 4,
-                    });
-                [vk::AccelerationStructureGeometryKHR::default()
-                    .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
-                    .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
-                    .flags(vk::GeometryFlagsKHR::OPAQUE)]
-            })
-            .collect();
-        fn blas_info<'a>(
-            g: &'a [vk::AccelerationStructureGeometryKHR<'a>; 1],
-            flags: vk::BuildAccelerationStructureFlagsKHR,
-        ) -> vk::AccelerationStructureBuildGeometryInfoKHR<'a> {
-            vk::AccelerationStructureBuildGeometryInfoKHR::default()
-                .ty(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL)
-                .flags(flags)
-                .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
-                .geometries(g)
-        }
-        // Sizes, and each BLAS's place in one storage buffer and one scratch buffer.
-        let mut as_offsets = Vec::new();
-        let mut scratch_offsets = Vec::new();
-        let mut as_sizes = Vec::new();
-        let (mut as_total, mut scratch_total) = (0u64, 0u64);
-        for (m, g) in built.iter().zip(&geometries) {
-            let mut sizes = vk::AccelerationStructureBuildSizesInfoKHR::default();
-            // SAFETY: a valid build info; one primitive count per geometry.
-            unsafe {
-                self.accel.get_acceleration_structure_build_sizes(
-                    vk::AccelerationStructureBuildTypeKHR::DEVICE,
-                    &blas_info(g, flags),
-                    &[m.triangles],
-                    &mut sizes,
-                )
-            };
-            as_total = align_up(as_total, AS_OFFSET_ALIGN);
-            as_offsets.push(as_total);
-            as_sizes.push(sizes.acceleration_structure_size);
-            as_total += sizes.acceleration_structure_size;
-            scratch_total = align_up(scratch_total, self.props.scratch_alignment);
-            scratch_offsets.push(scratch_total);
-            scratch_total += sizes.build_scratch_size;
-        }
-        self.blas_buffer = self.create_buffer(
-            as_total,
-            vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR
-                | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
-            vk::MemoryPropertyFlags::DEVICE_LOCAL,
-            "BLAS storage",
-        )?;
-        self.blas_bytes = as_total;
-        // Padded so the scratch base can be aligned up.
-        self.blas_scratch = self.create_buffer(
-            scratch_total + self.props.scratch_alignment,
-            vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
-            vk::MemoryPropertyFlags::DEVICE_LOCAL,
-            "BLAS scratch",
-        )?;
+        let geometries = self.blas_geometries(&built);
+        let layout = self.blas_layout(&built, &geometries, flags);
+        self.create_blas_buffers(&layout)?;
+        let handles = self.create_blas_handles(&layout)?;
         let scratch_base = align_up(self.blas_scratch.address, self.props.scratch_alignment);
-        let mut handles = Vec::with_capacity(built.len());
-        for (&off, &size) in as_offsets.iter().zip(&as_sizes) {
-            // SAFETY: the range lies within blas_buffer; the handle goes into `self.blases`
-            // right below, so it is destroyed with them.
-            let blas = unsafe {
-                self.accel.create_acceleration_structure(
-                    &vk::AccelerationStructureCreateInfoKHR::default()
-                        .buffer(self.blas_buffer.buffer)
-                        .offset(off)
-                        .size(size)
-                        .ty(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL),
-                    None,
-                )
-            };
-            match blas {
-                Ok(b) => handles.push(b),
-                Err(e) => {
-                    self.blases = handles.into_iter().map(|h| Some((h, 0))).collect();
-                    return Err(vkerr("vkCreateAccelerationStructureKHR")(e));
-                }
-            }
-        }
         let infos: Vec<vk::AccelerationStructureBuildGeometryInfoKHR<'_>> = geometries
             .iter()
             .zip(&handles)
-            .zip(&scratch_offsets)
+            .zip(&layout.scratch_offsets)
             .map(|((g, &dst), &s)| {
                 blas_info(g, flags)
                     .dst_acceleration_structure(dst)
@@ -1116,6 +1087,123 @@ impl VulkanRtPeer {
             )
         });
         // Store the handles whatever the builds did, so they are destroyed later.
+        self.store_blases(handles);
+        samples
+    }
+
+    /// The triangle geometry of each mesh of `built` in the uploaded vertex and index buffers.
+    fn blas_geometries(
+        &self,
+        built: &[MeshRange],
+    ) -> Vec<[vk::AccelerationStructureGeometryKHR<'static>; 1]> {
+        built
+            .iter()
+            .map(|m| {
+                let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
+                    .vertex_format(vk::Format::R32G32B32_SFLOAT)
+                    .vertex_data(vk::DeviceOrHostAddressConstKHR {
+                        device_address: self.vertices.address + m.first_vertex * 12,
+                    })
+                    .vertex_stride(12)
+                    .max_vertex(m.vertices.saturating_sub(1))
+                    .index_type(vk::IndexType::UINT32)
+                    .index_data(vk::DeviceOrHostAddressConstKHR {
+                        device_address: self.indices.address + m.first_index * 4,
+                    });
+                [vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
+                    .flags(vk::GeometryFlagsKHR::OPAQUE)]
+            })
+            .collect()
+    }
+
+    /// The sizes of the BLASes of `built`, and each one's place in one storage buffer and one
+    /// scratch buffer.
+    fn blas_layout(
+        &self,
+        built: &[MeshRange],
+        geometries: &[[vk::AccelerationStructureGeometryKHR<'_>; 1]],
+        flags: vk::BuildAccelerationStructureFlagsKHR,
+    ) -> BlasLayout {
+        let mut layout = BlasLayout::default();
+        for (m, g) in built.iter().zip(geometries) {
+            let mut sizes = vk::AccelerationStructureBuildSizesInfoKHR::default();
+            // SAFETY: a valid build info; one primitive count per geometry.
+            unsafe {
+                self.accel.get_acceleration_structure_build_sizes(
+                    vk::AccelerationStructureBuildTypeKHR::DEVICE,
+                    &blas_info(g, flags),
+                    &[m.triangles],
+                    &mut sizes,
+                )
+            };
+            layout.as_total = align_up(layout.as_total, AS_OFFSET_ALIGN);
+            layout.as_offsets.push(layout.as_total);
+            layout.as_sizes.push(sizes.acceleration_structure_size);
+            layout.as_total += sizes.acceleration_structure_size;
+            layout.scratch_total = align_up(layout.scratch_total, self.props.scratch_alignment);
+            layout.scratch_offsets.push(layout.scratch_total);
+            layout.scratch_total += sizes.build_scratch_size;
+        }
+        layout
+    }
+
+    /// The BLAS storage and scratch buffers of `layout`.
+    fn create_blas_buffers(&mut self, layout: &BlasLayout) -> Result<()> {
+        self.blas_buffer = self.create_buffer(
+            layout.as_total,
+            vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR
+                | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            vk::MemoryPropertyFlags::DEVICE_LOCAL,
+            "BLAS storage",
+        )?;
+        self.blas_bytes = layout.as_total;
+        // Padded so the scratch base can be aligned up.
+        self.blas_scratch = self.create_buffer(
+            layout.scratch_total + self.props.scratch_alignment,
+            vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            vk::MemoryPropertyFlags::DEVICE_LOCAL,
+            "BLAS scratch",
+        )?;
+        Ok(())
+    }
+
+    /// One acceleration structure per BLAS of `layout` in the storage buffer. On an error the
+    /// ones made so far go into `self.blases`, so they are destroyed with them.
+    fn create_blas_handles(
+        &mut self,
+        layout: &BlasLayout,
+    ) -> Result<Vec<vk::AccelerationStructureKHR>> {
+        let mut handles = Vec::with_capacity(layout.as_offsets.len());
+        for (&off, &size) in layout.as_offsets.iter().zip(&layout.as_sizes) {
+            // SAFETY: the range lies within blas_buffer; the handle is returned or stored in
+            // `self.blases` right below, so it is destroyed with them.
+            let blas = unsafe {
+                self.accel.create_acceleration_structure(
+                    &vk::AccelerationStructureCreateInfoKHR::default()
+                        .buffer(self.blas_buffer.buffer)
+                        .offset(off)
+                        .size(size)
+                        .ty(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL),
+                    None,
+                )
+            };
+            match blas {
+                Ok(b) => handles.push(b),
+                Err(e) => {
+                    self.blases = handles.into_iter().map(|h| Some((h, 0))).collect();
+                    return Err(vkerr("vkCreateAccelerationStructureKHR")(e));
+                }
+            }
+        }
+        Ok(handles)
+    }
+
+    /// `self.blases`: the built `handles` (one per mesh with triangles, in order) with their
+    /// device addresses, `None` for the meshes without triangles.
+    fn store_blases(&mut self, handles: Vec<vk::AccelerationStructureKHR>) {
+        let accel = &self.accel;
         let mut it = handles.into_iter();
         self.blases = self
             .meshes
@@ -1137,7 +1225,6 @@ impl VulkanRtPeer {
                 }
             })
             .collect();
-        samples
     }
 
     /// Builds the TLAS over `instances` (PREFER_FAST_TRACE, facing culling disabled, forced

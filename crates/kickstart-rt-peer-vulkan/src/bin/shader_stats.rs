@@ -62,7 +62,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use compile::{EntryModule, Source};
-use vulkan::{api_string, default_device, Compiled, StatValue, Vk};
+use vulkan::{api_string, default_device, Compiled, Gpu, StatValue, Vk};
 
 const USAGE: &str = "\
 usage: shader-stats [--entry NAME]... [--param NAME=VALUE]... [--device N] [--out DIR] [--unchecked]
@@ -221,6 +221,56 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), Failure> {
     // WGSL → naga IR, entry points and layouts, all before Vulkan: shader errors need no GPU.
+    let source = load_source(args)?;
+    let (module, info) = compile::parse_and_validate(&source)
+        .map_err(|e| format!("{}: {e}", args.files.join(" + ")))?;
+    let names = entry_names(args, &module)?;
+    let mut entries = Vec::with_capacity(names.len());
+    for n in &names {
+        entries.push(compile::prepare_entry(&module, &info, n).map_err(|e| e.0)?);
+    }
+
+    // Vulkan.
+    let vk = Vk::load()?;
+    let chosen = pick_device(args, &vk)?;
+    let gpu = vk.open(chosen)?;
+    let t = &gpu.target;
+    print_code_generation(args, &gpu);
+    if let Some(why) = &gpu.unsupported {
+        println!(
+            "shader-stats: {why}: no statistics on this device; compiling the pipelines only, as \
+             a check that the driver accepts them."
+        );
+    }
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    }
+
+    let mut table: Vec<(String, Compiled)> = Vec::new();
+    for (entry, m, i) in &entries {
+        let spirv = compile::write_spirv(entry, m, i, t, !args.unchecked).map_err(|e| e.0)?;
+        println!();
+        print_entry_header(entry, spirv.len());
+        if let Some(dir) = &args.out {
+            let path = dir.join(format!("{}.spv", sanitize(&entry.name)));
+            let bytes: Vec<u8> = spirv.iter().flat_map(|w| w.to_le_bytes()).collect();
+            write_file(&path, &bytes)?;
+            println!("  SPIR-V -> {}", path.display());
+        }
+        let compiled = gpu
+            .compile(entry, &spirv)
+            .map_err(|e| format!("entry point `{}`: {e}", entry.name))?;
+        print_compiled(entry, &compiled, args.out.as_deref())?;
+        table.push((entry.name.clone(), compiled));
+    }
+    print_table(&table);
+    Ok(())
+}
+
+/// The WGSL of the arguments: the `.wgsl` files, then the SDK modules composed with the
+/// parameters.
+fn load_source(args: &Args) -> Result<Source, Failure> {
     let mut parts = Vec::with_capacity(args.files.len());
     let (files, modules): (Vec<&String>, Vec<&String>) =
         args.files.iter().partition(|f| f.ends_with(".wgsl"));
@@ -239,44 +289,44 @@ fn run(args: &Args) -> Result<(), Failure> {
             .map_err(|e| format!("{}: {e}", roots.join(" + ")))?;
         parts.push((roots.join(" + "), text));
     }
-    let source = Source::concat(&parts);
-    let (module, info) = compile::parse_and_validate(&source)
-        .map_err(|e| format!("{}: {e}", args.files.join(" + ")))?;
-    let available = compile::compute_entry_points(&module);
-    let names: Vec<String> = if args.entries.is_empty() {
+    Ok(Source::concat(&parts))
+}
+
+/// The entry points to compile: those asked for (each a compute entry point of `module`), or
+/// every compute entry point.
+fn entry_names(args: &Args, module: &naga::Module) -> Result<Vec<String>, Failure> {
+    let available = compile::compute_entry_points(module);
+    if args.entries.is_empty() {
         if available.is_empty() {
             return Err(Failure(format!(
                 "{}: no compute entry point",
                 args.files.join(" + ")
             )));
         }
-        available.clone()
-    } else {
-        for e in &args.entries {
-            if !available.contains(e) {
-                let other = module.entry_points.iter().find(|ep| &ep.name == e);
-                return Err(Failure(match other {
-                    Some(ep) => format!(
-                        "entry point `{e}` is a {:?} entry point; only compute ones are compiled",
-                        ep.stage
-                    ),
-                    None => format!(
-                        "no entry point `{e}` in {}; compute entry points: {}",
-                        args.files.join(" + "),
-                        available.join(", ")
-                    ),
-                }));
-            }
-        }
-        args.entries.clone()
-    };
-    let mut entries = Vec::with_capacity(names.len());
-    for n in &names {
-        entries.push(compile::prepare_entry(&module, &info, n).map_err(|e| e.0)?);
+        return Ok(available);
     }
+    for e in &args.entries {
+        if !available.contains(e) {
+            let other = module.entry_points.iter().find(|ep| &ep.name == e);
+            return Err(Failure(match other {
+                Some(ep) => format!(
+                    "entry point `{e}` is a {:?} entry point; only compute ones are compiled",
+                    ep.stage
+                ),
+                None => format!(
+                    "no entry point `{e}` in {}; compute entry points: {}",
+                    args.files.join(" + "),
+                    available.join(", ")
+                ),
+            }));
+        }
+    }
+    Ok(args.entries.clone())
+}
 
-    // Vulkan.
-    let vk = Vk::load()?;
+/// The device of `--device` (or the default one), after listing every device and describing
+/// the chosen one.
+fn pick_device(args: &Args, vk: &Vk) -> Result<usize, Failure> {
     if vk.devices.is_empty() {
         return Err(Failure("no Vulkan physical device".to_string()));
     }
@@ -310,7 +360,12 @@ fn run(args: &Args) -> Result<(), Failure> {
         d.driver_info,
         d.driver_version_string()
     );
-    let gpu = vk.open(chosen)?;
+    Ok(chosen)
+}
+
+/// Prints what shapes the code the driver gets: the features enabled, the stage flags and the
+/// SPIR-V writer's options.
+fn print_code_generation(args: &Args, gpu: &Gpu<'_>) {
     let t = &gpu.target;
     let (major, minor) = compile::spirv_version(t.api_version);
     println!(
@@ -338,36 +393,6 @@ fn run(args: &Args) -> Result<(), Failure> {
         if opts.emit_int_div_checks { "on" } else { "off" },
         opts.zero_initialize_workgroup_memory,
     );
-    if let Some(why) = &gpu.unsupported {
-        println!(
-            "shader-stats: {why}: no statistics on this device; compiling the pipelines only, as \
-             a check that the driver accepts them."
-        );
-    }
-    if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-    }
-
-    let mut table: Vec<(String, Compiled)> = Vec::new();
-    for (entry, m, i) in &entries {
-        let spirv = compile::write_spirv(entry, m, i, t, !args.unchecked).map_err(|e| e.0)?;
-        println!();
-        print_entry_header(entry, spirv.len());
-        if let Some(dir) = &args.out {
-            let path = dir.join(format!("{}.spv", sanitize(&entry.name)));
-            let bytes: Vec<u8> = spirv.iter().flat_map(|w| w.to_le_bytes()).collect();
-            write_file(&path, &bytes)?;
-            println!("  SPIR-V -> {}", path.display());
-        }
-        let compiled = gpu
-            .compile(entry, &spirv)
-            .map_err(|e| format!("entry point `{}`: {e}", entry.name))?;
-        print_compiled(entry, &compiled, args.out.as_deref())?;
-        table.push((entry.name.clone(), compiled));
-    }
-    print_table(&table);
-    Ok(())
 }
 
 fn write_file(path: &Path, data: &[u8]) -> Result<(), Failure> {

@@ -523,7 +523,11 @@ mod tests {
         let words = write_spirv(&entry, &m, &i, &Target::h100_like(), true).expect("SPIR-V");
         assert_eq!(words[0], 0x0723_0203, "SPIR-V magic");
         assert_eq!(words[1], 0x0001_0600, "SPIR-V 1.6 for a Vulkan 1.3 device");
-        assert_eq!(entry.workgroup_size, [256, 1, 1], "WG = 256u in lbvh.wgsl");
+        assert_eq!(
+            entry.workgroup_size,
+            [256, 1, 1],
+            "WG = 256u in scene/lbvh/common.wgsl"
+        );
         assert_eq!(entry.layout.push_constant_size, 0);
         assert_eq!(entry.layout.set_count(), 1);
         let got = entry
@@ -535,7 +539,38 @@ mod tests {
         (got, entry.workgroup_bytes)
     }
 
-    /// lbvh.wgsl declares, in @group(0): 0 `params` uniform, 1 `aabbs` storage read, 2 `work`
+    /// The LBVH module, parsed and validated.
+    fn lbvh_module() -> (naga::Module, ModuleInfo) {
+        parse_and_validate(&lbvh()).expect("scene/lbvh/lbvh is valid")
+    }
+
+    use DescriptorKind::UniformBuffer as U;
+    const R: DescriptorKind = DescriptorKind::StorageBuffer { read_only: true };
+    const RW: DescriptorKind = DescriptorKind::StorageBuffer { read_only: false };
+
+    /// The LBVH's passes, in the order the composed module holds them.
+    #[test]
+    fn lbvh_entry_points() {
+        let (module, _) = lbvh_module();
+        assert_eq!(
+            compute_entry_points(&module),
+            [
+                "lbvh_bounds",
+                "lbvh_morton",
+                "lbvh_morton_histogram",
+                "lbvh_segment_keys",
+                "lbvh_rekey",
+                "lbvh_gather",
+                "lbvh_hierarchy",
+                "lbvh_climb",
+                "lbvh_refit_gather",
+                "lbvh_refit_ingest",
+                "lbvh_range_refit"
+            ]
+        );
+    }
+
+    /// scene/lbvh/common.wgsl declares, in @group(0): 0 `params` uniform, 1 `aabbs` storage read, 2 `work`
     /// (atomics), 3 `keys`, 4 `values`, 5 `order`, 6 `topology`, 7 `nodes`, 8 `bounds_out`,
     /// all storage read_write. Each entry point's layout holds what it reaches, as read in the
     /// source:
@@ -563,30 +598,11 @@ mod tests {
     ///   `pyramid`, `refit_dst` (leaf boxes from the triangles) and 17 `work_read` (the list
     ///   and the upper levels, read-only: not binding 2's atomics).
     ///
-    /// Vulkan bindings are the ranks within the group (wgpu-hal's numbering).
+    /// Vulkan bindings are the ranks within the group (wgpu-hal's numbering). The build's
+    /// passes here, the range refit's in [`lbvh_refit_bindings`].
     #[test]
-    fn lbvh_entry_points_and_bindings() {
-        use DescriptorKind::UniformBuffer as U;
-        const R: DescriptorKind = DescriptorKind::StorageBuffer { read_only: true };
-        const RW: DescriptorKind = DescriptorKind::StorageBuffer { read_only: false };
-        let src = lbvh();
-        let (module, info) = parse_and_validate(&src).expect("lbvh.wgsl is valid");
-        assert_eq!(
-            compute_entry_points(&module),
-            [
-                "lbvh_bounds",
-                "lbvh_morton",
-                "lbvh_morton_histogram",
-                "lbvh_segment_keys",
-                "lbvh_rekey",
-                "lbvh_gather",
-                "lbvh_hierarchy",
-                "lbvh_climb",
-                "lbvh_refit_gather",
-                "lbvh_refit_ingest",
-                "lbvh_range_refit"
-            ]
-        );
+    fn lbvh_build_bindings() {
+        let (module, info) = lbvh_module();
         let got = |ep| layout_of(&module, &info, ep);
         assert_eq!(
             got("lbvh_bounds"),
@@ -662,6 +678,13 @@ mod tests {
                 (0, 8, 6, RW),
             ]
         );
+    }
+
+    /// The range refit's passes' bindings, as documented at [`lbvh_build_bindings`].
+    #[test]
+    fn lbvh_refit_bindings() {
+        let (module, info) = lbvh_module();
+        let got = |ep| layout_of(&module, &info, ep);
         assert_eq!(
             got("lbvh_refit_gather"),
             (

@@ -195,6 +195,35 @@ impl Vk {
             .get(index)
             .ok_or_else(|| format!("no device {index}"))?;
         let summary = &self.devices[index];
+        let offered = self.offered(pd, summary)?;
+        let mut enabled = Enabled::of(&offered);
+        let device = self.create_device(pd, summary, &offered, &mut enabled)?;
+        let exec = enabled
+            .exec
+            .then(|| khr::pipeline_executable_properties::Device::new(&self.instance, &device));
+        let (v13, e13) = (offered.v13, &enabled.v13);
+        let target = Target {
+            api_version: summary.api_version,
+            robust_buffer_access2: enabled.robust_buffer_access2,
+            robust_image_access: on(enabled.robustness2.robust_image_access2)
+                || (v13 && on(e13.robust_image_access)),
+            zero_initialize_workgroup_memory: v13
+                && on(e13.shader_zero_initialize_workgroup_memory),
+            vendor_id: summary.vendor_id,
+        };
+        Ok(Gpu {
+            device,
+            exec,
+            unsupported: unsupported_reason(summary, offered.has_exec, enabled.exec),
+            target,
+            enabled: enabled.names(&offered),
+            allow_varying_subgroup_size: offered.subgroup_feature(),
+            _vk: std::marker::PhantomData,
+        })
+    }
+
+    /// What device `pd` offers of the features wgpu 30 may enable.
+    fn offered(&self, pd: vk::PhysicalDevice, summary: &DeviceSummary) -> Result<Offered, String> {
         let inst = &self.instance;
         // SAFETY: pd is one of this instance's devices.
         let exts = unsafe { inst.enumerate_device_extension_properties(pd) }
@@ -204,78 +233,63 @@ impl Vk {
                 .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
         };
         let version = summary.api_version.min(self.instance_version);
-        let v12 = version >= vk::API_VERSION_1_2;
-        let v13 = version >= vk::API_VERSION_1_3;
-        let has_exec = has(EXEC_PROPS_EXTENSION);
-        let has_robustness2 = has(ash::ext::robustness2::NAME);
-
-        // What the device supports.
-        let mut s11 = vk::PhysicalDeviceVulkan11Features::default();
-        let mut s12 = vk::PhysicalDeviceVulkan12Features::default();
-        let mut s13 = vk::PhysicalDeviceVulkan13Features::default();
-        let mut srob = vk::PhysicalDeviceRobustness2FeaturesEXT::default();
-        let mut sexec = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default();
-        let core = {
+        let mut o = Offered {
+            v12: version >= vk::API_VERSION_1_2,
+            v13: version >= vk::API_VERSION_1_3,
+            has_exec: has(EXEC_PROPS_EXTENSION),
+            has_robustness2: has(ash::ext::robustness2::NAME),
+            core: vk::PhysicalDeviceFeatures::default(),
+            v11_features: vk::PhysicalDeviceVulkan11Features::default(),
+            v12_features: vk::PhysicalDeviceVulkan12Features::default(),
+            v13_features: vk::PhysicalDeviceVulkan13Features::default(),
+            robustness2: vk::PhysicalDeviceRobustness2FeaturesEXT::default(),
+            exec: vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default(),
+            subgroup: vk::PhysicalDeviceSubgroupProperties::default(),
+        };
+        {
             let mut f2 = vk::PhysicalDeviceFeatures2::default();
-            if v12 {
-                f2 = f2.push_next(&mut s11).push_next(&mut s12);
+            if o.v12 {
+                f2 = f2
+                    .push_next(&mut o.v11_features)
+                    .push_next(&mut o.v12_features);
             }
-            if v13 {
-                f2 = f2.push_next(&mut s13);
+            if o.v13 {
+                f2 = f2.push_next(&mut o.v13_features);
             }
-            if has_robustness2 {
-                f2 = f2.push_next(&mut srob);
+            if o.has_robustness2 {
+                f2 = f2.push_next(&mut o.robustness2);
             }
-            if has_exec {
-                f2 = f2.push_next(&mut sexec);
+            if o.has_exec {
+                f2 = f2.push_next(&mut o.exec);
             }
             // SAFETY: a valid chain of feature structs for this device's version and extensions.
             unsafe { inst.get_physical_device_features2(pd, &mut f2) };
-            f2.features
-        };
-        let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+            o.core = f2.features;
+        }
         {
-            let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut subgroup);
+            let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut o.subgroup);
             // SAFETY: subgroup properties are core in Vulkan 1.1 (the instance is ≥ 1.1).
             unsafe { inst.get_physical_device_properties2(pd, &mut p2) };
         }
+        o.clear_chain();
+        Ok(o)
+    }
 
-        // What wgpu 30 enables of those (robustness, zero-init, subgroup size control, and the
-        // SDK's optional SHADER_F16 / int64 atomics), plus pipelineExecutableInfo.
-        let on = |b: vk::Bool32| b == vk::TRUE;
-        let enabled_core = vk::PhysicalDeviceFeatures::default()
-            .robust_buffer_access(on(core.robust_buffer_access))
-            .shader_int64(on(core.shader_int64))
-            .shader_int16(on(core.shader_int16));
-        let mut e11 = vk::PhysicalDeviceVulkan11Features::default()
-            .storage_buffer16_bit_access(on(s11.storage_buffer16_bit_access))
-            .uniform_and_storage_buffer16_bit_access(on(
-                s11.uniform_and_storage_buffer16_bit_access
-            ));
-        let mut e12 = vk::PhysicalDeviceVulkan12Features::default()
-            .shader_float16(on(s12.shader_float16))
-            .shader_int8(on(s12.shader_int8))
-            .shader_buffer_int64_atomics(on(s12.shader_buffer_int64_atomics))
-            .shader_shared_int64_atomics(on(s12.shader_shared_int64_atomics));
-        let mut e13 = vk::PhysicalDeviceVulkan13Features::default()
-            .robust_image_access(on(s13.robust_image_access))
-            .subgroup_size_control(on(s13.subgroup_size_control))
-            .shader_zero_initialize_workgroup_memory(on(
-                s13.shader_zero_initialize_workgroup_memory
-            ));
-        let robust_buffer_access2 = on(srob.robust_buffer_access2) && on(core.robust_buffer_access);
-        let mut erob = vk::PhysicalDeviceRobustness2FeaturesEXT::default()
-            .robust_buffer_access2(robust_buffer_access2)
-            .robust_image_access2(on(srob.robust_image_access2));
-        let exec_ok = has_exec && on(sexec.pipeline_executable_info);
-        let mut eexec = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default()
-            .pipeline_executable_info(exec_ok);
-
+    /// The logical device on `pd` with the `enabled` features and their extensions, and one
+    /// compute queue.
+    fn create_device(
+        &self,
+        pd: vk::PhysicalDevice,
+        summary: &DeviceSummary,
+        offered: &Offered,
+        enabled: &mut Enabled,
+    ) -> Result<ash::Device, String> {
+        let inst = &self.instance;
         let mut ext_names: Vec<*const c_char> = Vec::new();
-        if has_robustness2 {
+        if offered.has_robustness2 {
             ext_names.push(ash::ext::robustness2::NAME.as_ptr());
         }
-        if exec_ok {
+        if enabled.exec {
             ext_names.push(EXEC_PROPS_EXTENSION.as_ptr());
         }
         // SAFETY: pd is one of this instance's devices.
@@ -292,44 +306,82 @@ impl Vk {
         let mut info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
             .enabled_extension_names(&ext_names)
-            .enabled_features(&enabled_core);
-        if v12 {
-            info = info.push_next(&mut e11).push_next(&mut e12);
+            .enabled_features(&enabled.core);
+        if offered.v12 {
+            info = info.push_next(&mut enabled.v11).push_next(&mut enabled.v12);
         }
-        if v13 {
-            info = info.push_next(&mut e13);
+        if offered.v13 {
+            info = info.push_next(&mut enabled.v13);
         }
-        if has_robustness2 {
-            info = info.push_next(&mut erob);
+        if offered.has_robustness2 {
+            info = info.push_next(&mut enabled.robustness2);
         }
-        if exec_ok {
-            info = info.push_next(&mut eexec);
+        if enabled.exec {
+            info = info.push_next(&mut enabled.exec_features);
         }
         // SAFETY: features and extensions are ones the device reports; the chain matches them.
-        let device =
-            unsafe { inst.create_device(pd, &info, None) }.map_err(vkerr("vkCreateDevice"))?;
+        unsafe { inst.create_device(pd, &info, None) }.map_err(vkerr("vkCreateDevice"))
+    }
+}
 
-        let unsupported = if exec_ok {
-            None
-        } else if has_exec {
-            Some(format!(
-                "{} offers {} but not its feature pipelineExecutableInfo",
-                summary.name,
-                EXEC_PROPS_EXTENSION.to_string_lossy()
-            ))
-        } else {
-            Some(format!(
-                "{} does not support {} (driver {} {})",
-                summary.name,
-                EXEC_PROPS_EXTENSION.to_string_lossy(),
-                summary.driver_name,
-                summary.driver_info
-            ))
-        };
-        let exec = exec_ok.then(|| khr::pipeline_executable_properties::Device::new(inst, &device));
-        let subgroup_feature = v13
-            && on(s13.subgroup_size_control)
-            && subgroup.supported_operations.contains(
+fn on(b: vk::Bool32) -> bool {
+    b == vk::TRUE
+}
+
+/// Why a device gives no statistics (`None`: it does).
+fn unsupported_reason(summary: &DeviceSummary, has_exec: bool, exec_ok: bool) -> Option<String> {
+    if exec_ok {
+        None
+    } else if has_exec {
+        Some(format!(
+            "{} offers {} but not its feature pipelineExecutableInfo",
+            summary.name,
+            EXEC_PROPS_EXTENSION.to_string_lossy()
+        ))
+    } else {
+        Some(format!(
+            "{} does not support {} (driver {} {})",
+            summary.name,
+            EXEC_PROPS_EXTENSION.to_string_lossy(),
+            summary.driver_name,
+            summary.driver_info
+        ))
+    }
+}
+
+/// What a device supports of the features that matter here (read once; the structs' chain
+/// pointers are cleared, only their fields are read).
+struct Offered {
+    v12: bool,
+    v13: bool,
+    has_exec: bool,
+    has_robustness2: bool,
+    core: vk::PhysicalDeviceFeatures,
+    v11_features: vk::PhysicalDeviceVulkan11Features<'static>,
+    v12_features: vk::PhysicalDeviceVulkan12Features<'static>,
+    v13_features: vk::PhysicalDeviceVulkan13Features<'static>,
+    robustness2: vk::PhysicalDeviceRobustness2FeaturesEXT<'static>,
+    exec: vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR<'static>,
+    subgroup: vk::PhysicalDeviceSubgroupProperties<'static>,
+}
+
+impl Offered {
+    /// Drops the query's `p_next` links, which point at the other structs where they were.
+    fn clear_chain(&mut self) {
+        self.v11_features.p_next = std::ptr::null_mut();
+        self.v12_features.p_next = std::ptr::null_mut();
+        self.v13_features.p_next = std::ptr::null_mut();
+        self.robustness2.p_next = std::ptr::null_mut();
+        self.exec.p_next = std::ptr::null_mut();
+        self.subgroup.p_next = std::ptr::null_mut();
+    }
+
+    /// Whether wgpu would enable its `SUBGROUP` feature (subgroup size control and the
+    /// operations it needs in compute and fragment stages).
+    fn subgroup_feature(&self) -> bool {
+        self.v13
+            && on(self.v13_features.subgroup_size_control)
+            && self.subgroup.supported_operations.contains(
                 vk::SubgroupFeatureFlags::BASIC
                     | vk::SubgroupFeatureFlags::VOTE
                     | vk::SubgroupFeatureFlags::ARITHMETIC
@@ -338,48 +390,100 @@ impl Vk {
                     | vk::SubgroupFeatureFlags::SHUFFLE_RELATIVE
                     | vk::SubgroupFeatureFlags::QUAD,
             )
-            && subgroup
+            && self
+                .subgroup
                 .supported_stages
-                .contains(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::FRAGMENT);
-        let mut enabled = Vec::new();
-        let mut note = |b: bool, name: &str| {
-            if b {
-                enabled.push(name.to_string());
-            }
-        };
-        note(on(enabled_core.robust_buffer_access), "robustBufferAccess");
-        note(robust_buffer_access2, "robustBufferAccess2");
-        note(on(erob.robust_image_access2), "robustImageAccess2");
-        note(v13 && on(e13.robust_image_access), "robustImageAccess");
-        note(
-            v13 && on(e13.shader_zero_initialize_workgroup_memory),
-            "shaderZeroInitializeWorkgroupMemory",
+                .contains(vk::ShaderStageFlags::COMPUTE | vk::ShaderStageFlags::FRAGMENT)
+    }
+}
+
+/// The features the device is created with: what wgpu 30 enables of those offered (robustness,
+/// zero-init, subgroup size control, and the SDK's optional SHADER_F16 / int64 atomics), plus
+/// pipelineExecutableInfo.
+struct Enabled {
+    core: vk::PhysicalDeviceFeatures,
+    v11: vk::PhysicalDeviceVulkan11Features<'static>,
+    v12: vk::PhysicalDeviceVulkan12Features<'static>,
+    v13: vk::PhysicalDeviceVulkan13Features<'static>,
+    robustness2: vk::PhysicalDeviceRobustness2FeaturesEXT<'static>,
+    exec_features: vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR<'static>,
+    robust_buffer_access2: bool,
+    /// pipelineExecutableInfo is enabled (the statistics).
+    exec: bool,
+}
+
+impl Enabled {
+    fn of(o: &Offered) -> Self {
+        let (core, s11, s12, s13, srob) = (
+            &o.core,
+            &o.v11_features,
+            &o.v12_features,
+            &o.v13_features,
+            &o.robustness2,
         );
-        note(v13 && on(e13.subgroup_size_control), "subgroupSizeControl");
-        note(v12 && on(e12.shader_float16), "shaderFloat16");
-        note(
-            v12 && on(e12.shader_buffer_int64_atomics),
-            "shaderBufferInt64Atomics",
-        );
-        note(exec_ok, "pipelineExecutableInfo");
-        let target = Target {
-            api_version: summary.api_version,
+        let robust_buffer_access2 = on(srob.robust_buffer_access2) && on(core.robust_buffer_access);
+        let exec = o.has_exec && on(o.exec.pipeline_executable_info);
+        Enabled {
+            core: vk::PhysicalDeviceFeatures::default()
+                .robust_buffer_access(on(core.robust_buffer_access))
+                .shader_int64(on(core.shader_int64))
+                .shader_int16(on(core.shader_int16)),
+            v11: vk::PhysicalDeviceVulkan11Features::default()
+                .storage_buffer16_bit_access(on(s11.storage_buffer16_bit_access))
+                .uniform_and_storage_buffer16_bit_access(on(
+                    s11.uniform_and_storage_buffer16_bit_access
+                )),
+            v12: vk::PhysicalDeviceVulkan12Features::default()
+                .shader_float16(on(s12.shader_float16))
+                .shader_int8(on(s12.shader_int8))
+                .shader_buffer_int64_atomics(on(s12.shader_buffer_int64_atomics))
+                .shader_shared_int64_atomics(on(s12.shader_shared_int64_atomics)),
+            v13: vk::PhysicalDeviceVulkan13Features::default()
+                .robust_image_access(on(s13.robust_image_access))
+                .subgroup_size_control(on(s13.subgroup_size_control))
+                .shader_zero_initialize_workgroup_memory(on(
+                    s13.shader_zero_initialize_workgroup_memory
+                )),
+            robustness2: vk::PhysicalDeviceRobustness2FeaturesEXT::default()
+                .robust_buffer_access2(robust_buffer_access2)
+                .robust_image_access2(on(srob.robust_image_access2)),
+            exec_features: vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default()
+                .pipeline_executable_info(exec),
             robust_buffer_access2,
-            robust_image_access: on(erob.robust_image_access2)
-                || (v13 && on(e13.robust_image_access)),
-            zero_initialize_workgroup_memory: v13
-                && on(e13.shader_zero_initialize_workgroup_memory),
-            vendor_id: summary.vendor_id,
-        };
-        Ok(Gpu {
-            device,
             exec,
-            unsupported,
-            target,
-            enabled,
-            allow_varying_subgroup_size: subgroup_feature,
-            _vk: std::marker::PhantomData,
-        })
+        }
+    }
+
+    /// The code-generation-relevant features enabled, by their Vulkan names.
+    fn names(&self, o: &Offered) -> Vec<String> {
+        let (v12, v13) = (o.v12, o.v13);
+        [
+            (on(self.core.robust_buffer_access), "robustBufferAccess"),
+            (self.robust_buffer_access2, "robustBufferAccess2"),
+            (
+                on(self.robustness2.robust_image_access2),
+                "robustImageAccess2",
+            ),
+            (v13 && on(self.v13.robust_image_access), "robustImageAccess"),
+            (
+                v13 && on(self.v13.shader_zero_initialize_workgroup_memory),
+                "shaderZeroInitializeWorkgroupMemory",
+            ),
+            (
+                v13 && on(self.v13.subgroup_size_control),
+                "subgroupSizeControl",
+            ),
+            (v12 && on(self.v12.shader_float16), "shaderFloat16"),
+            (
+                v12 && on(self.v12.shader_buffer_int64_atomics),
+                "shaderBufferInt64Atomics",
+            ),
+            (self.exec, "pipelineExecutableInfo"),
+        ]
+        .into_iter()
+        .filter(|&(b, _)| b)
+        .map(|(_, name)| name.to_string())
+        .collect()
     }
 }
 
