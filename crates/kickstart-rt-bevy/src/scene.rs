@@ -144,123 +144,25 @@ pub(crate) fn sync_scene(
     let ctx = &sdk.ctx;
     let mut container = ctx.create_task_container();
     let sync = &mut *sync;
-    let mut built = 0;
-
-    // A mesh asset that changed or went: its instances wait for the new data (or for their
-    // entity to go too), and its geometry is dropped.
-    for id in extracted_meshes
-        .removed
-        .iter()
-        .chain(&extracted_meshes.modified)
-    {
-        sync.unsupported.remove(id);
-        let Some(geometry) = sync.geometries.remove(id) else {
-            continue;
-        };
-        let users: Vec<Entity> = sync
-            .instances
+    sync.drop_meshes(
+        ctx,
+        extracted_meshes
+            .removed
             .iter()
-            .filter(|(_, i)| i.mesh == *id)
-            .map(|(e, _)| *e)
-            .collect();
-        for entity in users {
-            if let Some(instance) = sync.instances.remove(&entity) {
-                destroy_instance(ctx, instance.handle);
-                sync.waiting.insert(entity, (*id, instance.transform));
-            }
-        }
-        if let Err(e) = ctx.destroy_geometry_handle(geometry.handle) {
-            warn!("kickstart-rt: dropping a mesh's geometry: {e}");
-        }
-    }
-
+            .chain(&extracted_meshes.modified),
+    );
     for entity in extracted.removed.drain(..) {
         sync.waiting.remove(&entity);
-        if let Some(instance) = sync.instances.remove(&entity) {
-            destroy_instance(ctx, instance.handle);
-        }
+        sync.remove_instance(ctx, entity);
     }
-
     for (entity, mesh, transform, deformed) in extracted.changed.drain(..) {
         if deformed {
-            // Bevy skins and morphs in its vertex shader, out of the SDK's reach: tracing the
-            // rest pose would cast shadows and bounce light where the mesh is not.
-            if !sync.warned_deformed {
-                warn!(
-                    "kickstart-rt: skinned and morphed meshes are left out of ray tracing (Bevy \
-                     deforms them in its vertex shader); entity {entity} is the first"
-                );
-                sync.warned_deformed = true;
-            }
-            sync.waiting.remove(&entity);
-            if let Some(old) = sync.instances.remove(&entity) {
-                destroy_instance(ctx, old.handle);
-            }
-            continue;
-        }
-        match sync.instances.get(&entity) {
-            Some(instance) if instance.mesh == mesh => {
-                let Some(geometry) = sync.geometries.get(&mesh).map(|g| g.handle) else {
-                    continue;
-                };
-                container.schedule_bvh_task(ksrt::InstanceTask {
-                    operation: ksrt::TaskOperation::Update,
-                    handle: instance.handle,
-                    input: instance_input(geometry, transform, entity),
-                });
-                if let Some(instance) = sync.instances.get_mut(&entity) {
-                    instance.transform = transform;
-                }
-            }
-            Some(_) => {
-                if let Some(old) = sync.instances.remove(&entity) {
-                    destroy_instance(ctx, old.handle);
-                }
-                sync.waiting.insert(entity, (mesh, transform));
-            }
-            None => {
-                sync.waiting.insert(entity, (mesh, transform));
-            }
+            sync.leave_out_deformed(ctx, entity);
+        } else {
+            sync.change(ctx, &mut container, entity, mesh, transform);
         }
     }
-
-    let waiting: Vec<_> = sync.waiting.iter().map(|(e, m)| (*e, *m)).collect();
-    for (entity, (mesh, transform)) in waiting {
-        let geometry = match sync.geometries.get(&mesh) {
-            Some(g) => g.handle,
-            None => match register_geometry(ctx, &mut container, mesh, &meshes, &allocator) {
-                Ok(Some(handle)) => {
-                    sync.geometries.insert(mesh, Geometry { handle });
-                    built += 1;
-                    handle
-                }
-                // Not uploaded yet: try again next frame.
-                Ok(None) => continue,
-                Err(why) => {
-                    if sync.unsupported.insert(mesh) {
-                        warn!("kickstart-rt: mesh {mesh:?} is not ray traced: {why}");
-                    }
-                    sync.waiting.remove(&entity);
-                    continue;
-                }
-            },
-        };
-        let handle = ctx.create_instance_handle();
-        container.schedule_bvh_task(ksrt::InstanceTask {
-            operation: ksrt::TaskOperation::Register,
-            handle,
-            input: instance_input(geometry, transform, entity),
-        });
-        sync.instances.insert(
-            entity,
-            Instance {
-                handle,
-                mesh,
-                transform,
-            },
-        );
-        sync.waiting.remove(&entity);
-    }
+    let built = sync.register_waiting(ctx, &mut container, &meshes, &allocator);
 
     if container.is_empty() {
         return;
@@ -277,6 +179,142 @@ pub(crate) fn sync_scene(
     });
     if let Err(e) = ctx.invoke_gpu_task(container) {
         error!("kickstart-rt: updating the ray-traced scene failed: {e}");
+    }
+}
+
+impl SceneSync {
+    /// Mesh assets that changed or went: their instances wait for the new data (or for their
+    /// entity to go too), and their geometries are dropped.
+    fn drop_meshes<'a>(
+        &mut self,
+        ctx: &ksrt::ExecuteContext,
+        ids: impl Iterator<Item = &'a AssetId<Mesh>>,
+    ) {
+        for id in ids {
+            self.unsupported.remove(id);
+            let Some(geometry) = self.geometries.remove(id) else {
+                continue;
+            };
+            let users: Vec<Entity> = self
+                .instances
+                .iter()
+                .filter(|(_, i)| i.mesh == *id)
+                .map(|(e, _)| *e)
+                .collect();
+            for entity in users {
+                if let Some(instance) = self.instances.remove(&entity) {
+                    destroy_instance(ctx, instance.handle);
+                    self.waiting.insert(entity, (*id, instance.transform));
+                }
+            }
+            if let Err(e) = ctx.destroy_geometry_handle(geometry.handle) {
+                warn!("kickstart-rt: dropping a mesh's geometry: {e}");
+            }
+        }
+    }
+
+    /// Removes `entity`'s instance from the SDK's scene, if it has one.
+    fn remove_instance(&mut self, ctx: &ksrt::ExecuteContext, entity: Entity) {
+        if let Some(instance) = self.instances.remove(&entity) {
+            destroy_instance(ctx, instance.handle);
+        }
+    }
+
+    /// A skinned or morphed mesh entity: left out of the scene (logged the first time).
+    fn leave_out_deformed(&mut self, ctx: &ksrt::ExecuteContext, entity: Entity) {
+        // Bevy skins and morphs in its vertex shader, out of the SDK's reach: tracing the
+        // rest pose would cast shadows and bounce light where the mesh is not.
+        if !self.warned_deformed {
+            warn!(
+                "kickstart-rt: skinned and morphed meshes are left out of ray tracing (Bevy \
+                 deforms them in its vertex shader); entity {entity} is the first"
+            );
+            self.warned_deformed = true;
+        }
+        self.waiting.remove(&entity);
+        self.remove_instance(ctx, entity);
+    }
+
+    /// A mesh entity added, moved or re-meshed: an instance of the same mesh moves at once;
+    /// otherwise the entity waits for its mesh's geometry ([`Self::register_waiting`]).
+    fn change(
+        &mut self,
+        ctx: &ksrt::ExecuteContext,
+        container: &mut ksrt::TaskContainer,
+        entity: Entity,
+        mesh: AssetId<Mesh>,
+        transform: Affine3A,
+    ) {
+        match self.instances.get_mut(&entity) {
+            Some(instance) if instance.mesh == mesh => {
+                let Some(geometry) = self.geometries.get(&mesh).map(|g| g.handle) else {
+                    return;
+                };
+                container.schedule_bvh_task(ksrt::InstanceTask {
+                    operation: ksrt::TaskOperation::Update,
+                    handle: instance.handle,
+                    input: instance_input(geometry, transform, entity),
+                });
+                instance.transform = transform;
+            }
+            Some(_) => {
+                self.remove_instance(ctx, entity);
+                self.waiting.insert(entity, (mesh, transform));
+            }
+            None => {
+                self.waiting.insert(entity, (mesh, transform));
+            }
+        }
+    }
+
+    /// Registers an instance for every waiting entity whose mesh Bevy has uploaded (and its
+    /// geometry, the first time the mesh is used); returns the number of new geometries.
+    fn register_waiting(
+        &mut self,
+        ctx: &ksrt::ExecuteContext,
+        container: &mut ksrt::TaskContainer,
+        meshes: &RenderAssets<RenderMesh>,
+        allocator: &MeshAllocator,
+    ) -> u32 {
+        let mut built = 0;
+        let waiting: Vec<_> = self.waiting.iter().map(|(e, m)| (*e, *m)).collect();
+        for (entity, (mesh, transform)) in waiting {
+            let geometry = match self.geometries.get(&mesh) {
+                Some(g) => g.handle,
+                None => match register_geometry(ctx, container, mesh, meshes, allocator) {
+                    Ok(Some(handle)) => {
+                        self.geometries.insert(mesh, Geometry { handle });
+                        built += 1;
+                        handle
+                    }
+                    // Not uploaded yet: try again next frame.
+                    Ok(None) => continue,
+                    Err(why) => {
+                        if self.unsupported.insert(mesh) {
+                            warn!("kickstart-rt: mesh {mesh:?} is not ray traced: {why}");
+                        }
+                        self.waiting.remove(&entity);
+                        continue;
+                    }
+                },
+            };
+            let handle = ctx.create_instance_handle();
+            container.schedule_bvh_task(ksrt::InstanceTask {
+                operation: ksrt::TaskOperation::Register,
+                handle,
+                input: instance_input(geometry, transform, entity),
+            });
+            self.instances.insert(
+                entity,
+                Instance {
+                    handle,
+                    mesh,
+                    transform,
+                },
+            );
+            self.waiting.remove(&entity);
+        }
+        built
     }
 }
 
