@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::app::gpu;
 use kickstart_rt_renderer::error::AnyResult;
-use kickstart_rt_renderer::scene::{self, Camera};
+use kickstart_rt_renderer::scene::{self, Camera, Scene};
 
 mod backends;
 mod busy;
@@ -187,18 +187,10 @@ fn tlas_sweep(bench: &Bench, counts: &[u32], bar: &indicatif::ProgressBar) -> Ve
     out
 }
 
-/// `ksrt bench`.
-pub fn run(opts: BenchOptions) -> AnyResult<()> {
-    if opts.iterations == 0 {
-        return Err("--iterations must be at least 1".into());
-    }
-    // Load every scene first: a wrong name fails before minutes of GPU work.
-    opts.extras.check()?;
-    if opts.peer.is_some() && opts.extras.ray_order != extras::RayOrder::Rows {
-        // The driver peer launches the rays as a 2-D image of rows (its own tiling of the launch
-        // then decides their grouping), so tiled rays would be compared in a scrambled order.
-        return Err("--peer needs --ray-order rows (the peer's launch is row by row)".into());
-    }
+/// The scenes `ksrt bench` measures (none with `--skip-scenes`, the defaults when none is
+/// named), each loaded (and flattened with `--flatten`) before any GPU work, so that a wrong
+/// name fails at once.
+fn load_scenes(opts: &BenchOptions) -> AnyResult<(Vec<String>, Vec<Scene>)> {
     let names: Vec<String> = if opts.extras.skip_scenes {
         Vec::new()
     } else if opts.scenes.is_empty() {
@@ -219,6 +211,74 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         });
         println!("loaded {name} in {:.2} s", start.elapsed().as_secs_f64());
     }
+    Ok((names, scenes))
+}
+
+/// Measures each scene from its camera (`--camera`, else its benchmark camera, else its own),
+/// printing each result above `bar`, which counts them.
+fn scene_sweep(
+    bench: &Bench,
+    opts: &BenchOptions,
+    names: &[String],
+    scenes: &[Scene],
+    mut peer: Option<&mut peer::PeerState>,
+    bar: &indicatif::ProgressBar,
+) -> Vec<SceneReport> {
+    let mut out = Vec::with_capacity(scenes.len());
+    for (name, scene) in names.iter().zip(scenes) {
+        bar.set_message(format!("bench {name}"));
+        let camera = opts
+            .camera
+            .or_else(|| scene::benchmark_camera(name))
+            .unwrap_or_else(|| scene.camera_or_default(None));
+        let r = bench_scene(
+            bench,
+            name,
+            scene,
+            camera,
+            opts.size,
+            peer.as_deref_mut(),
+            opts.extras.tree_work,
+        );
+        bar.suspend(|| {
+            print_scene(&r, opts.size);
+            if let Some(b) = &r.backends {
+                backends::print(b, &r);
+            }
+            if let Some(p) = &r.peer {
+                peer::print(p);
+            }
+        });
+        bar.inc(1);
+        out.push(r);
+    }
+    out
+}
+
+/// How many measurements of `report` failed (each is listed with its scene or section).
+fn failures(report: &Report) -> usize {
+    report
+        .scenes
+        .iter()
+        .map(|s| s.errors.len() + s.backends.as_ref().map_or(0, |b| b.errors.len()))
+        .sum::<usize>()
+        + report.tlas.iter().map(|t| t.errors.len()).sum::<usize>()
+        + report.extras.failures()
+}
+
+/// `ksrt bench`.
+pub fn run(opts: BenchOptions) -> AnyResult<()> {
+    if opts.iterations == 0 {
+        return Err("--iterations must be at least 1".into());
+    }
+    // Load every scene first: a wrong name fails before minutes of GPU work.
+    opts.extras.check()?;
+    if opts.peer.is_some() && opts.extras.ray_order != extras::RayOrder::Rows {
+        // The driver peer launches the rays as a 2-D image of rows (its own tiling of the launch
+        // then decides their grouping), so tiled rays would be compared in a scrambled order.
+        return Err("--peer needs --ray-order rows (the peer's launch is row by row)".into());
+    }
+    let (names, scenes) = load_scenes(&opts)?;
     let adapter = gpu::adapter()?;
     let timestamp_query = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
     if !timestamp_query {
@@ -270,33 +330,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
         "bench",
         "steps",
     );
-    for (name, scene) in names.iter().zip(&scenes) {
-        bar.set_message(format!("bench {name}"));
-        let camera = opts
-            .camera
-            .or_else(|| scene::benchmark_camera(name))
-            .unwrap_or_else(|| scene.camera_or_default(None));
-        let r = bench_scene(
-            &bench,
-            name,
-            scene,
-            camera,
-            opts.size,
-            peer.as_mut(),
-            opts.extras.tree_work,
-        );
-        bar.suspend(|| {
-            print_scene(&r, opts.size);
-            if let Some(b) = &r.backends {
-                backends::print(b, &r);
-            }
-            if let Some(p) = &r.peer {
-                peer::print(p);
-            }
-        });
-        bar.inc(1);
-        report.scenes.push(r);
-    }
+    report.scenes = scene_sweep(&bench, &opts, &names, &scenes, peer.as_mut(), &bar);
     let tlas_counts: &[u32] =
         if opts.extras.skip_scenes || !extras::Section::Tlas.runs_in(&opts.extras.sections) {
             &[]
@@ -322,13 +356,7 @@ pub fn run(opts: BenchOptions) -> AnyResult<()> {
             .map_err(|e| format!("--json {}: cannot write: {e}", path.display()))?;
         println!("wrote {}", path.display());
     }
-    let failed = report
-        .scenes
-        .iter()
-        .map(|s| s.errors.len() + s.backends.as_ref().map_or(0, |b| b.errors.len()))
-        .sum::<usize>()
-        + report.tlas.iter().map(|t| t.errors.len()).sum::<usize>()
-        + report.extras.failures();
+    let failed = failures(&report);
     if failed > 0 {
         return Err(format!("{failed} measurements failed (listed above)").into());
     }

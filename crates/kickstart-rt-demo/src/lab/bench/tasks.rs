@@ -67,26 +67,22 @@ fn trace_output(
         .create_view(&Default::default())
 }
 
-/// (f) The trace tasks on a G-buffer made from primary rays traced through the SDK (world
-/// positions and geometric normals of the hits, computed on the CPU from the hit records: no
-/// rasteriser involved). Each task alone at full and checkerboard resolution, multi-light
-/// shadows against the light count, and specular + diffuse + AO + one shadow together.
-pub(super) fn trace_tasks(
+/// The G-buffer of the bench's view made from primary rays traced through the SDK on `ctx`
+/// (world positions and geometric normals of the hits, computed on the CPU from the hit
+/// records), as the trace tasks' common inputs.
+fn hit_gbuffer(
     bench: &Bench,
-    scene: &Scene,
-    uploads: &[UploadedMesh],
-    camera: &Camera,
+    ctx: &ksrt::ExecuteContext,
+    slots: &std::collections::HashMap<u32, usize>,
+    (scene, camera): (&Scene, &Camera),
     (width, height): (u32, u32),
-    report: &mut SceneReport,
-) -> AnyResult<()> {
-    let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
-    let slots = handles.instance_of_slot();
+) -> AnyResult<ksrt::TraceTaskCommon> {
     let (dirs, primary) = primary_rays(camera, (width, height));
-    let (_, hits) = bench.trace(&ctx, &primary, Query::Closest)?;
+    let (_, hits) = bench.trace(ctx, &primary, Query::Closest)?;
     let mut positions = vec![[f32::NAN; 4]; hits.len()];
     let mut normals = vec![[0.0f32; 4]; hits.len()];
     for (i, (h, d)) in hits.iter().zip(&dirs).enumerate() {
-        if let Some(s) = h.is_hit().then(|| surface(scene, &slots, h, *d)).flatten() {
+        if let Some(s) = h.is_hit().then(|| surface(scene, slots, h, *d)).flatten() {
             positions[i] = s.point.extend(1.0).to_array();
             normals[i] = s.normal.extend(0.0).to_array();
         }
@@ -113,36 +109,64 @@ pub(super) fn trace_tasks(
     common.view.prev_world_to_view = world_to_view;
     common.view.prev_view_to_clip = view_to_clip;
     common.ray_offset.offset_type = ksrt::RayOffsetType::WorldPosition;
-    let radiance = trace_output(bench, size, wgpu::TextureFormat::Rgba16Float);
-    let radiance2 = trace_output(bench, size, wgpu::TextureFormat::Rgba16Float);
-    let scalar = trace_output(bench, size, wgpu::TextureFormat::R32Float);
-    let scalar2 = trace_output(bench, size, wgpu::TextureFormat::R32Float);
-    let packed = trace_output(bench, size, wgpu::TextureFormat::Rgba16Float);
-    // Lights around the camera, at a tenth of the view distance, so every light matters.
-    let reach = (camera.at - camera.eye).length().max(extent * 0.01);
-    let mut rng = Rng(0x5348_4457);
-    let lights: Vec<ksrt::LightInfo> = (0..32)
-        .map(|_| {
-            let d = Vec3::new(rng.f32() - 0.5, rng.f32() * 0.5, rng.f32() - 0.5);
-            ksrt::LightInfo::Point {
-                position: camera.eye + d * reach * 0.5,
-                radius: reach * 0.01,
-                range: extent * 4.0,
-            }
-        })
-        .collect();
-    let sun = ksrt::LightInfo::Directional {
-        direction: Vec3::new(0.3, -1.0, 0.2).normalize(),
-        angular_extent: 0.0093,
-    };
-    let tasks = |c: &ksrt::TraceTaskCommon| {
+    Ok(common)
+}
+
+/// The trace tasks the bench times: their outputs and lights.
+struct TaskSet {
+    radiance: wgpu::TextureView,
+    radiance2: wgpu::TextureView,
+    scalar: wgpu::TextureView,
+    scalar2: wgpu::TextureView,
+    packed: wgpu::TextureView,
+    /// Point lights around the camera, for the multi-light shadow.
+    lights: Vec<ksrt::LightInfo>,
+    /// The single shadow's light.
+    sun: ksrt::LightInfo,
+    /// The scene's size.
+    extent: f32,
+}
+
+impl TaskSet {
+    fn new(bench: &Bench, scene: &Scene, camera: &Camera, size: (u32, u32)) -> TaskSet {
+        let extent = scene.size();
+        // Lights around the camera, at a tenth of the view distance, so every light matters.
+        let reach = (camera.at - camera.eye).length().max(extent * 0.01);
+        let mut rng = Rng(0x5348_4457);
+        let lights: Vec<ksrt::LightInfo> = (0..32)
+            .map(|_| {
+                let d = Vec3::new(rng.f32() - 0.5, rng.f32() * 0.5, rng.f32() - 0.5);
+                ksrt::LightInfo::Point {
+                    position: camera.eye + d * reach * 0.5,
+                    radius: reach * 0.01,
+                    range: extent * 4.0,
+                }
+            })
+            .collect();
+        TaskSet {
+            radiance: trace_output(bench, size, wgpu::TextureFormat::Rgba16Float),
+            radiance2: trace_output(bench, size, wgpu::TextureFormat::Rgba16Float),
+            scalar: trace_output(bench, size, wgpu::TextureFormat::R32Float),
+            scalar2: trace_output(bench, size, wgpu::TextureFormat::R32Float),
+            packed: trace_output(bench, size, wgpu::TextureFormat::Rgba16Float),
+            lights,
+            sun: ksrt::LightInfo::Directional {
+                direction: Vec3::new(0.3, -1.0, 0.2).normalize(),
+                angular_extent: 0.0093,
+            },
+            extent,
+        }
+    }
+
+    /// Specular, diffuse, AO and one shadow on `c`: (name, lights, task).
+    fn tasks(&self, c: &ksrt::TraceTaskCommon) -> Vec<(&'static str, u32, ksrt::RenderTask)> {
         vec![
             (
                 "specular",
                 0,
                 ksrt::RenderTask::TraceSpecular(ksrt::TraceSpecularTask {
                     common: c.clone(),
-                    output: radiance.clone(),
+                    output: self.radiance.clone(),
                     demodulate_specular: false,
                     demodulation_output: None,
                 }),
@@ -152,7 +176,7 @@ pub(super) fn trace_tasks(
                 0,
                 ksrt::RenderTask::TraceDiffuse(ksrt::TraceDiffuseTask {
                     common: c.clone(),
-                    output: radiance2.clone(),
+                    output: self.radiance2.clone(),
                     diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
                     ambient_occlusion: None,
                 }),
@@ -162,8 +186,8 @@ pub(super) fn trace_tasks(
                 0,
                 ksrt::RenderTask::TraceAmbientOcclusion(ksrt::TraceAmbientOcclusionTask {
                     common: c.clone(),
-                    output: scalar.clone(),
-                    ao_radius: extent * 0.05,
+                    output: self.scalar.clone(),
+                    ao_radius: self.extent * 0.05,
                 }),
             ),
             (
@@ -171,22 +195,42 @@ pub(super) fn trace_tasks(
                 1,
                 ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
                     common: c.clone(),
-                    output: scalar2.clone(),
-                    light: sun,
+                    output: self.scalar2.clone(),
+                    light: self.sun,
                     enable_first_hit_and_end_search: true,
                 }),
             ),
         ]
-    };
-    let multi = |c: &ksrt::TraceTaskCommon, n: u32| {
+    }
+
+    /// The multi-light shadow of the first `n` lights on `c`.
+    fn multi(&self, c: &ksrt::TraceTaskCommon, n: u32) -> ksrt::RenderTask {
         ksrt::RenderTask::TraceMultiShadow(ksrt::TraceMultiShadowTask {
             common: c.clone(),
-            output0: packed.clone(),
-            output1: radiance2.clone(),
-            lights: lights[..n as usize].to_vec(),
+            output0: self.packed.clone(),
+            output1: self.radiance2.clone(),
+            lights: self.lights[..n as usize].to_vec(),
             enable_first_hit_and_end_search: true,
         })
-    };
+    }
+}
+
+/// (f) The trace tasks on a G-buffer made from primary rays traced through the SDK (no
+/// rasteriser involved, see [`hit_gbuffer`]). Each task alone at full and checkerboard
+/// resolution, multi-light shadows against the light count, and specular + diffuse + AO + one
+/// shadow together.
+pub(super) fn trace_tasks(
+    bench: &Bench,
+    scene: &Scene,
+    uploads: &[UploadedMesh],
+    camera: &Camera,
+    size: (u32, u32),
+    report: &mut SceneReport,
+) -> AnyResult<()> {
+    let (ctx, handles) = bench.registered(scene, uploads, false, true)?;
+    let slots = handles.instance_of_slot();
+    let common = hit_gbuffer(bench, &ctx, &slots, (scene, camera), size)?;
+    let set = TaskSet::new(bench, scene, camera, size);
     let time_one = |task: &ksrt::RenderTask| {
         bench.repeat(|_| {
             let mut c = ctx.create_task_container();
@@ -201,7 +245,7 @@ pub(super) fn trace_tasks(
         if checkerboard {
             c.half_resolution_mode = ksrt::HalfResolutionMode::Checkerboard;
         }
-        for (name, lights, task) in tasks(&c) {
+        for (name, lights, task) in set.tasks(&c) {
             report.trace_tasks.push(TraceTaskTime {
                 task: name,
                 checkerboard,
@@ -213,7 +257,7 @@ pub(super) fn trace_tasks(
             task: "multi_shadow",
             checkerboard,
             lights: 4,
-            time: time_one(&multi(&c, 4))?,
+            time: time_one(&set.multi(&c, 4))?,
         });
     }
     for n in SHADOW_LIGHT_COUNTS {
@@ -221,12 +265,12 @@ pub(super) fn trace_tasks(
             task: "multi_shadow",
             checkerboard: false,
             lights: n,
-            time: time_one(&multi(&common, n))?,
+            time: time_one(&set.multi(&common, n))?,
         });
     }
     report.trace_combined = Some(bench.repeat(|_| {
         let mut c = ctx.create_task_container();
-        for (_, _, t) in tasks(&common) {
+        for (_, _, t) in set.tasks(&common) {
             c.schedule_render_task(t);
         }
         bench.timed(&ctx, c, &["trace"], |_| {})

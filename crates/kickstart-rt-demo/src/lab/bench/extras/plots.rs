@@ -290,10 +290,16 @@ pub fn draw(chart: &Chart, dir: &Path) -> AnyResult<Option<PathBuf>> {
     Ok(Some(path))
 }
 
-/// The charts of `report`'s passes (only those with data).
-pub fn charts(report: &ExtrasReport) -> Vec<Chart> {
-    let mut out = Vec::new();
-    let chart = |file, title: &str, x: &str, y: &str, log_x, log_y, series| Chart {
+/// A chart of `series`.
+fn chart(
+    file: &'static str,
+    title: &str,
+    (x, y): (&str, &str),
+    log_x: bool,
+    log_y: bool,
+    series: Vec<Series>,
+) -> Chart {
+    Chart {
         file,
         title: title.to_string(),
         x_label: x.to_string(),
@@ -301,192 +307,213 @@ pub fn charts(report: &ExtrasReport) -> Vec<Chart> {
         log_x,
         log_y,
         series,
-    };
+    }
+}
+
+/// The charts of `report`'s passes (only those with data).
+pub fn charts(report: &ExtrasReport) -> Vec<Chart> {
+    let mut out = Vec::new();
     if let Some(s) = &report.scaling {
-        let rays = ["primary", "ao", "diffuse"]
-            .iter()
-            .map(|kind| Series {
-                name: format!("{kind} rays"),
-                points: s
-                    .triangles
-                    .iter()
-                    .filter_map(|p| {
-                        let r = p.rays.iter().find(|r| r.kind == *kind)?;
-                        Some((p.world_triangles as f64, r.mrays_per_s))
-                    })
-                    .collect(),
-            })
-            .collect();
-        out.push(chart(
-            "scaling-rays",
-            &format!(
-                "Ray throughput against scene size ({}x{} batches)",
-                s.ray_size.0, s.ray_size.1
-            ),
-            "triangles in the world (dragon copies counted each)",
-            "Mrays/s",
-            true,
-            true,
-            rays,
-        ));
-        let blas = Series {
-            name: "BLAS build, all geometries".into(),
+        scaling_size_charts(s, &mut out);
+        scaling_frame_charts(s, &mut out);
+    }
+    if let Some(c) = &report.cpu_peers {
+        cpu_peer_charts(c, &mut out);
+    }
+    if let Some(f) = &report.frames_in_flight {
+        frames_in_flight_chart(f, &mut out);
+    }
+    out
+}
+
+/// `--scaling`: ray throughput and build times against the scene's size.
+fn scaling_size_charts(s: &super::scaling::ScalingReport, out: &mut Vec<Chart>) {
+    let rays = ["primary", "ao", "diffuse"]
+        .iter()
+        .map(|kind| Series {
+            name: format!("{kind} rays"),
             points: s
                 .triangles
                 .iter()
                 .filter_map(|p| {
-                    Some((
-                        p.geometry_triangles as f64,
-                        p.blas_build.as_ref()?.median_ms,
-                    ))
+                    let r = p.rays.iter().find(|r| r.kind == *kind)?;
+                    Some((p.world_triangles as f64, r.mrays_per_s))
                 })
                 .collect(),
-        };
-        let tlas = Series {
-            name: "TLAS build over dragon copies (x = copies)".into(),
-            points: s
-                .triangles
-                .iter()
-                .filter_map(|p| Some((p.copies as f64, p.tlas_build.as_ref()?.median_ms)))
-                .collect(),
-        };
-        out.push(chart(
-            "scaling-build",
-            "GPU build time against size",
-            "BLAS: triangles; TLAS: instances",
-            "ms (GPU)",
-            true,
-            true,
-            vec![blas, tlas],
-        ));
-        let frame = |pts: &Vec<super::scaling::FramePoint>,
-                     x: fn(&super::scaling::FramePoint) -> f64| {
-            pts.iter().map(|p| (x(p), p.sdk_ms)).collect::<Vec<_>>()
-        };
-        out.push(chart(
-            "scaling-resolution",
-            &format!("SDK frame time against resolution ({})", s.frame_scene),
-            "megapixels",
-            "ms (GPU, SDK passes)",
-            true,
-            true,
-            vec![Series {
-                name: "SDK frame (inject, traces, denoisers)".into(),
-                points: frame(&s.resolution, |p| f64::from(p.width * p.height) / 1e6),
-            }],
-        ));
-        out.push(chart(
-            "scaling-lights",
-            &format!(
-                "SDK frame time against lights ({}, {})",
-                s.frame_scene,
-                s.lights
-                    .first()
-                    .map_or("—".to_string(), |p| format!("{}x{}", p.width, p.height))
-            ),
-            "lights in the multi-light shadow",
-            "ms (GPU, SDK passes)",
-            true,
-            false,
-            vec![Series {
-                name: "SDK frame".into(),
-                points: frame(&s.lights, |p| f64::from(p.lights)),
-            }],
-        ));
-        let tlas_series = |name: &str, f: fn(&super::scaling::TlasPoint) -> Option<f64>| Series {
-            name: name.into(),
-            points: s
-                .tlas
-                .iter()
-                .filter_map(|p| Some((f64::from(p.instances), f(p)?)))
-                .collect(),
-        };
-        out.push(chart(
-            "scaling-tlas",
-            "TLAS cost against instances",
-            "instances",
-            "ms (GPU)",
-            true,
-            true,
-            vec![
-                tlas_series("build", |p| p.build.as_ref().map(|s| s.median_ms)),
-                tlas_series("refit", |p| p.refit.as_ref().map(|s| s.median_ms)),
-            ],
-        ));
-    }
-    if let Some(c) = &report.cpu_peers {
-        let mut builders: Vec<String> = Vec::new();
-        for b in c.meshes.iter().flat_map(|m| &m.builds) {
-            if !builders.contains(&b.builder) {
-                builders.push(b.builder.clone());
-            }
+        })
+        .collect();
+    out.push(chart(
+        "scaling-rays",
+        &format!(
+            "Ray throughput against scene size ({}x{} batches)",
+            s.ray_size.0, s.ray_size.1
+        ),
+        (
+            "triangles in the world (dragon copies counted each)",
+            "Mrays/s",
+        ),
+        true,
+        true,
+        rays,
+    ));
+    let blas = Series {
+        name: "BLAS build, all geometries".into(),
+        points: s
+            .triangles
+            .iter()
+            .filter_map(|p| {
+                Some((
+                    p.geometry_triangles as f64,
+                    p.blas_build.as_ref()?.median_ms,
+                ))
+            })
+            .collect(),
+    };
+    let tlas = Series {
+        name: "TLAS build over dragon copies (x = copies)".into(),
+        points: s
+            .triangles
+            .iter()
+            .filter_map(|p| Some((p.copies as f64, p.tlas_build.as_ref()?.median_ms)))
+            .collect(),
+    };
+    out.push(chart(
+        "scaling-build",
+        "GPU build time against size",
+        ("BLAS: triangles; TLAS: instances", "ms (GPU)"),
+        true,
+        true,
+        vec![blas, tlas],
+    ));
+}
+
+/// `--scaling`: the SDK's frame time against resolution and lights, and the TLAS against
+/// instances.
+fn scaling_frame_charts(s: &super::scaling::ScalingReport, out: &mut Vec<Chart>) {
+    let frame = |pts: &Vec<super::scaling::FramePoint>,
+                 x: fn(&super::scaling::FramePoint) -> f64| {
+        pts.iter().map(|p| (x(p), p.sdk_ms)).collect::<Vec<_>>()
+    };
+    out.push(chart(
+        "scaling-resolution",
+        &format!("SDK frame time against resolution ({})", s.frame_scene),
+        ("megapixels", "ms (GPU, SDK passes)"),
+        true,
+        true,
+        vec![Series {
+            name: "SDK frame (inject, traces, denoisers)".into(),
+            points: frame(&s.resolution, |p| f64::from(p.width * p.height) / 1e6),
+        }],
+    ));
+    out.push(chart(
+        "scaling-lights",
+        &format!(
+            "SDK frame time against lights ({}, {})",
+            s.frame_scene,
+            s.lights
+                .first()
+                .map_or("—".to_string(), |p| format!("{}x{}", p.width, p.height))
+        ),
+        ("lights in the multi-light shadow", "ms (GPU, SDK passes)"),
+        true,
+        false,
+        vec![Series {
+            name: "SDK frame".into(),
+            points: frame(&s.lights, |p| f64::from(p.lights)),
+        }],
+    ));
+    let tlas_series = |name: &str, f: fn(&super::scaling::TlasPoint) -> Option<f64>| Series {
+        name: name.into(),
+        points: s
+            .tlas
+            .iter()
+            .filter_map(|p| Some((f64::from(p.instances), f(p)?)))
+            .collect(),
+    };
+    out.push(chart(
+        "scaling-tlas",
+        "TLAS cost against instances",
+        ("instances", "ms (GPU)"),
+        true,
+        true,
+        vec![
+            tlas_series("build", |p| p.build.as_ref().map(|s| s.median_ms)),
+            tlas_series("refit", |p| p.refit.as_ref().map(|s| s.median_ms)),
+        ],
+    ));
+}
+
+/// `--cpu-peers`: build time and SAH cost of each builder against triangles.
+fn cpu_peer_charts(c: &super::cpu_peers::CpuPeersReport, out: &mut Vec<Chart>) {
+    let mut builders: Vec<String> = Vec::new();
+    for b in c.meshes.iter().flat_map(|m| &m.builds) {
+        if !builders.contains(&b.builder) {
+            builders.push(b.builder.clone());
         }
-        let per_builder = |f: fn(&super::cpu_peers::PeerBuild) -> Option<f64>| {
-            builders
-                .iter()
-                .map(|name| Series {
-                    name: name.clone(),
-                    points: c
-                        .meshes
-                        .iter()
-                        .filter_map(|m| {
-                            let b = m.builds.iter().find(|b| &b.builder == name)?;
-                            Some((m.triangles as f64, f(b)?))
-                        })
-                        .collect(),
-                })
-                .collect::<Vec<_>>()
-        };
-        out.push(chart(
-            "cpu-peers-build",
-            &format!(
-                "BVH build time: GPU against CPU builders ({} CPU threads)",
-                c.cpu_threads
-            ),
-            "triangles",
-            "ms",
-            true,
-            true,
-            per_builder(|b| Some(b.time.median_ms)),
-        ));
-        out.push(chart(
-            "cpu-peers-sah",
-            "BVH quality: SAH cost / our CPU binned SAH's (lower is better)",
-            "triangles",
-            "SAH ratio",
-            true,
-            false,
-            per_builder(|b| b.sah_vs_cpu_binned),
-        ));
     }
-    if let Some(f) = &report.frames_in_flight {
-        let col = |name: &str, g: fn(&crate::app::frames_in_flight::FifSummary) -> f64| Series {
-            name: name.into(),
-            points: f
-                .summaries
-                .iter()
-                .map(|s| (f64::from(s.frames_in_flight), g(s)))
-                .collect(),
-        };
-        out.push(chart(
-            "frames-in-flight",
-            &format!(
-                "CPU per frame against frames in flight ({} {}x{})",
-                f.scene, f.width, f.height
-            ),
-            "frames in flight",
-            "ms (CPU)",
-            false,
-            false,
-            vec![
-                col("build_gpu_task", |s| s.sdk_build_ms),
-                col("record frame", |s| s.record_ms),
-                col("mean wait for GPU", |s| s.mean_wait_ms),
-                col("frame interval", |s| s.frame_ms),
-            ],
-        ));
-    }
-    out
+    let per_builder = |f: fn(&super::cpu_peers::PeerBuild) -> Option<f64>| {
+        builders
+            .iter()
+            .map(|name| Series {
+                name: name.clone(),
+                points: c
+                    .meshes
+                    .iter()
+                    .filter_map(|m| {
+                        let b = m.builds.iter().find(|b| &b.builder == name)?;
+                        Some((m.triangles as f64, f(b)?))
+                    })
+                    .collect(),
+            })
+            .collect::<Vec<_>>()
+    };
+    out.push(chart(
+        "cpu-peers-build",
+        &format!(
+            "BVH build time: GPU against CPU builders ({} CPU threads)",
+            c.cpu_threads
+        ),
+        ("triangles", "ms"),
+        true,
+        true,
+        per_builder(|b| Some(b.time.median_ms)),
+    ));
+    out.push(chart(
+        "cpu-peers-sah",
+        "BVH quality: SAH cost / our CPU binned SAH's (lower is better)",
+        ("triangles", "SAH ratio"),
+        true,
+        false,
+        per_builder(|b| b.sah_vs_cpu_binned),
+    ));
+}
+
+/// `--frames-in-flight`: the CPU's costs per frame against frames in flight.
+fn frames_in_flight_chart(f: &super::fif::FifReport, out: &mut Vec<Chart>) {
+    let col = |name: &str, g: fn(&crate::app::frames_in_flight::FifSummary) -> f64| Series {
+        name: name.into(),
+        points: f
+            .summaries
+            .iter()
+            .map(|s| (f64::from(s.frames_in_flight), g(s)))
+            .collect(),
+    };
+    out.push(chart(
+        "frames-in-flight",
+        &format!(
+            "CPU per frame against frames in flight ({} {}x{})",
+            f.scene, f.width, f.height
+        ),
+        ("frames in flight", "ms (CPU)"),
+        false,
+        false,
+        vec![
+            col("build_gpu_task", |s| s.sdk_build_ms),
+            col("record frame", |s| s.record_ms),
+            col("mean wait for GPU", |s| s.mean_wait_ms),
+            col("frame interval", |s| s.frame_ms),
+        ],
+    ));
 }
 
 /// Draws every chart of `report` into `dir` and lists them.
