@@ -35,7 +35,7 @@
 //! The tests that trace with the peer are `#[ignore]`d in CI's test passes (their Mesa 22
 //! lavapipe has no ray tracing, and a test that returned early there would count as a pass);
 //! `.ci/run` runs them in a step of their own on Mesa 25's lavapipe, which has it
-//! (`../shared/tools/lavapipe-rt/fetch`). Run with `--include-ignored`, they fail when no
+//! (`.ci/lavapipe-rt`). Run with `--include-ignored`, they fail when no
 //! ray-tracing device is found. `KSRT_REQUIRE_RT_PEER` makes the skip-path test fail too.
 
 #![warn(missing_docs)]

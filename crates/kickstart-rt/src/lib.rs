@@ -108,7 +108,7 @@
 
 // The SDK's layers, lowest first; a module imports only from its own layer and those before it,
 // no two files or folders import each other, and every import names the module that owns the
-// item, never the crate root's re-export (checked by `layering.rs`'s tests):
+// item, never the crate root's re-export (checked by `tests/layering.rs`):
 //
 // 1. foundation: `error`, `version`, `handles`, `tasks` (every public task and input type),
 //    `logging`, `allocations`, `container`, `camera`
@@ -134,8 +134,6 @@ mod device;
 mod error;
 mod gpu;
 mod handles;
-#[cfg(test)]
-mod layering;
 mod logging;
 mod scene;
 mod staging;

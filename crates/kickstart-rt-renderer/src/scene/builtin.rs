@@ -1,7 +1,7 @@
 //! The built-in scenes: the default scene of the instance-id bug report (an icosahedron sphere, a
 //! torus knot, a tube and a floor, each its own colour, in a room of a floor and two walls), the
 //! Cornell box, built in code from the classic Cornell measurements, and a closed room lit only
-//! by the sun through a small window in its ceiling (the sparse-GI case of issue 32).
+//! by the sun through a small window in its ceiling (the sparse-GI case: little light reaches most surfaces).
 
 use glam::{Affine3A, Vec3};
 

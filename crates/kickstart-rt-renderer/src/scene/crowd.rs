@@ -1,7 +1,7 @@
 //! The built-in "crowd": 100 distinct meshes of 10,092 triangles each (a box whose six faces
 //! are 29 × 29 grids of quads, bumped differently on every vertex, person-sized), standing on a
 //! 10 × 10 grid — the shape of a scene of skinned characters, whose BLASes are all refit every
-//! frame. `ksrt bench --scene crowd` times refitting them all in one task (issue 34's refit
+//! frame. `ksrt bench --scene crowd` times refitting them all in one task (the refit
 //! case: ingestion + refit of 100 `allow_update` meshes of about 10,000 triangles).
 
 use glam::{Affine3A, Vec3};

@@ -2,7 +2,7 @@
 //! buildings on a 40 × 25 grid of blocks, each its own mesh of 2,028 triangles (a box whose six
 //! faces are 13 × 13 grids of quads), each a different size and with its own bumps on every
 //! vertex, so no two BLASes are the same. `ksrt bench --scene town` times building them all in
-//! one task (issue 34's many-meshes case).
+//! one task (the many-meshes case).
 
 use glam::{Affine3A, Vec3};
 

@@ -1,5 +1,5 @@
 //! The record phase of `build_gpu_task`: carries out a checked [`FramePlan`] into the engine's
-//! encoder, one function per step of the data flow (`../shared/DESIGN.md`, "Data flow of one
+//! encoder, one function per step of the data flow (`docs/design.md`, "Data flow of one
 //! `build_gpu_task`"). Nothing here can fail: the plan checked every input, resolved every
 //! render task's effect, and ran this phase's allocations on copies of the pools' bookkeeping
 //! (`super::reserve`), so every allocation made here fits. A refused task therefore never

@@ -292,7 +292,7 @@ fn textures_map_by_uv_and_emission_shows_unlit() {
 
 /// The GI acceptance criterion: the default scene's diffuse GI shows all four object colours.
 /// This SDK traces and denoises diffuse GI, so a refused diffuse task fails the test (it used
-/// to pass through a "reported missing" branch whatever the GI did; issue 35).
+/// to pass through a "reported missing" branch whatever the GI did).
 #[test]
 fn default_scene_gi_holds_all_four_colours() {
     let scene = scene::builtin::default_scene();

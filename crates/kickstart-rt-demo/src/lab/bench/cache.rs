@@ -1,4 +1,4 @@
-//! `ksrt bench`: the direct lighting cache (issue 5). Per scene:
+//! `ksrt bench`: the direct lighting cache. Per scene:
 //! - **cache bytes** at the default tile settings: the surfels every instance got (16 bytes
 //!   each, from the SDK's allocation read-back, after the pool has grown to hold them all at full
 //!   resolution) and the whole `cache` kind of `resource_allocations()`;

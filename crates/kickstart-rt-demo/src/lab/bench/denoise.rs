@@ -2,7 +2,7 @@
 //! default) on synthetic inputs — a floor and a back wall seen by a perspective camera, noisy
 //! radiance, occlusion and shadow inputs — with a history already accumulated (the steady
 //! state of a frame). Each measurement is the span of the task's `denoise …` passes (GPU
-//! timestamps). Issue 7's targets on the H100: SpecularAndDiffuse ≤ 0.6 ms, Shadow ≤ 0.15 ms.
+//! timestamps). The targets on the H100: SpecularAndDiffuse ≤ 0.6 ms, Shadow ≤ 0.15 ms.
 
 use crate::app::gpu;
 use crate::lab::bench::busy::BusyGpu;
@@ -24,7 +24,7 @@ pub struct DenoiserTime {
     pub method: String,
     /// GPU time of the task's passes.
     pub time: Stats,
-    /// Issue 7's target, where it sets one.
+    /// The task's time target on the H100, where it has one.
     pub target_ms: Option<f64>,
     /// Each of the task's passes in recording order: its label and median GPU time (the
     /// profile behind `time`, whose span also counts the gaps between passes).

@@ -1,4 +1,4 @@
-//! `ksrt quality` (issues 7 and 32), the yardstick of every denoiser change: denoised 1-spp traces
+//! `ksrt quality`, the yardstick of every denoiser change: denoised 1-spp traces
 //! against converged references along a camera pan, scored with PSNR, FLIP and the energy ratio,
 //! then the flicker of a still camera.
 

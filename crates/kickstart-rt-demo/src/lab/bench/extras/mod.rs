@@ -1,4 +1,4 @@
-//! The optional passes of `ksrt bench` (issue 9, apart from the driver peer): CPU BVH peers
+//! The optional passes of `ksrt bench` (apart from the driver peer): CPU BVH peers
 //! (`--cpu-peers`), scaling (`--scaling`), frames in flight (`--frames-in-flight`), and the PNG
 //! charts of their results (`--plots DIR`, also from an earlier run's JSON with
 //! `--plots-from`). Each pass is off unless asked for; `--skip-scenes` leaves out the default
@@ -54,7 +54,7 @@ pub struct ExtraArgs {
     /// Order of the primary rays in the ray batches (the secondary rays follow their primary
     /// hits): `rows`, row by row over the image; `tiles`, 8×8-pixel tiles row by row, pixels row
     /// by row inside a tile (the order a screen-space dispatch of 8×8 workgroups issues them, as
-    /// the SDK's trace tasks and the software peer of issue 4 do). The batch shader takes 64
+    /// the SDK's trace tasks and the software peer do). The batch shader takes 64
     /// consecutive rays a workgroup either way.
     #[arg(long, value_enum, default_value_t = RayOrder::Rows)]
     pub ray_order: RayOrder,
