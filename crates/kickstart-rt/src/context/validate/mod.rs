@@ -8,14 +8,18 @@ use crate::tasks::*;
 /// wgpu's copy alignment: buffer copies need 4-byte offsets and sizes.
 pub(crate) const COPY_ALIGN: u64 = wgpu::COPY_BUFFER_ALIGNMENT;
 
-/// The aligned byte range `[start, end)` to copy for `len` bytes at `offset`, or an error when it
-/// does not fit the buffer. Unaligned inputs are widened to 4 bytes (the shader skips the slack).
+/// The aligned byte range `[start, end)` to copy for `len` bytes (`count` elements) at `offset`,
+/// or an error when it does not fit the buffer. Unaligned inputs are widened to 4 bytes (the
+/// shader skips the slack).
+///
+/// Data running past the buffer's end is blamed on `{field}.offset`, or on `{field}.count` when
+/// the offset is 0 (then the count, not the offset, asks for too much).
 pub(crate) fn copy_range(
     task: &'static str,
     field: &str,
     buffer: &wgpu::Buffer,
     offset: u64,
-    len: u64,
+    (count, len): (u32, u64),
 ) -> Result<(u64, u64)> {
     if !buffer.usage().contains(wgpu::BufferUsages::COPY_SRC) {
         return Err(Error::input(
@@ -27,15 +31,22 @@ pub(crate) fn copy_range(
     }
     let end = offset.checked_add(len).filter(|&e| e <= buffer.size());
     let Some(end) = end else {
-        return Err(Error::input(
-            task,
-            format!("{field}.offset"),
-            offset,
-            format!(
-                "{len} bytes from this offset exceed the buffer's {} bytes",
-                buffer.size()
-            ),
-        ));
+        let size = buffer.size();
+        return Err(if offset == 0 {
+            Error::input(
+                task,
+                format!("{field}.count"),
+                count,
+                format!("these elements take {len} bytes, more than the buffer's {size}"),
+            )
+        } else {
+            Error::input(
+                task,
+                format!("{field}.offset"),
+                offset,
+                format!("{len} bytes from this offset exceed the buffer's {size} bytes"),
+            )
+        });
     };
     let start = offset - offset % COPY_ALIGN;
     let aligned_end = end.div_ceil(COPY_ALIGN) * COPY_ALIGN;
@@ -43,7 +54,7 @@ pub(crate) fn copy_range(
         return Err(Error::input(
             task,
             format!("{field}.count"),
-            len,
+            count,
             "the data ends within 4 bytes of the buffer's end at an unaligned position; pad the buffer to a multiple of 4 bytes",
         ));
     }
@@ -142,12 +153,26 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
             "must be in [0, 1]",
         ));
     }
-    input
+    let extents: Vec<ComponentExtent> = input
         .components
         .iter()
         .enumerate()
         .map(|(i, c)| component(&format!("input.components[{i}]"), c))
-        .collect()
+        .collect::<Result<_>>()?;
+    // Callers sum the components' triangles as u32. Each component's count is bounded by its
+    // buffers, but components may share one buffer: refuse a sum that does not fit.
+    let total = extents
+        .iter()
+        .try_fold(0_u32, |sum, e| sum.checked_add(e.triangles));
+    if total.is_none() {
+        return Err(Error::input(
+            T,
+            "input.components",
+            format!("{} components", extents.len()),
+            "their triangles add up to more than 2^32 - 1",
+        ));
+    }
+    Ok(extents)
 }
 
 /// Validates one component (`f` names it); returns its copy ranges and triangles.
@@ -170,13 +195,29 @@ fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
             "must be ≥ 1",
         ));
     }
-    let vlen = vb.stride * (vb.count as u64 - 1) + vb.format.size();
+    // Stride and count are the caller's: a product past u64 must be refused here, not wrap to a
+    // small length the bounds check below would accept.
+    let vlen = vb
+        .stride
+        .checked_mul(u64::from(vb.count) - 1)
+        .and_then(|b| b.checked_add(vb.format.size()));
+    let Some(vlen) = vlen else {
+        return Err(Error::input(
+            T,
+            format!("{f}.vertex_buffer.stride"),
+            vb.stride,
+            format!(
+                "{} vertices this far apart span more than 2^64 bytes",
+                vb.count
+            ),
+        ));
+    };
     let vertex_bytes = copy_range(
         T,
         &format!("{f}.vertex_buffer"),
         &vb.buffer,
         vb.offset,
-        vlen,
+        (vb.count, vlen),
     )?;
     if let Some(t) = c.transform {
         if !t.is_finite() {
@@ -210,7 +251,13 @@ fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
                 ));
             }
             let len = ib.count as u64 * ib.format.size();
-            let r = copy_range(T, &format!("{f}.index_buffer"), &ib.buffer, ib.offset, len)?;
+            let r = copy_range(
+                T,
+                &format!("{f}.index_buffer"),
+                &ib.buffer,
+                ib.offset,
+                (ib.count, len),
+            )?;
             (ib.count, Some(r))
         }
         None => {
@@ -298,5 +345,7 @@ pub(crate) fn bvh_build(task: &BvhBuildTask) -> Result<()> {
     Ok(())
 }
 
+#[cfg(test)]
+mod fuzz;
 mod render;
 pub(crate) use render::render_task;
