@@ -29,19 +29,24 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 /// empty): a panic inside it must still become an error that names the file rather than abort
 /// `ksrt`.
 pub(super) fn load_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
-    match std::panic::catch_unwind(|| load_bytes(path, bytes)) {
-        Ok(r) => r,
-        Err(_) => Err(SceneError::new(
+    super::guard::guarded(|| load_bytes(path, bytes)).unwrap_or_else(|panic| {
+        Err(SceneError::new(
             path,
-            "the glTF reader failed on malformed data",
-        )),
-    }
+            format!("the glTF reader failed on malformed data ({panic})"),
+        ))
+    })
 }
 
 fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
     let err = |what: String| SceneError::new(path, what);
-    let file = gltf::Gltf::from_slice(bytes)
-        .map_err(|e| err(format!("not a valid glTF 2.0 file: {e}")))?;
+    let invalid = |e: gltf::Error| err(format!("not a valid glTF 2.0 file: {e}"));
+    let raw = gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
+    let json = raw.document.into_json();
+    check_attribute_accessors(&json).map_err(err)?;
+    let file = gltf::Gltf {
+        document: gltf::Document::from_json(json).map_err(invalid)?,
+        blob: raw.blob,
+    };
     let buffers = file
         .buffers()
         .map(|b| load_buffer(path, &b, file.blob.as_deref()))
@@ -122,14 +127,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             if let Some(cam) = node.camera() {
                 match cam.projection() {
                     gltf::camera::Projection::Perspective(p) => {
-                        // A glTF camera looks down its local −Z with +Y up.
-                        let eye = world.transform_point3(Vec3::ZERO);
-                        scene.camera = Some(Camera {
-                            eye,
-                            at: eye + world.transform_vector3(Vec3::NEG_Z),
-                            up: world.transform_vector3(Vec3::Y),
-                            fov_y_deg: p.yfov().to_degrees(),
-                        });
+                        scene.camera = Some(perspective_camera(&cam, &p, world).map_err(err)?);
                     }
                     gltf::camera::Projection::Orthographic(_) => log::warn!(
                         "{}: orthographic camera of node {} ignored",
@@ -140,7 +138,9 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             }
         }
         if let Some(light) = node.light() {
-            scene.lights.push(punctual_light(&light, world));
+            scene
+                .lights
+                .push(punctual_light(&light, world).map_err(err)?);
         }
         for child in node.children().collect::<Vec<_>>().into_iter().rev() {
             stack.push((child, world));
@@ -153,6 +153,66 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
         )));
     }
     Ok(scene)
+}
+
+/// The scene camera of a glTF perspective camera placed by its node's `world` transform (it
+/// looks down its local −Z with +Y up), or what is wrong with it: a `yfov` outside (0, π), or
+/// a transform that flattens the view or up direction to nothing or makes them parallel.
+fn perspective_camera(
+    cam: &gltf::Camera,
+    p: &gltf::camera::Perspective,
+    world: Affine3A,
+) -> Result<Camera, String> {
+    let yfov = p.yfov();
+    if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+        return Err(format!(
+            "camera {}: yfov {yfov} must be in (0, π) radians",
+            cam.index()
+        ));
+    }
+    let eye = world.transform_point3(Vec3::ZERO);
+    let at = eye + world.transform_vector3(Vec3::NEG_Z);
+    let up = world.transform_vector3(Vec3::Y);
+    // The direction as stored (`at − eye`): far out, a unit step vanishes in the rounding.
+    let side = (at - eye).normalize_or_zero().cross(up.normalize_or_zero());
+    if !at.is_finite() || side.length_squared() < 1e-12 {
+        return Err(format!(
+            "camera {}: its node's transform leaves no view direction and up (singular, or \
+             too far out for a unit step to register)",
+            cam.index()
+        ));
+    }
+    Ok(Camera {
+        eye,
+        at,
+        up,
+        fov_y_deg: yfov.to_degrees(),
+    })
+}
+
+/// Refuses a primitive attribute naming an accessor the file lacks, by its place in the file.
+/// The gltf crate's validator reads a primitive's POSITION accessor by index before checking
+/// that it exists: without this, such a file ends in a panic inside the crate.
+fn check_attribute_accessors(root: &gltf::json::Root) -> Result<(), String> {
+    let accessors = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &primitive.attributes {
+                if index.value() >= accessors {
+                    let name = match semantic {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".to_string(),
+                    };
+                    return Err(format!(
+                        "meshes[{m}].primitives[{p}].attributes.{name}: accessor {} does not \
+                         exist (the file has {accessors})",
+                        index.value()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The scene textures made from the file's images, each decoded once however many materials use
@@ -214,8 +274,17 @@ impl TextureCache {
                 let buf = buffers
                     .get(view.buffer().index())
                     .ok_or_else(|| err("its buffer is missing".into()))?;
-                buf.get(view.offset()..view.offset() + view.length())
-                    .ok_or_else(|| err("its buffer view is out of its buffer".into()))?
+                let end = view.offset().checked_add(view.length());
+                end.and_then(|end| buf.get(view.offset()..end))
+                    .ok_or_else(|| {
+                        err(format!(
+                            "its buffer view {} ({} bytes at offset {}) is out of its buffer of {} bytes",
+                            view.index(),
+                            view.length(),
+                            view.offset(),
+                            buf.len()
+                        ))
+                    })?
                     .to_vec()
             }
             gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => uri
@@ -231,9 +300,7 @@ impl TextureCache {
                     .map_err(|e| err(format!("cannot read {}: {e}", file.display())))?
             }
         };
-        let decoded = image::load_from_memory(&bytes)
-            .map_err(|e| err(format!("cannot decode the image: {e}")))?
-            .to_rgba8();
+        let decoded = super::texture::decode_rgba8(&bytes).map_err(err)?;
         let k = scene.textures.len();
         scene.textures.push(Texture {
             name,
@@ -529,7 +596,14 @@ fn fan_to_list(s: &[u32]) -> Vec<u32> {
 /// Gives every point and spot light without a range (glTF: infinite) one: twice the scene's size,
 /// past which the windowed falloff has nothing left to light.
 fn bound_light_ranges(scene: &mut Scene) {
+    // At least 1 (a scene of lights alone has size 0) and finite (a scene reaching ±3e38 has
+    // an infinite size): the renderer windows the falloff by the range.
     let reach = scene.size() * 2.0;
+    let reach = if reach.is_finite() {
+        reach.max(1.0)
+    } else {
+        1.0e18
+    };
     for light in &mut scene.lights {
         if let Light::Point { range, .. } | Light::Spot { range, .. } = light {
             if !range.is_finite() || *range <= 0.0 {
@@ -542,16 +616,33 @@ fn bound_light_ranges(scene: &mut Scene) {
 /// A `KHR_lights_punctual` light placed by its node's `world` transform (it shines along its
 /// local −Z). glTF's photometric units (lux, candela) are taken as the rasteriser's irradiance
 /// and radiant intensity at exposure 1, so a file lit for a physically based viewer looks about
-/// as bright here.
-fn punctual_light(light: &gltf::khr_lights_punctual::Light, world: Affine3A) -> Light {
+/// as bright here. Refused, with the reason: a colour or intensity that is negative or not
+/// finite, a range not above 0, or spot cone angles outside 0 ≤ inner < outer ≤ π/2 (the
+/// extension's own rules).
+fn punctual_light(
+    light: &gltf::khr_lights_punctual::Light,
+    world: Affine3A,
+) -> Result<Light, String> {
     use gltf::khr_lights_punctual::Kind;
-    let colour = Vec3::from(light.color()) * light.intensity().max(0.0);
+    let name = || format!("light {}", light.index());
+    let colour = Vec3::from(light.color()) * light.intensity();
+    if !colour.is_finite() || colour.min_element() < 0.0 {
+        return Err(format!(
+            "{}: colour {:?} × intensity {} must be finite and ≥ 0",
+            name(),
+            light.color(),
+            light.intensity()
+        ));
+    }
+    let range = light.range().unwrap_or(f32::INFINITY);
+    if range.is_nan() || range <= 0.0 {
+        return Err(format!("{}: range {range} must be > 0", name()));
+    }
     let position = world.transform_point3(Vec3::ZERO);
     let direction = world
         .transform_vector3(Vec3::NEG_Z)
         .normalize_or(Vec3::NEG_Y);
-    let range = light.range().unwrap_or(f32::INFINITY);
-    match light.kind() {
+    Ok(match light.kind() {
         Kind::Directional => Light::Sun {
             direction,
             irradiance: colour,
@@ -565,15 +656,25 @@ fn punctual_light(light: &gltf::khr_lights_punctual::Light, world: Affine3A) -> 
         Kind::Spot {
             inner_cone_angle,
             outer_cone_angle,
-        } => Light::Spot {
-            position,
-            direction,
-            intensity: colour,
-            range,
-            inner_angle: inner_cone_angle,
-            outer_angle: outer_cone_angle,
-        },
-    }
+        } => {
+            let ordered = 0.0 <= inner_cone_angle && inner_cone_angle < outer_cone_angle;
+            if !(ordered && outer_cone_angle <= std::f32::consts::FRAC_PI_2) {
+                return Err(format!(
+                    "{}: spot cone angles {inner_cone_angle} (inner) and {outer_cone_angle} \
+                     (outer) must satisfy 0 ≤ inner < outer ≤ π/2",
+                    name()
+                ));
+            }
+            Light::Spot {
+                position,
+                direction,
+                intensity: colour,
+                range,
+                inner_angle: inner_cone_angle,
+                outer_angle: outer_cone_angle,
+            }
+        }
+    })
 }
 
 #[cfg(test)]

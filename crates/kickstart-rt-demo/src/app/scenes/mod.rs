@@ -2,7 +2,9 @@
 //! glTF 2.0 / OBJ files into the renderer's [`Scene`] (built-in scenes are the renderer's).
 
 mod gltf;
+mod guard;
 mod obj;
+mod texture;
 
 use std::path::{Path, PathBuf};
 

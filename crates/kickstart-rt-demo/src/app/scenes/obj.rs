@@ -28,7 +28,14 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, materials) = tobj::load_obj(path, &options)
+    // tobj is third-party code fed arbitrary files: a panic inside it becomes an error too.
+    let (models, materials) = super::guard::guarded(|| tobj::load_obj(path, &options))
+        .map_err(|panic| {
+            SceneError::new(
+                path,
+                format!("the OBJ reader failed on malformed data ({panic})"),
+            )
+        })?
         .map_err(|e| SceneError::new(path, format!("not a valid OBJ file: {e}")))?;
     let materials = materials.unwrap_or_else(|e| {
         log::warn!(
@@ -135,9 +142,7 @@ fn texture(
     let err = |e: String| SceneError::new(obj, format!("base colour texture {file}: {e}"));
     let bytes =
         std::fs::read(&full).map_err(|e| err(format!("cannot read {}: {e}", full.display())))?;
-    let image = image::load_from_memory(&bytes)
-        .map_err(|e| err(format!("cannot decode the image: {e}")))?
-        .to_rgba8();
+    let image = super::texture::decode_rgba8(&bytes).map_err(err)?;
     scene.textures.push(Texture {
         name: file.to_string(),
         image,
