@@ -198,7 +198,7 @@ struct QualityCli {
     #[arg(long)]
     reference_samples: Option<u32>,
     /// Yaw of the whole pan, degrees.
-    #[arg(long, default_value_t = 8.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 8.0, allow_hyphen_values = true, value_parser = app::args::parse_degrees)]
     pan_degrees: f32,
     /// Frames held still at the pan's last camera after it, measuring the denoised output's
     /// flicker (0: none).
@@ -230,8 +230,8 @@ struct SoakCli {
     /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
     #[arg(long)]
     scenes: Option<PathBuf>,
-    /// Frames of churn.
-    #[arg(long, default_value_t = 2000)]
+    /// Frames of churn, in two rounds (at least 2: one a round).
+    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u32).range(2..))]
     frames: u32,
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, default_value = "160x90")]
@@ -459,6 +459,28 @@ mod tests {
             "dragon",
         ]);
         assert!(cli.is_ok());
+    }
+
+    #[test]
+    fn quality_pan_and_soak_frames_refuse_values_that_do_nothing() {
+        for pan in ["NaN", "inf", "1e9"] {
+            let args = ["ksrt", "quality", "--pan-degrees", pan];
+            assert!(Cli::try_parse_from(args).is_err(), "--pan-degrees {pan}");
+        }
+        let pan = Cli::try_parse_from(["ksrt", "quality", "--pan-degrees", "-12"]);
+        assert!(matches!(
+            pan.map(|c| c.command),
+            Ok(Command::Quality(QualityCli { pan_degrees, .. })) if pan_degrees == -12.0
+        ));
+        for frames in ["0", "1"] {
+            let args = ["ksrt", "soak", "--frames", frames];
+            assert!(Cli::try_parse_from(args).is_err(), "--frames {frames}");
+        }
+        let soak = Cli::try_parse_from(["ksrt", "soak", "--frames", "2"]);
+        assert!(matches!(
+            soak.map(|c| c.command),
+            Ok(Command::Soak(SoakCli { frames: 2, .. }))
+        ));
     }
 
     #[test]

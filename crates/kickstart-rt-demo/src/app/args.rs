@@ -14,9 +14,29 @@ pub fn parse_size(size: &str) -> AnyResult<(u32, u32)> {
     Ok((w, h))
 }
 
+/// Parses an angle in degrees: a finite number, at most a full turn either way.
+pub fn parse_degrees(s: &str) -> Result<f32, String> {
+    let v: f32 = s
+        .trim()
+        .parse()
+        .map_err(|e| format!("{s:?} is not a number of degrees: {e}"))?;
+    if !v.is_finite() || v.abs() > 360.0 {
+        return Err(format!("{v} degrees: must be finite and within ±360"));
+    }
+    Ok(v)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn degrees_are_finite_and_within_a_turn() {
+        assert_eq!(parse_degrees("-8.5"), Ok(-8.5));
+        for bad in ["NaN", "inf", "-inf", "361", "x"] {
+            assert!(parse_degrees(bad).is_err(), "{bad}");
+        }
+    }
 
     #[test]
     fn size_parsing() {

@@ -273,3 +273,25 @@ mod tests {
         );
     }
 }
+
+/// What wgpu's own allocator holds on `device`: bytes and allocations live, read after waiting
+/// for the device to go idle (so that resources freed by finished work are gone). It counts
+/// every buffer, texture and acceleration structure wgpu allocated, the driver BLASes and
+/// TLASes of the ray-query backend included, and nothing the SDK says about itself: the check
+/// on the SDK's own accounting. `None` on backends without a report (Metal, GL, WebGPU).
+pub fn wgpu_allocated(device: &wgpu::Device) -> AnyResult<Option<WgpuAllocated>> {
+    device.poll(wgpu::PollType::wait_indefinitely())?;
+    Ok(device.generate_allocator_report().map(|r| WgpuAllocated {
+        bytes: r.total_allocated_bytes,
+        allocations: r.allocations.len(),
+    }))
+}
+
+/// Live memory in wgpu's allocator (see [`wgpu_allocated`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WgpuAllocated {
+    /// Bytes of all live allocations.
+    pub bytes: u64,
+    /// Live allocations.
+    pub allocations: usize,
+}

@@ -43,6 +43,11 @@ pub struct SoakReport {
     /// `ResourceAllocations::total()` before the churn, at its peak, and after it (the pools keep
     /// their high-water capacity; see [`run`]).
     pub bytes: [u64; 3],
+    /// wgpu's allocator (see [`gpu::wgpu_allocated`]) before the churn and after each round
+    /// (`None`: the backend gives no report).
+    pub wgpu: Option<[gpu::WgpuAllocated; 3]>,
+    /// The traversal backend the SDK context took.
+    pub backend: Option<ksrt::TraversalBackend>,
     /// Wall time, seconds.
     pub seconds: f64,
 }
@@ -314,6 +319,10 @@ pub fn run(
     opts: &SoakOptions,
     mut progress: impl FnMut(u32),
 ) -> AnyResult<SoakReport> {
+    // Each of the two rounds needs a frame of churn, or the soak would pass having tested nothing.
+    if opts.frames < 2 {
+        return Err(format!("soak: {} frames; at least 2 (one a round)", opts.frames).into());
+    }
     let start = std::time::Instant::now();
     let mut renderer = crate::app::frames::new_renderer(
         device,
@@ -330,13 +339,18 @@ pub fn run(
         half: (hi - lo) * 0.4,
         max_geometries: opts.max_geometries,
     };
-    let mut report = SoakReport::default();
+    let mut report = SoakReport {
+        backend: Some(renderer.sdk.ctx.traversal_backend().backend),
+        ..SoakReport::default()
+    };
     let allocations = |r: &Renderer| r.sdk.ctx.resource_allocations();
     for _ in 0..QUIET_FRAMES {
         frame(device, queue, &mut renderer, camera, None, 1)?;
     }
     renderer.sdk.ctx.release_device_resources_immediately()?;
     let baseline = allocations(&renderer);
+    let wgpu_baseline = gpu::wgpu_allocated(device)?;
+    let mut wgpu_after = Vec::new();
     let mut peak = baseline.total();
     // Two rounds of the same churn (the same seed): per-object memory (vertex copies, BLASes,
     // denoiser histories) must be back at the baseline after each; the pools (lighting cache
@@ -370,6 +384,7 @@ pub fn run(
             .into());
         }
         after.push(a);
+        wgpu_after.push(gpu::wgpu_allocated(device)?);
     }
     if after[1] != after[0] {
         return Err(format!(
@@ -378,6 +393,19 @@ pub fn run(
         )
         .into());
     }
+    // wgpu's own count, which sees what the SDK's does not (the driver's acceleration
+    // structures): the second round must leave exactly what the first left.
+    if wgpu_after[1] != wgpu_after[0] {
+        return Err(format!(
+            "the same churn again grew wgpu's allocations:\n  after round 1 {:?}\n  after round 2 {:?}",
+            wgpu_after[0], wgpu_after[1]
+        )
+        .into());
+    }
+    report.wgpu = match (wgpu_baseline, wgpu_after[0], wgpu_after[1]) {
+        (Some(b), Some(r0), Some(r1)) => Some([b, r0, r1]),
+        _ => None,
+    };
     report.bytes = [baseline.total(), peak, after[1].total()];
     report.seconds = start.elapsed().as_secs_f64();
     Ok(report)
@@ -415,7 +443,11 @@ pub fn command(
     })?;
     bar.finish_and_clear();
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
-    println!("{} frames in {:.1} s, no error", r.frames, r.seconds);
+    let backend = r.backend.map_or("?".to_string(), |b| b.to_string());
+    println!(
+        "{} frames in {:.1} s on the {backend} backend, no error",
+        r.frames, r.seconds
+    );
     println!(
         "  geometries: {} registered, {} updated, {} destroyed",
         r.geometries[0], r.geometries[1], r.geometries[2]
@@ -432,6 +464,18 @@ pub fn command(
         mib(r.bytes[1]),
         mib(r.bytes[2])
     );
+    if let Some([b, r0, r1]) = r.wgpu {
+        println!(
+            "  wgpu's allocator: {:.2} MiB in {} allocations before, {:.2} MiB in {} after round 1, \
+             {:.2} MiB in {} after round 2",
+            mib(b.bytes),
+            b.allocations,
+            mib(r0.bytes),
+            r0.allocations,
+            mib(r1.bytes),
+            r1.allocations
+        );
+    }
     Ok(())
 }
 
@@ -475,5 +519,13 @@ mod tests {
             "the churn allocated nothing: {r:?}"
         );
         assert!(r.bytes[2] <= r.bytes[1], "{r:?}");
+        // Vulkan reports wgpu's allocator: `run` compared the rounds by it as well.
+        let Some([before, round1, _]) = r.wgpu else {
+            panic!("no allocator report on a Vulkan device: {r:?}");
+        };
+        assert!(
+            round1.allocations >= before.allocations && round1.bytes >= before.bytes,
+            "{r:?}"
+        );
     }
 }
