@@ -229,27 +229,44 @@ fn release_immediately_refuses_while_in_flight() {
     assert_eq!(ctx.resource_allocations().staging, 0);
 }
 
+/// Where thread `k` places its geometry `j` (a quad of side `1 + j` in z = 0): its corner at
+/// (10k, 10j) in x and y, and at a depth of its own, so that a ray tells every thread's every
+/// instance apart by its hit distance as well as by its instance index.
+fn thread_slot(k: usize, j: usize) -> Vec3 {
+    Vec3::new(10.0 * k as f32, 10.0 * j as f32, -0.25 * (5 * k + j) as f32)
+}
+
+/// Eight threads fill one container each (five geometries of their own sizes and an instance of
+/// each at a place of their own), then several threads build them, each container into exactly
+/// one GPU task; rays then find every thread's every instance where that thread put it, with its
+/// size: hit at the expected distance inside the quad, missed just outside it.
 #[test]
 fn eight_threads_fill_containers_then_several_build_each_task_once() {
     let ctx = context(16);
     let handles = ctx.create_geometry_handles(8 * 5);
-    let containers: Vec<TaskContainer> = std::thread::scope(|s| {
+    let filled: Vec<(TaskContainer, Vec<InstanceHandle>)> = std::thread::scope(|s| {
         let jobs: Vec<_> = handles
             .chunks(5)
-            .map(|chunk| {
+            .enumerate()
+            .map(|(k, chunk)| {
                 let ctx = &ctx;
                 s.spawn(move || {
                     let mut c = ctx.create_task_container();
-                    for (k, h) in chunk.iter().enumerate() {
-                        register_geometry(&mut c, *h, 1.0 + k as f32);
+                    let instances = ctx.create_instance_handles(chunk.len());
+                    for (j, (h, i)) in chunk.iter().zip(&instances).enumerate() {
+                        register_geometry(&mut c, *h, 1.0 + j as f32);
+                        let at = Affine3A::from_translation(thread_slot(k, j));
+                        register_instance(&mut c, *i, *h, at);
                     }
-                    c
+                    (c, instances)
                 })
             })
             .collect();
         jobs.into_iter().map(|j| j.join().unwrap()).collect()
     });
-    let built: Vec<GpuTaskHandle> = std::thread::scope(|s| {
+    let (containers, instances): (Vec<TaskContainer>, Vec<Vec<InstanceHandle>>) =
+        filled.into_iter().unzip();
+    let mut built: Vec<(GpuTaskHandle, wgpu::CommandBuffer)> = std::thread::scope(|s| {
         let mut rest = containers;
         let mut jobs = Vec::new();
         while !rest.is_empty() {
@@ -261,27 +278,35 @@ fn eight_threads_fill_containers_then_several_build_each_task_once() {
                     .map(|c| {
                         let mut e = encoder();
                         let t = ctx.build_gpu_task(c, &mut e).unwrap();
-                        gpu().queue.submit([e.finish()]);
-                        t
+                        (t, e.finish())
                     })
                     .collect::<Vec<_>>()
             }));
         }
         jobs.into_iter().flat_map(|j| j.join().unwrap()).collect()
     });
+    // GPU tasks must execute in the order they were built (each one's uploads and builds follow
+    // the previous one's): the threads only record, and the command buffers go to the queue in
+    // serial order. Submitted as each thread finished instead, a later task can run before an
+    // earlier one, and rays miss the earlier task's instances.
+    built.sort_by_key(|(t, _)| t.serial());
+    let serials: Vec<u64> = built.iter().map(|(t, _)| t.serial()).collect();
+    assert!(
+        serials.windows(2).all(|w| w[0] < w[1]) && serials.len() == 8,
+        "one task per container, each its own serial: {serials:?}"
+    );
+    let (built, buffers): (Vec<GpuTaskHandle>, Vec<wgpu::CommandBuffer>) =
+        built.into_iter().unzip();
+    gpu().queue.submit(buffers);
     gpu()
         .device
         .poll(wgpu::PollType::wait_indefinitely())
         .unwrap();
-    let mut serials: Vec<u64> = built.iter().map(|t| t.serial()).collect();
-    serials.sort();
-    serials.dedup();
-    assert_eq!(serials.len(), 8);
     assert_eq!(
         ctx.recorded_task_counts(),
         RecordedTaskCounts {
             geometry_tasks: 40,
-            instance_tasks: 0,
+            instance_tasks: 40,
             gpu_tasks: 8
         }
     );
@@ -290,6 +315,39 @@ fn eight_threads_fill_containers_then_several_build_each_task_once() {
     }
     for t in built {
         ctx.mark_gpu_task_completed(t).unwrap();
+    }
+    assert_threads_instances_traced(&ctx, &instances);
+}
+
+/// Builds every BLAS and the TLAS, then traces three rays down at each of thread `k`'s
+/// instances `j` (see [`thread_slot`]): 0.25 inside its near and far corners (hit at its
+/// depth), 0.25 past its far corner (miss: the quad has the size that thread gave it).
+fn assert_threads_instances_traced(ctx: &ExecuteContext, instances: &[Vec<InstanceHandle>]) {
+    rt::build_all(ctx);
+    let mut rays = Vec::new();
+    let mut want = Vec::new();
+    for (k, thread) in instances.iter().enumerate() {
+        for (j, i) in thread.iter().enumerate() {
+            let corner = thread_slot(k, j);
+            let side = 1.0 + j as f32;
+            let origin_z = 10.0;
+            for (offset, hit) in [(0.25, true), (side - 0.25, true), (side + 0.25, false)] {
+                let o = Vec3::new(corner.x + offset, corner.y + offset, origin_z);
+                rays.push(rt::ray(o, -Vec3::Z, 0.0, 100.0));
+                want.push(hit.then_some((i.index(), origin_z - corner.z)));
+            }
+        }
+    }
+    let hits = rt::closest(ctx, &rays);
+    for (k, (hit, want)) in hits.iter().zip(&want).enumerate() {
+        let thread = k / 15;
+        match want {
+            Some((instance, t)) => assert!(
+                hit.instance == *instance && (hit.t - t).abs() < 1e-4,
+                "thread {thread}, ray {k}: want instance {instance} at {t}, got {hit:?}"
+            ),
+            None => assert!(!hit.is_hit(), "thread {thread}, ray {k}: {hit:?}"),
+        }
     }
 }
 

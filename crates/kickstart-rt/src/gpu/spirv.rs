@@ -217,6 +217,18 @@ fn literal_string(words: &[u32]) -> String {
     String::from_utf8_lossy(&bytes[..end]).into_owned()
 }
 
+/// Whether the unit tests' device ([`crate::gpu::testing::gpu`]) must get the traversal passes
+/// from our own SPIR-V, stated from how that device is made rather than by
+/// [`crate::gpu::shader::spirv_accepted`] (the decision under test): it asks for every optional
+/// feature the adapter has unless `KSRT_TEST_MINIMAL_DEVICE=1` (then for none), and wgpu-hal's
+/// Vulkan adapters all offer `PASSTHROUGH_SHADERS`, other backends never take SPIR-V. So: on
+/// Vulkan, yes, unless the device is the minimal one.
+#[cfg(test)]
+pub(crate) fn test_device_takes_own_spirv(device: &wgpu::Device) -> bool {
+    let minimal = std::env::var("KSRT_TEST_MINIMAL_DEVICE").is_ok_and(|v| v == "1");
+    device.adapter_info().backend == wgpu::Backend::Vulkan && !minimal
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
