@@ -100,23 +100,84 @@ fn row_geometry_operation() {
     expect_field(&ctx, c, "GeometryTask", "operation");
 }
 
+/// An `Update` of an `allow_update` geometry replaces its vertices: rays hit where the new
+/// vertices are and no longer where the old ones were. Before: the unit quad in z = 0. After:
+/// the same triangles scaled by 2 and moved to z = −2 (a refit keeps the topology).
 #[test]
 fn geometry_update_with_allow_update_replaces_data() {
     let ctx = context(2);
     let h = ctx.create_geometry_handle();
-    for op in [TaskOperation::Register, TaskOperation::Update] {
-        let (vb, ib) = quad(1.0);
+    let instance = ctx.create_instance_handle();
+    let quad_at = |scale: f32, z: f32| {
+        let p: Vec<[f32; 3]> = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
+            .iter()
+            .map(|[x, y]| [x * scale, y * scale, z])
+            .collect();
+        // As `quad`'s buffers.
+        let vb = buffer(
+            bytemuck::cast_slice(&p),
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_SRC,
+        );
+        let ib = buffer(
+            bytemuck::cast_slice(&[0u32, 1, 2, 0, 2, 3]),
+            wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC,
+        );
         let mut input = geometry_input(vb, Some(ib));
         input.allow_update = true;
-        let mut c = ctx.create_task_container();
-        c.schedule_bvh_task(GeometryTask {
-            operation: op,
-            handle: h,
-            input,
-        });
-        build_submit_complete(&ctx, c);
-    }
+        input
+    };
+    // From z = 5 straight down: one ray over both quads, one over the big quad only, one past
+    // both.
+    let rays = [
+        rt::ray(Vec3::new(0.5, 0.5, 5.0), -Vec3::Z, 0.0, 100.0),
+        rt::ray(Vec3::new(1.5, 1.5, 5.0), -Vec3::Z, 0.0, 100.0),
+        rt::ray(Vec3::new(2.5, 0.5, 5.0), -Vec3::Z, 0.0, 100.0),
+    ];
+    let distances = |ctx: &ExecuteContext| -> Vec<Option<f32>> {
+        rt::closest(ctx, &rays)
+            .iter()
+            .map(|hit| {
+                hit.is_hit().then(|| {
+                    assert_eq!(hit.instance, instance.index(), "{hit:?}");
+                    hit.t
+                })
+            })
+            .collect()
+    };
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: h,
+        input: quad_at(1.0, 0.0),
+    });
+    register_instance(&mut c, instance, h, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let before = distances(&ctx);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Update,
+        handle: h,
+        input: quad_at(2.0, -2.0),
+    });
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let after = distances(&ctx);
     assert_eq!(ctx.recorded_task_counts().geometry_tasks, 2);
+    let near = |got: &[Option<f32>], want: [Option<f32>; 3]| {
+        got.iter().zip(want).all(|(g, w)| match (g, w) {
+            (Some(g), Some(w)) => (g - w).abs() < 1e-4,
+            (g, w) => g.is_none() && w.is_none(),
+        })
+    };
+    assert!(
+        near(&before, [Some(5.0), None, None]),
+        "before the update: {before:?}"
+    );
+    assert!(
+        near(&after, [Some(7.0), Some(7.0), None]),
+        "after the update: {after:?}"
+    );
 }
 
 #[test]
@@ -1223,6 +1284,7 @@ enum Bad {
     DirectTileMappingThreshold(f32),
     VertexStride(u64),
     VertexOffset(u64),
+    VertexCount(u32),
     ComponentTransform(usize, f32),
     IndexOffset(u64),
     IndexCount(u32),
@@ -1252,11 +1314,27 @@ fn bad_task() -> impl Strategy<Value = Bad> {
         not_positive().prop_map(Bad::TileUnitLength),
         prop_oneof![non_finite(), 1.0001f32..100.0, -100.0f32..-0.0001]
             .prop_map(Bad::DirectTileMappingThreshold),
-        (0u64..12).prop_map(Bad::VertexStride),
-        (1u64..64).prop_map(|k| Bad::VertexOffset(4 * k)),
+        // Extreme values as well as slightly wrong ones: a stride whose product with the count
+        // passes u64 must be refused, not wrap to a length the bounds check accepts.
+        prop_oneof![0u64..12, (u64::MAX / 3 + 1)..=u64::MAX].prop_map(Bad::VertexStride),
+        prop_oneof![(1u64..64).prop_map(|k| 4 * k), (u64::MAX - 4096)..=u64::MAX]
+            .prop_map(Bad::VertexOffset),
+        prop_oneof![5u32..1000, (u32::MAX - 1000)..=u32::MAX].prop_map(Bad::VertexCount),
         (0usize..12, non_finite()).prop_map(|(k, v)| Bad::ComponentTransform(k, v)),
-        (1u64..10_000).prop_map(Bad::IndexOffset),
-        prop::sample::select(vec![1u32, 2, 4, 5, 7, 8]).prop_map(Bad::IndexCount),
+        prop_oneof![1u64..10_000, (u64::MAX - 4096)..=u64::MAX].prop_map(Bad::IndexOffset),
+        prop::sample::select(vec![
+            1u32,
+            2,
+            4,
+            5,
+            7,
+            8,
+            9,
+            3_000_000_000,
+            u32::MAX - 3,
+            u32::MAX
+        ])
+        .prop_map(Bad::IndexCount),
         (0usize..12, non_finite()).prop_map(|(k, v)| Bad::InstanceTransform(k, v)),
         (0usize..4, prop_oneof![non_finite(), -1.0e9f32..-1.0e-6])
             .prop_map(|(k, v)| Bad::InitialTileColor(k, v)),
@@ -1330,6 +1408,10 @@ fn schedule(
         Bad::VertexOffset(v) => {
             c.schedule_bvh_task(geometry_task(&|i| i.components[0].vertex_buffer.offset = v));
             format!("{component}.vertex_buffer.offset")
+        }
+        Bad::VertexCount(v) => {
+            c.schedule_bvh_task(geometry_task(&|i| i.components[0].vertex_buffer.count = v));
+            format!("{component}.vertex_buffer.count")
         }
         Bad::ComponentTransform(k, v) => {
             c.schedule_bvh_task(geometry_task(&|i| {
@@ -1438,7 +1520,7 @@ fn render_task(bad: &Bad, ctx: &ExecuteContext) -> (RenderTask, &'static str) {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 32, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(common::proptest_config(32))]
 
     /// Random invalid tasks of every kind (geometry, instance, trace, injection, denoise), each
     /// among valid work in one container: refused with `InvalidInput` naming the bad field, and

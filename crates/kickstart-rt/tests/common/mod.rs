@@ -543,3 +543,24 @@ pub fn register_and_build_at(
     c.schedule_bvh_task(BvhBuildTask::default());
     c
 }
+
+/// The seed of every property test when `PROPTEST_RNG_SEED` is not set: a fixed one, so that a
+/// run repeats the last one and a failure in CI replays here.
+const PROPTEST_SEED: u64 = 0x6b73_7274_5f66_757a;
+
+/// A property test's configuration: `cases` cases from a fixed seed (`PROPTEST_RNG_SEED`
+/// overrides it; the seed used is printed, shown with a failure's output), and no failure
+/// files written into the source tree.
+pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
+    let seed = std::env::var("PROPTEST_RNG_SEED")
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(PROPTEST_SEED);
+    eprintln!("property test seed {seed} (PROPTEST_RNG_SEED={seed} replays it)");
+    proptest::test_runner::Config {
+        cases,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
+        failure_persistence: None,
+        ..proptest::test_runner::Config::default()
+    }
+}
