@@ -311,6 +311,9 @@ impl ExecuteContext {
         }
         s.scene.collect(u64::MAX);
         s.cache.collect(u64::MAX);
+        // Destroyed denoising contexts are otherwise retired only by the next build.
+        let live = s.denoisers.handles();
+        s.effects.denoisers.retire_destroyed(&live);
         s.effects.denoisers.collect(u64::MAX);
         s.staging.clear();
         Ok(())

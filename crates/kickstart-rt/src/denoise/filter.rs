@@ -487,6 +487,11 @@ impl Filter {
         self.histories.sync(device, live);
     }
 
+    /// Retires the histories of destroyed contexts (those not in `live`), creating nothing.
+    pub fn retire_destroyed(&mut self, live: &[DenoisingContextHandle]) {
+        self.histories.retire_destroyed(live.iter().copied());
+    }
+
     /// Releases retired histories whose last task is older than `oldest_in_flight`.
     pub fn collect(&mut self, oldest_in_flight: u64) {
         self.histories.collect(oldest_in_flight);

@@ -127,20 +127,25 @@ impl Histories {
         device: &wgpu::Device,
         live: impl Iterator<Item = &'a (DenoisingContextHandle, DenoisingContextInput)> + Clone,
     ) {
+        self.retire_destroyed(live.clone().map(|(h, _)| *h));
+        for (h, input) in live {
+            if !self.live.contains_key(h) {
+                self.live.insert(*h, History::new(device, *input));
+            }
+        }
+    }
+
+    /// Retires the histories of contexts not in `live` (destroyed ones), creating nothing.
+    pub fn retire_destroyed(&mut self, live: impl Iterator<Item = DenoisingContextHandle> + Clone) {
         let dead: Vec<DenoisingContextHandle> = self
             .live
             .keys()
-            .filter(|h| !live.clone().any(|(l, _)| l == *h))
+            .filter(|h| !live.clone().any(|l| l == **h))
             .copied()
             .collect();
         for h in dead {
             if let Some(history) = self.live.remove(&h) {
                 self.retired.push(history);
-            }
-        }
-        for (h, input) in live {
-            if !self.live.contains_key(h) {
-                self.live.insert(*h, History::new(device, *input));
             }
         }
     }

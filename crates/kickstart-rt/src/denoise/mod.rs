@@ -160,6 +160,14 @@ impl Denoisers {
         }
     }
 
+    /// Retires the histories of destroyed contexts (those not in `live`), creating nothing:
+    /// releasing memory must not allocate the histories of contexts no task has used yet.
+    pub fn retire_destroyed(&mut self, live: &[DenoisingContextHandle]) {
+        for denoiser in self.all() {
+            denoiser.retire_destroyed(live);
+        }
+    }
+
     /// Releases retired histories whose last task is older than `oldest_in_flight`.
     pub fn collect(&mut self, oldest_in_flight: u64) {
         for denoiser in self.all() {
