@@ -11,22 +11,7 @@ use wgpu::util::DeviceExt;
 /// A device of the test adapter with what the SDK uses, apart from the shared one (this test
 /// destroys it).
 fn own_device() -> (wgpu::Device, wgpu::Queue) {
-    let g = gpu();
-    let (features, limits) = if minimal() {
-        (wgpu::Features::empty(), wgpu::Limits::default())
-    } else {
-        (
-            required_features() | optional_features_supported(&g.adapter),
-            g.adapter.limits(),
-        )
-    };
-    pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("kickstart-rt faults test"),
-        required_features: features,
-        required_limits: limits,
-        ..Default::default()
-    }))
-    .expect("request_device")
+    own_test_device(gpu().device.limits(), "kickstart-rt faults test")
 }
 
 /// A unit quad's vertex and index buffers on `device`.
@@ -53,7 +38,12 @@ fn quad_on(device: &wgpu::Device) -> (wgpu::Buffer, wgpu::Buffer) {
 #[test]
 fn a_lost_device_is_reported_by_every_later_task_and_nothing_panics() {
     let (device, queue) = own_device();
-    let ctx = ExecuteContext::new(&device, &queue, InitSettings::default()).unwrap();
+    let settings = InitSettings {
+        backend: pass_backend_choice(),
+        ..InitSettings::default()
+    };
+    let ctx = ExecuteContext::new(&device, &queue, settings).unwrap();
+    assert_pass_backend(&ctx);
     let (vb, ib) = quad_on(&device);
     let first = ctx.create_geometry_handle();
     let mut c = ctx.create_task_container();

@@ -626,16 +626,10 @@ fn interpolated_mesh_colors_are_continuous_across_shared_and_split_edges() {
 
 #[test]
 fn a_short_pool_gives_coarse_caches_at_once_and_grows_later() {
-    let g = gpu();
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            lighting_cache_pool_bytes: 64 * 16,
-            ..Default::default()
-        },
-    )
-    .expect("context");
+    let ctx = context_with(InitSettings {
+        lighting_cache_pool_bytes: 64 * 16,
+        ..Default::default()
+    });
     let rect = small_floor();
     let mesh = rect.mesh(2, false);
     let unit = 0.3;
@@ -904,18 +898,12 @@ fn tile_view_shows_one_id_per_surfel() {
 
 #[test]
 fn a_destroyed_instance_frees_its_cache_for_the_next() {
-    let g = gpu();
     // Room for three caches of 17 surfels (the 2×2 quad at unit 1: 4 vertices, 4 edge samples,
     // 3 on the diagonal, 3 inside each triangle).
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            lighting_cache_pool_bytes: 64 * 16,
-            ..Default::default()
-        },
-    )
-    .expect("context");
+    let ctx = context_with(InitSettings {
+        lighting_cache_pool_bytes: 64 * 16,
+        ..Default::default()
+    });
     let mesh = small_floor().mesh(1, false);
     let edit = tile(1.0);
     let (geoms, inst) = scene(

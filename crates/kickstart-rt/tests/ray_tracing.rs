@@ -969,16 +969,10 @@ fn half_bits(v: f32) -> u16 {
 
 /// A context of the test device that times its passes.
 fn timing_context() -> ExecuteContext {
-    let g = gpu();
-    ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            gpu_timing: true,
-            ..Default::default()
-        },
-    )
-    .unwrap()
+    context_with(InitSettings {
+        gpu_timing: true,
+        ..Default::default()
+    })
 }
 
 /// Passes of `t` named `pass` under `label`.
@@ -1603,18 +1597,12 @@ fn dropped_after_polls(
 fn bad_geometry_is_reported_and_the_rest_traces() {
     let log: Arc<Mutex<Vec<String>>> = Arc::default();
     let sink = log.clone();
-    let g = gpu();
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            log_callback: Some(Arc::new(move |_, m: &str| {
-                sink.lock().unwrap().push(m.to_string())
-            })),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let ctx = context_with(InitSettings {
+        log_callback: Some(Arc::new(move |_, m: &str| {
+            sink.lock().unwrap().push(m.to_string())
+        })),
+        ..Default::default()
+    });
     // Three quads in a row at x = 0, 2, 4 (z = 0): "bad-index" has triangle 1 referencing
     // vertex 99; "bad-nan" has a NaN in vertex 3 (used by triangle 1 only); "bad-inf" an ∞ in vertex 3.
     let positions = |x: f32, v3: Vec3| {
@@ -1668,7 +1656,7 @@ fn bad_geometry_is_reported_and_the_rest_traces() {
     build_submit_complete(&ctx, c);
     let dropped: Vec<DroppedTriangles> = handles
         .iter()
-        .map(|h| dropped_after_polls(&ctx, &g.device, *h))
+        .map(|h| dropped_after_polls(&ctx, &gpu().device, *h))
         .collect();
     assert_eq!(
         dropped[0],
@@ -1877,19 +1865,13 @@ fn update_with_another_triangle_count_is_refused() {
 fn gpu_timings_label_the_passes_or_say_why_not() {
     let log: Arc<Mutex<Vec<String>>> = Arc::default();
     let sink = log.clone();
-    let g = gpu();
-    let ctx = ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        InitSettings {
-            gpu_timing: true,
-            log_callback: Some(Arc::new(move |_, m: &str| {
-                sink.lock().unwrap().push(m.to_string())
-            })),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let ctx = context_with(InitSettings {
+        gpu_timing: true,
+        log_callback: Some(Arc::new(move |_, m: &str| {
+            sink.lock().unwrap().push(m.to_string())
+        })),
+        ..Default::default()
+    });
     let geometry = ctx.create_geometry_handle();
     let instance = ctx.create_instance_handle();
     let mut c = ctx.create_task_container();
@@ -1905,7 +1887,7 @@ fn gpu_timings_label_the_passes_or_say_why_not() {
     let mut e = encoder();
     let task = ctx.build_gpu_task(c, &mut e).unwrap();
     submit(e);
-    let timed = g
+    let timed = gpu()
         .device
         .features()
         .contains(wgpu::Features::TIMESTAMP_QUERY);
@@ -2105,6 +2087,7 @@ fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backen
     }
     let (device, queue) = device_with_limits(limits, "kickstart-rt small BLAS limit");
     let ctx = ExecuteContext::new(&device, &queue, InitSettings::default()).expect("context");
+    assert_pass_backend(&ctx);
     assert_eq!(ctx.traversal_backend().backend, backend());
     let submit = |e: wgpu::CommandEncoder| {
         queue.submit([e.finish()]);
@@ -2172,21 +2155,7 @@ fn a_geometry_past_the_drivers_blas_limit_is_refused_only_by_the_hardware_backen
 /// A device of the test adapter with the test device's features and `limits` (wgpu's
 /// experimental ray queries accepted on the hardware pass, as the test device does).
 fn device_with_limits(limits: wgpu::Limits, label: &str) -> (wgpu::Device, wgpu::Queue) {
-    let g = gpu();
-    let hardware = backend() == TraversalBackend::HardwareRayQuery;
-    pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some(label),
-        required_features: g.device.features(),
-        required_limits: limits,
-        experimental_features: if hardware {
-            // SAFETY: the tests accept wgpu's experimental ray-query support.
-            unsafe { wgpu::ExperimentalFeatures::enabled() }
-        } else {
-            wgpu::ExperimentalFeatures::disabled()
-        },
-        ..Default::default()
-    }))
-    .expect("a device with lower limits than the adapter's")
+    own_test_device(limits, label)
 }
 
 /// An instance slot past the device's `max_tlas_instance_count` cannot enter the driver's TLAS:
@@ -2203,6 +2172,7 @@ fn an_instance_past_the_drivers_tlas_limit_is_refused_only_by_the_hardware_backe
     }
     let (device, queue) = device_with_limits(limits, "kickstart-rt small TLAS limit");
     let ctx = ExecuteContext::new(&device, &queue, InitSettings::default()).expect("context");
+    assert_pass_backend(&ctx);
     assert_eq!(ctx.traversal_backend().backend, backend());
     let submit = |e: wgpu::CommandEncoder| {
         queue.submit([e.finish()]);

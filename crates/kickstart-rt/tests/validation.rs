@@ -1191,18 +1191,13 @@ fn small_binding_context(bytes: u64) -> (wgpu::Device, wgpu::Queue, ExecuteConte
     let g = gpu();
     let mut limits = g.device.limits();
     limits.max_storage_buffer_binding_size = bytes;
-    let (device, queue) = pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("kickstart-rt small-binding tests"),
-        required_features: g.device.features(),
-        required_limits: limits,
-        ..Default::default()
-    }))
-    .expect("a device with smaller limits than the adapter's");
+    let (device, queue) = own_test_device(limits, "kickstart-rt small-binding tests");
     let settings = InitSettings {
         supported_working_sets: 2,
         ..Default::default()
     };
     let ctx = ExecuteContext::new(&device, &queue, settings).expect("context");
+    assert_pass_backend(&ctx);
     (device, queue, ctx)
 }
 

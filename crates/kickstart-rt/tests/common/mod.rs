@@ -93,19 +93,47 @@ pub fn gpu() -> &'static Gpu {
     })
 }
 
+/// A device of its own from the test adapter, with the shared test device's features (ray
+/// queries on the hardware pass, nothing optional on the minimal one) and `limits`: for tests
+/// that lose their device or need other limits, on the same backend as the rest of the pass.
+pub fn own_test_device(limits: wgpu::Limits, label: &str) -> (wgpu::Device, wgpu::Queue) {
+    let g = gpu();
+    let hardware = backend() == kickstart_rt::TraversalBackend::HardwareRayQuery;
+    pollster::block_on(g.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some(label),
+        required_features: g.device.features(),
+        required_limits: limits,
+        experimental_features: if hardware {
+            // SAFETY: the tests accept wgpu's experimental ray-query support.
+            unsafe { wgpu::ExperimentalFeatures::enabled() }
+        } else {
+            wgpu::ExperimentalFeatures::disabled()
+        },
+        ..Default::default()
+    }))
+    .expect("a device of the test adapter")
+}
+
 /// A context on the shared device, with the default settings but `working_sets`; fails the test
 /// when it took another backend than the pass asks for (a silent fallback to software).
 pub fn context(working_sets: u32) -> kickstart_rt::ExecuteContext {
+    context_with(kickstart_rt::InitSettings {
+        supported_working_sets: working_sets,
+        ..Default::default()
+    })
+}
+
+/// A context on the shared device with `settings`, checked as [`context`]'s is.
+pub fn context_with(settings: kickstart_rt::InitSettings) -> kickstart_rt::ExecuteContext {
     let g = gpu();
-    let ctx = kickstart_rt::ExecuteContext::new(
-        &g.device,
-        &g.queue,
-        kickstart_rt::InitSettings {
-            supported_working_sets: working_sets,
-            ..Default::default()
-        },
-    )
-    .expect("context");
+    let ctx = kickstart_rt::ExecuteContext::new(&g.device, &g.queue, settings).expect("context");
+    assert_pass_backend(&ctx);
+    ctx
+}
+
+/// Fails the test when `ctx` took another backend than the pass asks for (`KSRT_TEST_BACKEND`):
+/// every test that makes a context of its own (another device, other settings) checks it too.
+pub fn assert_pass_backend(ctx: &kickstart_rt::ExecuteContext) {
     let report = ctx.traversal_backend();
     assert_eq!(
         report.backend,
@@ -113,7 +141,17 @@ pub fn context(working_sets: u32) -> kickstart_rt::ExecuteContext {
         "the context took another backend than KSRT_TEST_BACKEND asks for: {}",
         report.reason
     );
-    ctx
+}
+
+/// The explicit choice of the pass's backend, for contexts on devices of a test's own (which
+/// may offer ray queries on a software pass).
+pub fn pass_backend_choice() -> kickstart_rt::BackendChoice {
+    match backend() {
+        kickstart_rt::TraversalBackend::Software => kickstart_rt::BackendChoice::Software,
+        kickstart_rt::TraversalBackend::HardwareRayQuery => {
+            kickstart_rt::BackendChoice::HardwareRayQuery
+        }
+    }
 }
 
 pub fn buffer(bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
