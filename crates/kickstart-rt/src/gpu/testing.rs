@@ -22,7 +22,8 @@ pub(crate) fn gpu() -> &'static TestGpu {
                 panic!("GPU tests need an adapter (install mesa-vulkan-drivers): {e}")
             });
         let minimal = std::env::var("KSRT_TEST_MINIMAL_DEVICE").is_ok_and(|v| v == "1");
-        let (features, limits) = if minimal {
+        let hardware = backend() == crate::device::TraversalBackend::HardwareRayQuery;
+        let (mut features, mut limits) = if minimal {
             (wgpu::Features::empty(), wgpu::Limits::default())
         } else {
             (
@@ -33,15 +34,38 @@ pub(crate) fn gpu() -> &'static TestGpu {
                 adapter.limits(),
             )
         };
+        if hardware {
+            let rq = crate::device::hardware_ray_query_features(&adapter).unwrap_or_else(|| {
+                panic!("KSRT_TEST_BACKEND=hardware needs an adapter with ray queries")
+            });
+            features |= rq;
+            limits = crate::device::hardware_ray_query_limits(&adapter, limits);
+        }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("kickstart-rt unit tests"),
             required_features: features,
             required_limits: limits,
+            experimental_features: if hardware {
+                // SAFETY: the tests accept wgpu's experimental ray-query support.
+                unsafe { wgpu::ExperimentalFeatures::enabled() }
+            } else {
+                wgpu::ExperimentalFeatures::disabled()
+            },
             ..Default::default()
         }))
         .expect("request_device");
         TestGpu { device, queue }
     })
+}
+
+/// The traversal backend the unit tests that trace use (`KSRT_TEST_BACKEND=hardware`: the
+/// hardware ray-query one, on a device created with ray queries; anything else: software), as
+/// the integration suites read it.
+pub(crate) fn backend() -> crate::device::TraversalBackend {
+    match std::env::var("KSRT_TEST_BACKEND").as_deref() {
+        Ok("hardware") => crate::device::TraversalBackend::HardwareRayQuery,
+        _ => crate::device::TraversalBackend::Software,
+    }
 }
 
 /// Reads `size` bytes of `buffer` from `offset` back to the CPU (waits; tests only).

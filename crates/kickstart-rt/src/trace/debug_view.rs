@@ -322,12 +322,9 @@ mod tests {
             view_formats: &[],
         });
         let view_tex = tex.create_view(&Default::default());
-        let mut pass = DebugViewPass::new(TraversalBackend::Software);
-        let cache = crate::cache::DirectLightingCache::new(
-            &testing::gpu().device,
-            64,
-            TraversalBackend::Software,
-        );
+        let mut pass = DebugViewPass::new(testing::backend());
+        let cache =
+            crate::cache::DirectLightingCache::new(&testing::gpu().device, 64, testing::backend());
         testing::run(|rec| {
             let debug = DebugView::new(kind, (VX, VY, W, H)).unwrap().unwrap();
             pass.record(
@@ -567,7 +564,7 @@ mod tests {
             assert!((c[0] - 5.0).abs() < 0.05, "{format:?}: {c:?}");
         }
         let g = testing::gpu();
-        let mut pass = DebugViewPass::new(TraversalBackend::Software);
+        let mut pass = DebugViewPass::new(testing::backend());
         // Every writable output format compiles (also on the minimal device).
         pass.prepare(&g.device);
         assert_eq!(pass.pipelines.len(), WRITABLE_OUTPUT_FORMATS.len());

@@ -233,6 +233,9 @@ pub(crate) struct TestScene {
     geometry_buf: wgpu::Buffer,
     blas_nodes: wgpu::Buffer,
     triangles: wgpu::Buffer,
+    /// The driver's BLASes and TLAS over the same triangles and instance records, on the
+    /// hardware test pass (`testing::backend()`).
+    hardware: Option<crate::scene::hardware::HardwareScene>,
 }
 
 /// A storage buffer with `data`.
@@ -247,10 +250,70 @@ fn upload(data: &[u8]) -> wgpu::Buffer {
     }
 }
 
+/// The triangle soup's buffer: also a BLAS input on the hardware pass, where the driver builds
+/// its BLASes from it.
+fn upload_triangles(data: &[u8], blas_input: bool) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let mut usage =
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+    if blas_input {
+        usage |= wgpu::BufferUsages::BLAS_INPUT;
+    }
+    let mut padded = data.to_vec();
+    padded.resize(data.len().max(128), 0);
+    testing::gpu()
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("test triangles"),
+            contents: &padded,
+            usage,
+        })
+}
+
+/// The driver's acceleration structures over the packed scene: a BLAS per geometry from its
+/// triangles in the soup, and a TLAS over the instance records, built as the context's
+/// hardware backend builds them (the same `HardwareScene`).
+fn driver_scene(
+    geometries: &[GeometryRecord],
+    instances: &[InstanceRecord],
+    triangles: &wgpu::Buffer,
+) -> crate::scene::hardware::HardwareScene {
+    let mut hw = crate::scene::hardware::HardwareScene::new(&testing::gpu().device);
+    for (slot, g) in geometries.iter().enumerate() {
+        hw.build(slot as u32, g.tri_base, g.tri_count, false);
+    }
+    for (slot, record) in instances.iter().enumerate() {
+        hw.set_record(slot as u32, bytemuck::bytes_of(record));
+    }
+    testing::run(|rec| hw.record(rec, triangles));
+    hw
+}
+
 impl TestScene {
     /// Builds each geometry's BLAS with `CpuBvh`, a TLAS over the instances' world boxes, and
     /// uploads everything.
     pub fn new(geometries: Vec<Vec<Tri>>, instances: Vec<TestInstance>) -> Self {
+        Self::new_on(testing::backend(), geometries, instances)
+    }
+
+    /// As [`TestScene::new`], for the software traversal whatever the test pass: for tests of
+    /// its own exact rules (watertight edges, the tie rule, the inclusive `t` range), which the
+    /// driver's triangle test does not promise.
+    pub fn software(geometries: Vec<Vec<Tri>>, instances: Vec<TestInstance>) -> Self {
+        Self::new_on(
+            crate::device::TraversalBackend::Software,
+            geometries,
+            instances,
+        )
+    }
+
+    /// The scene, with the driver's acceleration structures too when `backend` is the hardware
+    /// one.
+    fn new_on(
+        backend: crate::device::TraversalBackend,
+        geometries: Vec<Vec<Tri>>,
+        instances: Vec<TestInstance>,
+    ) -> Self {
         let mut blas = Vec::new();
         let mut soup: Vec<[u32; 4]> = Vec::new();
         let mut geo_records = Vec::new();
@@ -311,6 +374,9 @@ impl TestScene {
             }
         }
         let tlas = with_ref_table(pack_tlas(items), instances.len());
+        let hardware_pass = backend == crate::device::TraversalBackend::HardwareRayQuery;
+        let triangles = upload_triangles(bytemuck::cast_slice(&soup), hardware_pass);
+        let hardware = hardware_pass.then(|| driver_scene(&geo_records, &inst_records, &triangles));
         TestScene {
             geometries,
             instances,
@@ -320,7 +386,8 @@ impl TestScene {
             instance_buf: upload(bytemuck::cast_slice(&inst_records)),
             geometry_buf: upload(bytemuck::cast_slice(&geo_records)),
             blas_nodes: upload(bytemuck::cast_slice(&blas)),
-            triangles: upload(bytemuck::cast_slice(&soup)),
+            triangles,
+            hardware,
         }
     }
 
@@ -341,6 +408,11 @@ impl TestScene {
         TestScene::new(vec![tris], vec![TestInstance::new(0, Affine3A::IDENTITY)])
     }
 
+    /// [`TestScene::single`] on the software traversal (see [`TestScene::software`]).
+    pub fn single_software(tris: Vec<Tri>) -> Self {
+        TestScene::software(vec![tris], vec![TestInstance::new(0, Affine3A::IDENTITY)])
+    }
+
     /// The scene bindings.
     pub fn buffers(&self) -> SceneBuffers<'_> {
         SceneBuffers {
@@ -349,7 +421,7 @@ impl TestScene {
             geometries: &self.geometry_buf,
             blas_nodes: &self.blas_nodes,
             triangles: &self.triangles,
-            tlas: None,
+            tlas: self.hardware.as_ref().map(|h| h.tlas()),
         }
     }
 
@@ -475,14 +547,17 @@ pub(crate) fn gpu_trace(
     mask: u32,
 ) -> Vec<super::rays::GpuHit> {
     use super::rays::RayTracer;
+    use crate::device::TraversalBackend;
     use std::sync::OnceLock;
-    static TRACER: OnceLock<RayTracer> = OnceLock::new();
-    let tracer = TRACER.get_or_init(|| {
-        RayTracer::new(
-            &testing::gpu().device,
-            crate::device::TraversalBackend::Software,
-        )
-    });
+    static SOFTWARE: OnceLock<RayTracer> = OnceLock::new();
+    static HARDWARE: OnceLock<RayTracer> = OnceLock::new();
+    // The scene's own backend: software-only scenes trace in software on the hardware pass too.
+    let backend = scene.buffers().backend();
+    let tracer = match backend {
+        TraversalBackend::Software => &SOFTWARE,
+        TraversalBackend::HardwareRayQuery => &HARDWARE,
+    }
+    .get_or_init(|| RayTracer::new(&testing::gpu().device, backend));
     let ray_buf = upload(bytemuck::cast_slice(rays));
     let size = (rays.len().max(1) * 32) as u64;
     let hit_buf = testing::buffer(size);

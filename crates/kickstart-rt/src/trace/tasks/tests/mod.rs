@@ -130,14 +130,11 @@ fn read(t: &TextureInput) -> Vec<[f32; 4]> {
     out
 }
 
-/// Records `tasks` with one set of passes and waits.
+/// Records `tasks` with one set of passes and waits, on the test pass's backend.
 fn run(scene: &TestScene, tasks: &[RenderTask]) {
+    assert_eq!(scene.buffers().backend(), testing::backend());
     let g = testing::gpu();
-    let mut passes = TracePasses::new(
-        &g.device,
-        &g.queue,
-        crate::device::TraversalBackend::Software,
-    );
+    let mut passes = TracePasses::new(&g.device, &g.queue, testing::backend());
     testing::run(|rec| {
         for t in tasks {
             let job = TracePasses::job(t).expect("a trace task");

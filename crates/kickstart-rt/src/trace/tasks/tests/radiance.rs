@@ -19,12 +19,9 @@ fn cache_radiance(instance: u32, prim: u32, bary: vec2<f32>, bilinear: bool) -> 
 
 /// Records `tasks` with the stand-in cache holding `colours[instance][primitive]`.
 pub(super) fn run_cached(scene: &TestScene, colours: &[Vec<Vec3>], tasks: &[RenderTask]) {
+    assert_eq!(scene.buffers().backend(), testing::backend());
     let g = testing::gpu();
-    let mut passes = TracePasses::new(
-        &g.device,
-        &g.queue,
-        crate::device::TraversalBackend::Software,
-    );
+    let mut passes = TracePasses::new(&g.device, &g.queue, testing::backend());
     passes.library.replace("cache/sample", STUB_CACHE_WGSL);
     let mut base = Vec::new();
     let mut flat: Vec<[f32; 4]> = Vec::new();
