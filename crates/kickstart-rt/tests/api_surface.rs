@@ -837,3 +837,115 @@ fn releasing_right_after_destroying_a_denoiser_frees_its_history() {
         .unwrap_or_else(|e| panic!("release: {e}"));
     assert_eq!(ctx.resource_allocations().denoiser, before.denoiser);
 }
+
+/// Registers `n` quads on `device` in a row along x (each its own geometry and instance), builds
+/// them and traces a ray down onto each; returns the handles.
+fn quads_on(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    ctx: &ExecuteContext,
+    n: usize,
+) -> (Vec<GeometryHandle>, Vec<InstanceHandle>) {
+    use wgpu::util::DeviceExt;
+    let mesh = quad_mesh(0.0);
+    let init = |contents: &[u8], usage| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents,
+            usage: usage | wgpu::BufferUsages::COPY_SRC,
+        })
+    };
+    let (geometries, instances) = (
+        ctx.create_geometry_handles(n),
+        ctx.create_instance_handles(n),
+    );
+    let mut c = ctx.create_task_container();
+    for (k, (g, i)) in geometries.iter().zip(&instances).enumerate() {
+        let vb = init(
+            bytemuck::cast_slice(&mesh.positions),
+            wgpu::BufferUsages::VERTEX,
+        );
+        let ib = init(
+            bytemuck::cast_slice(&mesh.indices),
+            wgpu::BufferUsages::INDEX,
+        );
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: *g,
+            input: geometry_input(vb, Some(ib)),
+        });
+        let at = Affine3A::from_translation(Vec3::new(2.0 * k as f32, 0.0, 0.0));
+        register_instance(&mut c, *i, *g, at);
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 64,
+        ..Default::default()
+    });
+    let mut e = device.create_command_encoder(&Default::default());
+    let t = ctx
+        .build_gpu_task(c, &mut e)
+        .unwrap_or_else(|e| panic!("build: {e}"));
+    queue.submit([e.finish()]);
+    ctx.mark_gpu_task_completed(t)
+        .unwrap_or_else(|e| panic!("complete: {e}"));
+    let corners: Vec<Vec3> = (0..n)
+        .map(|k| Vec3::new(2.0 * k as f32, 0.0, 0.0))
+        .collect();
+    let (hits, _) = trace_on(device, queue, ctx, &rays_down(&corners, 5.0));
+    for (k, h) in hits.iter().enumerate() {
+        assert_eq!(h.instance, instances[k].index(), "ray {k}: {h:?}");
+    }
+    (geometries, instances)
+}
+
+/// wgpu's own allocator, on a device of the test's own, after each of two identical cycles of
+/// registering 8 quads, tracing them, destroying everything and releasing: the same bytes and
+/// allocations after both, and no more than while the quads were held. On the ray-query
+/// backend the driver's BLASes (which the SDK's own count does not see) must be gone: fewer
+/// bytes after the release than while held.
+#[test]
+fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
+    let (device, queue) = own_test_device(gpu().device.limits(), "kickstart-rt memory test");
+    let settings = InitSettings {
+        backend: pass_backend_choice(),
+        ..InitSettings::default()
+    };
+    let ctx =
+        ExecuteContext::new(&device, &queue, settings).unwrap_or_else(|e| panic!("context: {e}"));
+    assert_pass_backend(&ctx);
+    let cycle = || {
+        let (geometries, instances) = quads_on(&device, &queue, &ctx, 8);
+        let held = wgpu_allocated(&device).unwrap_or_else(|| panic!("no allocator report"));
+        ctx.destroy_instance_handles(&instances)
+            .unwrap_or_else(|e| panic!("{e}"));
+        ctx.destroy_geometry_handles(&geometries)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut c = ctx.create_task_container();
+        c.schedule_bvh_task(BvhBuildTask::default());
+        let mut e = device.create_command_encoder(&Default::default());
+        let t = ctx
+            .build_gpu_task(c, &mut e)
+            .unwrap_or_else(|e| panic!("build: {e}"));
+        queue.submit([e.finish()]);
+        ctx.mark_gpu_task_completed(t)
+            .unwrap_or_else(|e| panic!("complete: {e}"));
+        ctx.release_device_resources_immediately()
+            .unwrap_or_else(|e| panic!("release: {e}"));
+        let after = wgpu_allocated(&device).unwrap_or_else(|| panic!("no allocator report"));
+        (held, after)
+    };
+    let (held1, after1) = cycle();
+    let (held2, after2) = cycle();
+    assert_eq!(
+        after2, after1,
+        "the second cycle left more: held {held1:?} then {held2:?}"
+    );
+    assert!(after1.0 <= held1.0, "held {held1:?}, after {after1:?}");
+    if backend() == TraversalBackend::HardwareRayQuery {
+        // Each driver BLAS is an allocation of its own.
+        assert!(
+            after1.0 < held1.0 && after1.1 + 8 <= held1.1,
+            "the driver's BLASes stayed: {held1:?} → {after1:?}"
+        );
+    }
+}

@@ -602,3 +602,17 @@ pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
         ..proptest::test_runner::Config::default()
     }
 }
+
+/// What wgpu's own allocator holds on `device` once it is idle: live bytes and allocations, or
+/// `None` on backends without a report. It counts every buffer, texture and acceleration
+/// structure wgpu allocated (the driver's BLASes and TLAS on the ray-query backend included),
+/// and nothing the SDK says about itself: the check on `resource_allocations()`. Read it on a
+/// device of the test's own (`own_test_device`): the shared one carries other tests' work.
+pub fn wgpu_allocated(device: &wgpu::Device) -> Option<(u64, usize)> {
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    device
+        .generate_allocator_report()
+        .map(|r| (r.total_allocated_bytes, r.allocations.len()))
+}
