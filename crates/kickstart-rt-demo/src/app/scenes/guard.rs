@@ -88,15 +88,11 @@ mod tests {
     fn a_panic_becomes_its_message_and_a_value_passes_through() {
         assert_eq!(guarded(|| 7), Ok(7));
         let index = 9;
+        let panic_line = line!() + 1;
         let e = guarded(|| [1, 2, 3][index]).unwrap_err();
         assert!(e.contains("index out of bounds"), "{e}");
-        assert!(
-            e.ends_with(&format!(
-                "at kickstart-rt-demo/src/app/scenes/guard.rs:{}",
-                line!() - 2
-            )),
-            "{e}"
-        );
+        let at = format!("at kickstart-rt-demo/src/app/scenes/guard.rs:{panic_line}");
+        assert!(e.ends_with(&at), "{e}");
         let e = guarded(|| -> u8 { panic!("bad field {}", 3) }).unwrap_err();
         assert!(e.starts_with("bad field 3 at "), "{e}");
         assert_eq!(
