@@ -1,8 +1,8 @@
 //! Fuzzed scene files: glTF and OBJ built from random parameters (huge counts, offsets past their
-//! buffers, indices out of range, NaN and infinite positions, cycles and bad transforms,
-//! cameras, punctual lights and embedded images with bad fields or damaged bytes) or damaged
-//! bytes of a valid file (truncated, bytes overwritten). Whatever the input, loading ends in a
-//! `SceneError` or in a scene every consumer can trust ([`assert_sound`]); a panic or a hang
+//! buffers, indices out of range, NaN and infinite positions, cycles and bad transforms, cameras,
+//! punctual lights and embedded images with bad fields or damaged bytes) or damaged bytes of a
+//! valid file (truncated, bytes overwritten), and images alone. Whatever the input, loading ends in
+//! a `SceneError` or in a scene every consumer can trust ([`assert_sound`]); a panic or a hang
 //! fails the test. Valid files of the same generators must still load (a loader that refused
 //! everything would pass the rest). The seed is fixed and printed (`PROPTEST_RNG_SEED` picks
 //! another), so a run repeats and a failure replays.
@@ -678,6 +678,24 @@ proptest! {
         bytes.truncate(cut.min(bytes.len()));
         if let Ok(scene) = load_gltf_bytes(&bytes) {
             assert_sound(&scene);
+        }
+    }
+
+    /// Images alone, as the loaders decode them: small PNGs, some with bytes overwritten or a
+    /// header claiming up to 2^30 pixels a side. An intact image decodes to its pixels; any
+    /// other ends in an error or in an image within the size limit, never a panic or a huge
+    /// allocation.
+    #[test]
+    fn images_decode_to_their_pixels_or_are_refused((png, intact) in png_case()) {
+        match super::texture::decode_rgba8(&png) {
+            Ok(img) => {
+                let (w, h) = img.dimensions();
+                prop_assert!(w.min(h) >= 1 && w.max(h) <= super::texture::MAX_TEXTURE_SIDE);
+                if intact {
+                    prop_assert_eq!(img.get_pixel(0, 0).0, [200, 100, 50, 255]);
+                }
+            }
+            Err(e) => prop_assert!(!intact, "an intact PNG refused: {}", e),
         }
     }
 
