@@ -881,13 +881,7 @@ fn quads_on(
         max_blas_build_count: 64,
         ..Default::default()
     });
-    let mut e = device.create_command_encoder(&Default::default());
-    let t = ctx
-        .build_gpu_task(c, &mut e)
-        .unwrap_or_else(|e| panic!("build: {e}"));
-    queue.submit([e.finish()]);
-    ctx.mark_gpu_task_completed(t)
-        .unwrap_or_else(|e| panic!("complete: {e}"));
+    build_submit_complete_on(device, queue, ctx, c);
     let corners: Vec<Vec3> = (0..n)
         .map(|k| Vec3::new(2.0 * k as f32, 0.0, 0.0))
         .collect();
@@ -922,13 +916,7 @@ fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
             .unwrap_or_else(|e| panic!("{e}"));
         let mut c = ctx.create_task_container();
         c.schedule_bvh_task(BvhBuildTask::default());
-        let mut e = device.create_command_encoder(&Default::default());
-        let t = ctx
-            .build_gpu_task(c, &mut e)
-            .unwrap_or_else(|e| panic!("build: {e}"));
-        queue.submit([e.finish()]);
-        ctx.mark_gpu_task_completed(t)
-            .unwrap_or_else(|e| panic!("complete: {e}"));
+        build_submit_complete_on(&device, &queue, &ctx, c);
         ctx.release_device_resources_immediately()
             .unwrap_or_else(|e| panic!("release: {e}"));
         let after = wgpu_allocated(&device).unwrap_or_else(|| panic!("no allocator report"));

@@ -267,17 +267,6 @@ proptest! {
     }
 }
 
-/// The seed of the batched ingestion fuzz: `PROPTEST_RNG_SEED` when set (as for the property
-/// tests), else a fixed one; printed, so a failure replays.
-fn batch_fuzz_seed() -> u64 {
-    let seed = std::env::var("PROPTEST_RNG_SEED")
-        .ok()
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or(0x6b73_7274_6261_7463);
-    eprintln!("batched ingestion fuzz seed {seed} (PROPTEST_RNG_SEED={seed} replays it)");
-    seed
-}
-
 /// Fuzzed ingestion in bulk: 2,000 hostile meshes (NaN, ∞ and far-out vertices, indices out of
 /// range, degenerate triangles) registered in 4 tasks of 500, each geometry instanced at a
 /// random place; one build of every BLAS. Each geometry reports exactly the triangles it
@@ -286,7 +275,7 @@ fn batch_fuzz_seed() -> u64 {
 fn thousands_of_fuzzed_meshes_in_a_few_tasks_drop_exactly_the_bad_triangles() {
     const MESHES: usize = 2000;
     const PER_TASK: usize = 500;
-    let mut rng = Rng(batch_fuzz_seed());
+    let mut rng = Rng(fuzz_seed("batched ingestion fuzz", 0x6b73_7274_6261_7463));
     let ctx = context(4);
     let mut oracle = Oracle::default();
     let mut expected = Vec::with_capacity(MESHES);

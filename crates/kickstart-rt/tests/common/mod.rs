@@ -286,6 +286,20 @@ pub fn build_submit_complete(ctx: &kickstart_rt::ExecuteContext, c: kickstart_rt
         .expect("mark_gpu_task_completed");
 }
 
+/// [`build_submit_complete`] on a device of the test's own (`own_test_device`).
+pub fn build_submit_complete_on(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    ctx: &kickstart_rt::ExecuteContext,
+    c: kickstart_rt::TaskContainer,
+) {
+    let mut e = device.create_command_encoder(&Default::default());
+    let t = ctx.build_gpu_task(c, &mut e).expect("build_gpu_task");
+    queue.submit([e.finish()]);
+    ctx.mark_gpu_task_completed(t)
+        .expect("mark_gpu_task_completed");
+}
+
 /// Schedules the registration of instance `handle` of `geometry` at `transform`.
 pub fn register_instance(
     c: &mut kickstart_rt::TaskContainer,
@@ -586,15 +600,22 @@ pub fn register_and_build_at(
 /// run repeats the last one and a failure in CI replays here.
 const PROPTEST_SEED: u64 = 0x6b73_7274_5f66_757a;
 
+/// The seed of a fuzzed test named `what`: `PROPTEST_RNG_SEED` when set, else `default`;
+/// printed, so a failure's output says how to replay it.
+pub fn fuzz_seed(what: &str, default: u64) -> u64 {
+    let seed = std::env::var("PROPTEST_RNG_SEED")
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(default);
+    eprintln!("{what} seed {seed} (PROPTEST_RNG_SEED={seed} replays it)");
+    seed
+}
+
 /// A property test's configuration: `cases` cases from a fixed seed (`PROPTEST_RNG_SEED`
 /// overrides it; the seed used is printed, shown with a failure's output), and no failure
 /// files written into the source tree.
 pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
-    let seed = std::env::var("PROPTEST_RNG_SEED")
-        .ok()
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or(PROPTEST_SEED);
-    eprintln!("property test seed {seed} (PROPTEST_RNG_SEED={seed} replays it)");
+    let seed = fuzz_seed("property test", PROPTEST_SEED);
     proptest::test_runner::Config {
         cases,
         rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
