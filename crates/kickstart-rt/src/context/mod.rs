@@ -475,7 +475,9 @@ impl ExecuteContext {
     /// submits it, and marks it complete by itself once the queue reports the submission done.
     /// That report arrives through wgpu's callbacks, which run when the device is polled (any
     /// `device.poll`, or the next `invoke_gpu_task`/`build_gpu_task`, which poll without waiting);
-    /// nothing here blocks.
+    /// nothing here blocks. When several threads poll one device, the callback runs on whichever
+    /// thread's poll took it, which may finish a moment after another thread's waiting poll has
+    /// returned: the task counts as in flight until then.
     pub fn invoke_gpu_task(&self, container: TaskContainer) -> Result<()> {
         let mut encoder = self
             .device

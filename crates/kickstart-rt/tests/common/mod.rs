@@ -131,6 +131,30 @@ pub fn context_with(settings: kickstart_rt::InitSettings) -> kickstart_rt::Execu
     ctx
 }
 
+/// Waits until every task `ctx` invoked by itself is seen complete, or fails the test after
+/// `limit`. A wait on the device is not enough by itself: on a device shared by tests running in
+/// parallel, another thread's poll may take the queue's completion callbacks and run them just
+/// after our wait returns, so the count is read until that callback has run.
+pub fn settle_invoked_tasks(ctx: &kickstart_rt::ExecuteContext, limit: std::time::Duration) {
+    let start = std::time::Instant::now();
+    loop {
+        gpu()
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("poll");
+        let left = ctx.in_flight_task_count();
+        if left == 0 {
+            return;
+        }
+        assert!(
+            start.elapsed() < limit,
+            "{left} invoked tasks still in flight {:?} after the device went idle",
+            start.elapsed()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
 /// Fails the test when `ctx` took another backend than the pass asks for (`KSRT_TEST_BACKEND`):
 /// every test that makes a context of its own (another device, other settings) checks it too.
 pub fn assert_pass_backend(ctx: &kickstart_rt::ExecuteContext) {
