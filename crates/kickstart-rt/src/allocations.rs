@@ -14,7 +14,10 @@ pub struct ResourceAllocations {
     pub tlas: u64,
     /// Build scratch.
     pub scratch: u64,
-    /// Denoiser history and intermediates.
+    /// Denoisers: every context's guides and signal histories (16 bytes per grid pixel for
+    /// each of two guides, and per signal two records of 16 bytes for radiance, 8 for
+    /// occlusion and shadows; see `ExecuteContext::denoising_context_bytes`), and the one
+    /// à-trous intermediate they share (a record per pixel of the largest context's grid).
     pub denoiser: u64,
     /// Upload staging owned by working sets.
     pub staging: u64,

@@ -1235,36 +1235,85 @@ fn multi_shadow_denoises_the_packed_visibility() {
     assert!(mean < 0.03, "multi-shadow mean error {mean}");
 }
 
-#[test]
-fn history_memory_is_created_lazily_counted_and_released_after_destroy() {
-    let g = static_gbuffer();
-    let h = Harness::new(SignalType::SpecularAndDiffuse, DenoisingMethod::Fast);
-    let ctx = &h.ctx;
-    assert_eq!(ctx.resource_allocations().denoiser, 0, "created lazily");
-    let build = |ctx: &ExecuteContext| {
-        let mut e = encoder();
-        let t = ctx
-            .build_gpu_task(ctx.create_task_container(), &mut e)
-            .unwrap();
-        submit(e);
-        t
+/// Builds an empty container on `ctx` and submits it (a `build_gpu_task` collects released
+/// memory).
+fn build_empty(ctx: &ExecuteContext) -> GpuTaskHandle {
+    let mut e = encoder();
+    let t = ctx
+        .build_gpu_task(ctx.create_task_container(), &mut e)
+        .unwrap();
+    submit(e);
+    t
+}
+
+/// A denoising context's memory, by the documented formula: per grid pixel two 16-byte guides
+/// and, per signal, two records (16 bytes for radiance, 8 for occlusion and shadows); plus the
+/// à-trous intermediate all contexts share, one record per pixel.
+fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
+    let (signals, record) = match signal {
+        SignalType::SpecularAndDiffuse => (2, 16),
+        SignalType::Specular | SignalType::Diffuse => (1, 16),
+        _ => (1, 8),
     };
-    let t = build(ctx);
-    // Guides ×2, and per signal: history ×2 and intermediates ×2; 16 bytes per pixel each.
-    let bytes = (SIZE * SIZE * 16 * (2 + 4 * 2)) as u64;
-    assert_eq!(ctx.resource_allocations().denoiser, bytes);
-    ctx.mark_gpu_task_completed(t).unwrap();
-    let r = reference_image(&g, reference);
-    let used = h.submit_frame(&g, &[r.clone(), r], Motion::Matrices, DenoiseMode::Continue);
-    ctx.destroy_denoising_context_handle(h.handle).unwrap();
-    // The task that used it is still in flight: the memory stays.
-    let t2 = build(ctx);
-    assert_eq!(ctx.resource_allocations().denoiser, bytes);
-    ctx.mark_gpu_task_completed(used).unwrap();
-    ctx.mark_gpu_task_completed(t2).unwrap();
-    let t3 = build(ctx);
-    assert_eq!(ctx.resource_allocations().denoiser, 0);
-    ctx.mark_gpu_task_completed(t3).unwrap();
+    (
+        grid_pixels * (2 * 16 + 2 * signals * record),
+        grid_pixels * record,
+    )
+}
+
+/// A context holds no memory before its first frame; then its guides and histories for the
+/// frame's grid (a block mode's is a quarter of the pixels, and the larger buffers go once no
+/// task uses them) and the shared intermediate; all of it is released after destruction once
+/// the tasks that used it are complete.
+#[test]
+fn history_memory_follows_its_grid_and_is_released_after_destroy() {
+    let g = static_gbuffer();
+    for signal in [SignalType::SpecularAndDiffuse, SignalType::Shadow] {
+        let mut h = Harness::new(signal, DenoisingMethod::Fast);
+        let t = build_empty(&h.ctx);
+        assert_eq!(h.ctx.resource_allocations().denoiser, 0, "created lazily");
+        assert_eq!(h.ctx.denoising_context_bytes(h.handle), Ok(0));
+        h.ctx.mark_gpu_task_completed(t).unwrap();
+        let r = reference_image(&g, reference);
+        let inputs = vec![r; h.outputs.len()];
+        let full = u64::from(SIZE * SIZE);
+        h.frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
+        let (own, shared) = expected_denoiser_bytes(signal, full);
+        assert_eq!(
+            h.ctx.denoising_context_bytes(h.handle),
+            Ok(own),
+            "{signal:?}"
+        );
+        assert_eq!(h.ctx.resource_allocations().denoiser, own + shared);
+
+        // One traced pixel per 2×2: a quarter of the grid.
+        h.half_resolution_mode = HalfResolutionMode::OnePer2x2 { phase: 0 };
+        let used = h.submit_frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
+        let (quarter, quarter_shared) = expected_denoiser_bytes(signal, full / 4);
+        assert_eq!(h.ctx.denoising_context_bytes(h.handle), Ok(own + quarter));
+        h.ctx.mark_gpu_task_completed(used).unwrap();
+        h.frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
+        assert_eq!(h.ctx.denoising_context_bytes(h.handle), Ok(quarter));
+        assert_eq!(
+            h.ctx.resource_allocations().denoiser,
+            quarter + quarter_shared,
+            "{signal:?}: the full-size buffers are released"
+        );
+
+        let used = h.submit_frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
+        h.ctx.destroy_denoising_context_handle(h.handle).unwrap();
+        // The task that used it is still in flight: the memory stays.
+        let t2 = build_empty(&h.ctx);
+        assert_eq!(
+            h.ctx.resource_allocations().denoiser,
+            quarter + quarter_shared
+        );
+        h.ctx.mark_gpu_task_completed(used).unwrap();
+        h.ctx.mark_gpu_task_completed(t2).unwrap();
+        let t3 = build_empty(&h.ctx);
+        assert_eq!(h.ctx.resource_allocations().denoiser, 0, "{signal:?}");
+        h.ctx.mark_gpu_task_completed(t3).unwrap();
+    }
 }
 
 #[test]

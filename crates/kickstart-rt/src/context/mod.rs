@@ -350,6 +350,15 @@ impl ExecuteContext {
         a
     }
 
+    /// GPU bytes of one denoising context: its guides and signal histories, sized for the grid
+    /// of its last frame (0 before its first frame). The filter intermediate all contexts share
+    /// is not in it (see [`ResourceAllocations::denoiser`]).
+    pub fn denoising_context_bytes(&self, handle: DenoisingContextHandle) -> Result<u64> {
+        let s = self.state();
+        s.denoisers.get(handle)?;
+        Ok(s.effects.denoisers.context_bytes(&handle))
+    }
+
     /// An instance's lighting cache as the GPU allocated it: `None` until the allocating task has
     /// been marked complete and its log has been read back (asynchronously: a later call after a
     /// device poll sees it), or while the instance waits for its geometry's BLAS.

@@ -22,6 +22,7 @@ use std::collections::HashMap;
 use bytemuck::{Pod, Zeroable};
 
 use super::history::{self, Histories, History};
+use super::scratch::Scratch;
 use super::signal::{wgsl_format, Kind, SignalSet};
 use crate::gpu::buffers::placeholder_texture;
 use crate::gpu::reflect::{ReflectedLayout, ShaderReflection};
@@ -475,16 +476,12 @@ impl Filter {
 
     /// Follows the live contexts: creates the history of new ones it serves, retires destroyed
     /// ones.
-    pub fn sync(
-        &mut self,
-        device: &wgpu::Device,
-        live: &[(DenoisingContextHandle, DenoisingContextInput)],
-    ) {
+    pub fn sync(&mut self, live: &[(DenoisingContextHandle, DenoisingContextInput)]) {
         let served = self.signal_types;
         let live = live
             .iter()
             .filter(move |(_, input)| served.contains(&input.signal_type));
-        self.histories.sync(device, live);
+        self.histories.sync(live);
     }
 
     /// Retires the histories of destroyed contexts (those not in `live`), creating nothing.
@@ -495,6 +492,16 @@ impl Filter {
     /// Releases retired histories whose last task is older than `oldest_in_flight`.
     pub fn collect(&mut self, oldest_in_flight: u64) {
         self.histories.collect(oldest_in_flight);
+    }
+
+    /// GPU bytes of a live context it serves (see [`Histories::context_bytes`]).
+    pub fn context_bytes(&self, context: &DenoisingContextHandle) -> Option<u64> {
+        self.histories.context_bytes(context)
+    }
+
+    /// Bytes of the largest signal buffer of a context it serves.
+    pub fn largest_signal_buffer(&self) -> u64 {
+        self.histories.largest_signal_buffer()
     }
 
     /// GPU bytes of its histories (live and not yet released).
@@ -522,7 +529,13 @@ impl Filter {
 
     /// Records one frame of a validated denoise task of this denoiser (its context has a
     /// history after `sync`; a context without one records nothing).
-    pub fn record(&mut self, rec: &mut Recorder<'_>, shared: &Shared, job: &Job<'_>, serial: u64) {
+    pub fn record(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        (shared, scratch): (&Shared, &mut Scratch),
+        job: &Job<'_>,
+        serial: u64,
+    ) {
         let Some(h) = self.histories.get_mut(&job.common.context) else {
             return;
         };
@@ -532,19 +545,28 @@ impl Filter {
         let Some(chains) = self.pipelines.chains(device, shared, set, job) else {
             return; // unreachable: validation admits writable formats only
         };
-        record_frame(rec, shared, h, job, &temporal, &chains, serial);
+        let passes = Passes {
+            temporal: &temporal,
+            chains: &chains,
+        };
+        record_frame(rec, (shared, scratch), h, job, &passes, serial);
     }
+}
+
+/// The pipelines of one frame of a context: its temporal pass and its signals' à-trous chains.
+struct Passes<'a> {
+    temporal: &'a wgpu::ComputePipeline,
+    chains: &'a [Chain],
 }
 
 /// Records one frame of `job` on its context's history `h`: the temporal pass, then each
 /// signal's à-trous chain; then advances the history.
 fn record_frame(
     rec: &mut Recorder<'_>,
-    shared: &Shared,
+    (shared, scratch): (&Shared, &mut Scratch),
     h: &mut History,
     job: &Job<'_>,
-    temporal: &wgpu::ComputePipeline,
-    chains: &[Chain],
+    passes: &Passes<'_>,
     serial: u64,
 ) {
     let c = job.common;
@@ -552,14 +574,23 @@ fn record_frame(
     let mut inputs = GBufferInputs::of_denoise(c, job.inputs[0]);
     inputs.viewport = resolve_viewport(c.viewport, job.inputs[0].texture().size());
     let vp = inputs.viewport;
-    let (params, motion_texture) = frame_params(shared, h, job, vp, settings);
+    let (grid_w, grid_h) = grid_size(vp, c.half_resolution_mode);
+    let pixels = u64::from(grid_w) * u64::from(grid_h);
+    let scratch_bytes = pixels * history::signal_record_bytes(h.input.signal_type);
+    let (own, fresh) = h.buffers_for(rec.device, pixels);
+    let buffers = BufferSet {
+        guides: own.guides.clone(),
+        history: own.history.clone(),
+        scratch: scratch.get(rec.device, scratch_bytes, serial),
+    };
+    let (params, motion_texture) = frame_params(shared, h, job, (vp, fresh), settings);
     let params = rec.uniform("kickstart-rt denoise params", &params);
     let gb_params = rec.uniform("kickstart-rt denoise g-buffer", &inputs.params());
-    let (grid_w, grid_h) = grid_size(vp, c.half_resolution_mode);
     let frame = Frame {
         params: &params,
         groups: (grid_w.div_ceil(TILE), grid_h.div_ceil(TILE)),
         cur: (h.frame % 2) as usize,
+        buffers: &buffers,
     };
 
     let previous_scope = rec.scope;
@@ -570,19 +601,19 @@ fn record_frame(
         gbuffer_params: &gb_params,
         motion: &motion_texture,
     };
-    record_temporal(rec, shared, h, job, &frame, &temporal_inputs, temporal);
-    // 2. À-trous iterations, per signal: history → temp[0] → temp[1] → … → the output texture
-    // (the last iteration writes it; in a block mode the upsample pass does, from the grid).
+    record_temporal(rec, shared, job, &frame, &temporal_inputs, passes.temporal);
+    // 2. À-trous iterations, per signal: history → the previous frame's history → the shared
+    // scratch → … → the output texture (the last iteration writes it; in a block mode the
+    // upsample pass does, from the grid).
     let upsample = (c.half_resolution_mode.block_size() > 1).then(|| UpsampleInputs {
         gbuffer: &inputs,
         gbuffer_params: &gb_params,
         viewport_groups: (vp.width.div_ceil(TILE), vp.height.div_ceil(TILE)),
     });
-    for chain in chains {
+    for chain in passes.chains {
         record_atrous(
             rec,
             shared,
-            h,
             job,
             &frame,
             chain,
@@ -607,6 +638,16 @@ struct Frame<'a> {
     groups: (u32, u32),
     /// The current frame's buffers (by frame parity); `1 - cur` are the previous frame's.
     cur: usize,
+    buffers: &'a BufferSet,
+}
+
+/// The buffers one frame of a context binds: its own guides and histories, and the shared
+/// à-trous scratch.
+struct BufferSet {
+    guides: [wgpu::Buffer; 2],
+    /// `history[parity][signal]`.
+    history: [Vec<wgpu::Buffer>; 2],
+    scratch: wgpu::Buffer,
 }
 
 /// What the temporal pass reads besides the signal: the G-buffer and the motion vectors (or a
@@ -619,12 +660,12 @@ struct TemporalInputs<'a> {
 
 /// The frame's `DenoiseParams` and the motion texture to bind (a placeholder without motion
 /// vectors). The history starts over on `DenoiseMode::DiscardHistory`, on the context's first
-/// frame and when the viewport changes size.
+/// frame, when the viewport changes size and when its buffers were just allocated (`fresh`).
 fn frame_params(
     shared: &Shared,
     h: &History,
     job: &Job<'_>,
-    vp: Viewport,
+    (vp, fresh): (Viewport, bool),
     settings: MethodSettings,
 ) -> (DenoiseParams, TextureInput) {
     let c = job.common;
@@ -633,7 +674,8 @@ fn frame_params(
         .is_some_and(|l| l.width != vp.width || l.height != vp.height);
     let mode = c.half_resolution_mode;
     let regridded = h.prev_mode.block_size() != mode.block_size();
-    let discard = c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized || regridded;
+    let discard =
+        c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized || regridded || fresh;
     let (grid_w, grid_h) = grid_size(vp, mode);
     let (x, y) = mode.traced_pixel();
     let (prev_x, prev_y) = h.prev_mode.traced_pixel();
@@ -695,7 +737,6 @@ fn grid_size(vp: Viewport, mode: HalfResolutionMode) -> (u32, u32) {
 fn record_temporal(
     rec: &mut Recorder<'_>,
     shared: &Shared,
-    h: &History,
     job: &Job<'_>,
     frame: &Frame<'_>,
     inputs: &TemporalInputs<'_>,
@@ -726,16 +767,17 @@ fn record_temporal(
             ("dn_input1", view(&input1)),
         ],
     );
-    let hist_prev1 = second(&h.history[prv], false);
-    let hist_cur1 = second(&h.history[cur], true);
+    let b = frame.buffers;
+    let hist_prev1 = second(&b.history[prv], false);
+    let hist_cur1 = second(&b.history[cur], true);
     let g2 = shared.temporal_buffers.bind_group(
         device,
         &[
-            ("guide_prev", h.guides[prv].as_entire_binding()),
-            ("guide_cur", h.guides[cur].as_entire_binding()),
-            ("hist_prev0", h.history[prv][0].as_entire_binding()),
+            ("guide_prev", b.guides[prv].as_entire_binding()),
+            ("guide_cur", b.guides[cur].as_entire_binding()),
+            ("hist_prev0", b.history[prv][0].as_entire_binding()),
             ("hist_prev1", hist_prev1.as_entire_binding()),
-            ("hist_cur0", h.history[cur][0].as_entire_binding()),
+            ("hist_cur0", b.history[cur][0].as_entire_binding()),
             ("hist_cur1", hist_cur1.as_entire_binding()),
         ],
     );
@@ -757,7 +799,6 @@ struct UpsampleInputs<'a> {
 fn record_atrous(
     rec: &mut Recorder<'_>,
     shared: &Shared,
-    h: &History,
     job: &Job<'_>,
     frame: &Frame<'_>,
     chain: &Chain,
@@ -774,9 +815,12 @@ fn record_atrous(
             wgpu::BindingResource::TextureView(job.outputs[s]),
         )],
     );
-    let mut src = h.history[frame.cur][s].clone();
+    let b = frame.buffers;
+    // The previous frame's history is dead once the temporal pass has read it.
+    let ping_pong = [b.history[1 - frame.cur][s].clone(), b.scratch.clone()];
+    let mut src = b.history[frame.cur][s].clone();
     for it in 0..iterations {
-        let dst = h.temp[(it % 2) as usize][s].clone();
+        let dst = ping_pong[(it % 2) as usize].clone();
         let step = rec.uniform(
             "kickstart-rt denoise a-trous step",
             &StepParams {
@@ -795,7 +839,7 @@ fn record_atrous(
         let a1 = shared.atrous_buffers.bind_group(
             device,
             &[
-                ("guide", h.guides[frame.cur].as_entire_binding()),
+                ("guide", b.guides[frame.cur].as_entire_binding()),
                 ("src0", src.as_entire_binding()),
                 ("src1", read_placeholder.as_entire_binding()),
                 ("dst0", dst.as_entire_binding()),
@@ -822,7 +866,7 @@ fn record_atrous(
             device,
             &[
                 ("dp", frame.params.as_entire_binding()),
-                ("guide", h.guides[frame.cur].as_entire_binding()),
+                ("guide", b.guides[frame.cur].as_entire_binding()),
                 ("src0", src.as_entire_binding()),
             ],
         );

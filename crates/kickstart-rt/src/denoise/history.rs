@@ -1,8 +1,10 @@
-//! The GPU memory of one denoising context: guides, history and filter intermediates, sized by
-//! the context's maximum resolution. Guides hold 16 bytes per pixel, a signal's history and
-//! intermediates 16 (radiance) or 8 (occlusion, shadows) bytes per pixel (see
-//! `shaders/denoise/common.wgsl` and the record files); a signal's buffers are separate so that
-//! each binding stays under WebGPU's default 128 MiB binding limit up to 4K.
+//! The GPU memory of one denoising context: its guides and signal histories, allocated by its
+//! first frame for that frame's grid (the viewport, or one pixel per block in a block mode) and
+//! reallocated when the grid changes size. Guides hold 16 bytes per pixel, a signal's history
+//! 16 (radiance) or 8 (occlusion, shadows) bytes per pixel (see `shaders/denoise/common.wgsl`
+//! and the record files); a signal's buffers are separate so that each binding stays under
+//! WebGPU's default 128 MiB binding limit up to 4K. The filter's intermediates are not a
+//! context's: see [`super::scratch`].
 
 use std::collections::HashMap;
 
@@ -34,20 +36,70 @@ pub(crate) fn buffer_bytes(input: &DenoisingContextInput) -> u64 {
     input.max_width as u64 * input.max_height as u64 * RECORD_BYTES
 }
 
-/// Bytes of one signal buffer (history, intermediate) of a context of `input`'s size.
-fn signal_buffer_bytes(input: &DenoisingContextInput) -> u64 {
-    input.max_width as u64 * input.max_height as u64 * signal_record_bytes(input.signal_type)
+/// The buffers of one context, sized for `pixels` grid pixels: the guides of this and the
+/// previous frame (by frame parity, [`RECORD_BYTES`] per pixel each) and, per signal, the
+/// accumulated signal of this and the previous frame ([`signal_record_bytes`] per pixel each).
+/// The previous frame's signal buffer is dead once the temporal pass has read it, so the à-trous
+/// iterations use it as one of their two ping-pong buffers (the other is the denoisers' shared
+/// [`super::scratch::Scratch`]).
+pub(crate) struct HistoryBuffers {
+    /// Grid pixels each buffer holds.
+    pub pixels: u64,
+    pub guides: [wgpu::Buffer; 2],
+    /// `history[parity][signal]`.
+    pub history: [Vec<wgpu::Buffer>; 2],
+}
+
+impl HistoryBuffers {
+    fn new(device: &wgpu::Device, signal_type: SignalType, pixels: u64) -> Self {
+        let buffer = |label: &str, size: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
+        let signal_size = pixels * signal_record_bytes(signal_type);
+        let set = || {
+            (0..signal_count(signal_type))
+                .map(|_| buffer("kickstart-rt denoiser history", signal_size))
+                .collect::<Vec<_>>()
+        };
+        let guide_size = pixels * RECORD_BYTES;
+        HistoryBuffers {
+            pixels,
+            guides: [
+                buffer("kickstart-rt denoiser guide", guide_size),
+                buffer("kickstart-rt denoiser guide", guide_size),
+            ],
+            history: [set(), set()],
+        }
+    }
+
+    /// GPU bytes held: [`history_bytes`] of its size.
+    fn bytes(&self, signal_type: SignalType) -> u64 {
+        history_bytes(signal_type, self.pixels)
+    }
+}
+
+/// Bytes a context of `signal_type` holds for a grid of `pixels`: two guides of
+/// [`RECORD_BYTES`] and, per signal, two records of [`signal_record_bytes`], per pixel.
+pub(crate) fn history_bytes(signal_type: SignalType, pixels: u64) -> u64 {
+    let per_pixel =
+        2 * RECORD_BYTES + 2 * signal_count(signal_type) as u64 * signal_record_bytes(signal_type);
+    pixels * per_pixel
 }
 
 /// One context's buffers and the state carried between its frames.
 pub(crate) struct History {
     pub input: DenoisingContextInput,
-    /// This and the previous frame's guide, by frame parity.
-    pub guides: [wgpu::Buffer; 2],
-    /// `history[parity][signal]`: the accumulated signal of this and the previous frame.
-    pub history: [Vec<wgpu::Buffer>; 2],
-    /// `temp[k][signal]`: à-trous ping-pong buffers.
-    pub temp: [Vec<wgpu::Buffer>; 2],
+    /// Allocated by the first frame, for its grid (the viewport, or one pixel per block in a
+    /// block mode); `None` before.
+    buffers: Option<HistoryBuffers>,
+    /// Buffers replaced by larger or smaller ones, kept until no in-flight task uses them
+    /// (`last_used` is their last task).
+    replaced: Vec<(HistoryBuffers, u64)>,
     /// Frames recorded (the parity picks the current buffers).
     pub frame: u64,
     /// The viewport of the last frame: another size invalidates the history (its rows no longer
@@ -63,39 +115,12 @@ pub(crate) struct History {
 }
 
 impl History {
-    /// Allocates the buffers of a context (contents undefined until the first frame, which
-    /// starts without history).
-    pub fn new(device: &wgpu::Device, input: DenoisingContextInput) -> Self {
-        let buffer = |label: &str, size: u64| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            })
-        };
-        let n = signal_count(input.signal_type);
-        let signal_size = signal_buffer_bytes(&input);
-        let set = |label: &str| {
-            (0..n)
-                .map(|_| buffer(label, signal_size))
-                .collect::<Vec<_>>()
-        };
-        let guide_size = buffer_bytes(&input);
+    /// A context's state before its first frame: no GPU memory yet.
+    pub fn new(input: DenoisingContextInput) -> Self {
         History {
             input,
-            guides: [
-                buffer("kickstart-rt denoiser guide", guide_size),
-                buffer("kickstart-rt denoiser guide", guide_size),
-            ],
-            history: [
-                set("kickstart-rt denoiser history"),
-                set("kickstart-rt denoiser history"),
-            ],
-            temp: [
-                set("kickstart-rt denoiser intermediate"),
-                set("kickstart-rt denoiser intermediate"),
-            ],
+            buffers: None,
+            replaced: Vec::new(),
             frame: 0,
             last_viewport: None,
             prev_jitter: glam::Vec2::ZERO,
@@ -104,10 +129,47 @@ impl History {
         }
     }
 
-    /// GPU bytes held.
+    /// The buffers for a frame on a grid of `pixels`, and whether they were just allocated
+    /// (contents undefined: the frame starts its history over). The buffers follow the grid:
+    /// a larger grid gets larger ones, and one at most a quarter of the current size (a block
+    /// mode after full rate, a smaller viewport) gets smaller ones; a grid of another size
+    /// starts the history over anyway.
+    pub fn buffers_for(&mut self, device: &wgpu::Device, pixels: u64) -> (&HistoryBuffers, bool) {
+        let fits = |b: &HistoryBuffers| pixels <= b.pixels && pixels.saturating_mul(4) > b.pixels;
+        let (buffers, fresh) = match self.buffers.take() {
+            Some(b) if fits(&b) => (b, false),
+            old => {
+                if let Some(old) = old {
+                    self.replaced.push((old, self.last_used));
+                }
+                let t = self.input.signal_type;
+                (HistoryBuffers::new(device, t, pixels.max(1)), true)
+            }
+        };
+        (self.buffers.insert(buffers), fresh)
+    }
+
+    /// Releases replaced buffers whose last task is older than `oldest_in_flight`.
+    fn collect(&mut self, oldest_in_flight: u64) {
+        self.replaced.retain(|(_, last)| *last >= oldest_in_flight);
+    }
+
+    /// GPU bytes held (current and replaced buffers).
     pub fn bytes(&self) -> u64 {
-        let n = signal_count(self.input.signal_type) as u64;
-        buffer_bytes(&self.input) * 2 + signal_buffer_bytes(&self.input) * 4 * n
+        let t = self.input.signal_type;
+        self.buffers
+            .iter()
+            .chain(self.replaced.iter().map(|(b, _)| b))
+            .map(|b| b.bytes(t))
+            .sum()
+    }
+
+    /// Bytes of the largest signal buffer of its current buffers (what its à-trous chain needs
+    /// of the shared scratch).
+    pub fn signal_buffer_bytes(&self) -> u64 {
+        self.buffers.as_ref().map_or(0, |b| {
+            b.pixels * signal_record_bytes(self.input.signal_type)
+        })
     }
 }
 
@@ -124,13 +186,12 @@ impl Histories {
     /// retires destroyed ones.
     pub fn sync<'a>(
         &mut self,
-        device: &wgpu::Device,
         live: impl Iterator<Item = &'a (DenoisingContextHandle, DenoisingContextInput)> + Clone,
     ) {
         self.retire_destroyed(live.clone().map(|(h, _)| *h));
         for (h, input) in live {
             if !self.live.contains_key(h) {
-                self.live.insert(*h, History::new(device, *input));
+                self.live.insert(*h, History::new(*input));
             }
         }
     }
@@ -150,14 +211,33 @@ impl Histories {
         }
     }
 
+    /// GPU bytes of a live context (0 before its first frame); `None` for a context this
+    /// denoiser does not serve.
+    pub fn context_bytes(&self, context: &DenoisingContextHandle) -> Option<u64> {
+        self.live.get(context).map(History::bytes)
+    }
+
     /// The history of a live context.
     pub fn get_mut(&mut self, context: &DenoisingContextHandle) -> Option<&mut History> {
         self.live.get_mut(context)
     }
 
-    /// Releases retired histories whose last task is older than `oldest_in_flight`.
+    /// Releases retired histories, and buffers the live ones replaced, whose last task is
+    /// older than `oldest_in_flight`.
     pub fn collect(&mut self, oldest_in_flight: u64) {
         self.retired.retain(|h| h.last_used >= oldest_in_flight);
+        for h in self.live.values_mut() {
+            h.collect(oldest_in_flight);
+        }
+    }
+
+    /// Bytes of the largest signal buffer of a live context (what the shared scratch must hold).
+    pub fn largest_signal_buffer(&self) -> u64 {
+        self.live
+            .values()
+            .map(History::signal_buffer_bytes)
+            .max()
+            .unwrap_or(0)
     }
 
     /// GPU bytes held (live and not yet released).

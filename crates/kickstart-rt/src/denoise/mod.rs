@@ -8,9 +8,10 @@
 //! ([`route`]).
 //!
 //! History lives in SDK-owned storage buffers (16 or 8 bytes per pixel and buffer; see
-//! [`history::History`]), created in the first `build_gpu_task` after the handle is created,
-//! released lazily after destruction once no in-flight task uses it, and counted as
-//! [`crate::ResourceAllocations::denoiser`]. A viewport of another size than the previous
+//! [`history::History`]), created by a context's first frame for that frame's grid (a block
+//! mode's grid holds a quarter or a sixteenth of the pixels), released lazily after destruction
+//! once no in-flight task uses it, and counted as [`crate::ResourceAllocations::denoiser`]. The
+//! filters' intermediate is one buffer every context shares ([`scratch`]). A viewport of another size than the previous
 //! frame's starts the history over, as does [`crate::DenoiseMode::DiscardHistory`].
 //!
 //! Input and output may be the same texture: no pass reads the input and writes the output.
@@ -20,6 +21,7 @@ pub(crate) use filter::shader_variants;
 pub(crate) mod history;
 mod occlusion;
 mod radiance;
+mod scratch;
 mod shadow;
 mod signal;
 
@@ -29,6 +31,7 @@ use crate::handles::DenoisingContextHandle;
 use crate::tasks::{DenoisingContextInput, RenderTask};
 use crate::trace::gbuffer::resolve_viewport;
 use filter::{Filter, Job, Shared};
+use scratch::Scratch;
 
 /// The denoisers.
 #[derive(Debug, Clone, Copy)]
@@ -121,6 +124,8 @@ pub(crate) struct Denoisers {
     device: wgpu::Device,
     /// Created on first use.
     shared: Option<Shared>,
+    /// The à-trous intermediate every context shares.
+    scratch: Scratch,
     radiance: Filter,
     occlusion: Filter,
     shadow: Filter,
@@ -132,6 +137,7 @@ impl Denoisers {
         Denoisers {
             device: device.clone(),
             shared: None,
+            scratch: Scratch::default(),
             radiance: radiance::new(),
             occlusion: occlusion::new(),
             shadow: shadow::new(),
@@ -152,11 +158,11 @@ impl Denoisers {
         self.shared = Some(shared);
     }
 
-    /// Follows the live contexts: creates the history of new ones, retires destroyed ones.
+    /// Follows the live contexts: starts the history of new ones (their memory comes with
+    /// their first frame), retires destroyed ones.
     pub fn sync(&mut self, live: &[(DenoisingContextHandle, DenoisingContextInput)]) {
-        let device = self.device.clone();
         for denoiser in self.all() {
-            denoiser.sync(&device, live);
+            denoiser.sync(live);
         }
     }
 
@@ -168,19 +174,42 @@ impl Denoisers {
         }
     }
 
-    /// Releases retired histories whose last task is older than `oldest_in_flight`.
+    /// Releases retired histories whose last task is older than `oldest_in_flight`, and the
+    /// shared intermediate when no live context needs it at its size.
     pub fn collect(&mut self, oldest_in_flight: u64) {
         for denoiser in self.all() {
             denoiser.collect(oldest_in_flight);
         }
+        let needed = self.filters().map(Filter::largest_signal_buffer).max();
+        self.scratch.collect(oldest_in_flight, needed.unwrap_or(0));
     }
 
-    /// GPU bytes held (live and not yet released).
+    fn filters(&self) -> impl Iterator<Item = &Filter> {
+        [&self.radiance, &self.occlusion, &self.shadow].into_iter()
+    }
+
+    /// GPU bytes held (live and not yet released): [`Self::history_bytes`] and
+    /// [`Self::intermediate_bytes`].
     pub fn bytes(&self) -> u64 {
-        [&self.radiance, &self.occlusion, &self.shadow]
-            .iter()
-            .map(|d| d.bytes())
-            .sum()
+        self.history_bytes() + self.intermediate_bytes()
+    }
+
+    /// GPU bytes of the contexts' guides and histories.
+    pub fn history_bytes(&self) -> u64 {
+        self.filters().map(Filter::bytes).sum()
+    }
+
+    /// GPU bytes of one live context's guides and histories (0 before its first frame, or for
+    /// a context no `build_gpu_task` has seen yet).
+    pub fn context_bytes(&self, context: &DenoisingContextHandle) -> u64 {
+        self.filters()
+            .find_map(|f| f.context_bytes(context))
+            .unwrap_or(0)
+    }
+
+    /// GPU bytes of the intermediate the contexts share.
+    pub fn intermediate_bytes(&self) -> u64 {
+        self.scratch.bytes()
     }
 
     /// Records a validated denoise task ([`route`]d, `check_task` passed; its context has a
@@ -189,11 +218,12 @@ impl Denoisers {
         let (denoiser, job) = (routed.denoiser, &routed.job);
         let device = &self.device;
         let shared = self.shared.get_or_insert_with(|| Shared::new(device));
+        let scratch = &mut self.scratch;
         let denoiser = match denoiser {
             Denoiser::Radiance => &mut self.radiance,
             Denoiser::Occlusion => &mut self.occlusion,
             Denoiser::Shadow => &mut self.shadow,
         };
-        denoiser.record(rec, shared, job, serial);
+        denoiser.record(rec, (shared, scratch), job, serial);
     }
 }
