@@ -129,9 +129,14 @@ struct RenderCli {
     /// Only the lit images: no CPU reference image and no debug views (benchmark runs).
     #[arg(long)]
     no_reference: bool,
-    /// Also write the SDK pass timings (medians of the last frames) as JSON to this file.
+    /// Also write the SDK pass timings (medians of the last frames) and its memory peak as JSON
+    /// to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Also write the SDK's memory at its peak over the frames, by kind and by denoising
+    /// context, as CSV (`kind,bytes`) to this file.
+    #[arg(long)]
+    memory_csv: Option<PathBuf>,
     /// Frames the CPU may record ahead of the GPU, 1..=3 (1: wait for each frame before
     /// recording the next). Each frame's CPU time of `build_gpu_task` and its wait for the
     /// frame N back are printed and in --json.
@@ -305,6 +310,7 @@ fn run(command: Command) -> AnyResult<()> {
             hdr: c.hdr,
             no_reference: c.no_reference,
             json: c.json,
+            memory_csv: c.memory_csv,
             frames_in_flight: c.frames_in_flight,
             preset: c.preset,
         }),
@@ -371,6 +377,7 @@ const LAYERS: &[&[&str]] = &[
         "app::progress",
         "app::timings",
         "app::gpu",
+        "app::memory",
     ],
     &["app::readback", "app::scenes", "app::frames"],
     &["app::frames_in_flight", "app::debug_view"],

@@ -251,7 +251,7 @@ pub struct SdkFrame {
     /// debug output type), or `None`.
     pub debug_view: Option<ksrt::DebugOutputType>,
     size: (u32, u32),
-    denoisers: std::collections::HashMap<u8, ksrt::DenoisingContextHandle>,
+    denoisers: std::collections::HashMap<u8, (ksrt::SignalType, ksrt::DenoisingContextHandle)>,
     shadow_light: Option<ksrt::LightInfo>,
     /// The trace inputs of the last frame, for the debug view's task.
     debug_common: Option<ksrt::TraceTaskCommon>,
@@ -433,9 +433,17 @@ impl SdkFrame {
         }
     }
 
+    /// The denoising contexts created so far (one per signal type the frames denoised), by
+    /// signal type.
+    pub fn denoising_contexts(&self) -> Vec<(ksrt::SignalType, ksrt::DenoisingContextHandle)> {
+        let mut all: Vec<_> = self.denoisers.values().copied().collect();
+        all.sort_by_key(|(signal, _)| *signal as u8);
+        all
+    }
+
     fn denoiser(&mut self, signal: ksrt::SignalType) -> ksrt::Result<ksrt::DenoisingContextHandle> {
         let key = signal as u8;
-        if let Some(&h) = self.denoisers.get(&key) {
+        if let Some(&(_, h)) = self.denoisers.get(&key) {
             return Ok(h);
         }
         let h = self
@@ -446,7 +454,7 @@ impl SdkFrame {
                 signal_type: signal,
                 method: self.preset.denoising_method(),
             })?;
-        self.denoisers.insert(key, h);
+        self.denoisers.insert(key, (signal, h));
         Ok(h)
     }
 

@@ -231,6 +231,8 @@ pub struct LoopResult {
     /// GPU timings of the SDK's passes in each of the last `timed_frames` frames (when the
     /// renderer measures them), read after the final drain so that no read-back blocks the loop.
     pub timings: Vec<ksrt::GpuTimings>,
+    /// The SDK's memory at its peak over the frames (sampled after each frame is recorded).
+    pub memory: crate::app::memory::MemoryPeak,
 }
 
 /// How many frames the loop renders, and how.
@@ -264,6 +266,7 @@ pub fn run(
     let mut records: Vec<FrameRecord> = Vec::with_capacity(frames as usize);
     let mut timed = Vec::new();
     let mut starts = Vec::with_capacity(frames as usize);
+    let mut memory = crate::app::memory::MemoryPeak::default();
     for f in 0..frames {
         let start = Instant::now();
         starts.push(start);
@@ -291,6 +294,11 @@ pub fn run(
         let flag = done.clone();
         queue.on_submitted_work_done(move || flag.store(true, Ordering::Release));
         rec.submit_ms = t.elapsed().as_secs_f64() * 1e3;
+        memory.sample(
+            device,
+            &renderer.sdk.ctx,
+            &renderer.sdk.denoising_contexts(),
+        );
         if f + timed_frames >= frames {
             if let Some(&first) = tasks.first() {
                 timed.push(first);
@@ -321,7 +329,11 @@ pub fn run(
             Err(e) => log::debug!("no GPU timings: {e}"),
         }
     }
-    Ok(LoopResult { records, timings })
+    Ok(LoopResult {
+        records,
+        timings,
+        memory,
+    })
 }
 
 #[cfg(test)]

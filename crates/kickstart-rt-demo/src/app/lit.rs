@@ -67,8 +67,8 @@ pub struct LitResult {
     pub frames: Vec<crate::app::frames_in_flight::FrameRecord>,
     /// Each of [`LitOptions::debug_views`] with its texels, in the order asked.
     pub debug: Vec<(DebugView, Texels)>,
-    /// The SDK's GPU memory after the last frame, bytes.
-    pub sdk_bytes: u64,
+    /// The SDK's GPU memory at its peak over the frames.
+    pub memory: crate::app::memory::MemoryPeak,
     /// The traversal backend the SDK traced with, and why.
     pub backend: kickstart_rt::BackendReport,
 }
@@ -133,7 +133,7 @@ pub fn render(
         timings: looped.timings,
         frames: looped.records,
         debug,
-        sdk_bytes: renderer.sdk.ctx.resource_allocations().total(),
+        memory: looped.memory,
         backend: renderer.sdk.ctx.traversal_backend().clone(),
     })
 }

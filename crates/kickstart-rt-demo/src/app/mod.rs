@@ -3,7 +3,7 @@
 //! the GPU and reading textures back, images written as files, progress bars and the window.
 //!
 //! Layers, lowest first (checked by the crate's layering test):
-//! `args`, `defaults`, `progress`, `timings`, `gpu` → `readback`, `scenes`, `frames` →
+//! `args`, `defaults`, `progress`, `timings`, `gpu`, `memory` → `readback`, `scenes`, `frames` →
 //! `frames_in_flight`, `debug_view` → `lit`, `cpu_reference`, `shaders` → `render`, `view`.
 
 pub mod args;
@@ -14,6 +14,7 @@ pub mod frames;
 pub mod frames_in_flight;
 pub mod gpu;
 pub mod lit;
+pub mod memory;
 pub mod progress;
 pub mod readback;
 pub mod render;

@@ -36,6 +36,8 @@ pub struct RenderArgs {
     pub no_reference: bool,
     /// `--json FILE`.
     pub json: Option<PathBuf>,
+    /// `--memory-csv FILE`.
+    pub memory_csv: Option<PathBuf>,
     /// `--frames-in-flight N`.
     pub frames_in_flight: u32,
     /// `--preset`.
@@ -100,8 +102,19 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
         scene.meshes.len(),
         scene.instances.len(),
         scene.triangle_count(),
-        result.sdk_bytes
+        result.memory.total()
     );
+    print!(
+        "{}",
+        result.memory.breakdown(
+            u64::from(width) * u64::from(height),
+            scene.triangle_count() as u64
+        )
+    );
+    if let Some(path) = &args.memory_csv {
+        result.memory.write_csv(path)?;
+        println!("wrote {}", path.display());
+    }
     println!(
         "traversal backend: {} ({})",
         result.backend.backend, result.backend.reason
@@ -188,6 +201,7 @@ fn report(
         value["frames_in_flight"] = serde_json::json!({"summary": fif, "frames": result.frames});
         value["preset"] = serde_json::json!(args.preset.name());
         value["traversal_backend"] = serde_json::json!(result.backend.backend.to_string());
+        value["memory"] = result.memory.json();
         std::fs::write(path, serde_json::to_string_pretty(&value)?)
             .map_err(|e| format!("--json {}: {e}", path.display()))?;
         println!("wrote {}", path.display());

@@ -122,7 +122,7 @@ fn hdr_channels_are_written_as_linear_exr() {
         timings: vec![],
         frames: vec![],
         debug: vec![],
-        sdk_bytes: 0,
+        memory: Default::default(),
         backend: kickstart_rt::BackendReport {
             backend: kickstart_rt::TraversalBackend::Software,
             reason: "test".into(),
