@@ -7,7 +7,7 @@ mod common;
 
 use common::cache as lc;
 use common::denoise as dn;
-use common::rt::{closest, mesh_input, ray, schedule_mesh, Mesh, Rng};
+use common::rt::{closest, compare, mesh_input, ray, schedule_mesh, Mesh, Rng};
 use common::*;
 use glam::{Affine3A, Vec3, Vec4};
 use kickstart_rt::*;
@@ -145,7 +145,10 @@ fn destroying_every_handle_refuses_them_frees_their_memory_and_new_ones_work() {
         "two triangles a quad: {held:?}"
     );
     assert!(held.blas > before.blas, "{held:?} vs {before:?}");
-    assert!(held.denoiser > before.denoiser, "{held:?} vs {before:?}");
+    assert_eq!(
+        held.denoiser, before.denoiser,
+        "a denoising context's memory comes with its first frame: {held:?}"
+    );
 
     ctx.destroy_all_geometry_handles();
     ctx.destroy_all_instance_handles();
@@ -804,27 +807,28 @@ fn denoiser_with_one_texture_as_input_and_output_matches_separate_textures() {
 /// retired only by the next build).
 #[test]
 fn releasing_right_after_destroying_a_denoiser_frees_its_history() {
-    let ctx = context(2);
+    let h = dn::Harness::new(SignalType::Diffuse, DenoisingMethod::Fast);
+    let ctx = &h.ctx;
     let before = ctx.resource_allocations();
-    let d = ctx
-        .create_denoising_context_handle(DenoisingContextInput {
-            max_width: 32,
-            max_height: 32,
-            signal_type: SignalType::Diffuse,
-            method: DenoisingMethod::Fast,
-        })
-        .unwrap_or_else(|e| panic!("denoising context: {e}"));
-    // The next build creates the context's history.
-    build_submit_complete(&ctx, ctx.create_task_container());
+    // The context's first frame creates its history.
+    let eye = Vec3::new(0.0, 1.0, 4.0);
+    let g = dn::gbuffer(eye, Vec3::ZERO, eye, Vec3::ZERO);
+    let reference = dn::reference_image(&g, dn::reference);
+    h.frame(
+        &g,
+        &[reference],
+        dn::Motion::Matrices,
+        DenoiseMode::Continue,
+    );
     let held = ctx.resource_allocations();
     assert!(held.denoiser > before.denoiser, "{held:?} vs {before:?}");
-    ctx.destroy_denoising_context_handle(d)
+    ctx.destroy_denoising_context_handle(h.handle)
         .unwrap_or_else(|e| panic!("destroy: {e}"));
     ctx.release_device_resources_immediately()
         .unwrap_or_else(|e| panic!("release: {e}"));
     let after = ctx.resource_allocations();
     assert_eq!(after.denoiser, before.denoiser, "{after:?}");
-    // A context created since but not yet used by a build gets no history from the release.
+    // A context created since but not yet used by a frame gets no memory from the release.
     let _unused = ctx
         .create_denoising_context_handle(DenoisingContextInput {
             max_width: 32,
@@ -936,4 +940,122 @@ fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
             "the driver's BLASes stayed: {held1:?} → {after1:?}"
         );
     }
+}
+
+/// Schedules a closest-hit trace of `rays` into `c`; returns the hit buffer to read once the
+/// container's task completed.
+fn schedule_trace(c: &mut TaskContainer, rays: &[GpuRay]) -> wgpu::Buffer {
+    let rb = buffer(bytemuck::cast_slice(rays), wgpu::BufferUsages::STORAGE);
+    let hb = gpu().device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("hits"),
+        size: rays.len() as u64 * 32,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask::new(
+        rb,
+        rays.len() as u32,
+        hb.clone(),
+    )));
+    hb
+}
+
+/// Once a scene's builds are done, the next GPU task gives back what only builds use: the
+/// build scratch, the vertex copies' pool and the BLAS pools' free space (their ranges in use
+/// moved into smaller buffers). Rays traced after hit exactly what they hit before, and agree
+/// with the CPU oracle, on either backend.
+#[test]
+fn build_memory_is_given_back_once_builds_are_done_and_traces_stay_the_same() {
+    let ctx = context(2);
+    let mut rng = Rng(fuzz_seed("build memory", 0x5eed_b17d));
+    let mut oracle = common::rt::Oracle::default();
+    let mut c = ctx.create_task_container();
+    for k in 0..6 {
+        let m = Mesh::soup(&mut rng, 400 + 150 * k, 3.0);
+        let g = ctx.create_geometry_handle();
+        schedule_mesh(&mut c, g, "soup", &m);
+        oracle.geometry(g, &m);
+        let i = ctx.create_instance_handle();
+        let input = InstanceInput::new(
+            g,
+            Affine3A::from_translation(Vec3::new(4.0 * k as f32, 0.0, 0.0)),
+        );
+        oracle.instance(i, &input);
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: i,
+            input,
+        });
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 64,
+        ..Default::default()
+    });
+    let rays: Vec<GpuRay> = (0..4000)
+        .map(|_| {
+            // From inside one of the soups.
+            let k = rng.below(6) as f32;
+            let o = Vec3::new(4.0 * k, 0.0, 0.0) + rng.v(0.0, 3.0);
+            ray(o, rng.unit(), 0.0, 100.0)
+        })
+        .collect();
+    // Traced in the building task: before anything is given back.
+    let before_hits = schedule_trace(&mut c, &rays);
+    build_submit_complete(&ctx, c);
+    let built = ctx.resource_allocations();
+    let before: Vec<GpuHit> = bytemuck::pod_collect_to_vec(&read_buffer(&before_hits));
+
+    let after = closest(&ctx, &rays);
+    let quiet = ctx.resource_allocations();
+    assert_eq!(quiet.vertex_copies, 0, "{quiet:?}");
+    assert_eq!(
+        quiet.blas, built.blas,
+        "the BLASes stay: {quiet:?} vs {built:?}"
+    );
+    assert!(
+        quiet.scratch * 4 < built.scratch,
+        "build scratch kept: {quiet:?} vs {built:?}"
+    );
+    // Only the last element's rounding is left of each pool (at most one 256-byte buffer or
+    // the 16-element minimum each).
+    assert!(
+        quiet.pool_reserve <= 5 * 16 * 64,
+        "pool space kept: {quiet:?} vs {built:?}"
+    );
+    let hit = before.iter().filter(|h| h.is_hit()).count();
+    assert!(hit > 800, "{hit} of {} rays hit", rays.len());
+    common::rt::assert_agrees(&compare(&oracle, &rays, &before, 0xff), "before the move");
+    let differ: Vec<usize> = (0..rays.len()).filter(|&k| after[k] != before[k]).collect();
+    if let Some(&k) = differ.first() {
+        panic!(
+            "{} of {} rays trace differently after the BLASes moved, e.g. ray {k}: {:?} then {:?}",
+            differ.len(),
+            rays.len(),
+            before[k],
+            after[k]
+        );
+    }
+    common::rt::assert_agrees(&compare(&oracle, &rays, &after, 0xff), "after the move");
+
+    // The next build allocates again and still traces right.
+    let m = Mesh::soup(&mut rng, 300, 3.0);
+    let g = ctx.create_geometry_handle();
+    let i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    schedule_mesh(&mut c, g, "late soup", &m);
+    let input = InstanceInput::new(g, Affine3A::from_translation(Vec3::new(0.0, 6.0, 0.0)));
+    oracle.geometry(g, &m);
+    oracle.instance(i, &input);
+    c.schedule_bvh_task(InstanceTask {
+        operation: TaskOperation::Register,
+        handle: i,
+        input,
+    });
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let rays: Vec<GpuRay> = (0..2000)
+        .map(|_| ray(rng.v(0.0, 3.0) + Vec3::Y * 6.0, rng.unit(), 0.0, 100.0))
+        .collect();
+    let hits = closest(&ctx, &rays);
+    common::rt::assert_agrees(&compare(&oracle, &rays, &hits, 0xff), "after a later build");
 }

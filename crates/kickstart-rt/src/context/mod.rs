@@ -298,8 +298,10 @@ impl ExecuteContext {
         }
     }
 
-    /// Releases the memory of destroyed handles and pooled staging now. Refused with
-    /// [`Error::TasksInFlight`] while any built GPU task is not marked complete.
+    /// Releases the memory of destroyed handles and pooled staging now, and what only BLAS
+    /// builds use: the build scratch and the free space of the BLAS pools (their ranges in use
+    /// are copied into smaller buffers by a submission of its own on the context's queue).
+    /// Refused with [`Error::TasksInFlight`] while any built GPU task is not marked complete.
     pub fn release_device_resources_immediately(&self) -> Result<()> {
         let mut s = self.state();
         self.collect_invoked(&mut s);
@@ -316,6 +318,13 @@ impl ExecuteContext {
         s.effects.denoisers.retire_destroyed(&live);
         s.effects.denoisers.collect(u64::MAX);
         s.staging.clear();
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("kickstart-rt release"),
+            });
+        s.scene.give_back_build_memory(&mut encoder);
+        self.queue.submit([encoder.finish()]);
         Ok(())
     }
 

@@ -69,6 +69,13 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
         s.instances.slot_count(),
     );
     let ingestions = allocate_staged(frame, s, plan);
+    // Only geometry tasks and queued builds use the BLAS pools' free space and the build
+    // scratch: a task with neither gives them back.
+    if ingestions.is_empty() && s.blas_queue.is_empty() {
+        s.scene.release_build_memory(frame.encoder);
+    } else {
+        s.scene.note_build_work();
+    }
     let mut uploads = Uploads::default();
     clear_dead_slots(s, &mut uploads, frame.serial);
     for (task, ..) in &ingestions {

@@ -120,6 +120,11 @@ impl Grown {
     pub(crate) fn bytes(&self) -> u64 {
         self.buffer.as_ref().map_or(0, |b| b.size())
     }
+
+    /// Drops the buffer (the next [`Self::get`] allocates what it asks for).
+    pub(crate) fn release(&mut self) {
+        self.buffer = None;
+    }
 }
 
 /// A 1×1 `Rgba8Unorm` texture bound where a pass's optional input is absent (the shader never

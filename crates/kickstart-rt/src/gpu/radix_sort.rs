@@ -323,6 +323,13 @@ impl RadixSort {
             .sum()
     }
 
+    /// Drops its scratch (the next sort allocates what it needs).
+    pub fn release_scratch(&mut self) {
+        self.keys_tmp = None;
+        self.vals_tmp = None;
+        self.hist = None;
+    }
+
     /// Makes the scratch hold `count` pairs and `hist_len` histogram entries. Growing drops the
     /// old buffers: wgpu keeps them alive while already recorded commands use them.
     fn reserve(&mut self, device: &wgpu::Device, count: u32, hist_len: u32) {
@@ -341,11 +348,11 @@ impl RadixSort {
         if too_small(&self.keys_tmp, count) || too_small(&self.vals_tmp, count) {
             // Whole blocks: a later sort of a slightly larger count reuses them.
             let entries = count.checked_next_multiple_of(BLOCK).unwrap_or(count);
-            self.keys_tmp = Some(storage("radix sort keys scratch", entries));
-            self.vals_tmp = Some(storage("radix sort values scratch", entries));
+            self.keys_tmp = Some(storage("kickstart-rt radix sort keys scratch", entries));
+            self.vals_tmp = Some(storage("kickstart-rt radix sort values scratch", entries));
         }
         if too_small(&self.hist, hist_len) {
-            self.hist = Some(storage("radix sort histogram", hist_len));
+            self.hist = Some(storage("kickstart-rt radix sort histogram", hist_len));
         }
     }
 }

@@ -300,6 +300,8 @@ pub(crate) struct GpuScene {
     passes: Passes,
     /// The driver's acceleration structures, on the hardware backend only.
     pub hardware: Option<HardwareScene>,
+    /// Whether the build memory was given back since the last task with BLAS work.
+    build_memory_released: bool,
 }
 
 impl GpuScene {
@@ -354,6 +356,7 @@ impl GpuScene {
             counters: storage(device, "kickstart-rt ingestion counters", 8),
             passes: Passes::default(),
             hardware: hardware.then(|| HardwareScene::new(device)),
+            build_memory_released: true,
         }
     }
 
@@ -380,6 +383,56 @@ impl GpuScene {
             + self.tlas.topology.size()
             + self.tlas.aabbs.size()
             + self.tlas.centroid_bounds.size()
+    }
+
+    /// Gives back what only builds use, once a scene's builds are done (the first GPU task
+    /// without BLAS work after some; see [`Self::note_build_work`]): the free tails of
+    /// the BLAS pools (the ranges in use are copied into smaller buffers inside `encoder`) and
+    /// every build scratch buffer. The next build allocates what it needs again.
+    pub fn release_build_memory(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        if !self.build_memory_released {
+            self.give_back_build_memory(encoder);
+        }
+    }
+
+    /// What [`Self::release_build_memory`] gives back, now, whether or not it has since the
+    /// last build.
+    pub fn give_back_build_memory(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        self.build_memory_released = true;
+        let device = self.device.clone();
+        for pool in [
+            &mut self.staged,
+            &mut self.triangles,
+            &mut self.nodes,
+            &mut self.orders,
+            &mut self.topologies,
+        ] {
+            pool.trim(&device, encoder);
+        }
+        self.release_build_scratch();
+    }
+
+    /// Drops every build scratch buffer (the next build allocates what it needs).
+    fn release_build_scratch(&mut self) {
+        let device = &self.device;
+        // `storage` makes buffers of at least 256 bytes: those are the empty scene's.
+        if self.scratch_aabbs.size() > 256 {
+            self.scratch_aabbs = storage(device, "kickstart-rt build boxes", AABB_BYTES);
+        }
+        if self.scratch_order.size() > 256 {
+            self.scratch_order = storage(device, "kickstart-rt build order", 4);
+        }
+        self.scratch_topology.release();
+        if let Some(lbvh) = self.passes.lbvh.as_mut() {
+            lbvh.release_scratch();
+        }
+    }
+
+    /// Notes that a GPU task ingests geometry or builds BLASes: the next task without such work
+    /// gives the build memory back ([`Self::release_build_memory`]), once per quiet spell, so
+    /// that a TLAS rebuilt every frame keeps its own small scratch.
+    pub fn note_build_work(&mut self) {
+        self.build_memory_released = false;
     }
 
     /// Releases pool ranges no in-flight task can read.

@@ -30,6 +30,9 @@ pub(crate) struct Ledger {
     used: u64,
 }
 
+/// Elements of an empty pool (and the least a trimmed one keeps).
+const MIN_CAPACITY: u32 = 16;
+
 impl Ledger {
     /// An empty ledger of `capacity` elements of `element_bytes` each.
     fn new(element_bytes: u64, capacity: u32) -> Self {
@@ -111,6 +114,24 @@ impl Ledger {
         }
     }
 
+    /// Gives back the free tail: the capacity shrinks to the end of the last range handed out
+    /// or pending (at least [`MIN_CAPACITY`] elements). Returns whether it shrank.
+    pub fn trim_free_tail(&mut self) -> bool {
+        let Some((&start, &len)) = self.free.iter().next_back() else {
+            return false;
+        };
+        let new_cap = start.max(MIN_CAPACITY);
+        if start + len != self.capacity || new_cap >= self.capacity {
+            return false;
+        }
+        self.free.remove(&start);
+        if new_cap > start {
+            self.free.insert(start, new_cap - start);
+        }
+        self.capacity = new_cap;
+        true
+    }
+
     /// Puts `r` on the free list, merged with its neighbours (`used` is the caller's business).
     fn release(&mut self, r: Range) {
         let mut start = r.start;
@@ -156,7 +177,7 @@ impl Pool {
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST
             | extra;
-        let ledger = Ledger::new(element_bytes, 16);
+        let ledger = Ledger::new(element_bytes, MIN_CAPACITY);
         Pool {
             label,
             usage,
@@ -218,6 +239,21 @@ impl Pool {
     pub fn collect(&mut self, oldest_in_flight: u64) {
         self.ledger.collect(oldest_in_flight);
     }
+
+    /// Gives the free tail back ([`Ledger::trim_free_tail`]): a smaller buffer holding the
+    /// ranges in use, copied inside `encoder`. Returns whether it shrank.
+    pub fn trim(&mut self, device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder) -> bool {
+        if !self.ledger.trim_free_tail() {
+            return false;
+        }
+        let bytes = self.ledger.capacity() as u64 * self.ledger.element_bytes;
+        let new = create(device, self.label, bytes, self.usage);
+        let kept = new.size().min(self.buffer.size());
+        encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, kept);
+        // As when growing: wgpu keeps the old buffer alive while recorded commands use it.
+        self.buffer = new;
+        true
+    }
 }
 
 /// A pool buffer of `size` bytes (at least 256).
@@ -267,6 +303,52 @@ mod tests {
         assert_eq!(p.buffer().size(), size);
         assert!(d.start + d.len <= size as u32 / 16);
         assert!(p.alloc(&g.device, &mut enc, 1 << 20, 1024).is_none());
+        g.queue.submit([enc.finish()]);
+    }
+
+    /// A pool gives its free tail back, keeping the contents of the ranges still in use, and
+    /// never a range in use or waiting for its tasks.
+    #[test]
+    fn trimming_gives_the_free_tail_back_and_keeps_the_contents() {
+        let g = gpu();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let mut p = Pool::new(&g.device, "test pool", 16);
+        let a = p.alloc(&g.device, &mut enc, 10, u64::MAX).unwrap();
+        let b = p.alloc(&g.device, &mut enc, 90, u64::MAX).unwrap();
+        let c = p.alloc(&g.device, &mut enc, 200, u64::MAX).unwrap();
+        // Growth left a few elements free past `c`.
+        assert!(p.trim(&g.device, &mut enc));
+        assert_eq!(p.ledger().capacity(), c.start + c.len);
+        assert!(!p.trim(&g.device, &mut enc), "no free tail left");
+        // Known contents in `a`, then `c` freed: pending until task 3 completes.
+        let words: Vec<u32> = (0..a.len * 4).map(|i| 0xC0DE_0000 + i).collect();
+        let src = crate::gpu::testing::buffer_with(bytemuck::cast_slice(&words));
+        enc.copy_buffer_to_buffer(&src, 0, p.buffer(), a.start as u64 * 16, a.len as u64 * 16);
+        p.free_after(c, 3);
+        assert!(
+            !p.trim(&g.device, &mut enc),
+            "the pending range is not given back"
+        );
+        p.collect(4);
+        assert!(p.trim(&g.device, &mut enc));
+        assert_eq!(p.ledger().capacity(), b.start + b.len);
+        assert_eq!(p.buffer().size(), u64::from(b.start + b.len) * 16);
+        p.free_after(b, 4);
+        p.collect(5);
+        assert!(p.trim(&g.device, &mut enc));
+        assert_eq!(
+            p.ledger().capacity(),
+            MIN_CAPACITY,
+            "the least a pool keeps"
+        );
+        assert_eq!(p.used_bytes(), u64::from(a.len) * 16);
+        g.queue.submit([enc.finish()]);
+        let bytes = crate::gpu::testing::read_back(p.buffer(), 0, u64::from(a.len) * 16);
+        assert_eq!(bytemuck::cast_slice::<u8, u32>(&bytes), &words[..]);
+        // Still a working pool: it grows again from the trimmed size.
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let d = p.alloc(&g.device, &mut enc, 40, u64::MAX).unwrap();
+        assert_eq!(d.start, a.len);
         g.queue.submit([enc.finish()]);
     }
 

@@ -180,18 +180,30 @@ impl Lbvh {
         };
         let device = rec.device;
         let total = layout.positions;
-        let work = self.work.get(device, "lbvh work", layout.work_words * 4);
-        let keys = self.keys.get(device, "lbvh keys", u64::from(total) * 4);
-        let values = self.values.get(device, "lbvh values", u64::from(total) * 4);
-        let order = self
-            .batch_order
-            .get(device, "lbvh batch order", u64::from(total) * 4);
-        let karras = self
-            .topology
-            .get(device, "lbvh topology", layout.topology_words.max(1) * 4);
-        let clustered_topology =
-            self.clustered_topology
-                .get(device, "hploc topology", layout.topology_words.max(1) * 4);
+        let work = self
+            .work
+            .get(device, "kickstart-rt lbvh work", layout.work_words * 4);
+        let keys = self
+            .keys
+            .get(device, "kickstart-rt lbvh keys", u64::from(total) * 4);
+        let values = self
+            .values
+            .get(device, "kickstart-rt lbvh values", u64::from(total) * 4);
+        let order = self.batch_order.get(
+            device,
+            "kickstart-rt lbvh batch order",
+            u64::from(total) * 4,
+        );
+        let karras = self.topology.get(
+            device,
+            "kickstart-rt lbvh topology",
+            layout.topology_words.max(1) * 4,
+        );
+        let clustered_topology = self.clustered_topology.get(
+            device,
+            "kickstart-rt hploc topology",
+            layout.topology_words.max(1) * 4,
+        );
         // A fast-build batch writes the orders and topologies its builds keep.
         let (order, karras) = match kept {
             Some((orders, topologies)) => (orders.clone(), topologies.clone()),

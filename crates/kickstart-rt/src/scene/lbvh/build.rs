@@ -107,10 +107,14 @@ impl Lbvh {
         } else {
             work_words(n)
         };
-        let work = self.work.get(device, "lbvh work", words * 4);
-        let keys = self.keys.get(device, "lbvh keys", u64::from(n) * 4);
-        let values = self.values.get(device, "lbvh values", u64::from(n) * 4);
-        let dummy = self.dummy.get(device, "lbvh no bounds", 32);
+        let work = self.work.get(device, "kickstart-rt lbvh work", words * 4);
+        let keys = self
+            .keys
+            .get(device, "kickstart-rt lbvh keys", u64::from(n) * 4);
+        let values = self
+            .values
+            .get(device, "kickstart-rt lbvh values", u64::from(n) * 4);
+        let dummy = self.dummy.get(device, "kickstart-rt lbvh no bounds", 32);
         let topo_bytes = u64::from(Self::topology_words(n)) * 4;
         // The output topology, and where the hierarchy pass writes the Karras tree: the same
         // place unless the build is clustered (then the builder's scratch, at base 0).
@@ -118,13 +122,21 @@ impl Lbvh {
             Some((t, base)) => (t.clone(), base),
             None if clustered => (
                 self.clustered_topology
-                    .get(device, "hploc topology", topo_bytes),
+                    .get(device, "kickstart-rt hploc topology", topo_bytes),
                 0,
             ),
-            None => (self.topology.get(device, "lbvh topology", topo_bytes), 0),
+            None => (
+                self.topology
+                    .get(device, "kickstart-rt lbvh topology", topo_bytes),
+                0,
+            ),
         };
         let (karras, karras_base) = if clustered {
-            (self.topology.get(device, "lbvh topology", topo_bytes), 0)
+            (
+                self.topology
+                    .get(device, "kickstart-rt lbvh topology", topo_bytes),
+                0,
+            )
         } else {
             (topology.clone(), topo_base)
         };

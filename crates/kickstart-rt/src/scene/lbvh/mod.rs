@@ -438,7 +438,24 @@ impl Lbvh {
         (5 * count).saturating_sub(4).max(1)
     }
 
-    /// Scratch bytes currently held (grows with the largest build).
+    /// Drops every scratch buffer (the next build allocates what it needs).
+    pub fn release_scratch(&mut self) {
+        for g in [
+            &mut self.work,
+            &mut self.keys,
+            &mut self.values,
+            &mut self.topology,
+            &mut self.clustered_topology,
+            &mut self.dummy,
+            &mut self.pyramid_boxes,
+            &mut self.batch_order,
+        ] {
+            g.release();
+        }
+        self.sort.release_scratch();
+    }
+
+    /// Scratch bytes currently held (grows with the largest build, until released).
     pub fn scratch_bytes(&self) -> u64 {
         self.work.bytes()
             + self.keys.bytes()

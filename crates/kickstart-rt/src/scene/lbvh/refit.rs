@@ -57,8 +57,10 @@ impl Lbvh {
             return;
         }
         let device = rec.device;
-        let work = self.work.get(device, "lbvh work", work_words(n) * 4);
-        let dummy = self.dummy.get(device, "lbvh no bounds", 32);
+        let work = self
+            .work
+            .get(device, "kickstart-rt lbvh work", work_words(n) * 4);
+        let dummy = self.dummy.get(device, "kickstart-rt lbvh no bounds", 32);
         let (bounds_out, bounds_base) = r.bounds_out.unwrap_or((&dummy, 0));
         let mut flags = Self::flags(r.leaf_refs, r.bounds_out.is_some());
         if r.sorted_boxes {
@@ -153,11 +155,15 @@ impl Lbvh {
         };
         let device = rec.device;
         let layout = RefitLayout::of(chunk);
-        let work = self.work.get(device, "lbvh work", layout.work_words * 4);
-        let dummy = self.dummy.get(device, "lbvh no bounds", 32);
-        let pyramid =
-            self.pyramid_boxes
-                .get(device, "lbvh box pyramid", layout.pyramid_boxes.max(1) * 32);
+        let work = self
+            .work
+            .get(device, "kickstart-rt lbvh work", layout.work_words * 4);
+        let dummy = self.dummy.get(device, "kickstart-rt lbvh no bounds", 32);
+        let pyramid = self.pyramid_boxes.get(
+            device,
+            "kickstart-rt lbvh box pyramid",
+            layout.pyramid_boxes.max(1) * 32,
+        );
         let bounds_out = first.bounds_out.map_or(&dummy, |(b, _)| b);
         let mut segs = layout.segs;
         segs.resize(REFIT_BATCH, Params::zeroed());
