@@ -1246,9 +1246,9 @@ fn build_empty(ctx: &ExecuteContext) -> GpuTaskHandle {
     t
 }
 
-/// A denoising context's memory, by the documented formula: per grid pixel two 16-byte guides
-/// and, per signal, two records (16 bytes for radiance, 8 for occlusion and shadows); plus the
-/// à-trous intermediate all contexts share, one record per pixel.
+/// A denoising context's memory, by the documented formula: its own, per grid pixel and signal
+/// two records (16 bytes for radiance, 8 for occlusion and shadows); and what it may share with
+/// other contexts: two 16-byte guides and the à-trous intermediate (one record) per pixel.
 fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
     let (signals, record) = match signal {
         SignalType::SpecularAndDiffuse => (2, 16),
@@ -1256,12 +1256,12 @@ fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
         _ => (1, 8),
     };
     (
-        grid_pixels * (2 * 16 + 2 * signals * record),
-        grid_pixels * record,
+        grid_pixels * 2 * signals * record,
+        grid_pixels * (2 * 16 + record),
     )
 }
 
-/// A context holds no memory before its first frame; then its guides and histories for the
+/// A context holds no memory before its first frame; then its histories and guides for the
 /// frame's grid (a block mode's is a quarter of the pixels, and the larger buffers go once no
 /// task uses them) and the shared intermediate; all of it is released after destruction once
 /// the tasks that used it are complete.
@@ -1384,4 +1384,96 @@ fn denoise_task_refuses_a_context_of_another_signal_or_size() {
         other => panic!("expected a viewport error, got {other:?}"),
     }
     submit(e);
+}
+
+/// Two contexts denoised in one task from the same G-buffer share one pair of guides, and each
+/// gives, frame by frame, exactly what it gives alone; a frame where one context's inputs differ
+/// (another roughness) gives it a pair of its own without losing its history, and it shares
+/// again once its inputs match its partner's for a second frame.
+#[test]
+fn contexts_with_the_same_inputs_share_their_guides_and_give_what_each_gives_alone() {
+    let method = DenoisingMethod::HighQuality;
+    let shared = Harness::new(SignalType::Diffuse, method);
+    let partner = shared
+        .ctx
+        .create_denoising_context_handle(DenoisingContextInput {
+            max_width: SIZE,
+            max_height: SIZE,
+            signal_type: SignalType::Diffuse,
+            method,
+        })
+        .unwrap();
+    let read = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    let write = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC;
+    let partner_in = [make_texture(wgpu::TextureFormat::Rgba32Float, read)];
+    let partner_out = [make_texture(wgpu::TextureFormat::Rgba32Float, write)];
+    let (alone_a, alone_b) = (
+        Harness::new(SignalType::Diffuse, method),
+        Harness::new(SignalType::Diffuse, method),
+    );
+    let mut rng = Rng(77);
+    let pixels = u64::from(SIZE * SIZE);
+    let (own, guides_and_scratch) = expected_denoiser_bytes(SignalType::Diffuse, pixels);
+    for frame in 0..7 {
+        let eye = EYE + Vec3::new(0.04 * frame as f32, 0.0, 0.0);
+        let prev_eye = EYE + Vec3::new(0.04 * frame.max(1) as f32 - 0.04, 0.0, 0.0);
+        let g = gbuffer(eye, Vec3::ZERO, prev_eye, Vec3::ZERO);
+        let r = reference_image(&g, reference);
+        let (a, b) = (noisy(&r, &mut rng), noisy(&r, &mut rng));
+        // Frame 3: the partner reads another roughness, so its guide differs.
+        let partner_common = |h: &Harness| {
+            let mut c = h.common(&g, Motion::Matrices, DenoiseMode::Continue);
+            if frame == 3 {
+                c.roughness.global_roughness = 0.8;
+            }
+            c
+        };
+        shared.upload(&g, std::slice::from_ref(&a), Motion::Matrices);
+        write_texture(&partner_in[0], &b);
+        let mut c = shared.ctx.create_task_container();
+        c.schedule_render_task(shared.task(shared.common(
+            &g,
+            Motion::Matrices,
+            DenoiseMode::Continue,
+        )));
+        let mut pc = partner_common(&shared);
+        pc.context = partner;
+        c.schedule_render_task(denoise_task(
+            SignalType::Diffuse,
+            pc,
+            &partner_in,
+            &partner_out,
+        ));
+        build_submit_complete(&shared.ctx, c);
+
+        let want_a = alone_a.frame(
+            &g,
+            std::slice::from_ref(&a),
+            Motion::Matrices,
+            DenoiseMode::Continue,
+        );
+        alone_b.upload(&g, std::slice::from_ref(&b), Motion::Matrices);
+        let mut c = alone_b.ctx.create_task_container();
+        c.schedule_render_task(alone_b.task(partner_common(&alone_b)));
+        build_submit_complete(&alone_b.ctx, c);
+        let want_b = read_texture(&alone_b.outputs[0]);
+        assert!(
+            read_texture(&shared.outputs[0]) == want_a[0],
+            "frame {frame}: first context"
+        );
+        assert!(
+            read_texture(&partner_out[0]) == want_b,
+            "frame {frame}: partner"
+        );
+
+        let total = shared.ctx.resource_allocations().denoiser;
+        // The partner's own pair from frame 3 until it rejoins (frame 5), released by the next
+        // task.
+        let pairs = if (3..=5).contains(&frame) { 2 } else { 1 };
+        assert_eq!(
+            total,
+            2 * own + guides_and_scratch + (pairs - 1) * 2 * 16 * pixels,
+            "frame {frame}: {pairs} pair(s) of guides"
+        );
+    }
 }

@@ -21,6 +21,7 @@ use std::collections::HashMap;
 
 use bytemuck::{Pod, Zeroable};
 
+use super::guides::{GuideKey, GuideRequest, Guides};
 use super::history::{self, Histories, History};
 use super::scratch::Scratch;
 use super::signal::{wgsl_format, Kind, SignalSet};
@@ -33,7 +34,9 @@ use crate::tasks::{
     DenoiseMode, DenoiseTaskCommon, DenoisingContextInput, DenoisingMethod, HalfResolutionMode,
     MotionType, SignalType, TextureInput, Viewport,
 };
-use crate::trace::gbuffer::{resolve_viewport, CameraFrame, GBufferBinder, GBufferInputs};
+use crate::trace::gbuffer::{
+    resolve_viewport, CameraFrame, GBufferBinder, GBufferInputs, GBufferParams,
+};
 
 /// Invocations per workgroup side of every denoise pass (`@workgroup_size(8, 8)`).
 const TILE: u32 = 8;
@@ -499,6 +502,11 @@ impl Filter {
         self.histories.context_bytes(context)
     }
 
+    /// The guide pairs of the live contexts it serves.
+    pub fn guides_held(&self) -> impl Iterator<Item = usize> + '_ {
+        self.histories.guides_held()
+    }
+
     /// Bytes of the largest signal buffer of a context it serves.
     pub fn largest_signal_buffer(&self) -> u64 {
         self.histories.largest_signal_buffer()
@@ -532,10 +540,11 @@ impl Filter {
     pub fn record(
         &mut self,
         rec: &mut Recorder<'_>,
-        (shared, scratch): (&Shared, &mut Scratch),
+        res: Resources<'_>,
         job: &Job<'_>,
         serial: u64,
     ) {
+        let shared = res.shared;
         let Some(h) = self.histories.get_mut(&job.common.context) else {
             return;
         };
@@ -549,8 +558,15 @@ impl Filter {
             temporal: &temporal,
             chains: &chains,
         };
-        record_frame(rec, (shared, scratch), h, job, &passes, serial);
+        record_frame(rec, res, h, job, &passes, serial);
     }
+}
+
+/// What every denoiser's frames share: the layouts, the à-trous intermediate and the guides.
+pub(super) struct Resources<'a> {
+    pub shared: &'a Shared,
+    pub scratch: &'a mut Scratch,
+    pub guides: &'a mut Guides,
 }
 
 /// The pipelines of one frame of a context: its temporal pass and its signals' à-trous chains.
@@ -563,7 +579,7 @@ struct Passes<'a> {
 /// signal's à-trous chain; then advances the history.
 fn record_frame(
     rec: &mut Recorder<'_>,
-    (shared, scratch): (&Shared, &mut Scratch),
+    res: Resources<'_>,
     h: &mut History,
     job: &Job<'_>,
     passes: &Passes<'_>,
@@ -578,14 +594,30 @@ fn record_frame(
     let pixels = u64::from(grid_w) * u64::from(grid_h);
     let scratch_bytes = pixels * history::signal_record_bytes(h.input.signal_type);
     let (own, fresh) = h.buffers_for(rec.device, pixels);
+    let history = own.history.clone();
+    let discard = starts_over(h, job, vp, fresh);
+    let gbuffer = inputs.params();
+    let guides = res.guides.for_frame(
+        rec.device,
+        rec.encoder,
+        &mut h.guide,
+        GuideRequest {
+            key: guide_key(job, &gbuffer, (grid_w, grid_h)),
+            pixels,
+            discard,
+            serial,
+        },
+    );
     let buffers = BufferSet {
-        guides: own.guides.clone(),
-        history: own.history.clone(),
-        scratch: scratch.get(rec.device, scratch_bytes, serial),
+        guide_prev: guides.prev,
+        guide_cur: guides.cur,
+        history,
+        scratch: res.scratch.get(rec.device, scratch_bytes, serial),
     };
-    let (params, motion_texture) = frame_params(shared, h, job, (vp, fresh), settings);
+    let shared = res.shared;
+    let (params, motion_texture) = frame_params(shared, h, job, (vp, discard), settings);
     let params = rec.uniform("kickstart-rt denoise params", &params);
-    let gb_params = rec.uniform("kickstart-rt denoise g-buffer", &inputs.params());
+    let gb_params = rec.uniform("kickstart-rt denoise g-buffer", &gbuffer);
     let frame = Frame {
         params: &params,
         groups: (grid_w.div_ceil(TILE), grid_h.div_ceil(TILE)),
@@ -641,10 +673,11 @@ struct Frame<'a> {
     buffers: &'a BufferSet,
 }
 
-/// The buffers one frame of a context binds: its own guides and histories, and the shared
-/// à-trous scratch.
+/// The buffers one frame of a context binds: its guides (maybe shared), its histories and the
+/// shared à-trous scratch.
 struct BufferSet {
-    guides: [wgpu::Buffer; 2],
+    guide_prev: wgpu::Buffer,
+    guide_cur: wgpu::Buffer,
     /// `history[parity][signal]`.
     history: [Vec<wgpu::Buffer>; 2],
     scratch: wgpu::Buffer,
@@ -659,23 +692,16 @@ struct TemporalInputs<'a> {
 }
 
 /// The frame's `DenoiseParams` and the motion texture to bind (a placeholder without motion
-/// vectors). The history starts over on `DenoiseMode::DiscardHistory`, on the context's first
-/// frame, when the viewport changes size and when its buffers were just allocated (`fresh`).
+/// vectors); `discard`: the frame starts the history over ([`starts_over`]).
 fn frame_params(
     shared: &Shared,
     h: &History,
     job: &Job<'_>,
-    (vp, fresh): (Viewport, bool),
+    (vp, discard): (Viewport, bool),
     settings: MethodSettings,
 ) -> (DenoiseParams, TextureInput) {
     let c = job.common;
-    let resized = h
-        .last_viewport
-        .is_some_and(|l| l.width != vp.width || l.height != vp.height);
     let mode = c.half_resolution_mode;
-    let regridded = h.prev_mode.block_size() != mode.block_size();
-    let discard =
-        c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized || regridded || fresh;
     let (grid_w, grid_h) = grid_size(vp, mode);
     let (x, y) = mode.traced_pixel();
     let (prev_x, prev_y) = h.prev_mode.traced_pixel();
@@ -713,16 +739,51 @@ fn frame_params(
         motion_type,
         max_history: settings.max_history,
         discard_history: discard as u32,
-        checkerboard: match mode {
-            HalfResolutionMode::Checkerboard => 1,
-            HalfResolutionMode::CheckerboardInverted => 2,
-            _ => 0,
-        },
+        checkerboard: checkerboard_code(mode),
         base_radius: settings.base_radius,
         grid: [grid_w, grid_h, mode.block_size(), 0],
         lattice: [x, y, prev_x, prev_y],
     };
     (params, motion_texture)
+}
+
+/// Whether a frame of `job` on `h` starts the history over: on `DenoiseMode::DiscardHistory`, on
+/// the context's first frame, when the viewport changes size or the grid its block size, and
+/// when its buffers were just allocated (`fresh`).
+fn starts_over(h: &History, job: &Job<'_>, vp: Viewport, fresh: bool) -> bool {
+    let c = job.common;
+    let resized = h
+        .last_viewport
+        .is_some_and(|l| l.width != vp.width || l.height != vp.height);
+    let regridded = h.prev_mode.block_size() != c.half_resolution_mode.block_size();
+    c.mode == DenoiseMode::DiscardHistory || h.frame == 0 || resized || regridded || fresh
+}
+
+/// What makes the guide of a frame of `job` with G-buffer uniform `gbuffer` on a grid of
+/// `grid` pixels: two contexts' frames with equal keys in one task write the same guide.
+fn guide_key(job: &Job<'_>, gbuffer: &GBufferParams, grid: (u32, u32)) -> GuideKey {
+    let c = job.common;
+    let mode = c.half_resolution_mode;
+    let (x, y) = mode.traced_pixel();
+    let checkerboard = checkerboard_code(mode);
+    GuideKey::new(
+        gbuffer,
+        [
+            Some(c.depth.texture.texture()),
+            Some(c.normal.texture.texture()),
+            c.roughness.texture.as_ref().map(|t| t.texture()),
+        ],
+        [grid.0, grid.1, mode.block_size(), x, y, checkerboard],
+    )
+}
+
+/// `DenoiseParams::checkerboard` of `mode`: 0 off, 1 even cells traced, 2 odd ones.
+fn checkerboard_code(mode: HalfResolutionMode) -> u32 {
+    match mode {
+        HalfResolutionMode::Checkerboard => 1,
+        HalfResolutionMode::CheckerboardInverted => 2,
+        _ => 0,
+    }
 }
 
 /// The grid the passes work on (see `shaders/denoise/common.wgsl`): the viewport, or one pixel
@@ -773,8 +834,8 @@ fn record_temporal(
     let g2 = shared.temporal_buffers.bind_group(
         device,
         &[
-            ("guide_prev", b.guides[prv].as_entire_binding()),
-            ("guide_cur", b.guides[cur].as_entire_binding()),
+            ("guide_prev", b.guide_prev.as_entire_binding()),
+            ("guide_cur", b.guide_cur.as_entire_binding()),
             ("hist_prev0", b.history[prv][0].as_entire_binding()),
             ("hist_prev1", hist_prev1.as_entire_binding()),
             ("hist_cur0", b.history[cur][0].as_entire_binding()),
@@ -839,7 +900,7 @@ fn record_atrous(
         let a1 = shared.atrous_buffers.bind_group(
             device,
             &[
-                ("guide", b.guides[frame.cur].as_entire_binding()),
+                ("guide", b.guide_cur.as_entire_binding()),
                 ("src0", src.as_entire_binding()),
                 ("src1", read_placeholder.as_entire_binding()),
                 ("dst0", dst.as_entire_binding()),
@@ -866,7 +927,7 @@ fn record_atrous(
             device,
             &[
                 ("dp", frame.params.as_entire_binding()),
-                ("guide", b.guides[frame.cur].as_entire_binding()),
+                ("guide", b.guide_cur.as_entire_binding()),
                 ("src0", src.as_entire_binding()),
             ],
         );

@@ -1,10 +1,10 @@
-//! The GPU memory of one denoising context: its guides and signal histories, allocated by its
+//! The GPU memory of one denoising context: its signal histories, allocated by its
 //! first frame for that frame's grid (the viewport, or one pixel per block in a block mode) and
-//! reallocated when the grid changes size. Guides hold 16 bytes per pixel, a signal's history
-//! 16 (radiance) or 8 (occlusion, shadows) bytes per pixel (see `shaders/denoise/common.wgsl`
-//! and the record files); a signal's buffers are separate so that each binding stays under
-//! WebGPU's default 128 MiB binding limit up to 4K. The filter's intermediates are not a
-//! context's: see [`super::scratch`].
+//! reallocated when the grid changes size. A signal's history holds 16 (radiance) or 8
+//! (occlusion, shadows) bytes per pixel (see `shaders/denoise/common.wgsl` and the record
+//! files); a signal's buffers are separate so that each binding stays under WebGPU's default
+//! 128 MiB binding limit up to 4K. The guides (16 bytes per pixel) and the filter's intermediate
+//! are not a context's own: see [`super::guides`] and [`super::scratch`].
 
 use std::collections::HashMap;
 
@@ -36,16 +36,15 @@ pub(crate) fn buffer_bytes(input: &DenoisingContextInput) -> u64 {
     input.max_width as u64 * input.max_height as u64 * RECORD_BYTES
 }
 
-/// The buffers of one context, sized for `pixels` grid pixels: the guides of this and the
-/// previous frame (by frame parity, [`RECORD_BYTES`] per pixel each) and, per signal, the
-/// accumulated signal of this and the previous frame ([`signal_record_bytes`] per pixel each).
+/// The buffers of one context, sized for `pixels` grid pixels: per signal, the accumulated signal
+/// of this and the previous frame ([`signal_record_bytes`] per pixel each). Its guides may be
+/// shared with other contexts: see [`super::guides`].
 /// The previous frame's signal buffer is dead once the temporal pass has read it, so the à-trous
 /// iterations use it as one of their two ping-pong buffers (the other is the denoisers' shared
 /// [`super::scratch::Scratch`]).
 pub(crate) struct HistoryBuffers {
     /// Grid pixels each buffer holds.
     pub pixels: u64,
-    pub guides: [wgpu::Buffer; 2],
     /// `history[parity][signal]`.
     pub history: [Vec<wgpu::Buffer>; 2],
 }
@@ -66,13 +65,8 @@ impl HistoryBuffers {
                 .map(|_| buffer("kickstart-rt denoiser history", signal_size))
                 .collect::<Vec<_>>()
         };
-        let guide_size = pixels * RECORD_BYTES;
         HistoryBuffers {
             pixels,
-            guides: [
-                buffer("kickstart-rt denoiser guide", guide_size),
-                buffer("kickstart-rt denoiser guide", guide_size),
-            ],
             history: [set(), set()],
         }
     }
@@ -83,12 +77,10 @@ impl HistoryBuffers {
     }
 }
 
-/// Bytes a context of `signal_type` holds for a grid of `pixels`: two guides of
-/// [`RECORD_BYTES`] and, per signal, two records of [`signal_record_bytes`], per pixel.
+/// Bytes a context of `signal_type` holds for a grid of `pixels`: per signal, two records of
+/// [`signal_record_bytes`] per pixel.
 pub(crate) fn history_bytes(signal_type: SignalType, pixels: u64) -> u64 {
-    let per_pixel =
-        2 * RECORD_BYTES + 2 * signal_count(signal_type) as u64 * signal_record_bytes(signal_type);
-    pixels * per_pixel
+    pixels * 2 * signal_count(signal_type) as u64 * signal_record_bytes(signal_type)
 }
 
 /// One context's buffers and the state carried between its frames.
@@ -97,6 +89,8 @@ pub(crate) struct History {
     /// Allocated by the first frame, for its grid (the viewport, or one pixel per block in a
     /// block mode); `None` before.
     buffers: Option<HistoryBuffers>,
+    /// Its pair of guides (an id of [`super::guides::Guides`]), from its first frame on.
+    pub guide: Option<usize>,
     /// Buffers replaced by larger or smaller ones, kept until no in-flight task uses them
     /// (`last_used` is their last task).
     replaced: Vec<(HistoryBuffers, u64)>,
@@ -120,6 +114,7 @@ impl History {
         History {
             input,
             buffers: None,
+            guide: None,
             replaced: Vec::new(),
             frame: 0,
             last_viewport: None,
@@ -209,6 +204,11 @@ impl Histories {
                 self.retired.push(history);
             }
         }
+    }
+
+    /// The guide pairs the live contexts hold.
+    pub fn guides_held(&self) -> impl Iterator<Item = usize> + '_ {
+        self.live.values().filter_map(|h| h.guide)
     }
 
     /// GPU bytes of a live context (0 before its first frame); `None` for a context this

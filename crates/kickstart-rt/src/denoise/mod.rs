@@ -11,12 +11,14 @@
 //! [`history::History`]), created by a context's first frame for that frame's grid (a block
 //! mode's grid holds a quarter or a sixteenth of the pixels), released lazily after destruction
 //! once no in-flight task uses it, and counted as [`crate::ResourceAllocations::denoiser`]. The
-//! filters' intermediate is one buffer every context shares ([`scratch`]). A viewport of another size than the previous
+//! filters' intermediate is one buffer every context shares ([`scratch`]), and contexts denoised
+//! in one task from the same inputs share their guides ([`guides`]). A viewport of another size than the previous
 //! frame's starts the history over, as does [`crate::DenoiseMode::DiscardHistory`].
 //!
 //! Input and output may be the same texture: no pass reads the input and writes the output.
 
 mod filter;
+mod guides;
 pub(crate) use filter::shader_variants;
 pub(crate) mod history;
 mod occlusion;
@@ -30,7 +32,8 @@ use crate::gpu::Recorder;
 use crate::handles::DenoisingContextHandle;
 use crate::tasks::{DenoisingContextInput, RenderTask};
 use crate::trace::gbuffer::resolve_viewport;
-use filter::{Filter, Job, Shared};
+use filter::{Filter, Job, Resources, Shared};
+use guides::Guides;
 use scratch::Scratch;
 
 /// The denoisers.
@@ -126,6 +129,8 @@ pub(crate) struct Denoisers {
     shared: Option<Shared>,
     /// The à-trous intermediate every context shares.
     scratch: Scratch,
+    /// The guides, shared by contexts denoised from the same inputs.
+    guides: Guides,
     radiance: Filter,
     occlusion: Filter,
     shadow: Filter,
@@ -138,6 +143,7 @@ impl Denoisers {
             device: device.clone(),
             shared: None,
             scratch: Scratch::default(),
+            guides: Guides::default(),
             radiance: radiance::new(),
             occlusion: occlusion::new(),
             shadow: shadow::new(),
@@ -182,6 +188,8 @@ impl Denoisers {
         }
         let needed = self.filters().map(Filter::largest_signal_buffer).max();
         self.scratch.collect(oldest_in_flight, needed.unwrap_or(0));
+        let held: Vec<usize> = self.filters().flat_map(Filter::guides_held).collect();
+        self.guides.collect(oldest_in_flight, &held);
     }
 
     fn filters(&self) -> impl Iterator<Item = &Filter> {
@@ -194,13 +202,13 @@ impl Denoisers {
         self.history_bytes() + self.intermediate_bytes()
     }
 
-    /// GPU bytes of the contexts' guides and histories.
+    /// GPU bytes of the contexts' histories and guides.
     pub fn history_bytes(&self) -> u64 {
-        self.filters().map(Filter::bytes).sum()
+        self.filters().map(Filter::bytes).sum::<u64>() + self.guides.bytes()
     }
 
-    /// GPU bytes of one live context's guides and histories (0 before its first frame, or for
-    /// a context no `build_gpu_task` has seen yet).
+    /// GPU bytes of one live context's histories (0 before its first frame, or for a context
+    /// no `build_gpu_task` has seen yet); its guides may be shared and are not in it.
     pub fn context_bytes(&self, context: &DenoisingContextHandle) -> u64 {
         self.filters()
             .find_map(|f| f.context_bytes(context))
@@ -218,12 +226,16 @@ impl Denoisers {
         let (denoiser, job) = (routed.denoiser, &routed.job);
         let device = &self.device;
         let shared = self.shared.get_or_insert_with(|| Shared::new(device));
-        let scratch = &mut self.scratch;
+        let res = Resources {
+            shared,
+            scratch: &mut self.scratch,
+            guides: &mut self.guides,
+        };
         let denoiser = match denoiser {
             Denoiser::Radiance => &mut self.radiance,
             Denoiser::Occlusion => &mut self.occlusion,
             Denoiser::Shadow => &mut self.shadow,
         };
-        denoiser.record(rec, (shared, scratch), job, serial);
+        denoiser.record(rec, res, job, serial);
     }
 }

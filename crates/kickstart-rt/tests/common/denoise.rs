@@ -229,7 +229,7 @@ pub fn psnr(g: &GBuffer, a: &[Vec4], reference: &[Vec4]) -> f64 {
     10.0 * (1.0 / mse(g, a, reference)).log10()
 }
 
-fn make_texture(format: wgpu::TextureFormat, usage: wgpu::TextureUsages) -> wgpu::TextureView {
+pub fn make_texture(format: wgpu::TextureFormat, usage: wgpu::TextureUsages) -> wgpu::TextureView {
     texture(format, SIZE, SIZE, usage)
 }
 
@@ -403,6 +403,19 @@ impl Harness {
         motion: Motion,
         mode: DenoiseMode,
     ) -> GpuTaskHandle {
+        self.upload(g, inputs, motion);
+        let task = self.task(self.common(g, motion, mode));
+        let mut c = self.ctx.create_task_container();
+        c.schedule_render_task(task);
+        let mut e = encoder();
+        let h = self.ctx.build_gpu_task(c, &mut e).expect("denoise task");
+        submit(e);
+        h
+    }
+
+    /// Writes `g`'s depth, normals and motion and the signal `inputs` into the harness's
+    /// textures.
+    pub fn upload(&self, g: &GBuffer, inputs: &[Vec<Vec4>], motion: Motion) {
         let (w2v, v2c) = (g.view.world_to_view, g.view.view_to_clip);
         let clip = v2c * w2v;
         let depth: Vec<f32> = g
@@ -429,51 +442,59 @@ impl Harness {
         for (t, img) in self.inputs.iter().zip(inputs) {
             write_texture(t, img);
         }
-        let common = self.common(g, motion, mode);
-        let task = match self.signal {
-            SignalType::Specular => RenderTask::DenoiseSpecular(DenoiseSpecularTask {
+    }
+
+    /// The harness's denoise task on `common`.
+    pub fn task(&self, common: DenoiseTaskCommon) -> RenderTask {
+        denoise_task(self.signal, common, &self.inputs, &self.outputs)
+    }
+}
+
+/// The denoise task of a context of `signal` on `common`, from `inputs` into `outputs` (one
+/// texture each per signal).
+pub fn denoise_task(
+    signal: SignalType,
+    common: DenoiseTaskCommon,
+    inputs: &[wgpu::TextureView],
+    outputs: &[wgpu::TextureView],
+) -> RenderTask {
+    match signal {
+        SignalType::Specular => RenderTask::DenoiseSpecular(DenoiseSpecularTask {
+            common,
+            input: inputs[0].clone(),
+            output: outputs[0].clone(),
+        }),
+        SignalType::Diffuse => RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+            common,
+            input: inputs[0].clone(),
+            output: outputs[0].clone(),
+        }),
+        SignalType::SpecularAndDiffuse => {
+            RenderTask::DenoiseSpecularAndDiffuse(DenoiseSpecularAndDiffuseTask {
                 common,
-                input: self.inputs[0].clone(),
-                output: self.outputs[0].clone(),
-            }),
-            SignalType::Diffuse => RenderTask::DenoiseDiffuse(DenoiseDiffuseTask {
+                input_specular: inputs[0].clone(),
+                input_diffuse: inputs[1].clone(),
+                output_specular: outputs[0].clone(),
+                output_diffuse: outputs[1].clone(),
+            })
+        }
+        SignalType::DiffuseOcclusion => {
+            RenderTask::DenoiseDiffuseOcclusion(DenoiseDiffuseOcclusionTask {
                 common,
-                input: self.inputs[0].clone(),
-                output: self.outputs[0].clone(),
-            }),
-            SignalType::SpecularAndDiffuse => {
-                RenderTask::DenoiseSpecularAndDiffuse(DenoiseSpecularAndDiffuseTask {
-                    common,
-                    input_specular: self.inputs[0].clone(),
-                    input_diffuse: self.inputs[1].clone(),
-                    output_specular: self.outputs[0].clone(),
-                    output_diffuse: self.outputs[1].clone(),
-                })
-            }
-            SignalType::DiffuseOcclusion => {
-                RenderTask::DenoiseDiffuseOcclusion(DenoiseDiffuseOcclusionTask {
-                    common,
-                    input: self.inputs[0].clone(),
-                    output: self.outputs[0].clone(),
-                })
-            }
-            SignalType::Shadow => RenderTask::DenoiseShadow(DenoiseShadowTask {
-                common,
-                input: self.inputs[0].clone(),
-                output: self.outputs[0].clone(),
-            }),
-            SignalType::MultiShadow => RenderTask::DenoiseMultiShadow(DenoiseMultiShadowTask {
-                common,
-                input0: self.inputs[0].clone(),
-                input1: self.inputs[0].clone(),
-                output: self.outputs[0].clone(),
-            }),
-        };
-        let mut c = self.ctx.create_task_container();
-        c.schedule_render_task(task);
-        let mut e = encoder();
-        let h = self.ctx.build_gpu_task(c, &mut e).expect("denoise task");
-        submit(e);
-        h
+                input: inputs[0].clone(),
+                output: outputs[0].clone(),
+            })
+        }
+        SignalType::Shadow => RenderTask::DenoiseShadow(DenoiseShadowTask {
+            common,
+            input: inputs[0].clone(),
+            output: outputs[0].clone(),
+        }),
+        SignalType::MultiShadow => RenderTask::DenoiseMultiShadow(DenoiseMultiShadowTask {
+            common,
+            input0: inputs[0].clone(),
+            input1: inputs[0].clone(),
+            output: outputs[0].clone(),
+        }),
     }
 }
