@@ -19,6 +19,8 @@ pub struct MemoryPeak {
     /// The largest total of wgpu's live allocations labelled by the SDK, over the same frames;
     /// `None` where wgpu has no allocator report (Metal, GL, WebGPU).
     pub wgpu_sdk: Option<u64>,
+    /// wgpu's SDK allocations at that peak, bytes by label (largest first).
+    pub wgpu_labels: Vec<(String, u64)>,
     /// Frames sampled.
     pub frames: u32,
 }
@@ -41,8 +43,12 @@ impl MemoryPeak {
                 .map(|(signal, h)| (*signal, ctx.denoising_context_bytes(*h).unwrap_or(0)))
                 .collect();
         }
-        if let Some(bytes) = wgpu_sdk_bytes(device) {
-            self.wgpu_sdk = Some(self.wgpu_sdk.map_or(bytes, |b| b.max(bytes)));
+        if let Some(labels) = wgpu_sdk_labels(device) {
+            let bytes = labels.iter().map(|(_, b)| b).sum();
+            if self.wgpu_sdk.is_none_or(|peak| bytes > peak) {
+                self.wgpu_sdk = Some(bytes);
+                self.wgpu_labels = labels;
+            }
         }
     }
 
@@ -109,6 +115,9 @@ impl MemoryPeak {
         if let Some(w) = self.wgpu_sdk {
             out += &format!("wgpu_allocator,{w}\n");
         }
+        for (label, bytes) in &self.wgpu_labels {
+            out += &format!("wgpu:{label},{bytes}\n");
+        }
         out
     }
 
@@ -133,14 +142,17 @@ impl MemoryPeak {
     }
 }
 
-/// Bytes of `device`'s live allocations labelled by the SDK, by wgpu's allocator report.
-fn wgpu_sdk_bytes(device: &wgpu::Device) -> Option<u64> {
+/// `device`'s live allocations labelled by the SDK, by wgpu's allocator report: bytes by label,
+/// largest first.
+fn wgpu_sdk_labels(device: &wgpu::Device) -> Option<Vec<(String, u64)>> {
     device.generate_allocator_report().map(|r| {
-        r.allocations
-            .iter()
-            .filter(|a| a.name.starts_with(SDK_LABEL))
-            .map(|a| a.size)
-            .sum()
+        let mut by_label = std::collections::BTreeMap::<String, u64>::new();
+        for a in r.allocations.iter().filter(|a| a.name.starts_with(SDK_LABEL)) {
+            *by_label.entry(a.name.clone()).or_default() += a.size;
+        }
+        let mut rows: Vec<(String, u64)> = by_label.into_iter().collect();
+        rows.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+        rows
     })
 }
 
@@ -158,6 +170,7 @@ mod tests {
             },
             contexts: vec![(SignalType::Shadow, 3_000_000)],
             wgpu_sdk: Some(6_500_000),
+            wgpu_labels: vec![("kickstart-rt BLAS nodes".into(), 6_500_000)],
             frames: 2,
         }
     }
@@ -171,8 +184,9 @@ mod tests {
         assert!(lines.contains(&"denoiser,4000000"), "{csv}");
         assert!(lines.contains(&"denoising_context:Shadow,3000000"), "{csv}");
         assert!(lines.contains(&"total,6000001"), "{csv}");
-        assert_eq!(lines.last(), Some(&"wgpu_allocator,6500000"));
-        assert_eq!(lines.len(), 1 + 8 + 1 + 2);
+        assert!(lines.contains(&"wgpu_allocator,6500000"), "{csv}");
+        assert_eq!(lines.last(), Some(&"wgpu:kickstart-rt BLAS nodes,6500000"));
+        assert_eq!(lines.len(), 1 + 8 + 1 + 2 + 1);
     }
 
     #[test]
