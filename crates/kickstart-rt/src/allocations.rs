@@ -23,6 +23,9 @@ pub struct ResourceAllocations {
     pub staging: u64,
     /// Capacity of the shared pools (vertex copies, BLAS) not handed out yet.
     pub pool_reserve: u64,
+    /// The driver's BLASes and TLAS of the hardware ray-query backend, as wgpu's allocator
+    /// reports them (0 on the software backend, and where wgpu has no allocator report).
+    pub driver_acceleration_structures: u64,
 }
 
 impl ResourceAllocations {
@@ -36,5 +39,6 @@ impl ResourceAllocations {
             + self.denoiser
             + self.staging
             + self.pool_reserve
+            + self.driver_acceleration_structures
     }
 }

@@ -914,6 +914,15 @@ fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
     let cycle = || {
         let (geometries, instances) = quads_on(&device, &queue, &ctx, 8);
         let held = wgpu_allocated(&device).unwrap_or_else(|| panic!("no allocator report"));
+        // The SDK counts the driver's structures, by the same report: only on the ray-query
+        // backend.
+        let driver = ctx.resource_allocations().driver_acceleration_structures;
+        match backend() {
+            TraversalBackend::HardwareRayQuery => {
+                assert!(driver > 0, "driver structures uncounted")
+            }
+            TraversalBackend::Software => assert_eq!(driver, 0),
+        }
         ctx.destroy_instance_handles(&instances)
             .unwrap_or_else(|e| panic!("{e}"));
         ctx.destroy_geometry_handles(&geometries)
@@ -924,6 +933,11 @@ fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
         ctx.release_device_resources_immediately()
             .unwrap_or_else(|e| panic!("release: {e}"));
         let after = wgpu_allocated(&device).unwrap_or_else(|| panic!("no allocator report"));
+        let left = ctx.resource_allocations().driver_acceleration_structures;
+        assert!(
+            left < driver || driver == 0,
+            "{left} of {driver} driver bytes left"
+        );
         (held, after)
     };
     let (held1, after1) = cycle();

@@ -69,6 +69,10 @@ impl MemoryPeak {
             ("denoiser", a.denoiser),
             ("staging", a.staging),
             ("pool_reserve", a.pool_reserve),
+            (
+                "driver_acceleration_structures",
+                a.driver_acceleration_structures,
+            ),
         ]
         .into_iter()
         .map(|(k, b)| (k.to_string(), b))
@@ -96,7 +100,7 @@ impl MemoryPeak {
             out += &format!("  {kind:<34} {:>9.1} MB\n", mb(bytes));
         }
         let a = &self.sdk;
-        let scene = a.vertex_copies + a.blas + a.tlas + a.scratch + a.cache + a.pool_reserve;
+        let scene = a.total() - a.denoiser - a.staging;
         out += &format!(
             "  denoisers {:.1} bytes per pixel; scene and cache {:.1} bytes per triangle\n",
             a.denoiser as f64 / pixels.max(1) as f64,
@@ -147,7 +151,11 @@ impl MemoryPeak {
 fn wgpu_sdk_labels(device: &wgpu::Device) -> Option<Vec<(String, u64)>> {
     device.generate_allocator_report().map(|r| {
         let mut by_label = std::collections::BTreeMap::<String, u64>::new();
-        for a in r.allocations.iter().filter(|a| a.name.starts_with(SDK_LABEL)) {
+        for a in r
+            .allocations
+            .iter()
+            .filter(|a| a.name.starts_with(SDK_LABEL))
+        {
             *by_label.entry(a.name.clone()).or_default() += a.size;
         }
         let mut rows: Vec<(String, u64)> = by_label.into_iter().collect();
@@ -186,7 +194,7 @@ mod tests {
         assert!(lines.contains(&"total,6000001"), "{csv}");
         assert!(lines.contains(&"wgpu_allocator,6500000"), "{csv}");
         assert_eq!(lines.last(), Some(&"wgpu:kickstart-rt BLAS nodes,6500000"));
-        assert_eq!(lines.len(), 1 + 8 + 1 + 2 + 1);
+        assert_eq!(lines.len(), 1 + 9 + 1 + 2 + 1);
     }
 
     #[test]

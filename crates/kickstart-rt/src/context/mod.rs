@@ -350,6 +350,9 @@ impl ExecuteContext {
             denoiser: s.effects.denoisers.bytes(),
             ..Default::default()
         };
+        if sc.hardware.is_some() {
+            a.driver_acceleration_structures = driver_structure_bytes(&self.device);
+        }
         a.staging = s.staging.bytes()
             + s.in_flight
                 .values()
@@ -650,4 +653,20 @@ impl DeviceErrorScopes {
         }
         first
     }
+}
+
+/// Bytes of the driver acceleration structures the hardware backend made, by wgpu's allocator
+/// report (their sizes are the driver's; wgpu does not tell them otherwise). 0 where wgpu has no
+/// report.
+fn driver_structure_bytes(device: &wgpu::Device) -> u64 {
+    device.generate_allocator_report().map_or(0, |r| {
+        r.allocations
+            .iter()
+            .filter(|a| {
+                a.name
+                    .starts_with(crate::scene::hardware::DRIVER_STRUCTURE_LABEL)
+            })
+            .map(|a| a.size)
+            .sum()
+    })
 }

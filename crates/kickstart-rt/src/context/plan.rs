@@ -38,6 +38,11 @@ pub(super) struct FramePlan<'c> {
 pub(super) struct Reserved {
     /// Step 5's BVH work in order: each geometry and whether it is (re)built or refitted.
     pub blas: Vec<(GeometryHandle, PendingBvh)>,
+    /// Step 5's BLAS builds (not refits), `(triangles, keep_for_refit)` each: what the pools
+    /// make room for before them.
+    pub blas_builds: Vec<(u32, bool)>,
+    /// Step 1's staged allocations, triangles in all.
+    pub staged_triangles: u64,
     /// Whether step 6 updates the TLAS.
     pub tlas: bool,
 }

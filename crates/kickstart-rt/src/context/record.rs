@@ -134,6 +134,8 @@ fn allocate_staged<'c>(
     plan: &'c FramePlan<'_>,
 ) -> Vec<Ingestion<'c>> {
     let mut ingestions = Vec::new();
+    s.scene
+        .reserve_staged(frame.encoder, plan.reserved.staged_triangles);
     for (task, extents) in &plan.geometries {
         let triangles: u32 = extents.iter().map(|e| e.triangles).sum();
         let Ok(slot) = s.geometries.get_mut(task.handle) else {
@@ -391,6 +393,8 @@ fn build_blases(
     let Some(build) = plan.build else {
         return deferred;
     };
+    s.scene
+        .reserve_blas(frame.encoder, &plan.reserved.blas_builds);
     // The work the plan reserved for, in order (compared in debug builds).
     let mut done_work = Vec::new();
     let serial = frame.serial;

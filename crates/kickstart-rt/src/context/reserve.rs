@@ -43,7 +43,9 @@ pub(super) fn check(s: &State, plan: &FramePlan<'_>) -> Result<Reserved> {
     s.scene.check_tables(geometry_slots, instance_slots)?;
     let oldest = s.oldest_in_flight();
     let mut pools = SceneReservation::of(&s.scene, oldest);
-    // `record::allocate_staged`: an update reuses its geometry's range.
+    // `record::allocate_staged`: an update reuses its geometry's range; room for all of them is
+    // made first.
+    let mut staged = Vec::new();
     for (task, extents) in &plan.geometries {
         let Ok(slot) = s.geometries.get(task.handle) else {
             continue;
@@ -53,11 +55,22 @@ pub(super) fn check(s: &State, plan: &FramePlan<'_>) -> Result<Reserved> {
             (Some(d), TaskOperation::Update) if d.gpu.staged.is_some()
         );
         if !reuses {
-            let triangles = extents.iter().map(|e| e.triangles).sum();
-            pools.staged(triangles, &task.input.name)?;
+            let triangles: u32 = extents.iter().map(|e| e.triangles).sum();
+            staged.push((triangles, task.input.name.as_str()));
         }
     }
+    let staged_triangles = staged.iter().map(|(t, _)| u64::from((*t).max(1))).sum();
+    pools.reserve_staged(staged_triangles);
+    for (triangles, name) in staged {
+        pools.staged(triangles, name)?;
+    }
     let blas = blas_work(s, plan);
+    let blas_builds: Vec<(u32, bool)> = blas
+        .iter()
+        .filter(|q| q.work == PendingBvh::Build)
+        .map(|q| (q.triangles, q.allow_update))
+        .collect();
+    pools.reserve_blas(&blas_builds);
     for q in &blas {
         if q.work == PendingBvh::Build {
             pools.blas(q.triangles, q.allow_update, q.name)?;
@@ -75,6 +88,8 @@ pub(super) fn check(s: &State, plan: &FramePlan<'_>) -> Result<Reserved> {
     }
     Ok(Reserved {
         blas: blas.iter().map(|q| (q.handle, q.work)).collect(),
+        blas_builds,
+        staged_triangles,
         tlas,
     })
 }

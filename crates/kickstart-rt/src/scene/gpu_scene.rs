@@ -464,6 +464,24 @@ impl GpuScene {
     }
 
     /// Space for `triangles` ingested triangles (reserved by the plan).
+    /// Makes room for a task's staged allocations of `triangles` in all, before them (one
+    /// growth instead of doublings; see `Ledger::reserve`).
+    pub fn reserve_staged(&mut self, encoder: &mut wgpu::CommandEncoder, triangles: u64) {
+        let (max, d) = (self.max_binding, &self.device);
+        self.staged.reserve(d, encoder, triangles, max);
+    }
+
+    /// Makes room for a task's BLAS builds (`(triangles, keep_for_refit)` each), before them.
+    pub fn reserve_blas(&mut self, encoder: &mut wgpu::CommandEncoder, builds: &[(u32, bool)]) {
+        let totals = BlasTotals::of(builds);
+        let (max, d) = (self.max_binding, &self.device);
+        self.triangles.reserve(d, encoder, totals.triangles, max);
+        self.nodes.reserve(d, encoder, totals.nodes, max);
+        self.orders.reserve(d, encoder, totals.orders, max);
+        self.topologies
+            .reserve(d, encoder, totals.topology_words, max);
+    }
+
     pub fn alloc_staged(&mut self, encoder: &mut wgpu::CommandEncoder, triangles: u32) -> Range {
         let max = self.max_binding;
         Self::reserved(&mut self.staged, &self.device, encoder, triangles, max)
@@ -1203,5 +1221,35 @@ mod tests {
         assert!(!continues((0, 0, 128), 128, 256));
         // Backwards (a lower slot after a higher one) too.
         assert!(!continues((128, 0, 128), 0, 128));
+    }
+}
+
+/// Elements a task's BLAS builds allocate from each pool, in all.
+pub(crate) struct BlasTotals {
+    pub triangles: u64,
+    pub nodes: u64,
+    pub orders: u64,
+    pub topology_words: u64,
+}
+
+impl BlasTotals {
+    /// The totals of `builds` (`(triangles, keep_for_refit)` each), as
+    /// [`GpuScene::build_blas`] allocates them (at least one element each).
+    pub fn of(builds: &[(u32, bool)]) -> Self {
+        let mut t = BlasTotals {
+            triangles: 0,
+            nodes: 0,
+            orders: 0,
+            topology_words: 0,
+        };
+        for &(n, keep) in builds {
+            t.triangles += u64::from(n.max(1));
+            t.nodes += u64::from(Lbvh::node_count(n).max(1));
+            if keep {
+                t.orders += u64::from(n.max(1));
+                t.topology_words += u64::from(Lbvh::topology_words(n).max(1));
+            }
+        }
+        t
     }
 }

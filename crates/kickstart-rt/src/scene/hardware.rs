@@ -12,6 +12,14 @@ use std::collections::HashMap;
 
 use crate::gpu::Recorder;
 
+/// The start of every driver acceleration structure's label (the SDK's memory count finds them
+/// in wgpu's allocator report by it).
+pub(crate) const DRIVER_STRUCTURE_LABEL: &str = "kickstart-rt driver ";
+/// Label of the driver's BLASes.
+const DRIVER_BLAS_LABEL: &str = "kickstart-rt driver BLAS";
+/// Label of the driver's TLAS.
+const DRIVER_TLAS_LABEL: &str = "kickstart-rt driver TLAS";
+
 /// Words of one instance record (128 bytes, the instance table's record; the context writes
 /// them: `instance_record`). Words 0–11: the object-to-world rows; 12–23: the world-to-object
 /// rows; 24: the geometry slot; 25: the inclusion mask; 26: bit 0, in the TLAS.
@@ -92,7 +100,7 @@ impl HardwareScene {
         }
         let blas = self.device.create_blas(
             &wgpu::CreateBlasDescriptor {
-                label: Some("kickstart-rt driver BLAS"),
+                label: Some(DRIVER_BLAS_LABEL),
                 flags,
                 update_mode: if updatable {
                     wgpu::AccelerationStructureUpdateMode::PreferUpdate
@@ -274,7 +282,7 @@ impl HardwareScene {
 /// An unbuilt TLAS of `capacity` instances.
 fn create_tlas(device: &wgpu::Device, capacity: u32) -> wgpu::Tlas {
     device.create_tlas(&wgpu::CreateTlasDescriptor {
-        label: Some("kickstart-rt driver TLAS"),
+        label: Some(DRIVER_TLAS_LABEL),
         max_instances: capacity,
         flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
         update_mode: wgpu::AccelerationStructureUpdateMode::Build,

@@ -114,14 +114,53 @@ impl Ledger {
         }
     }
 
-    /// Gives back the free tail: the capacity shrinks to the end of the last range handed out
-    /// or pending (at least [`MIN_CAPACITY`] elements). Returns whether it shrank.
+    /// Elements free at the end of the buffer.
+    fn free_tail(&self) -> u32 {
+        match self.free.iter().next_back() {
+            Some((&start, &len)) if start + len == self.capacity => len,
+            _ => 0,
+        }
+    }
+
+    /// Makes room for `total` more elements at the end before a task's allocations of that
+    /// many, so that they grow the buffer once instead of doubling it on the way (a scene
+    /// loaded in one task ends up with an eighth of headroom, not up to half). Growth is at
+    /// least an eighth of the capacity, so that streaming small allocations stays amortised.
+    /// Nothing changes when the capacity would pass `max_bytes` (the allocations then are
+    /// refused as usual). Returns whether it grew.
+    pub fn reserve(&mut self, total: u64, max_bytes: u64) -> bool {
+        let tail = u64::from(self.free_tail());
+        if total <= tail {
+            return false;
+        }
+        let cap = u64::from(self.capacity);
+        let new_cap = (cap + total - tail).max(cap + cap / 8);
+        if new_cap * self.element_bytes > max_bytes || new_cap > u64::from(u32::MAX) {
+            return false;
+        }
+        let old_cap = self.capacity;
+        self.capacity = new_cap as u32;
+        self.release(Range {
+            start: old_cap,
+            len: self.capacity - old_cap,
+        });
+        true
+    }
+
+    /// Gives back the free tail when it is worth a copy: at least a quarter of the capacity, or
+    /// anything when no range is in use or pending (then nothing needs copying). The capacity
+    /// shrinks to the end of the last range handed out or pending (at least [`MIN_CAPACITY`]
+    /// elements). Returns whether it shrank.
     pub fn trim_free_tail(&mut self) -> bool {
         let Some((&start, &len)) = self.free.iter().next_back() else {
             return false;
         };
         let new_cap = start.max(MIN_CAPACITY);
-        if start + len != self.capacity || new_cap >= self.capacity {
+        let idle = self.used_bytes() == 0;
+        if start + len != self.capacity
+            || new_cap >= self.capacity
+            || (!idle && len < self.capacity / 4)
+        {
             return false;
         }
         self.free.remove(&start);
@@ -219,12 +258,7 @@ impl Pool {
         let old_cap = self.ledger.capacity();
         let r = self.ledger.alloc(len, max_bytes)?;
         if self.ledger.capacity() != old_cap {
-            let bytes = self.ledger.capacity() as u64 * self.ledger.element_bytes;
-            let new = create(device, self.label, bytes, self.usage);
-            encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
-            // The old buffer stays alive while recorded commands use it (wgpu reference counts
-            // it).
-            self.buffer = new;
+            self.regrow(device, encoder);
         }
         Some(r)
     }
@@ -241,18 +275,45 @@ impl Pool {
     }
 
     /// Gives the free tail back ([`Ledger::trim_free_tail`]): a smaller buffer holding the
-    /// ranges in use, copied inside `encoder`. Returns whether it shrank.
+    /// ranges in use, copied inside `encoder` (nothing to copy when none is). Returns whether it
+    /// shrank.
     pub fn trim(&mut self, device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder) -> bool {
+        let idle = self.ledger.used_bytes() == 0;
         if !self.ledger.trim_free_tail() {
             return false;
         }
         let bytes = self.ledger.capacity() as u64 * self.ledger.element_bytes;
         let new = create(device, self.label, bytes, self.usage);
-        let kept = new.size().min(self.buffer.size());
-        encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, kept);
+        if !idle {
+            let kept = new.size().min(self.buffer.size());
+            encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, kept);
+        }
         // As when growing: wgpu keeps the old buffer alive while recorded commands use it.
         self.buffer = new;
         true
+    }
+
+    /// [`Ledger::reserve`] on the pool: grows the buffer (copying its contents inside
+    /// `encoder`) so that `total` more elements fit at its end.
+    pub fn reserve(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        total: u64,
+        max_bytes: u64,
+    ) {
+        if self.ledger.reserve(total, max_bytes) {
+            self.regrow(device, encoder);
+        }
+    }
+
+    /// A buffer of the ledger's (larger) capacity, holding the old one's contents.
+    fn regrow(&mut self, device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder) {
+        let bytes = self.ledger.capacity() as u64 * self.ledger.element_bytes;
+        let new = create(device, self.label, bytes, self.usage);
+        encoder.copy_buffer_to_buffer(&self.buffer, 0, &new, 0, self.buffer.size());
+        // The old buffer stays alive while recorded commands use it (wgpu reference counts it).
+        self.buffer = new;
     }
 }
 
@@ -316,10 +377,9 @@ mod tests {
         let a = p.alloc(&g.device, &mut enc, 10, u64::MAX).unwrap();
         let b = p.alloc(&g.device, &mut enc, 90, u64::MAX).unwrap();
         let c = p.alloc(&g.device, &mut enc, 200, u64::MAX).unwrap();
-        // Growth left a few elements free past `c`.
-        assert!(p.trim(&g.device, &mut enc));
-        assert_eq!(p.ledger().capacity(), c.start + c.len);
-        assert!(!p.trim(&g.device, &mut enc), "no free tail left");
+        // Growth left a few elements free past `c`: not worth a copy.
+        assert!(!p.trim(&g.device, &mut enc), "a small tail stays");
+        assert_eq!(p.ledger().capacity(), c.start + c.len + 6);
         // Known contents in `a`, then `c` freed: pending until task 3 completes.
         let words: Vec<u32> = (0..a.len * 4).map(|i| 0xC0DE_0000 + i).collect();
         let src = crate::gpu::testing::buffer_with(bytemuck::cast_slice(&words));
@@ -330,7 +390,7 @@ mod tests {
             "the pending range is not given back"
         );
         p.collect(4);
-        assert!(p.trim(&g.device, &mut enc));
+        assert!(p.trim(&g.device, &mut enc), "two thirds free");
         assert_eq!(p.ledger().capacity(), b.start + b.len);
         assert_eq!(p.buffer().size(), u64::from(b.start + b.len) * 16);
         p.free_after(b, 4);
@@ -352,6 +412,39 @@ mod tests {
         g.queue.submit([enc.finish()]);
     }
 
+    /// Reserving room for a task's allocations grows the pool once, to what they need (or by
+    /// an eighth of the capacity at least), and the allocations then fit without growing.
+    #[test]
+    fn reserving_grows_once_to_what_a_task_needs() {
+        let g = gpu();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let mut p = Pool::new(&g.device, "test pool", 16);
+        let sizes = [1000, 30, 2000, 7, 500];
+        let total: u64 = sizes.iter().map(|&n| u64::from(n)).sum();
+        p.reserve(&g.device, &mut enc, total, u64::MAX);
+        assert_eq!(
+            u64::from(p.ledger().capacity()),
+            total,
+            "exactly what the task needs"
+        );
+        let cap = p.ledger().capacity();
+        for n in sizes {
+            p.alloc(&g.device, &mut enc, n, u64::MAX).unwrap();
+        }
+        assert_eq!(
+            p.ledger().capacity(),
+            cap,
+            "no growth after the reservation"
+        );
+        // A small reservation grows by an eighth of the capacity.
+        p.reserve(&g.device, &mut enc, 40, u64::MAX);
+        assert_eq!(p.ledger().capacity(), cap + cap / 8);
+        assert_eq!(p.buffer().size(), u64::from(cap + cap / 8) * 16);
+        // Past the limit: nothing changes.
+        assert!(!p.ledger().clone().reserve(1 << 30, 1 << 20));
+        g.queue.submit([enc.finish()]);
+    }
+
     /// One call on a pool, as the plan and the record phase make them.
     #[derive(Clone, Copy)]
     enum Op {
@@ -359,6 +452,8 @@ mod tests {
         /// Frees the `n`th range handed out so far, last used by task `serial`.
         Free(usize, u64),
         Collect(u64),
+        /// Room for this many elements more, under a limit of this many bytes.
+        Reserve(u64, u64),
     }
 
     /// The plan simulates a task's allocations on a copy of the ledger; the record phase then
@@ -388,6 +483,11 @@ mod tests {
             Alloc(1 << 20, 1 << 16), // past the limit: refused, nothing changes
             Alloc(0, u64::MAX),      // at least one element
             Alloc(100, 400 * 16),    // doubling would pass the limit: grows to it
+            Reserve(300, u64::MAX),  // one growth for the next three
+            Alloc(120, u64::MAX),
+            Alloc(90, u64::MAX),
+            Alloc(90, u64::MAX),
+            Reserve(1 << 20, 1 << 16), // past the limit: nothing changes
         ];
         let mut predicted = pool.ledger().clone();
         let (mut real, mut sim) = (Vec::new(), Vec::new());
@@ -416,6 +516,10 @@ mod tests {
                     pool.collect(oldest);
                     predicted.collect(oldest);
                 }
+                Reserve(total, max) => {
+                    pool.reserve(&g.device, &mut enc, total, max);
+                    predicted.reserve(total, max);
+                }
             }
             assert_eq!(pool.ledger(), &predicted, "op {i}: the bookkeeping");
             assert_eq!(
@@ -432,7 +536,9 @@ mod tests {
         assert_eq!(real[5], at(10, 90));
         assert_eq!(real[6], at(100, 15));
         assert_eq!(real[7], None);
-        assert_eq!(predicted.capacity(), 400);
+        // Grown to the limit (400), then once by the reservation: the three allocations' 300
+        // elements less the 75 free at the end; they fit without growing again.
+        assert_eq!(predicted.capacity(), 400 + 300 - 75);
         g.queue.submit([enc.finish()]);
     }
 }

@@ -5,7 +5,7 @@
 //! with the error the record phase used to return midway; the record phase then cannot fail.
 
 use crate::error::{Error, Result};
-use crate::scene::gpu_scene::{GpuScene, NODE_BYTES, TRIANGLE_BYTES};
+use crate::scene::gpu_scene::{BlasTotals, GpuScene, NODE_BYTES, TRIANGLE_BYTES};
 use crate::scene::lbvh::Lbvh;
 use crate::scene::pool::{Ledger, Pool, Range};
 
@@ -36,6 +36,22 @@ impl SceneReservation {
             orders: copy(&scene.orders),
             topologies: copy(&scene.topologies),
         }
+    }
+
+    /// What [`GpuScene::reserve_staged`] does before a task's staged allocations of `triangles`
+    /// in all.
+    pub fn reserve_staged(&mut self, triangles: u64) {
+        self.staged.reserve(triangles, self.max);
+    }
+
+    /// What [`GpuScene::reserve_blas`] does before a task's BLAS builds (`(triangles,
+    /// keep_for_refit)` each).
+    pub fn reserve_blas(&mut self, builds: &[(u32, bool)]) {
+        let totals = BlasTotals::of(builds);
+        self.triangles.reserve(totals.triangles, self.max);
+        self.nodes.reserve(totals.nodes, self.max);
+        self.orders.reserve(totals.orders, self.max);
+        self.topologies.reserve(totals.topology_words, self.max);
     }
 
     /// What [`GpuScene::alloc_staged`] allocates for `triangles` ingested triangles of geometry
