@@ -79,6 +79,21 @@ enum Command {
     Soak(SoakCli),
     /// Benchmark BLAS/TLAS builds and refits, BVH quality and ray throughput on the GPU.
     Bench(BenchCli),
+    /// Compare two `ksrt render` output folders: the PSNR of every PNG image both hold (8-bit,
+    /// peak 255); fails when one is below --min-db.
+    Compare(CompareCli),
+}
+
+// `ksrt compare`'s options (no doc comment: the variant's is the help text).
+#[derive(Args)]
+struct CompareCli {
+    /// The folder compared.
+    a: PathBuf,
+    /// The folder it is compared against.
+    b: PathBuf,
+    /// Least PSNR every image must have, dB.
+    #[arg(long, default_value_t = 40.0)]
+    min_db: f64,
 }
 
 // `ksrt shaders`'s options (no doc comment: the variant's is the help text).
@@ -325,6 +340,7 @@ fn run(command: Command) -> AnyResult<()> {
         }),
         Command::Quality(c) => quality::command::run(quality_args(c)),
         Command::Soak(c) => lab::soak::command(&c.scene, c.scenes, c.frames, &c.size, c.seed),
+        Command::Compare(c) => lab::compare::command(&c.a, &c.b, c.min_db),
         Command::Bench(c) => bench::command::run(bench::command::BenchArgs {
             scenes: c.scenes,
             names: c.scene,

@@ -1248,7 +1248,7 @@ fn build_empty(ctx: &ExecuteContext) -> GpuTaskHandle {
 
 /// A denoising context's memory, by the documented formula: its own, per grid pixel and signal
 /// two records (16 bytes for radiance, 8 for occlusion and shadows); and what it may share with
-/// other contexts: two 16-byte guides and the à-trous intermediate (one record) per pixel.
+/// other contexts: two 8-byte guides and the à-trous intermediate (one record) per pixel.
 fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
     let (signals, record) = match signal {
         SignalType::SpecularAndDiffuse => (2, 16),
@@ -1257,7 +1257,7 @@ fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
     };
     (
         grid_pixels * 2 * signals * record,
-        grid_pixels * (2 * 16 + record),
+        grid_pixels * (2 * 8 + record),
     )
 }
 
@@ -1472,7 +1472,7 @@ fn contexts_with_the_same_inputs_share_their_guides_and_give_what_each_gives_alo
         let pairs = if (3..=5).contains(&frame) { 2 } else { 1 };
         assert_eq!(
             total,
-            2 * own + guides_and_scratch + (pairs - 1) * 2 * 16 * pixels,
+            2 * own + guides_and_scratch + (pairs - 1) * 2 * 8 * pixels,
             "frame {frame}: {pairs} pair(s) of guides"
         );
     }

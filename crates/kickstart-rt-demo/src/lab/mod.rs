@@ -4,6 +4,7 @@
 //! application never uses it.
 
 pub mod bench;
+pub mod compare;
 pub mod obvhs_peer;
 pub mod quality;
 pub mod soak;

@@ -32,7 +32,7 @@ struct AtrousParams {
 @group(0) @binding(0) var<uniform> dp: DenoiseParams;
 @group(0) @binding(1) var<uniform> ap: AtrousParams;
 
-@group(1) @binding(0) var<storage, read> guide: array<vec4<u32>>;
+@group(1) @binding(0) var<storage, read> guide: array<vec2<u32>>;
 @group(1) @binding(1) var<storage, read> src0: array<DnRecord>;
 @group(1) @binding(2) var<storage, read> src1: array<DnRecord>;
 @group(1) @binding(3) var<storage, read_write> dst0: array<DnRecord>;
@@ -68,13 +68,14 @@ struct DnMoments {
 
 // Adds the neighbour `q` (guide `g`, record `h`) to the moments of the centre at `pos` (normal
 // `n`, camera distance `dist`) when it lies on the centre's surface. Only the neighbour's
-// position is read from its guide: no normal is decoded.
-fn dn_moments_add(m: DnMoments, q: vec2<i32>, g: vec4<u32>, h: DnRecord, pos: vec3<f32>,
+// position is taken from its guide: no normal is decoded.
+fn dn_moments_add(m: DnMoments, q: vec2<i32>, g: vec2<u32>, h: DnRecord, pos: vec3<f32>,
                   n: vec3<f32>, dist: f32) -> DnMoments {
-    if !dn_in_grid(q) || g.w == DN_INVALID {
+    if !dn_in_grid(q) || !dn_guide_valid(g) {
         return m;
     }
-    if abs(dot(n, bitcast<vec3<f32>>(g.xyz) - pos)) > 0.02 * dist {
+    let gpos = dn_guide_position(vec2<u32>(q), bitcast<f32>(g.x), false);
+    if abs(dot(n, gpos - pos)) > 0.02 * dist {
         return m;
     }
     let l = dn_luminance(dn_value(h).xyz);
@@ -166,12 +167,12 @@ fn dn_tap_index(p: vec2<i32>, o: vec2<i32>, step: i32) -> u32 {
 }
 
 // Adds the tap `o` (guide `g`, record `h`) of the centre `c`.
-fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec4<u32>, h: DnRecord) -> DnAcc {
+fn dn_tap(acc: DnAcc, c: DnCentre, o: vec2<i32>, step: i32, g: vec2<u32>, h: DnRecord) -> DnAcc {
     let q = c.p + o * step;
     if !dn_in_grid(q) {
         return acc;
     }
-    let gq = dn_unpack_guide(g);
+    let gq = dn_unpack_guide(g, vec2<u32>(q), false);
     if !gq.valid {
         return acc;
     }
@@ -229,7 +230,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let p = vec2<i32>(gid.xy);
     let i = dn_index(gid.xy);
-    let gp = dn_unpack_guide(guide[i]);
+    let gp = dn_unpack_guide(guide[i], gid.xy, false);
     if !gp.valid {
         // No surface: the accumulated input passes through.
         for (var s = 0u; s < DN_SIGNALS; s++) {

@@ -13,8 +13,11 @@
 // 2×2 or 4×4 block, HalfResolutionMode::OnePer*) one pixel per block, the block's traced one
 // (dn_texel); the upsample pass then writes every viewport pixel from that grid. Per-pixel
 // buffers are indexed by grid pixel, row-major with the grid's width.
-// - guide (vec4<u32>): world position xyz (f32 bits); w = octahedral normal (12 + 12 bits) and
-//   roughness (8 bits), or DN_INVALID where the G-buffer holds no surface.
+// - guide (vec2<u32>): x = the surface's clip-space depth (f32 bits: the G-buffer's hardware
+//   depth, or its world position's projection); y = octahedral normal (12 + 12 bits) and
+//   roughness (8 bits), or DN_INVALID where the G-buffer holds no surface. The position is the
+//   depth unprojected at the grid pixel's texel with its frame's camera and jitter
+//   (dn_guide_position), as the G-buffer's own decoding does: 8 bytes instead of a position's 12.
 // - signal (DnRecord, history and filter intermediates): the value (rgb or scalar), the hit
 //   distance, z = history: second moment of luminance / filter: variance of the value's noise,
 //   and the history length in frames (layouts in the record files).
@@ -57,6 +60,9 @@ struct DenoiseParams {
     grid: vec4<u32>,
     // xy: this frame's traced pixel of each block, zw: the previous frame's (block modes).
     lattice: vec4<u32>,
+    // This and the previous frame's clip-to-world matrices (the guides' unprojection).
+    clip_to_world: mat4x4<f32>,
+    prev_clip_to_world: mat4x4<f32>,
 }
 
 const DN_INVALID: u32 = 0xffffffffu;
@@ -107,11 +113,36 @@ fn dn_oct_decode(e: vec2<f32>) -> vec3<f32> {
     return normalize(n);
 }
 
-fn dn_pack_guide(p: vec3<f32>, n: vec3<f32>, roughness: f32) -> vec4<u32> {
+// The guide of a surface at clip-space depth `z`, normal `n`, `roughness`.
+fn dn_pack_guide(z: f32, n: vec3<f32>, roughness: f32) -> vec2<u32> {
     let e = clamp(dn_oct_encode(n) * 0.5 + 0.5, vec2<f32>(0.0), vec2<f32>(1.0));
     let q = vec2<u32>(round(e * 4095.0));
     let r = u32(round(clamp(roughness, 0.0, 1.0) * 254.0));
-    return vec4<u32>(bitcast<vec3<u32>>(p), q.x | (q.y << 12u) | (r << 24u));
+    return vec2<u32>(bitcast<u32>(z), q.x | (q.y << 12u) | (r << 24u));
+}
+
+// Whether guide `g` holds a surface.
+fn dn_guide_valid(g: vec2<u32>) -> bool {
+    return g.y != DN_INVALID;
+}
+
+// World position of clip-space depth `z` at grid pixel `q` of this frame (`prev` false) or of
+// the previous one: the same arithmetic as the G-buffer's decoding (gb_ndc_of, gb_unproject) on
+// that frame's texel, jitter and camera.
+fn dn_guide_position(q: vec2<u32>, z: f32, prev: bool) -> vec3<f32> {
+    var lattice = dp.lattice.xy;
+    var jitter = dp.jitter.xy;
+    var m = dp.clip_to_world;
+    if prev {
+        lattice = dp.lattice.zw;
+        jitter = dp.jitter.zw;
+        m = dp.prev_clip_to_world;
+    }
+    let texel = dp.viewport.xy + q * dp.grid.z + lattice;
+    let at = vec2<f32>(texel) + 0.5 - jitter;
+    let uv = (at - vec2<f32>(dp.viewport.xy)) / vec2<f32>(dp.viewport.zw);
+    let c = m * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, z, 1.0);
+    return c.xyz / c.w;
 }
 
 struct DnGuide {
@@ -121,16 +152,17 @@ struct DnGuide {
     roughness: f32,
 }
 
-fn dn_unpack_guide(g: vec4<u32>) -> DnGuide {
+// The surface of guide `g` at grid pixel `q` of this frame (`prev` false) or the previous one.
+fn dn_unpack_guide(g: vec2<u32>, q: vec2<u32>, prev: bool) -> DnGuide {
     var r: DnGuide;
-    r.valid = g.w != DN_INVALID;
+    r.valid = dn_guide_valid(g);
     if !r.valid {
         return r;
     }
-    r.position = bitcast<vec3<f32>>(g.xyz);
-    let e = vec2<f32>(f32(g.w & 4095u), f32((g.w >> 12u) & 4095u)) / 4095.0;
+    r.position = dn_guide_position(q, bitcast<f32>(g.x), prev);
+    let e = vec2<f32>(f32(g.y & 4095u), f32((g.y >> 12u) & 4095u)) / 4095.0;
     r.normal = dn_oct_decode(e * 2.0 - 1.0);
-    r.roughness = f32(g.w >> 24u) / 254.0;
+    r.roughness = f32(g.y >> 24u) / 254.0;
     return r;
 }
 

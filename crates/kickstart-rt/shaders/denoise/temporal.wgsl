@@ -20,8 +20,8 @@
 @group(1) @binding(2) var dn_input0: texture_2d<f32>;
 @group(1) @binding(3) var dn_input1: texture_2d<f32>;
 
-@group(2) @binding(0) var<storage, read> guide_prev: array<vec4<u32>>;
-@group(2) @binding(1) var<storage, read_write> guide_cur: array<vec4<u32>>;
+@group(2) @binding(0) var<storage, read> guide_prev: array<vec2<u32>>;
+@group(2) @binding(1) var<storage, read_write> guide_cur: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> hist_prev0: array<DnRecord>;
 @group(2) @binding(3) var<storage, read> hist_prev1: array<DnRecord>;
 @group(2) @binding(4) var<storage, read_write> hist_cur0: array<DnRecord>;
@@ -117,11 +117,21 @@ fn dn_sample(s: u32, p: vec2<u32>, valid: bool, pos: vec3<f32>, n: vec3<f32>) ->
     return any_sum / max(any_count, 1.0);
 }
 
+// The guide depth of the surface at `texel` (position `pos`): the G-buffer's own hardware depth
+// (unprojecting it repeats the G-buffer's decoding exactly), or a world position's projection.
+fn dn_guide_depth(texel: vec2<u32>, pos: vec3<f32>) -> f32 {
+    if gb_branch(gb.depth_type) == 0u {
+        let c = gb.world_to_clip * vec4<f32>(pos, 1.0);
+        return c.z / c.w;
+    }
+    return textureLoad(gb_depth, texel, 0).x;
+}
+
 // Weight of the previous frame's pixel `q` (guide `g`, bilinear weight `bw`) for this pixel's
 // history: 0 outside the grid or where it shows another surface.
 fn dn_history_weight(
     q: vec2<i32>,
-    g: vec4<u32>,
+    g: vec2<u32>,
     bw: f32,
     pos: vec3<f32>,
     n: vec3<f32>,
@@ -130,7 +140,7 @@ fn dn_history_weight(
     if !dn_in_grid(q) {
         return 0.0;
     }
-    let gq = dn_unpack_guide(g);
+    let gq = dn_unpack_guide(g, vec2<u32>(q), true);
     if !gq.valid || !dn_reusable(gq, pos, n, pred) {
         return 0.0;
     }
@@ -185,11 +195,13 @@ fn dn_catmull_rom(t: f32) -> vec4<f32> {
 // `pred`), not the normal (no decode per tap): a tap of another normal on the same plane is
 // rare, weighs little, and the result is clamped to the neighbourhood anyway.
 fn dn_ring_tap(q: vec2<i32>, w: f32, n: vec3<f32>, pred: vec3<f32>, dist: f32) -> vec3<f32> {
-    let j = dn_clamped_index(q);
+    let cq = dn_clamped(q);
+    let j = dn_index(cq);
     let g = guide_prev[j];
     let r = hist_prev0[j];
-    let on_plane = abs(dot(n, bitcast<vec3<f32>>(g.xyz) - pred)) < 0.01 * dist;
-    if !dn_in_grid(q) || g.w == DN_INVALID || !on_plane {
+    let gp = dn_guide_position(cq, bitcast<f32>(g.x), true);
+    let on_plane = abs(dot(n, gp - pred)) < 0.01 * dist;
+    if !dn_in_grid(q) || !dn_guide_valid(g) || !on_plane {
         return vec3<f32>(0.0, 0.0, -1e9);
     }
     return w * vec3<f32>(dn_value(r).x, dn_rec_z(r), 1.0);
@@ -426,21 +438,21 @@ fn main(
     let i = dn_index(p);
     if !inside {
         // A block whose traced pixel lies past the viewport this frame: nothing traced.
-        guide_cur[i] = vec4<u32>(DN_INVALID);
+        guide_cur[i] = vec2<u32>(DN_INVALID);
         for (var s = 0u; s < DN_SIGNALS; s++) {
             dn_store_hist(s, i, dn_pack_signal(vec4<f32>(0.0), 0.0, 0.0));
         }
         return;
     }
     if !surf.valid {
-        guide_cur[i] = vec4<u32>(DN_INVALID);
+        guide_cur[i] = vec2<u32>(DN_INVALID);
         for (var s = 0u; s < DN_SIGNALS; s++) {
             let v = dn_sample(s, p, false, pos, n);
             dn_store_hist(s, i, dn_pack_signal(v, 0.0, 0.0));
         }
         return;
     }
-    guide_cur[i] = dn_pack_guide(pos, n, gb_roughness(texel));
+    guide_cur[i] = dn_pack_guide(dn_guide_depth(texel, pos), n, gb_roughness(texel));
 
     let wsum = w0 + w1 + w2 + w3;
 

@@ -16,7 +16,7 @@
 #import trace/gbuffer
 
 @group(1) @binding(0) var<uniform> dp: DenoiseParams;
-@group(1) @binding(1) var<storage, read> guide: array<vec4<u32>>;
+@group(1) @binding(1) var<storage, read> guide: array<vec2<u32>>;
 @group(1) @binding(2) var<storage, read> src0: array<DnRecord>;
 
 // Plane-distance tolerance, as a fraction of the view distance per viewport pixel of offset.
@@ -45,13 +45,13 @@ struct UpAcc {
 
 // Adds grid pixel `q` (guide `g`, record `h`, bilinear weight `bw`) for the surface `surf`; a
 // pixel outside the grid is left out.
-fn up_tap(acc: UpAcc, q: vec2<i32>, g: vec4<u32>, h: DnRecord, bw: f32, surf: GbSurface,
+fn up_tap(acc: UpAcc, q: vec2<i32>, g: vec2<u32>, h: DnRecord, bw: f32, surf: GbSurface,
           tol: f32) -> UpAcc {
     if !dn_in_grid(q) {
         return acc;
     }
     var r = acc;
-    let gq = dn_unpack_guide(g);
+    let gq = dn_unpack_guide(g, vec2<u32>(q), false);
     let m = up_match(gq, surf.position, surf.normal, tol);
     if gq.valid && m > r.best_match {
         r.best_match = m;

@@ -88,6 +88,10 @@ struct DenoiseParams {
     base_radius: f32,
     grid: [u32; 4],
     lattice: [u32; 4],
+    /// This and the previous frame's clip-to-world matrices (column-major): the guides' depths
+    /// are unprojected with them.
+    clip_to_world: [[f32; 4]; 4],
+    prev_clip_to_world: [[f32; 4]; 4],
 }
 
 #[repr(C)]
@@ -743,6 +747,8 @@ fn frame_params(
         base_radius: settings.base_radius,
         grid: [grid_w, grid_h, mode.block_size(), 0],
         lattice: [x, y, prev_x, prev_y],
+        clip_to_world: cam.clip_to_world.as_mat4().to_cols_array_2d(),
+        prev_clip_to_world: prev.clip_to_world.as_mat4().to_cols_array_2d(),
     };
     (params, motion_texture)
 }

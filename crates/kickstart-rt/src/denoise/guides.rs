@@ -1,6 +1,6 @@
-//! The denoisers' guides (a surface record per grid pixel: position, normal, roughness; see
-//! `shaders/denoise/common.wgsl`), this frame's and the previous frame's, shared by the denoising
-//! contexts whose frames write identical guides.
+//! The denoisers' guides (a surface record per grid pixel: clip-space depth, normal, roughness;
+//! see `shaders/denoise/common.wgsl`), this frame's and the previous frame's, shared by the
+//! denoising contexts whose frames write identical guides.
 //!
 //! A context's temporal pass writes this frame's guide from its G-buffer inputs; the next frame
 //! reads it as the previous guide. Contexts denoised in the same GPU task from the same G-buffer
@@ -16,8 +16,8 @@
 
 use crate::trace::gbuffer::GBufferParams;
 
-/// Bytes per pixel of a guide (`vec4<u32>`).
-pub(crate) const GUIDE_BYTES: u64 = 16;
+/// Bytes per pixel of a guide (`vec2<u32>`: the depth, the normal and roughness).
+pub(crate) const GUIDE_BYTES: u64 = 8;
 
 /// Everything a frame's guide is made of besides the textures' contents: two frames of one GPU
 /// task with equal keys write the same guide.

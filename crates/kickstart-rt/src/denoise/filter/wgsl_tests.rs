@@ -4,6 +4,7 @@
 //! The denoising method picks no variant: iterations, history length and radius are uniforms
 //! or loop counts on the CPU, so Fast and HighQuality share every pipeline.
 
+use super::super::guides::GUIDE_BYTES;
 use super::*;
 use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
 use std::collections::BTreeSet;
@@ -17,7 +18,7 @@ fn check_temporal(module: &naga::Module, signal_type: SignalType) {
         assert_eq!(storage_stride(module, name) as u64, record, "{name}");
     }
     for name in ["guide_prev", "guide_cur"] {
-        assert_eq!(storage_stride(module, name) as u64, history::RECORD_BYTES);
+        assert_eq!(storage_stride(module, name) as u64, GUIDE_BYTES);
     }
 }
 
@@ -28,10 +29,7 @@ fn check_upsample(module: &naga::Module, signal_type: SignalType) {
     crate::trace::gbuffer::assert_wgsl_layout(module);
     let record = history::signal_record_bytes(signal_type);
     assert_eq!(storage_stride(module, "src0") as u64, record);
-    assert_eq!(
-        storage_stride(module, "guide") as u64,
-        history::RECORD_BYTES
-    );
+    assert_eq!(storage_stride(module, "guide") as u64, GUIDE_BYTES);
 }
 
 /// Asserts the layouts an à-trous pass of a context of `signal_type` shares with the Rust side.
@@ -50,10 +48,7 @@ fn check_atrous(module: &naga::Module, signal_type: SignalType) {
     for name in ["src0", "src1", "dst0", "dst1"] {
         assert_eq!(storage_stride(module, name) as u64, record, "{name}");
     }
-    assert_eq!(
-        storage_stride(module, "guide") as u64,
-        history::RECORD_BYTES
-    );
+    assert_eq!(storage_stride(module, "guide") as u64, GUIDE_BYTES);
 }
 
 fn assert_denoise_params(module: &naga::Module) {
@@ -78,6 +73,8 @@ fn assert_denoise_params(module: &naga::Module) {
             base_radius,
             grid,
             lattice,
+            clip_to_world,
+            prev_clip_to_world,
         }
     );
 }
