@@ -14,10 +14,11 @@ pub struct ResourceAllocations {
     pub tlas: u64,
     /// Build scratch.
     pub scratch: u64,
-    /// Denoisers: every context's guides and signal histories (16 bytes per grid pixel for
-    /// each of two guides, and per signal two records of 16 bytes for radiance, 8 for
-    /// occlusion and shadows; see `ExecuteContext::denoising_context_bytes`), and the one
-    /// à-trous intermediate they share (a record per pixel of the largest context's grid).
+    /// Denoisers: every context's signal histories (per grid pixel and signal, a record of 16
+    /// bytes for radiance, 8 for occlusion and shadows; see
+    /// `ExecuteContext::denoising_context_bytes`), the guides (two of 8 bytes per pixel, one
+    /// pair for the contexts denoised from the same inputs) and the two intermediates every
+    /// context shares (a record per pixel of the largest context's grid each).
     pub denoiser: u64,
     /// Upload staging owned by working sets.
     pub staging: u64,

@@ -1247,8 +1247,8 @@ fn build_empty(ctx: &ExecuteContext) -> GpuTaskHandle {
 }
 
 /// A denoising context's memory, by the documented formula: its own, per grid pixel and signal
-/// two records (16 bytes for radiance, 8 for occlusion and shadows); and what it may share with
-/// other contexts: two 8-byte guides and the à-trous intermediate (one record) per pixel.
+/// one record (16 bytes for radiance, 8 for occlusion and shadows); and what it may share with
+/// other contexts: two 8-byte guides and the two intermediates (a record each) per pixel.
 fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
     let (signals, record) = match signal {
         SignalType::SpecularAndDiffuse => (2, 16),
@@ -1256,8 +1256,8 @@ fn expected_denoiser_bytes(signal: SignalType, grid_pixels: u64) -> (u64, u64) {
         _ => (1, 8),
     };
     (
-        grid_pixels * 2 * signals * record,
-        grid_pixels * (2 * 8 + record),
+        grid_pixels * signals * record,
+        grid_pixels * (2 * 8 + 2 * record),
     )
 }
 

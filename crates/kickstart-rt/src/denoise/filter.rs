@@ -625,8 +625,8 @@ fn record_frame(
     let frame = Frame {
         params: &params,
         groups: (grid_w.div_ceil(TILE), grid_h.div_ceil(TILE)),
-        cur: (h.frame % 2) as usize,
         buffers: &buffers,
+        history_bytes: scratch_bytes,
     };
 
     let previous_scope = rec.scope;
@@ -672,9 +672,9 @@ struct Frame<'a> {
     params: &'a wgpu::Buffer,
     /// Workgroups of every dispatch.
     groups: (u32, u32),
-    /// The current frame's buffers (by frame parity); `1 - cur` are the previous frame's.
-    cur: usize,
     buffers: &'a BufferSet,
+    /// Bytes of one signal's history.
+    history_bytes: u64,
 }
 
 /// The buffers one frame of a context binds: its guides (maybe shared), its histories and the
@@ -682,9 +682,10 @@ struct Frame<'a> {
 struct BufferSet {
     guide_prev: wgpu::Buffer,
     guide_cur: wgpu::Buffer,
-    /// `history[parity][signal]`.
-    history: [Vec<wgpu::Buffer>; 2],
-    scratch: wgpu::Buffer,
+    /// One per signal.
+    history: Vec<wgpu::Buffer>,
+    /// The temporal pass's output (a buffer per signal), then the à-trous ping-pong.
+    scratch: [wgpu::Buffer; 2],
 }
 
 /// What the temporal pass reads besides the signal: the G-buffer and the motion vectors (or a
@@ -810,7 +811,6 @@ fn record_temporal(
     temporal: &wgpu::ComputePipeline,
 ) {
     let device = rec.device;
-    let (cur, prv) = (frame.cur, 1 - frame.cur);
     // The second signal's buffer, or a placeholder (`written`: the one bound for writing).
     let second = |set: &Vec<wgpu::Buffer>, written: bool| -> wgpu::Buffer {
         set.get(1)
@@ -835,20 +835,31 @@ fn record_temporal(
         ],
     );
     let b = frame.buffers;
-    let hist_prev1 = second(&b.history[prv], false);
-    let hist_cur1 = second(&b.history[cur], true);
+    let signals = b.history.len();
+    let hist_prev1 = second(&b.history, false);
+    let hist_cur1 = if signals > 1 {
+        b.scratch[1].clone()
+    } else {
+        shared.placeholder_buffers[1].clone()
+    };
     let g2 = shared.temporal_buffers.bind_group(
         device,
         &[
             ("guide_prev", b.guide_prev.as_entire_binding()),
             ("guide_cur", b.guide_cur.as_entire_binding()),
-            ("hist_prev0", b.history[prv][0].as_entire_binding()),
+            ("hist_prev0", b.history[0].as_entire_binding()),
             ("hist_prev1", hist_prev1.as_entire_binding()),
-            ("hist_cur0", b.history[cur][0].as_entire_binding()),
+            ("hist_cur0", b.scratch[0].as_entire_binding()),
             ("hist_cur1", hist_cur1.as_entire_binding()),
         ],
     );
     rec.dispatch_2d("denoise temporal", temporal, &[&g0, &g1, &g2], frame.groups);
+    // This frame's accumulated signals become the history (the previous one is read: the
+    // temporal pass could not write it in place).
+    for (s, history) in b.history.iter().enumerate() {
+        rec.encoder
+            .copy_buffer_to_buffer(&b.scratch[s], 0, history, 0, frame.history_bytes);
+    }
 }
 
 /// What the upsample pass of a block mode reads besides the filtered grid.
@@ -883,9 +894,9 @@ fn record_atrous(
         )],
     );
     let b = frame.buffers;
-    // The previous frame's history is dead once the temporal pass has read it.
-    let ping_pong = [b.history[1 - frame.cur][s].clone(), b.scratch.clone()];
-    let mut src = b.history[frame.cur][s].clone();
+    // The scratch is free once the temporal pass's output is in the history.
+    let ping_pong = b.scratch.clone();
+    let mut src = b.history[s].clone();
     for it in 0..iterations {
         let dst = ping_pong[(it % 2) as usize].clone();
         let step = rec.uniform(

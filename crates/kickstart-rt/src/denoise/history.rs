@@ -37,16 +37,14 @@ pub(crate) fn buffer_bytes(input: &DenoisingContextInput) -> u64 {
 }
 
 /// The buffers of one context, sized for `pixels` grid pixels: per signal, the accumulated signal
-/// of this and the previous frame ([`signal_record_bytes`] per pixel each). Its guides may be
-/// shared with other contexts: see [`super::guides`].
-/// The previous frame's signal buffer is dead once the temporal pass has read it, so the à-trous
-/// iterations use it as one of their two ping-pong buffers (the other is the denoisers' shared
-/// [`super::scratch::Scratch`]).
+/// ([`signal_record_bytes`] per pixel). The temporal pass reads it (the previous frame's) and
+/// writes this frame's into the shared scratch ([`super::scratch::Scratch`]), which is then
+/// copied into it. Its guides may be shared with other contexts: see [`super::guides`].
 pub(crate) struct HistoryBuffers {
     /// Grid pixels each buffer holds.
     pub pixels: u64,
-    /// `history[parity][signal]`.
-    pub history: [Vec<wgpu::Buffer>; 2],
+    /// One buffer per signal.
+    pub history: Vec<wgpu::Buffer>,
 }
 
 impl HistoryBuffers {
@@ -55,19 +53,16 @@ impl HistoryBuffers {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
-                usage: wgpu::BufferUsages::STORAGE,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })
         };
         let signal_size = pixels * signal_record_bytes(signal_type);
-        let set = || {
-            (0..signal_count(signal_type))
-                .map(|_| buffer("kickstart-rt denoiser history", signal_size))
-                .collect::<Vec<_>>()
-        };
         HistoryBuffers {
             pixels,
-            history: [set(), set()],
+            history: (0..signal_count(signal_type))
+                .map(|_| buffer("kickstart-rt denoiser history", signal_size))
+                .collect(),
         }
     }
 
@@ -77,10 +72,10 @@ impl HistoryBuffers {
     }
 }
 
-/// Bytes a context of `signal_type` holds for a grid of `pixels`: per signal, two records of
+/// Bytes a context of `signal_type` holds for a grid of `pixels`: per signal, one record of
 /// [`signal_record_bytes`] per pixel.
 pub(crate) fn history_bytes(signal_type: SignalType, pixels: u64) -> u64 {
-    pixels * 2 * signal_count(signal_type) as u64 * signal_record_bytes(signal_type)
+    pixels * signal_count(signal_type) as u64 * signal_record_bytes(signal_type)
 }
 
 /// One context's buffers and the state carried between its frames.
