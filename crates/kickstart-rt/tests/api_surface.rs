@@ -1030,6 +1030,10 @@ fn build_memory_is_given_back_once_builds_are_done_and_traces_stay_the_same() {
         quiet.scratch * 4 < built.scratch,
         "build scratch kept: {quiet:?} vs {built:?}"
     );
+    assert!(
+        quiet.cache < built.cache,
+        "the lighting cache's allocation scratch kept: {quiet:?} vs {built:?}"
+    );
     // Only the last element's rounding is left of each pool (at most one 256-byte buffer or
     // the 16-element minimum each).
     assert!(

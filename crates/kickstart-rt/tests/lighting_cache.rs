@@ -952,7 +952,10 @@ fn a_destroyed_instance_frees_its_cache_for_the_next() {
         }
     );
     run_tasks(&ctx, vec![]);
-    assert_eq!(ctx.resource_allocations().cache, bytes);
+    // Nothing grew (the allocation scratch and the meta pool's free tail may have been given
+    // back since).
+    let after = ctx.resource_allocations().cache;
+    assert!(after <= bytes, "{after} bytes after, {bytes} before");
     let cam = Camera {
         eye: above().eye + Vec3::new(9.0, 0.0, 0.0),
         target: Vec3::new(9.0, 0.0, 0.0),

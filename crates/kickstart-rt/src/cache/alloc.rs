@@ -503,6 +503,20 @@ impl DirectLightingCache {
         }
     }
 
+    /// Gives back what only allocations use once none waits: the allocation scratch, and the
+    /// meta pool's free tail (the ranges in use copied into a smaller buffer inside `encoder`
+    /// when at least a quarter is free). The next allocation takes what it needs again.
+    pub fn give_back_idle_memory(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        if !self.waiting.is_empty() {
+            return;
+        }
+        self.meta.trim(&self.device, encoder);
+        // `storage` makes buffers of at least 256 bytes: the empty cache's.
+        if self.scratch.size() > 256 {
+            self.scratch = storage(&self.device, "kickstart-rt cache allocation scratch", 4);
+        }
+    }
+
     /// Records the GPU allocation of `jobs` (instances whose geometry's BLAS is built; the plan
     /// checked each with [`Self::check_allocation`] when its instance task came). Jobs past the
     /// per-task limit stay waiting.
