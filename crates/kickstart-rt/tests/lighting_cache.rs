@@ -952,8 +952,7 @@ fn a_destroyed_instance_frees_its_cache_for_the_next() {
         }
     );
     run_tasks(&ctx, vec![]);
-    // Nothing grew (the allocation scratch and the meta pool's free tail may have been given
-    // back since).
+    // Nothing grew (the allocation scratch may have been given back since).
     let after = ctx.resource_allocations().cache;
     assert!(after <= bytes, "{after} bytes after, {bytes} before");
     let cam = Camera {

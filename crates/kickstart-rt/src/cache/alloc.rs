@@ -503,14 +503,14 @@ impl DirectLightingCache {
         }
     }
 
-    /// Gives back what only allocations use once none waits: the allocation scratch, and the
-    /// meta pool's free tail (the ranges in use copied into a smaller buffer inside `encoder`
-    /// when at least a quarter is free). The next allocation takes what it needs again.
-    pub fn give_back_idle_memory(&mut self, encoder: &mut wgpu::CommandEncoder) {
+    /// Gives back what only allocations use once none waits: the allocation scratch (no task in
+    /// flight uses it then, so it is freed at once). The meta pool keeps its size: trimming it
+    /// means copying it, and the old buffer would live beside the new one until the copy is
+    /// done — a peak of its own. The next allocation takes what it needs again.
+    pub fn give_back_idle_memory(&mut self) {
         if !self.waiting.is_empty() {
             return;
         }
-        self.meta.trim(&self.device, encoder);
         // `storage` makes buffers of at least 256 bytes: the empty cache's.
         if self.scratch.size() > 256 {
             self.scratch = storage(&self.device, "kickstart-rt cache allocation scratch", 4);
@@ -628,6 +628,13 @@ impl DirectLightingCache {
     ) -> (Vec<AllocJob>, Vec<Range>) {
         let mut fitted = Vec::with_capacity(jobs.len());
         let mut records = Vec::with_capacity(jobs.len());
+        // Room for every job's records at once: one growth to what they need, not doublings.
+        let total: u64 = jobs
+            .iter()
+            .map(|j| u64::from(j.tri_count.max(1)) * u64::from(RECORD_WORDS))
+            .sum();
+        self.meta
+            .reserve(&self.device, rec.encoder, total, self.max_binding);
         for j in jobs {
             let words = j.tri_count.max(1) * RECORD_WORDS;
             match self

@@ -584,8 +584,7 @@ fn allocate_caches(frame: &mut Frame<'_>, s: &mut State) {
         .prepare_task(frame.encoder, s.instances.slot_count(), frame.serial);
     let jobs = s.cache_jobs();
     if jobs.is_empty() {
-        // After the plan's checks of this task: the next task's plan sees the smaller pool.
-        s.cache.give_back_idle_memory(frame.encoder);
+        s.cache.give_back_idle_memory();
         return;
     }
     let serial = frame.serial;
