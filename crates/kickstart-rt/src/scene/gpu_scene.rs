@@ -1183,6 +1183,36 @@ fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
 /// A BLAS as read back: raw nodes (16 floats each) and triangles (12 floats each).
 pub(crate) type RawBlas = (Vec<[f32; 16]>, Vec<[f32; 12]>);
 
+/// Elements a task's BLAS builds allocate from each pool, in all.
+pub(crate) struct BlasTotals {
+    pub triangles: u64,
+    pub nodes: u64,
+    pub orders: u64,
+    pub topology_words: u64,
+}
+
+impl BlasTotals {
+    /// The totals of `builds` (`(triangles, keep_for_refit)` each), as
+    /// [`GpuScene::build_blas`] allocates them (at least one element each).
+    pub fn of(builds: &[(u32, bool)]) -> Self {
+        let mut t = BlasTotals {
+            triangles: 0,
+            nodes: 0,
+            orders: 0,
+            topology_words: 0,
+        };
+        for &(n, keep) in builds {
+            t.triangles += u64::from(n.max(1));
+            t.nodes += u64::from(Lbvh::node_count(n).max(1));
+            if keep {
+                t.orders += u64::from(n.max(1));
+                t.topology_words += u64::from(Lbvh::topology_words(n).max(1));
+            }
+        }
+        t
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::{continues, refs_per_instance, TLAS_REF_BUDGET};
@@ -1221,35 +1251,5 @@ mod tests {
         assert!(!continues((0, 0, 128), 128, 256));
         // Backwards (a lower slot after a higher one) too.
         assert!(!continues((128, 0, 128), 0, 128));
-    }
-}
-
-/// Elements a task's BLAS builds allocate from each pool, in all.
-pub(crate) struct BlasTotals {
-    pub triangles: u64,
-    pub nodes: u64,
-    pub orders: u64,
-    pub topology_words: u64,
-}
-
-impl BlasTotals {
-    /// The totals of `builds` (`(triangles, keep_for_refit)` each), as
-    /// [`GpuScene::build_blas`] allocates them (at least one element each).
-    pub fn of(builds: &[(u32, bool)]) -> Self {
-        let mut t = BlasTotals {
-            triangles: 0,
-            nodes: 0,
-            orders: 0,
-            topology_words: 0,
-        };
-        for &(n, keep) in builds {
-            t.triangles += u64::from(n.max(1));
-            t.nodes += u64::from(Lbvh::node_count(n).max(1));
-            if keep {
-                t.orders += u64::from(n.max(1));
-                t.topology_words += u64::from(Lbvh::topology_words(n).max(1));
-            }
-        }
-        t
     }
 }
