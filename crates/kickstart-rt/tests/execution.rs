@@ -662,9 +662,24 @@ fn tasks_ahead_of_a_gpu_never_polled_are_refused_and_memory_stays_bounded() {
             Ok(t) => accepted.push((t, frame)),
             Err(Error::WorkingSetsExhausted { supported }) => {
                 assert_eq!(supported, WORKING_SETS);
-                // What the SDK held when its working sets filled up: nothing may grow after.
-                let now = (ctx.resource_allocations(), ctx.in_flight_task_count());
-                assert_eq!(*full.get_or_insert(now), now, "frame {frame}");
+                // What the SDK held when its working sets filled up: nothing may grow after
+                // (the driver's structures, read from wgpu's allocator, may shrink as finished
+                // work frees old ones, or move by their placement's padding).
+                let a = ctx.resource_allocations();
+                let driver = a.driver_acceleration_structures;
+                let now = (
+                    ResourceAllocations {
+                        driver_acceleration_structures: 0,
+                        ..a
+                    },
+                    ctx.in_flight_task_count(),
+                );
+                let (first, first_driver) = *full.get_or_insert((now, driver));
+                assert_eq!(first, now, "frame {frame}");
+                assert!(
+                    driver <= first_driver + DRIVER_PLACEMENT_PADDING,
+                    "frame {frame}: the driver's structures grew: {first_driver} → {driver}"
+                );
             }
             Err(other) => panic!("frame {frame}: {other:?}"),
         }
@@ -686,7 +701,7 @@ fn tasks_ahead_of_a_gpu_never_polled_are_refused_and_memory_stays_bounded() {
         ctx.recorded_task_counts().gpu_tasks,
         base_tasks + u64::from(WORKING_SETS)
     );
-    let (held, in_flight) = full.expect("the working sets filled up");
+    let ((held, in_flight), _) = full.expect("the working sets filled up");
     assert_eq!(in_flight, WORKING_SETS as usize);
     assert!(held.staging > 0, "each task in flight holds its upload");
     // The GPU catches up: only the accepted frames reached it.
@@ -749,20 +764,28 @@ fn a_full_pipeline_of_frames_runs_in_bounded_memory() {
         peak.staging <= warm.staging && peak.scratch <= warm.scratch,
         "grew after the first frames: {warm:?} → {peak:?}"
     );
-    assert_eq!(
-        ResourceAllocations {
-            staging: 0,
-            scratch: 0,
-            ..peak
-        },
-        ResourceAllocations {
-            staging: 0,
-            scratch: 0,
-            ..warm
-        },
-        "the scene's own memory changed"
+    // The driver's structures (hardware backend) are wgpu's allocator's sizes, with the padding
+    // of where each landed: the TLAS rebuilt each frame moves by a few bytes, not more.
+    let driver = (
+        warm.driver_acceleration_structures,
+        peak.driver_acceleration_structures,
     );
+    assert!(
+        driver.1 <= driver.0 + DRIVER_PLACEMENT_PADDING,
+        "the driver's structures grew: {driver:?}"
+    );
+    let own = |a: ResourceAllocations| ResourceAllocations {
+        staging: 0,
+        scratch: 0,
+        driver_acceleration_structures: 0,
+        ..a
+    };
+    assert_eq!(own(peak), own(warm), "the scene's own memory changed");
 }
+
+/// Bytes a driver structure's reported size may move by between two placements in wgpu's
+/// allocator (its alignment padding).
+const DRIVER_PLACEMENT_PADDING: u64 = 1024;
 
 /// `invoke_gpu_task` called in a loop by an application that never polls the device itself:
 /// every call returns at once, each either accepted or refused by name, and no more tasks than
