@@ -956,24 +956,6 @@ fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
     }
 }
 
-/// Schedules a closest-hit trace of `rays` into `c`; returns the hit buffer to read once the
-/// container's task completed.
-fn schedule_trace(c: &mut TaskContainer, rays: &[GpuRay]) -> wgpu::Buffer {
-    let rb = buffer(bytemuck::cast_slice(rays), wgpu::BufferUsages::STORAGE);
-    let hb = gpu().device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("hits"),
-        size: rays.len() as u64 * 32,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask::new(
-        rb,
-        rays.len() as u32,
-        hb.clone(),
-    )));
-    hb
-}
-
 /// Once a scene's builds are done, the next GPU task gives back what only builds use: the
 /// build scratch, the vertex copies' pool and the BLAS pools' free space (their ranges in use
 /// moved into smaller buffers). Rays traced after hit exactly what they hit before, and agree
@@ -1014,7 +996,12 @@ fn build_memory_is_given_back_once_builds_are_done_and_traces_stay_the_same() {
         })
         .collect();
     // Traced in the building task: before anything is given back.
-    let before_hits = schedule_trace(&mut c, &rays);
+    let before_hits = common::rt::schedule_trace(
+        &mut c,
+        &rays,
+        RayQuery::ClosestHit,
+        InstanceInclusionMask::VISIBLE_IN_RT,
+    );
     build_submit_complete(&ctx, c);
     let built = ctx.resource_allocations();
     let before: Vec<GpuHit> = bytemuck::pod_collect_to_vec(&read_buffer(&before_hits));

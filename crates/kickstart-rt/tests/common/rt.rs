@@ -258,6 +258,20 @@ pub fn trace(
     if rays.is_empty() {
         return Vec::new();
     }
+    let mut c = ctx.create_task_container();
+    let hb = schedule_trace(&mut c, rays, query, mask);
+    build_submit_complete(ctx, c);
+    bytemuck::pod_collect_to_vec(&read_buffer(&hb))
+}
+
+/// Schedules a trace of `rays` into `c`; returns the hit buffer (32 bytes a ray) to read once the
+/// container's task has completed.
+pub fn schedule_trace(
+    c: &mut TaskContainer,
+    rays: &[GpuRay],
+    query: RayQuery,
+    mask: InstanceInclusionMask,
+) -> wgpu::Buffer {
     let rb = buffer(bytemuck::cast_slice(rays), wgpu::BufferUsages::STORAGE);
     let hb = gpu().device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("hits"),
@@ -265,14 +279,12 @@ pub fn trace(
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     });
-    let mut c = ctx.create_task_container();
     c.schedule_render_task(RenderTask::TraceRays(TraceRaysTask {
         query,
         instance_mask: mask,
         ..TraceRaysTask::new(rb, rays.len() as u32, hb.clone())
     }));
-    build_submit_complete(ctx, c);
-    bytemuck::pod_collect_to_vec(&read_buffer(&hb))
+    hb
 }
 
 pub fn closest(ctx: &ExecuteContext, rays: &[GpuRay]) -> Vec<GpuHit> {
