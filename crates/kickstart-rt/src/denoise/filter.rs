@@ -596,7 +596,7 @@ fn record_frame(
     let vp = inputs.viewport;
     let (grid_w, grid_h) = grid_size(vp, c.half_resolution_mode);
     let pixels = u64::from(grid_w) * u64::from(grid_h);
-    let scratch_bytes = pixels * history::signal_record_bytes(h.input.signal_type);
+    let signal_bytes = pixels * history::signal_record_bytes(h.input.signal_type);
     let (own, fresh) = h.buffers_for(rec.device, pixels);
     let history = own.history.clone();
     let discard = starts_over(h, job, vp, fresh);
@@ -616,7 +616,7 @@ fn record_frame(
         guide_prev: guides.prev,
         guide_cur: guides.cur,
         history,
-        scratch: res.scratch.get(rec.device, scratch_bytes, serial),
+        scratch: res.scratch.get(rec.device, signal_bytes, serial),
     };
     let shared = res.shared;
     let (params, motion_texture) = frame_params(shared, h, job, (vp, discard), settings);
@@ -626,7 +626,7 @@ fn record_frame(
         params: &params,
         groups: (grid_w.div_ceil(TILE), grid_h.div_ceil(TILE)),
         buffers: &buffers,
-        history_bytes: scratch_bytes,
+        history_bytes: signal_bytes,
     };
 
     let previous_scope = rec.scope;
@@ -638,9 +638,9 @@ fn record_frame(
         motion: &motion_texture,
     };
     record_temporal(rec, shared, job, &frame, &temporal_inputs, passes.temporal);
-    // 2. À-trous iterations, per signal: history → the previous frame's history → the shared
-    // scratch → … → the output texture (the last iteration writes it; in a block mode the
-    // upsample pass does, from the grid).
+    // 2. À-trous iterations, per signal: history → scratch 0 → scratch 1 → … → the output
+    // texture (the last iteration writes it; in a block mode the upsample pass does, from the
+    // grid).
     let upsample = (c.half_resolution_mode.block_size() > 1).then(|| UpsampleInputs {
         gbuffer: &inputs,
         gbuffer_params: &gb_params,

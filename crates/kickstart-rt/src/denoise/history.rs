@@ -89,7 +89,7 @@ pub(crate) struct History {
     /// Buffers replaced by larger or smaller ones, kept until no in-flight task uses them
     /// (`last_used` is their last task).
     replaced: Vec<(HistoryBuffers, u64)>,
-    /// Frames recorded (the parity picks the current buffers).
+    /// Frames recorded (0: the next frame starts the history).
     pub frame: u64,
     /// The viewport of the last frame: another size invalidates the history (its rows no longer
     /// line up).
