@@ -1302,6 +1302,15 @@ fn history_memory_follows_its_grid_and_is_released_after_destroy() {
 
         let used = h.submit_frame(&g, &inputs, Motion::Matrices, DenoiseMode::Continue);
         h.ctx.destroy_denoising_context_handle(h.handle).unwrap();
+        // A destroyed context's bytes are asked of a stale handle: an error naming it.
+        match h.ctx.denoising_context_bytes(h.handle) {
+            Err(Error::InvalidHandle {
+                kind: HandleKind::DenoisingContext,
+                index,
+                ..
+            }) => assert_eq!(index, h.handle.index()),
+            other => panic!("{signal:?}: stale handle gave {other:?}"),
+        }
         // The task that used it is still in flight: the memory stays.
         let t2 = build_empty(&h.ctx);
         assert_eq!(
