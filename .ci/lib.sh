@@ -14,6 +14,9 @@ step() {
     now=$(date +%s)
     if [ -n "$STEP_NAME" ]; then
         echo "ci: done in $((now - STEP_START)) s (total $((now - CI_START)) s): $STEP_NAME"
+        # Builds fill the disk fast (a linker that runs out of space dies of SIGBUS, which reads
+        # like a crash), so each step's end says how much is left.
+        echo "ci: disk free: $(df -h --output=avail . | tail -1 | tr -d ' ')"
     fi
     STEP_NAME="$1"
     STEP_START=$now
