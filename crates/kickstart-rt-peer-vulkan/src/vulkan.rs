@@ -120,6 +120,11 @@ pub struct VulkanRtPeer {
     /// out of the TLAS: there is nothing to hit).
     blases: Vec<Option<(vk::AccelerationStructureKHR, u64)>>,
     blas_bytes: u64,
+    /// One `ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR` query per BLAS of the last fast-trace
+    /// build; null otherwise. Destroyed with the BLASes.
+    compacted_queries: vk::QueryPool,
+    /// See [`VulkanRtPeer::blas_compacted_bytes`].
+    blas_compacted_bytes: Option<u64>,
     tlas: vk::AccelerationStructureKHR,
     tlas_buffer: Buffer,
     tlas_scratch: Buffer,
@@ -450,6 +455,8 @@ impl VulkanRtPeer {
             blas_scratch: Buffer::default(),
             blases: Vec::new(),
             blas_bytes: 0,
+            compacted_queries: vk::QueryPool::null(),
+            blas_compacted_bytes: None,
             tlas: vk::AccelerationStructureKHR::null(),
             tlas_buffer: Buffer::default(),
             tlas_scratch: Buffer::default(),
@@ -705,9 +712,25 @@ impl VulkanRtPeer {
         &self.driver
     }
 
-    /// Bytes of the BLASes built last (acceleration structure storage, without scratch).
+    /// Bytes of the BLASes built last (acceleration structure storage, without scratch; with the
+    /// padding that starts each at a multiple of 256 bytes in the one buffer).
     pub fn blas_bytes(&self) -> u64 {
         self.blas_bytes
+    }
+
+    /// Bytes the BLASes built last would take once compacted, as the driver reports them
+    /// (`VK_QUERY_TYPE_ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR`, summed over the BLASes): what a
+    /// `vkCmdCopyAccelerationStructureKHR` in `COMPACT` mode would keep, to set beside
+    /// [`Self::blas_bytes`]. Only the size is queried: the peer traces the uncompacted BLASes.
+    /// The plain sum: unlike [`Self::blas_bytes`], no padding to the 256-byte offsets at which
+    /// BLASes sit in one buffer (lavapipe reports each BLAS's full size as its compacted size,
+    /// so there the two differ by that padding alone).
+    ///
+    /// `None` before any build, after a [`BuildPreference::FastBuild`] build (built without
+    /// `ALLOW_COMPACTION`, as dynamic geometry is: it is rebuilt, not compacted) and after a
+    /// build that failed.
+    pub fn blas_compacted_bytes(&self) -> Option<u64> {
+        self.blas_compacted_bytes
     }
 
     fn memory_type(&self, bits: u32, want: vk::MemoryPropertyFlags) -> Option<u32> {
@@ -979,6 +1002,10 @@ impl VulkanRtPeer {
         let mut b = std::mem::take(&mut self.blas_scratch);
         self.destroy_buffer(&mut b);
         self.blas_bytes = 0;
+        // SAFETY: as destroy_tlas.
+        unsafe { self.device.destroy_query_pool(self.compacted_queries, None) };
+        self.compacted_queries = vk::QueryPool::null();
+        self.blas_compacted_bytes = None;
     }
 
     /// Uploads the scene's meshes (replacing any earlier scene, its BLASes and TLAS). Indices
@@ -1032,6 +1059,9 @@ impl VulkanRtPeer {
     /// (each with its own scratch region), `timing.iterations` times after the warm-up (each
     /// rebuild writes the same acceleration structures). Returns the GPU times of the builds.
     /// Replaces any earlier BLASes (and drops the TLAS, which referenced them).
+    ///
+    /// [`BuildPreference::FastTrace`] builds also allow compaction and query the compacted size
+    /// after the last timed build, outside its timestamps ([`Self::blas_compacted_bytes`]).
     pub fn build_blases(&mut self, preference: BuildPreference, timing: Timing) -> Result<Samples> {
         if self.meshes.is_empty() {
             return Err(PeerError::Order(
@@ -1039,10 +1069,17 @@ impl VulkanRtPeer {
             ));
         }
         self.destroy_blases();
+        // ALLOW_COMPACTION with fast trace only: a static scene's BLASes are what engines
+        // compact, and the flag may cost build time or size, which the fast-build figures should
+        // not carry.
         let flags = match preference {
-            BuildPreference::FastTrace => vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+            BuildPreference::FastTrace => {
+                vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+                    | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION
+            }
             BuildPreference::FastBuild => vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD,
         };
+        let compact = preference == BuildPreference::FastTrace;
         let built: Vec<MeshRange> = self
             .meshes
             .iter()
@@ -1053,6 +1090,13 @@ impl VulkanRtPeer {
         let layout = self.blas_layout(&built, &geometries, flags);
         self.create_blas_buffers(&layout)?;
         let handles = self.create_blas_handles(&layout)?;
+        if compact {
+            if let Err(e) = self.create_compacted_queries(handles.len()) {
+                self.store_blases(handles);
+                return Err(e);
+            }
+        }
+        let queries = self.compacted_queries;
         let scratch_base = align_up(self.blas_scratch.address, self.props.scratch_alignment);
         let infos: Vec<vk::AccelerationStructureBuildGeometryInfoKHR<'_>> = geometries
             .iter()
@@ -1077,18 +1121,107 @@ impl VulkanRtPeer {
         let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
             ranges.iter().map(|r| r.as_slice()).collect();
         let accel = &self.accel;
-        let samples = self.repeat(timing, |_| {
+        let samples = self.repeat(timing, |last| {
             self.timed(
                 |_, cmd| {
                     // SAFETY: inputs, destinations and disjoint scratch regions are live.
                     unsafe { accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs) }
                 },
-                |_, _| {},
+                // After the second timestamp: the size query is not part of the build's time.
+                |d, cmd| {
+                    if last && queries != vk::QueryPool::null() {
+                        self.record_compacted_sizes(d, cmd, &handles, queries);
+                    }
+                },
             )
         });
+        let compacted = match &samples {
+            Ok(_) if compact => Some(self.read_compacted_sizes(handles.len())),
+            _ => None,
+        };
         // Store the handles whatever the builds did, so they are destroyed later.
         self.store_blases(handles);
+        self.blas_compacted_bytes = compacted.transpose()?;
         samples
+    }
+
+    /// The query pool of one compacted size per BLAS (`count` of them; none for 0, as a pool
+    /// must hold at least one query), in `self.compacted_queries`.
+    fn create_compacted_queries(&mut self, count: usize) -> Result<()> {
+        if count == 0 {
+            return Ok(());
+        }
+        let count = u32::try_from(count)
+            .map_err(|_| PeerError::InvalidInput(format!("{count} BLASes: too many to query")))?;
+        // SAFETY: plain object creation on a live device; stored in `self` at once, so
+        // `destroy_blases` (and with it `Drop`) releases it.
+        self.compacted_queries = unsafe {
+            self.device.create_query_pool(
+                &vk::QueryPoolCreateInfo::default()
+                    .query_type(vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR)
+                    .query_count(count),
+                None,
+            )
+        }
+        .map_err(vkerr("vkCreateQueryPool (compacted sizes)"))?;
+        Ok(())
+    }
+
+    /// Records, after the build in `cmd`, the writing of each of `blases`' compacted size into
+    /// query i of `queries` (reset first: a query must be reset before each use).
+    fn record_compacted_sizes(
+        &self,
+        d: &ash::Device,
+        cmd: vk::CommandBuffer,
+        blases: &[vk::AccelerationStructureKHR],
+        queries: vk::QueryPool,
+    ) {
+        // The build writes the structures in the build stage; the size query reads them there.
+        let barrier = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR)
+            .dst_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR);
+        let stage = vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR;
+        // SAFETY: recording; the pool holds one query per BLAS, and the BLASes were built with
+        // ALLOW_COMPACTION by the build recorded before this.
+        unsafe {
+            d.cmd_reset_query_pool(cmd, queries, 0, blases.len() as u32);
+            d.cmd_pipeline_barrier(
+                cmd,
+                stage,
+                stage,
+                vk::DependencyFlags::empty(),
+                &[barrier],
+                &[],
+                &[],
+            );
+            self.accel.cmd_write_acceleration_structures_properties(
+                cmd,
+                blases,
+                vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+                queries,
+                0,
+            );
+        }
+    }
+
+    /// The sum of the `count` compacted sizes [`Self::record_compacted_sizes`] wrote (0 for no
+    /// BLAS).
+    fn read_compacted_sizes(&self, count: usize) -> Result<u64> {
+        if count == 0 {
+            return Ok(0);
+        }
+        let mut sizes = vec![0u64; count];
+        // SAFETY: the waited submission wrote all `count` queries of the pool.
+        unsafe {
+            self.device.get_query_pool_results(
+                self.compacted_queries,
+                0,
+                &mut sizes,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+        }
+        .map_err(vkerr("vkGetQueryPoolResults (compacted sizes)"))?;
+        Ok(sizes.iter().sum())
     }
 
     /// The triangle geometry of each mesh of `built` in the uploaded vertex and index buffers.

@@ -206,9 +206,25 @@ fn traces_our_hit_rules_on_a_quad() {
         },
     ])
     .expect("upload");
-    for pref in [BuildPreference::FastBuild, BuildPreference::FastTrace] {
+    assert_eq!(peer.blas_compacted_bytes(), None, "no BLAS built yet");
+    // Fast-build between two fast-trace builds: it must not keep the first one's size.
+    use BuildPreference::{FastBuild, FastTrace};
+    for pref in [FastTrace, FastBuild, FastTrace] {
         let t = peer.build_blases(pref, TIMING).expect("BLAS build");
         assert!(t.median() >= 0.0);
+        let (bytes, compacted) = (peer.blas_bytes(), peer.blas_compacted_bytes());
+        eprintln!("{pref:?}: BLAS {bytes} bytes, compacted {compacted:?}");
+        match pref {
+            // Built without ALLOW_COMPACTION: nothing to query.
+            FastBuild => assert_eq!(compacted, None),
+            // Compaction never grows a BLAS, and a BLAS over two triangles is not empty.
+            FastTrace => {
+                assert!(
+                    compacted.is_some_and(|c| c > 0 && c <= bytes),
+                    "{compacted:?} of {bytes}"
+                )
+            }
+        }
     }
     let moved = glam::Affine3A::from_translation(glam::Vec3::new(0.0, 0.0, -2.0));
     peer.build_tlas(

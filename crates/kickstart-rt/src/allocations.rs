@@ -43,3 +43,38 @@ impl ResourceAllocations {
             + self.driver_acceleration_structures
     }
 }
+
+/// Where a BLAS's node range stands with compaction (see [`BlasMemory`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlasCompaction {
+    /// The tree has no unreferenced node to drop: a fast-build tree (one triangle a leaf), a
+    /// fast-trace tree kept for refits (`allow_update`: a refit decides its collapsed leaves
+    /// again, so it keeps every node), or one of fewer than two triangles.
+    NotApplicable,
+    /// A fast-trace tree, compacted by its build; its unused nodes are given back once the
+    /// build's node count is read back, a task or two after it completed.
+    Pending,
+    /// A fast-trace tree whose node range holds only its reachable nodes.
+    Done,
+}
+
+/// GPU memory of one geometry's BLAS ([`crate::ExecuteContext::geometry_blas_memory`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BlasMemory {
+    /// Its triangles in leaf order: 48 bytes a triangle.
+    pub triangle_bytes: u64,
+    /// Its BVH2 nodes: 64 bytes a node (`n - 1` nodes for `n` triangles, fewer once compacted).
+    pub node_bytes: u64,
+    /// Sort order and refit topology kept for refits (`allow_update` only): 4 and 20 bytes a
+    /// triangle (less 16 bytes).
+    pub refit_bytes: u64,
+    /// Whether the node range was compacted.
+    pub compaction: BlasCompaction,
+}
+
+impl BlasMemory {
+    /// Sum of every part.
+    pub fn total(&self) -> u64 {
+        self.triangle_bytes + self.node_bytes + self.refit_bytes
+    }
+}

@@ -142,7 +142,7 @@ mod timing;
 mod trace;
 mod version;
 
-pub use allocations::ResourceAllocations;
+pub use allocations::{BlasCompaction, BlasMemory, ResourceAllocations};
 pub use cache::{CacheAllocation, CacheLevel};
 pub use container::TaskContainer;
 pub use context::{

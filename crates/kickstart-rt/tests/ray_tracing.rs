@@ -2328,3 +2328,218 @@ fn a_batch_of_builds_of_every_size_traces_as_the_oracle_says() {
         );
     }
 }
+
+/// A child as the compaction test compares it: its box, and its leaf ref (`None`: an inner
+/// child, whose index compaction renumbers).
+type ComparedChild = (Vec3, Vec3, Option<u32>);
+
+/// The inner nodes reachable from the root of a read-back BLAS, in depth-first order (left
+/// child first), each with its two children as (box, leaf ref or `None` for an inner child).
+fn reachable_nodes(b: &kickstart_rt::cpu::BlasReadback) -> Vec<(u32, Vec<ComparedChild>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![0u32];
+    while let Some(i) = stack.pop() {
+        let node = &b.nodes[i as usize];
+        out.push((
+            i,
+            node.iter()
+                .map(|c| (c.min, c.max, c.is_leaf().then_some(c.reference)))
+                .collect(),
+        ));
+        for c in node.iter().rev().filter(|c| !c.is_empty() && !c.is_leaf()) {
+            stack.push(c.reference);
+        }
+    }
+    out
+}
+
+/// A fast-trace BLAS of static geometry is compacted: its build moves the nodes its collapsed
+/// leaves left unreferenced out of the way, the node count read back gives the rest of its
+/// range back, and the next quiet task packs the node pool, moving BLASes. The compacted tree is
+/// the tree a fast-trace build kept for refits makes (never compacted): the same nodes in the
+/// same order, numbered 0.. without gaps, in a batch of builds and alone; node bytes are 64 a
+/// reachable node; and rays traced before and after the moves hit exactly the same, as the CPU
+/// oracle does.
+#[test]
+fn fast_trace_compaction_keeps_the_tree_and_gives_nodes_back() {
+    let ctx = context(2);
+    let device = gpu().device.clone();
+    let sphere = Mesh::icosphere(4);
+    let n = sphere.indices.len() as u64 / 3;
+    let mut rng = Rng(fuzz_seed("compaction", 0xc0_4ac7));
+    let soup = Mesh::soup(&mut rng, 3000, 2.0);
+    let [batched, soup_h, kept, single] = [(); 4].map(|()| ctx.create_geometry_handle());
+    let mut oracle = Oracle::default();
+    let mut c = ctx.create_task_container();
+    let mut place = |c: &mut TaskContainer, g: GeometryHandle, m: &Mesh, x: f32| {
+        oracle.geometry(g, m);
+        let i = ctx.create_instance_handle();
+        let input = InstanceInput::new(g, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)));
+        oracle.instance(i, &input);
+        c.schedule_bvh_task(InstanceTask {
+            operation: TaskOperation::Register,
+            handle: i,
+            input,
+        });
+        i
+    };
+    // One task: the sphere and the soup as a batch of fast-trace builds, and the sphere kept
+    // for refits (far from the rays: it is destroyed below); then the sphere again, built alone.
+    let mut kept_instance = None;
+    for (g, m, update, x) in [
+        (batched, &sphere, false, 0.0),
+        (soup_h, &soup, false, 4.0),
+        (kept, &sphere, true, 100.0),
+    ] {
+        let mut input = mesh_input("compaction", m, update);
+        input.build_hint = BuildHint::PreferFastTrace;
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: g,
+            input,
+        });
+        let i = place(&mut c, g, m, x);
+        kept_instance = Some(i).filter(|_| update);
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 8,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    let mut c = ctx.create_task_container();
+    schedule_mesh(&mut c, single, "compaction alone", &sphere);
+    place(&mut c, single, &sphere, 12.0);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let rays: Vec<GpuRay> = (0..3000)
+        .map(|k| {
+            // Towards the sphere, the soup or the sphere built alone, from around it.
+            let centre = Vec3::new([0.0, 4.0, 12.0][k % 3], 0.0, 0.0);
+            let o = centre + rng.v(-2.5, 2.5);
+            let d = (centre + rng.v(-0.8, 0.8) - o).normalize_or(Vec3::X);
+            ray(o, d, 0.0, 100.0)
+        })
+        .collect();
+    let before = closest(&ctx, &rays);
+
+    let kept_memory = ctx.geometry_blas_memory(kept).unwrap().expect("built");
+    assert_eq!(kept_memory.compaction, BlasCompaction::NotApplicable);
+    assert_eq!(kept_memory.node_bytes, 64 * (n - 1));
+    let reference = reachable_nodes(&ctx.read_back_blas(kept).unwrap());
+    let reachable = reference.len() as u64;
+    assert!(
+        reachable * 4 < (n - 1) * 3,
+        "{reachable} of {} nodes reachable: too few collapsed to tell",
+        n - 1
+    );
+    for g in [batched, single] {
+        let m = compacted_after_polls(&ctx, &device, g);
+        assert_eq!(m.compaction, BlasCompaction::Done, "{g:?}");
+        assert_eq!(m.node_bytes, 64 * reachable, "{g:?}: {m:?}");
+        assert_eq!(m.triangle_bytes, 48 * n, "{g:?}");
+        assert_eq!(m.refit_bytes, 0, "{g:?}");
+    }
+    assert_eq!(
+        compacted_after_polls(&ctx, &device, soup_h).compaction,
+        BlasCompaction::Done
+    );
+    // With the kept sphere gone (its vertex copy too), a quiet task packs the node pool (the
+    // geometry headers follow the moves). What the pools keep besides the last element's
+    // rounding (one 256-byte buffer or 16 elements each) is the kept sphere's triangles
+    // between the others' (triangles never move: the driver's BLASes read them in place).
+    ctx.destroy_instance_handle(kept_instance.expect("the kept sphere's instance"))
+        .unwrap();
+    ctx.destroy_geometry_handle(kept).unwrap();
+    let after = closest(&ctx, &rays);
+    let quiet = ctx.resource_allocations();
+    assert!(
+        quiet.pool_reserve <= 48 * n + 5 * 16 * 64,
+        "pool space kept: {quiet:?}"
+    );
+    for g in [batched, single] {
+        let b = ctx.read_back_blas(g).unwrap();
+        assert_eq!(b.nodes.len() as u64, reachable, "{g:?}");
+        let got = reachable_nodes(&b);
+        // The reference's nodes, in their order, renumbered 0.. without gaps.
+        let mut order: Vec<u32> = reference.iter().map(|r| r.0).collect();
+        order.sort_unstable();
+        for (r, c) in reference.iter().zip(&got) {
+            let rank = order.binary_search(&r.0).unwrap() as u32;
+            assert_eq!(c.0, rank, "{g:?}: node {} of the kept tree", r.0);
+            assert_eq!(c.1, r.1, "{g:?}: node {} of the kept tree", r.0);
+        }
+        assert_eq!(got.len(), reference.len(), "{g:?}");
+    }
+    assert_agrees(&compare(&oracle, &rays, &before, 0xff), "before compaction");
+    let differ = (0..rays.len()).filter(|&k| after[k] != before[k]).count();
+    assert_eq!(
+        differ, 0,
+        "rays that trace differently once compacted and moved"
+    );
+    assert!(
+        before.iter().filter(|h| h.is_hit()).count() > 1000,
+        "too few hits to tell"
+    );
+}
+
+/// Bytes wgpu's allocator holds for buffers labelled `label` on `device` (after a wait).
+fn allocated_with_label(device: &wgpu::Device, label: &str) -> u64 {
+    device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    let report = device
+        .generate_allocator_report()
+        .expect("an allocator report");
+    report
+        .allocations
+        .iter()
+        .filter(|a| a.name == label)
+        .map(|a| a.size)
+        .sum()
+}
+
+/// The node memory a compaction gives back returns to the driver, by wgpu's own allocator
+/// report: the node pool's buffer holds the uncompacted nodes after the build, and exactly the
+/// compacted ones once the next quiet task packed it.
+#[test]
+fn compacted_nodes_go_back_to_the_driver() {
+    let (device, queue) = own_test_device(gpu().device.limits(), "kickstart-rt compaction test");
+    let settings = InitSettings {
+        backend: pass_backend_choice(),
+        ..InitSettings::default()
+    };
+    let ctx = ExecuteContext::new(&device, &queue, settings).unwrap_or_else(|e| panic!("{e}"));
+    assert_pass_backend(&ctx);
+    let triangles = 6000u64;
+    let g = ctx.create_geometry_handle();
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(GeometryTask {
+        operation: TaskOperation::Register,
+        handle: g,
+        input: many_triangles(&device, triangles as u32),
+    });
+    register_instance(&mut c, ctx.create_instance_handle(), g, Affine3A::IDENTITY);
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete_on(&device, &queue, &ctx, c);
+    const NODES: &str = "kickstart-rt BLAS nodes";
+    let built = allocated_with_label(&device, NODES);
+    assert!(
+        built >= 64 * (triangles - 1),
+        "{built} bytes of nodes after the build"
+    );
+    let m = compacted_after_polls(&ctx, &device, g);
+    assert_eq!(m.compaction, BlasCompaction::Done);
+    assert!(m.node_bytes < built / 2, "{m:?}: {built} bytes before");
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete_on(&device, &queue, &ctx, c);
+    let packed = allocated_with_label(&device, NODES);
+    // The allocator may round an allocation up to its placement alignment.
+    assert!(
+        packed >= m.node_bytes && packed <= m.node_bytes + 1024,
+        "{packed} bytes of nodes held for {} compacted",
+        m.node_bytes
+    );
+    assert_eq!(
+        ctx.read_back_blas(g).unwrap().nodes.len() as u64 * 64,
+        m.node_bytes
+    );
+}

@@ -23,6 +23,9 @@ pub struct MemoryPeak {
     pub wgpu_labels: Vec<(String, u64)>,
     /// Frames sampled.
     pub frames: u32,
+    /// The SDK's count and wgpu's labelled total after the last frame sampled: what a scene
+    /// holds once its builds are done (static BLASes compacted, build memory given back).
+    pub last: (u64, Option<u64>),
 }
 
 impl MemoryPeak {
@@ -36,6 +39,7 @@ impl MemoryPeak {
     ) {
         self.frames += 1;
         let now = ctx.resource_allocations();
+        self.last.0 = now.total();
         if self.frames == 1 || now.total() > self.sdk.total() {
             self.sdk = now;
             self.contexts = contexts
@@ -43,7 +47,9 @@ impl MemoryPeak {
                 .map(|(signal, h)| (*signal, ctx.denoising_context_bytes(*h).unwrap_or(0)))
                 .collect();
         }
-        if let Some(labels) = wgpu_sdk_labels(device) {
+        let labels = wgpu_sdk_labels(device);
+        self.last.1 = labels.as_ref().map(|l| l.iter().map(|(_, b)| b).sum());
+        if let Some(labels) = labels {
             let bytes = labels.iter().map(|(_, b)| b).sum();
             if self.wgpu_sdk.is_none_or(|peak| bytes > peak) {
                 self.wgpu_sdk = Some(bytes);
@@ -106,6 +112,11 @@ impl MemoryPeak {
             a.denoiser as f64 / pixels.max(1) as f64,
             scene as f64 / triangles.max(1) as f64
         );
+        out += &format!("  after the last frame: {:.1} MB", mb(self.last.0));
+        match self.last.1 {
+            Some(w) => out += &format!(" (wgpu's allocator: {:.1} MB)\n", mb(w)),
+            None => out += "\n",
+        }
         out
     }
 
@@ -137,6 +148,8 @@ impl MemoryPeak {
             "total": self.total(),
             "wgpu_allocator": self.wgpu_sdk,
             "kinds": kinds,
+            "last_total": self.last.0,
+            "last_wgpu_allocator": self.last.1,
         })
     }
 
@@ -180,6 +193,7 @@ mod tests {
             wgpu_sdk: Some(6_500_000),
             wgpu_labels: vec![("kickstart-rt BLAS nodes".into(), 6_500_000)],
             frames: 2,
+            last: (5_000_000, Some(5_400_000)),
         }
     }
 
@@ -207,6 +221,10 @@ mod tests {
         assert!(text.contains("denoisers 4.0 bytes per pixel"), "{text}");
         assert!(
             text.contains("scene and cache 2000.0 bytes per triangle"),
+            "{text}"
+        );
+        assert!(
+            text.contains("after the last frame: 5.0 MB (wgpu's allocator: 5.4 MB)"),
             "{text}"
         );
     }

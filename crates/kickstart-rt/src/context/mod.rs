@@ -6,6 +6,7 @@
 //! per step of the data flow; it cannot fail, so a refused task never changes the context. The render effects live in [`effects`], the state kept
 //! between tasks in [`state`].
 
+mod compaction;
 mod effects;
 mod plan;
 mod record;
@@ -19,14 +20,14 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use crate::allocations::ResourceAllocations;
+use crate::allocations::{BlasMemory, ResourceAllocations};
 use crate::container::TaskContainer;
 use crate::device::BackendReport;
 use crate::error::{Error, Result};
 use crate::gpu::recorder::Timestamps;
 use crate::handles::*;
 use crate::logging::{LogCallback, Logger, Severity};
-use crate::scene::gpu_scene::GpuScene;
+use crate::scene::gpu_scene::{GpuScene, NODE_BYTES, TRIANGLE_BYTES};
 use crate::staging::StagingPool;
 use crate::tasks::*;
 use crate::timing::{GpuTimings, TimingReadback};
@@ -138,6 +139,7 @@ impl ExecuteContext {
                 tlas_refit: false,
                 any_instance: false,
                 dropped_readbacks: Vec::new(),
+                node_count_readbacks: Vec::new(),
                 timings: BTreeMap::new(),
                 next_serial: 1,
                 device_error: None,
@@ -226,6 +228,7 @@ impl ExecuteContext {
         let slot = s.geometries.remove(handle)?;
         if let Some(mut d) = slot.data {
             d.gpu.free_after(&mut s.scene, slot.last_used);
+            s.scene.note_pool_frees();
         }
         s.dead_geometry_slots.push(handle.index);
         Ok(())
@@ -452,6 +455,34 @@ impl ExecuteContext {
             .is_some_and(|d| d.gpu.blas.is_some() && d.gpu.pending.is_none()))
     }
 
+    /// GPU memory of a geometry's BLAS (its triangles, nodes and refit data), or `None` until
+    /// it is built. A fast-trace BLAS (`BuildHint::PreferFastTrace`, or `Auto` without
+    /// `allow_update`) is compacted: its build drops the nodes its collapsed leaves left
+    /// unreferenced, and its node range shrinks once the build's node count is read back (the
+    /// first call to the context after its task completed and a device poll);
+    /// [`BlasMemory::compaction`] says which applies. The memory given back returns to the
+    /// driver when the next task without geometry work packs the node pool.
+    pub fn geometry_blas_memory(&self, handle: GeometryHandle) -> Result<Option<BlasMemory>> {
+        let mut s = self.state();
+        self.collect_invoked(&mut s);
+        let Some(blas) = s
+            .geometries
+            .get(handle)?
+            .data
+            .as_ref()
+            .and_then(|d| d.gpu.blas)
+        else {
+            return Ok(None);
+        };
+        let (order, topology) = blas.refit.map_or((0, 0), |(o, t)| (o.len, t.len));
+        Ok(Some(BlasMemory {
+            triangle_bytes: u64::from(blas.tris.len) * TRIANGLE_BYTES,
+            node_bytes: u64::from(blas.nodes.len) * NODE_BYTES,
+            refit_bytes: (u64::from(order) + u64::from(topology)) * 4,
+            compaction: blas.compaction,
+        }))
+    }
+
     /// Reads a built BLAS back to the CPU: its nodes, its triangles in leaf order, and its SAH
     /// cost. **Blocks** until the device is idle: for tools, benchmarks and tests, not frames.
     /// Submit the task that built it first.
@@ -533,6 +564,7 @@ impl ExecuteContext {
             }
         }
         s.collect_dropped(&self.logger);
+        s.collect_node_counts();
     }
 
     /// Validates the whole container, then records its GPU work into the engine's `encoder`.
@@ -590,6 +622,7 @@ impl ExecuteContext {
                 staging: Vec::new(),
                 held: Vec::new(),
                 dropped: None,
+                node_counts: None,
             },
             serial,
         };

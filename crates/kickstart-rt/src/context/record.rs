@@ -9,6 +9,7 @@ use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use super::compaction::NodeCountReadback;
 use super::effects::{Inputs, Route};
 use super::plan::FramePlan;
 use super::settings::INSTANCE_RECORD_SIZE;
@@ -71,12 +72,13 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
     let ingestions = allocate_staged(frame, s, plan);
     // Only geometry tasks and queued builds use the BLAS pools' free space and the build
     // scratch: a task with neither gives them back.
+    let mut uploads = Uploads::default();
     if ingestions.is_empty() && s.blas_queue.is_empty() {
-        s.scene.release_build_memory(frame.encoder);
+        let moves = s.scene.release_build_memory(frame.encoder);
+        s.apply_node_moves(&moves, &mut uploads);
     } else {
         s.scene.note_build_work();
     }
-    let mut uploads = Uploads::default();
     clear_dead_slots(s, &mut uploads, frame.serial);
     for (task, ..) in &ingestions {
         if task.operation == TaskOperation::Register {
@@ -404,6 +406,8 @@ fn build_blases(
     let mut batch = Vec::new();
     // Range refits, recorded as one batch below too.
     let mut refits = Vec::new();
+    // The geometry and build stamp of each slot built, for the compactions' read-back.
+    let mut built = HashMap::new();
     let mut done = 0;
     while done < build.max_blas_build_count {
         let Some(h) = s.blas_queue.pop_front() else {
@@ -448,6 +452,9 @@ fn build_blases(
                     h.index as u64 * GEOMETRY_RECORD_SIZE,
                     bytemuck::bytes_of(&header),
                 );
+                if let Some(blas) = d.gpu.blas {
+                    built.insert(h.index, (h, blas.stamp));
+                }
                 if let (Some(hw), Some(blas)) = (s.scene.hardware.as_mut(), d.gpu.blas) {
                     hw.build(h.index, blas.tris.start, d.gpu.triangles, d.allow_update);
                 }
@@ -472,8 +479,15 @@ fn build_blases(
         }
         done += 1;
     }
-    s.scene.record_batch(&mut rec, batch);
+    let counts = s.scene.record_batch(&mut rec, batch);
     s.scene.record_refit_batch(&mut rec, refits);
+    frame.ws.node_counts = NodeCountReadback::record(
+        frame.device,
+        frame.encoder,
+        counts,
+        |slot| built.get(&slot).copied(),
+        serial,
+    );
     debug_assert_eq!(
         done_work, plan.reserved.blas,
         "the plan's prediction of step 5"

@@ -11,7 +11,8 @@ use super::settings::{DroppedTriangles, RecordedTaskCounts, INSTANCE_RECORD_SIZE
 use crate::error::Error;
 use crate::handles::*;
 use crate::logging::{Logger, Severity};
-use crate::scene::gpu_scene::{GeometryGpu, GpuScene, PendingBvh};
+use crate::scene::gpu_scene::{GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE};
+use crate::scene::pool::Move;
 use crate::scene::strategy::BuildStrategy;
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::tasks::*;
@@ -58,6 +59,8 @@ pub(super) struct WorkingSet {
     /// Inputs the task reads and the raw copies it made, kept alive while the GPU may read them.
     pub(super) held: Vec<wgpu::Buffer>,
     pub(super) dropped: Option<DroppedReadback>,
+    /// Node counts of the BLASes the task compacted.
+    pub(super) node_counts: Option<super::compaction::NodeCountReadback>,
 }
 
 pub(super) struct State {
@@ -87,6 +90,8 @@ pub(super) struct State {
     pub(super) tlas_refit: bool,
     pub(super) any_instance: bool,
     pub(super) dropped_readbacks: Vec<DroppedReadback>,
+    /// Node counts of compacted BLASes whose tasks completed, being mapped.
+    pub(super) node_count_readbacks: Vec<super::compaction::NodeCountReadback>,
     pub(super) timings: BTreeMap<u64, TimingReadback>,
     pub(super) next_serial: u64,
     pub(super) counts: RecordedTaskCounts,
@@ -157,6 +162,10 @@ impl State {
                 }
             });
             self.dropped_readbacks.push(r);
+        }
+        if let Some(r) = ws.node_counts {
+            r.start_mapping();
+            self.node_count_readbacks.push(r);
         }
     }
 
@@ -258,4 +267,60 @@ pub(super) fn instance_record(input: &InstanceInput) -> [u8; INSTANCE_RECORD_SIZ
     words[25] = input.inclusion_mask.0;
     words[26] = input.participating_in_tlas as u32;
     bytemuck::cast(words)
+}
+
+impl State {
+    /// Gives back the unused nodes of every compacted BLAS whose count has arrived (a BLAS
+    /// destroyed or rebuilt since is skipped: its range is no longer that build's).
+    pub(super) fn collect_node_counts(&mut self) {
+        let mut i = 0;
+        while i < self.node_count_readbacks.len() {
+            if !self.node_count_readbacks[i].is_mapped() {
+                i += 1;
+                continue;
+            }
+            let r = self.node_count_readbacks.swap_remove(i);
+            let Some((serial, counts)) = r.arrived() else {
+                continue;
+            };
+            for (handle, stamp, count) in counts {
+                let Ok(slot) = self.geometries.get_mut(handle) else {
+                    continue;
+                };
+                let Some(blas) = slot.data.as_mut().and_then(|d| d.gpu.blas.as_mut()) else {
+                    continue;
+                };
+                if blas.stamp == stamp {
+                    self.scene.shrink_compacted(blas, count, serial);
+                }
+            }
+        }
+    }
+
+    /// Gives the BLASes whose nodes `GpuScene::release_build_memory` moved their new node
+    /// range, and queues their geometry headers' new node base into `uploads`.
+    pub(super) fn apply_node_moves(&mut self, moves: &[Move], uploads: &mut Uploads) {
+        if moves.is_empty() {
+            return;
+        }
+        for h in self.geometries.handles() {
+            let Ok(slot) = self.geometries.get_mut(h) else {
+                continue;
+            };
+            let Some(blas) = slot.data.as_mut().and_then(|d| d.gpu.blas.as_mut()) else {
+                continue;
+            };
+            let Some(start) = Move::moved(moves, blas.nodes.start) else {
+                continue;
+            };
+            if start != blas.nodes.start {
+                blas.nodes.start = start;
+                uploads.push(
+                    &self.scene.geometry_table.buffer,
+                    u64::from(h.index) * GEOMETRY_RECORD_SIZE,
+                    bytemuck::bytes_of(&start),
+                );
+            }
+        }
+    }
 }

@@ -38,6 +38,7 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "scene/lbvh/bounds",
     "scene/lbvh/climb",
     "scene/lbvh/common",
+    "scene/lbvh/compact",
     "scene/lbvh/gather",
     "scene/lbvh/hierarchy",
     "scene/lbvh/hploc",

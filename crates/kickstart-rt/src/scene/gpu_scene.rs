@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::scene::hardware::HardwareScene;
 // Generic buffer helpers live in the gpu layer; re-exported here for the modules that still
 // import them from the scene.
+use crate::allocations::BlasCompaction;
 use crate::gpu::buffers::{read_back, storage, Grown};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
@@ -14,7 +15,7 @@ use crate::scene::lbvh::{
     BatchBuild, BatchKind, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs,
     RawTriangles, RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
-use crate::scene::pool::{Pool, Range};
+use crate::scene::pool::{Move, Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
 use crate::scene::strategy::BuildStrategy;
 use crate::scene::traversal::SceneBuffers;
@@ -80,6 +81,11 @@ pub(crate) struct BlasRanges {
     /// Sort order (`n` words; `orders` pool) and refit topology (`topologies` pool), kept for
     /// `allow_update` geometry only. Separate pools: the builder binds them in one dispatch.
     pub refit: Option<(Range, Range)>,
+    /// The build's stamp (the geometry header's flags bits 8-31): which build a late
+    /// compaction read-back is about.
+    pub stamp: u32,
+    /// Where its node range stands with compaction (`nodes` is the compacted range once done).
+    pub compaction: BlasCompaction,
 }
 
 /// An ingestion left to its geometry's refit in the same task: [`GpuScene::refit_blas`]
@@ -389,17 +395,47 @@ impl GpuScene {
     /// without BLAS work after some; see [`Self::note_build_work`]): the free tails of
     /// the BLAS pools (the ranges in use are copied into smaller buffers inside `encoder`) and
     /// every build scratch buffer. The next build allocates what it needs again.
-    pub fn release_build_memory(&mut self, encoder: &mut wgpu::CommandEncoder) {
-        if !self.build_memory_released {
-            self.give_back_build_memory(encoder);
+    ///
+    /// The node pool is packed first ([`Pool::pack`]): the ranges compaction and destroyed
+    /// geometry left free between BLASes go too. Returns how the BLASes' node ranges moved: the
+    /// caller updates their geometries (`BlasRanges::nodes`, and the headers' node base) before
+    /// anything reads them.
+    pub fn release_build_memory(&mut self, encoder: &mut wgpu::CommandEncoder) -> Vec<Move> {
+        if self.build_memory_released {
+            return Vec::new();
         }
+        let moves = self.nodes.pack(&self.device, encoder).unwrap_or_default();
+        self.give_back_build_memory(encoder);
+        moves
+    }
+
+    /// Gives back the nodes the compaction of `blas` left unused, now that its node count
+    /// `count` was read back from the task `serial` that built it, and marks it compacted. The
+    /// next task without build work packs the pool ([`Self::release_build_memory`]).
+    pub fn shrink_compacted(&mut self, blas: &mut BlasRanges, count: u32, serial: u64) {
+        if blas.compaction != BlasCompaction::Pending {
+            return;
+        }
+        blas.compaction = BlasCompaction::Done;
+        if count == 0 || count >= blas.nodes.len {
+            return;
+        }
+        let tail = Range {
+            start: blas.nodes.start + count,
+            len: blas.nodes.len - count,
+        };
+        // No task reads the tail: the compacted tree's refs stay below `count`.
+        self.nodes.free_after(tail, serial);
+        blas.nodes.len = count;
+        self.build_memory_released = false;
     }
 
     /// What [`Self::release_build_memory`] gives back, now, whether or not it has since the
     /// last build.
+    /// Ranges still waiting for in-flight tasks cannot go yet: the next quiet task tries again.
     pub fn give_back_build_memory(&mut self, encoder: &mut wgpu::CommandEncoder) {
-        self.build_memory_released = true;
         let device = self.device.clone();
+        let mut waiting = false;
         for pool in [
             &mut self.staged,
             &mut self.triangles,
@@ -408,7 +444,9 @@ impl GpuScene {
             &mut self.topologies,
         ] {
             pool.trim(&device, encoder);
+            waiting |= pool.ledger().has_pending();
         }
+        self.build_memory_released = !waiting;
         self.release_build_scratch();
     }
 
@@ -426,6 +464,12 @@ impl GpuScene {
         if let Some(lbvh) = self.passes.lbvh.as_mut() {
             lbvh.release_scratch();
         }
+    }
+
+    /// Notes that pool ranges were freed (a geometry destroyed): the next task without build
+    /// work gives the space back ([`Self::release_build_memory`]).
+    pub fn note_pool_frees(&mut self) {
+        self.build_memory_released = false;
     }
 
     /// Notes that a GPU task ingests geometry or builds BLASes: the next task without such work
@@ -637,33 +681,47 @@ impl GpuScene {
                 kept: refit,
             });
         } else {
-            self.record_blas_passes(rec, (slot, staged), n, (tris, nodes, refit), strategy);
+            // Not batched: kept for refits, or no triangle; neither is compacted.
+            let no_counts = None;
+            self.record_blas_passes(
+                rec,
+                (slot, staged),
+                n,
+                (tris, nodes, refit),
+                (strategy, no_counts),
+            );
         }
+        // The build's stamp (flags bits 8-31): the TLAS's refs name nodes of one build of this
+        // BLAS, so the traversal enters a ref whose stamp is not the geometry's current one at
+        // the BLAS root instead (a TLAS update deferred past a rebuild; see instance_refs).
+        self.blas_builds = self.blas_builds.wrapping_add(1);
+        let stamp = self.blas_builds & 0x00ff_ffff;
         g.blas = Some(BlasRanges {
             tris,
             nodes,
             strategy,
             refit,
+            stamp,
+            compaction: compaction_of(strategy, refit.is_some(), n),
         });
-        // The build's stamp (flags bits 8-31): the TLAS's refs name nodes of one build of this
-        // BLAS, so the traversal enters a ref whose stamp is not the geometry's current one at
-        // the BLAS root instead (a TLAS update deferred past a rebuild; see instance_refs).
-        self.blas_builds = self.blas_builds.wrapping_add(1);
-        [
-            nodes.start,
-            tris.start,
-            n,
-            1 | ((self.blas_builds & 0x00ff_ffff) << 8),
-        ]
+        [nodes.start, tris.start, n, 1 | (stamp << 8)]
     }
 
     /// Records the builds [`GpuScene::build_blas`] deferred, as one batch of each kind
     /// ([`Lbvh::build_batch`]): fast-trace builds, fast-build builds that keep their order and
     /// topology (`allow_update`), and those that do not. A kind the batch cannot take (fewer
     /// than two builds) is built one by one.
-    pub fn record_batch(&mut self, rec: &mut Recorder<'_>, batch: Vec<DeferredBuild>) {
+    ///
+    /// Returns where the fast-trace builds' node counts after compaction are, for the caller to
+    /// read back ([`GpuScene::shrink_compacted`]).
+    pub fn record_batch(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        batch: Vec<DeferredBuild>,
+    ) -> NodeCounts {
+        let mut counts = NodeCounts::default();
         if batch.is_empty() {
-            return;
+            return counts;
         }
         rec.scope = "blas build";
         let (fast_trace, fast_build): (Vec<DeferredBuild>, Vec<DeferredBuild>) = batch
@@ -672,23 +730,33 @@ impl GpuScene {
         let (kept, scratch): (Vec<DeferredBuild>, Vec<DeferredBuild>) =
             fast_build.into_iter().partition(|d| d.kept.is_some());
         for builds in [fast_trace, kept, scratch] {
-            self.record_batch_of(rec, builds);
+            self.record_batch_of(rec, builds, &mut counts);
         }
+        counts
     }
 
     /// Records deferred builds of one kind (one strategy, all kept or none) as a batch, or one
     /// by one.
-    fn record_batch_of(&mut self, rec: &mut Recorder<'_>, batch: Vec<DeferredBuild>) {
+    fn record_batch_of(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        batch: Vec<DeferredBuild>,
+        counts: &mut NodeCounts,
+    ) {
         let Some(first) = batch.first() else {
             return;
         };
+        let count_buffer = node_count_buffer(&self.device, batch.len());
         let kind = match (first.strategy, first.kept) {
-            (BuildStrategy::FastTrace, _) => BatchKind::FastTrace,
+            (BuildStrategy::FastTrace, _) => BatchKind::FastTrace {
+                counts: &count_buffer,
+            },
             (BuildStrategy::FastBuild, Some(_)) => BatchKind::FastBuild {
                 kept: Some((self.orders.buffer(), self.topologies.buffer())),
             },
             (BuildStrategy::FastBuild, None) => BatchKind::FastBuild { kept: None },
         };
+        let first_is_fast_trace = first.strategy == BuildStrategy::FastTrace;
         let builds: Vec<BatchBuild> = batch
             .iter()
             .map(|d| BatchBuild {
@@ -722,22 +790,30 @@ impl GpuScene {
                     (d.slot, d.staged),
                     d.count,
                     (d.tris, d.nodes, d.kept),
-                    d.strategy,
+                    (d.strategy, Some(&mut *counts)),
                 );
             }
+        } else if first_is_fast_trace {
+            counts.parts.push((count_buffer, batch.len()));
+            counts.slots.extend(batch.iter().map(|d| d.slot));
         }
     }
 
-    /// The passes of one BLAS build into its allocated ranges.
+    /// The passes of one BLAS build into its allocated ranges. A fast-trace build that keeps
+    /// no topology is compacted, its node count added to `counts`.
     fn record_blas_passes(
         &mut self,
         rec: &mut Recorder<'_>,
         (slot, staged): (u32, Range),
         n: u32,
         (tris, nodes, refit): BlasAlloc,
-        strategy: BuildStrategy,
+        (strategy, counts): (BuildStrategy, Option<&mut NodeCounts>),
     ) {
         let max_leaf = strategy.max_leaf();
+        let compacted = compaction_of(strategy, refit.is_some(), n) == BlasCompaction::Pending;
+        let count_buffer = counts
+            .filter(|_| compacted)
+            .map(|c| (c, node_count_buffer(&self.device, 1)));
         self.ensure_scratch(n);
         rec.scope = "blas build";
         let (prims, lbvh) = self.passes.build(&self.device);
@@ -790,8 +866,13 @@ impl GpuScene {
                 // are what `BuildHint::PreferFastTrace` promises.
                 clustered: strategy == BuildStrategy::FastTrace,
                 hierarchy_only: by_ranges,
+                compact_counts: count_buffer.as_ref().map(|(_, b)| b),
             },
         );
+        if let Some((counts, buffer)) = count_buffer {
+            counts.parts.push((buffer, 1));
+            counts.slots.push(slot);
+        }
         match topology.filter(|_| by_ranges) {
             Some(topology) => lbvh.refit_triangles(
                 rec,
@@ -869,6 +950,7 @@ impl GpuScene {
                 nodes,
                 strategy,
                 refit: Some((order, topology)),
+                ..
             }),
         ) = (g.staged, g.blas)
         else {
@@ -1077,6 +1159,7 @@ impl GpuScene {
                     centroid_bounds,
                     clustered: tlas_clustered(refs),
                     hierarchy_only: false,
+                    compact_counts: None,
                 },
             );
             self.tlas.refits_since_rebuild = 0;
@@ -1178,6 +1261,37 @@ fn empty_root(device: &wgpu::Device) -> wgpu::Buffer {
         bytemuck::cast_slice(&root),
         wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
     )
+}
+
+/// Where a new BLAS's nodes stand with compaction: a fast-trace tree (leaves collapsed) that
+/// keeps no refit topology and has inner nodes is compacted by its build, and its unused nodes
+/// given back once the count is read back; the others have no unreferenced node.
+fn compaction_of(strategy: BuildStrategy, kept: bool, triangles: u32) -> BlasCompaction {
+    if strategy == BuildStrategy::FastTrace && !kept && triangles >= 2 {
+        BlasCompaction::Pending
+    } else {
+        BlasCompaction::NotApplicable
+    }
+}
+
+/// The node counts a task's compactions write, for the context to read back: the first `words`
+/// words of each part's buffer, in order, are the counts of the geometry slots in `slots`.
+#[derive(Default)]
+pub(crate) struct NodeCounts {
+    /// (buffer, words), in order.
+    pub parts: Vec<(wgpu::Buffer, usize)>,
+    /// The geometry slot of each count, in order.
+    pub slots: Vec<u32>,
+}
+
+/// A buffer for `words` node counts of compactions (copied out to a read-back).
+fn node_count_buffer(device: &wgpu::Device, words: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("kickstart-rt BLAS node counts"),
+        size: (words as u64 * 4).max(4),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
 }
 
 /// A BLAS as read back: raw nodes (16 floats each) and triangles (12 floats each).

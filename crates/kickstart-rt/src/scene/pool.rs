@@ -16,6 +16,27 @@ pub(crate) struct Range {
     pub len: u32,
 }
 
+/// How [`Ledger::pack`] moved one run of elements in use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Move {
+    /// First element before.
+    pub from: u32,
+    /// First element after.
+    pub to: u32,
+    /// Elements.
+    pub len: u32,
+}
+
+impl Move {
+    /// Where a range that started at `start` starts after the moves (`None`: it was not in
+    /// use, so it did not move).
+    pub fn moved(moves: &[Move], start: u32) -> Option<u32> {
+        let i = moves.partition_point(|m| m.from <= start).checked_sub(1)?;
+        let m = moves[i];
+        (start - m.from < m.len).then(|| m.to + (start - m.from))
+    }
+}
+
 /// The CPU side of a [`Pool`]: its capacity and which ranges are free, handed out or waiting to
 /// be released. Cloning it and allocating on the copy predicts exactly what the pool will hand
 /// out (and whether it grows) for the same calls in the same order.
@@ -114,6 +135,11 @@ impl Ledger {
         }
     }
 
+    /// Whether ranges wait for in-flight tasks before they are free.
+    pub fn has_pending(&self) -> bool {
+        !self.pending.is_empty()
+    }
+
     /// Elements free at the end of the buffer.
     fn free_tail(&self) -> u32 {
         match self.free.iter().next_back() {
@@ -169,6 +195,48 @@ impl Ledger {
         }
         self.capacity = new_cap;
         true
+    }
+
+    /// Packs the ranges in use to the front, in order, when anything is not in use (free, or
+    /// waiting for in-flight tasks): a copy of what is in use, once per quiet spell after
+    /// builds, against the holes between ranges that a tail trim cannot give back (a compaction
+    /// leaves one after every fast-trace BLAS); the capacity becomes what is
+    /// in use (at least [`MIN_CAPACITY`]). Ranges waiting for in-flight tasks are dropped: those
+    /// tasks read the old buffer, which the new one replaces. Returns the moves of the runs in
+    /// use, in order, or `None` when nothing changed.
+    pub fn pack(&mut self) -> Option<Vec<Move>> {
+        if self.used >= u64::from(self.capacity) || self.capacity <= MIN_CAPACITY {
+            return None;
+        }
+        let mut gaps: Vec<(u32, u32)> = self.free.iter().map(|(&s, &l)| (s, l)).collect();
+        gaps.extend(self.pending.iter().map(|(_, r)| (r.start, r.len)));
+        gaps.sort_unstable();
+        let mut moves = Vec::new();
+        let (mut at, mut to) = (0u32, 0u32);
+        let mut run = |from: u32, end: u32, moves: &mut Vec<Move>| {
+            if end > from {
+                moves.push(Move {
+                    from,
+                    to,
+                    len: end - from,
+                });
+                to += end - from;
+            }
+        };
+        for (start, len) in gaps {
+            run(at, start, &mut moves);
+            at = start + len;
+        }
+        run(at, self.capacity, &mut moves);
+        let packed = u32::try_from(self.used).unwrap_or(u32::MAX);
+        let capacity = packed.max(MIN_CAPACITY);
+        self.capacity = capacity;
+        self.free.clear();
+        if capacity > packed {
+            self.free.insert(packed, capacity - packed);
+        }
+        self.pending.clear();
+        Some(moves)
     }
 
     /// Puts `r` on the free list, merged with its neighbours (`used` is the caller's business).
@@ -293,6 +361,31 @@ impl Pool {
         true
     }
 
+    /// [`Ledger::pack`] on the pool: a buffer of the packed capacity, the runs in use copied
+    /// into it inside `encoder`. Returns the moves, or `None` when nothing changed.
+    pub fn pack(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Option<Vec<Move>> {
+        let moves = self.ledger.pack()?;
+        let bytes = u64::from(self.ledger.capacity()) * self.ledger.element_bytes;
+        let new = create(device, self.label, bytes, self.usage);
+        let e = self.ledger.element_bytes;
+        for m in &moves {
+            encoder.copy_buffer_to_buffer(
+                &self.buffer,
+                u64::from(m.from) * e,
+                &new,
+                u64::from(m.to) * e,
+                u64::from(m.len) * e,
+            );
+        }
+        // As when growing: wgpu keeps the old buffer alive while recorded commands use it.
+        self.buffer = new;
+        Some(moves)
+    }
+
     /// [`Ledger::reserve`] on the pool: grows the buffer (copying its contents inside
     /// `encoder`) so that `total` more elements fit at its end.
     pub fn reserve(
@@ -409,6 +502,74 @@ mod tests {
         let mut enc = g.device.create_command_encoder(&Default::default());
         let d = p.alloc(&g.device, &mut enc, 40, u64::MAX).unwrap();
         assert_eq!(d.start, a.len);
+        g.queue.submit([enc.finish()]);
+    }
+
+    /// Packing moves the ranges in use to the front in order, closing the holes between them
+    /// (a range waiting for in-flight tasks is a hole too: those tasks read the old buffer), and
+    /// keeps their contents; `Move::moved` finds where a range went.
+    #[test]
+    fn packing_closes_the_holes_and_keeps_the_contents() {
+        let g = gpu();
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        let mut p = Pool::new(&g.device, "test pool", 16);
+        let r: Vec<Range> = [10, 20, 30, 40, 50]
+            .iter()
+            .map(|&n| p.alloc(&g.device, &mut enc, n, u64::MAX).unwrap())
+            .collect();
+        // Known contents in ranges 1 and 3.
+        let words: Vec<u32> = (0..(r[1].len + r[3].len) * 4)
+            .map(|i| 0xC0DE_0000 + i)
+            .collect();
+        let src = crate::gpu::testing::buffer_with(bytemuck::cast_slice(&words));
+        let split = u64::from(r[1].len) * 16;
+        enc.copy_buffer_to_buffer(&src, 0, p.buffer(), u64::from(r[1].start) * 16, split);
+        enc.copy_buffer_to_buffer(
+            &src,
+            split,
+            p.buffer(),
+            u64::from(r[3].start) * 16,
+            u64::from(r[3].len) * 16,
+        );
+        // Range 0 free, range 2 waiting for task 7, and the tail of range 4 given back.
+        p.free_after(r[0], 1);
+        p.collect(2);
+        p.free_after(r[2], 7);
+        p.free_after(
+            Range {
+                start: r[4].start + 5,
+                len: 45,
+            },
+            1,
+        );
+        p.collect(2);
+        let moves = p.pack(&g.device, &mut enc).expect("holes to close");
+        let m = |from, to, len| Move { from, to, len };
+        assert_eq!(
+            moves,
+            [m(10, 0, 20), m(60, 20, 45)],
+            "ranges 1, and 3 with 4's head"
+        );
+        assert_eq!(Move::moved(&moves, r[1].start), Some(0));
+        assert_eq!(Move::moved(&moves, r[3].start), Some(20));
+        assert_eq!(Move::moved(&moves, r[4].start), Some(60));
+        assert_eq!(Move::moved(&moves, r[0].start), None);
+        assert_eq!(Move::moved(&moves, r[2].start), None);
+        assert_eq!(p.ledger().capacity(), 65);
+        assert_eq!(
+            p.used_bytes(),
+            65 * 16,
+            "the waiting range is gone with the old buffer"
+        );
+        assert!(!p.ledger().has_pending());
+        assert_eq!(p.pack(&g.device, &mut enc), None, "nothing left to close");
+        g.queue.submit([enc.finish()]);
+        let bytes =
+            crate::gpu::testing::read_back(p.buffer(), 0, u64::from(r[1].len + r[3].len) * 16);
+        assert_eq!(bytemuck::cast_slice::<u8, u32>(&bytes), &words[..]);
+        // Still a working pool: the next range goes at the end.
+        let mut enc = g.device.create_command_encoder(&Default::default());
+        assert_eq!(p.alloc(&g.device, &mut enc, 8, u64::MAX).unwrap().start, 65);
         g.queue.submit([enc.finish()]);
     }
 

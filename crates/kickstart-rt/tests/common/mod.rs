@@ -661,3 +661,21 @@ pub fn wgpu_allocated(device: &wgpu::Device) -> Option<(u64, usize)> {
         .generate_allocator_report()
         .map(|r| (r.total_allocated_bytes, r.allocations.len()))
 }
+
+/// Polls until the compaction of `h`'s BLAS is read back and applied (each call to the context
+/// collects what arrived), or fails the test.
+pub fn compacted_after_polls(
+    ctx: &kickstart_rt::ExecuteContext,
+    device: &wgpu::Device,
+    h: kickstart_rt::GeometryHandle,
+) -> kickstart_rt::BlasMemory {
+    for _ in 0..1000 {
+        let m = ctx.geometry_blas_memory(h).unwrap().expect("built");
+        if m.compaction != kickstart_rt::BlasCompaction::Pending {
+            return m;
+        }
+        device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    panic!("the compaction of {h:?} was not read back after 1000 polls");
+}

@@ -92,6 +92,9 @@ impl PeerReport {
             blas_build_fast_trace: None,
             blas_build_fast_build: None,
             blas_bytes_fast_trace: None,
+            blas_compacted_bytes_fast_trace: None,
+            ours_blas_bytes: None,
+            blas_triangles: 0,
             tlas_build: None,
             rays: Vec::new(),
             workload: None,
@@ -172,10 +175,12 @@ pub fn compare(
             Ok(TimeComparison::new(ours_blas, t))
         })
     });
-    report.blas_bytes_fast_trace = report
-        .blas_build_fast_trace
-        .as_ref()
-        .map(|_| peer.blas_bytes());
+    if report.blas_build_fast_trace.is_some() {
+        report.blas_bytes_fast_trace = Some(peer.blas_bytes());
+        report.blas_compacted_bytes_fast_trace = peer.blas_compacted_bytes();
+        report.blas_triangles = ours.geometry_triangles;
+        report.ours_blas_bytes = ours.blas_memory.as_ref().map(|m| m.total());
+    }
     let slots: Vec<u32> = match batches {
         Some(b) => b.slots.clone(),
         None => (0..scene.instances.len() as u32).collect(),
@@ -251,6 +256,44 @@ pub fn compare(
     report
 }
 
+/// `12.3 MiB` (`KiB` below one MiB: the small test scenes' BLASes are a few KiB).
+fn size(bytes: u64) -> String {
+    const MIB: f64 = 1048576.0;
+    let b = bytes as f64;
+    if b >= MIB {
+        format!("{:.1} MiB", b / MIB)
+    } else {
+        format!("{:.1} KiB", b / 1024.0)
+    }
+}
+
+/// Our fast-trace BLASes' bytes once compacted, and the driver's storage for them, uncompacted
+/// and compacted, each with its bytes per triangle of the BLASes (left out when the count is 0, i.e. unknown); `None` when the
+/// fast-trace build did not run.
+fn blas_size_line(r: &PeerReport) -> Option<String> {
+    let triangles = r.blas_triangles;
+    let with_per_tri = |bytes: u64| {
+        if triangles == 0 {
+            size(bytes)
+        } else {
+            format!(
+                "{} ({:.1} B/tri)",
+                size(bytes),
+                bytes as f64 / triangles as f64
+            )
+        }
+    };
+    let bytes = r.blas_bytes_fast_trace?;
+    let compacted = r
+        .blas_compacted_bytes_fast_trace
+        .map_or("—".to_string(), with_per_tri);
+    let ours = r.ours_blas_bytes.map_or("—".to_string(), with_per_tri);
+    Some(format!(
+        "BLAS memory (fast trace): ours {ours} compacted; driver {}, compacted {compacted}",
+        with_per_tri(bytes)
+    ))
+}
+
 /// Prints one scene's peer figures.
 pub fn print(r: &PeerReport) {
     if let Some(why) = &r.skipped {
@@ -279,6 +322,9 @@ pub fn print(r: &PeerReport) {
             ),
             None => println!("    {what:<30} —"),
         }
+    }
+    if let Some(line) = blas_size_line(r) {
+        println!("    {line}");
     }
     let rate = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.1}"));
     for k in &r.rays {
@@ -393,6 +439,31 @@ mod tests {
     }
 
     #[test]
+    fn blas_sizes_print_with_bytes_per_triangle() {
+        let mut r = PeerReport::empty();
+        r.blas_triangles = 1024;
+        assert_eq!(blas_size_line(&r), None, "no fast-trace build, no line");
+        r.blas_bytes_fast_trace = Some(3 * 1048576);
+        r.blas_compacted_bytes_fast_trace = Some(1536);
+        r.ours_blas_bytes = Some(2048);
+        assert_eq!(
+            blas_size_line(&r).as_deref(),
+            Some("BLAS memory (fast trace): ours 2.0 KiB (2.0 B/tri) compacted; driver 3.0 MiB (3072.0 B/tri), compacted 1.5 KiB (1.5 B/tri)")
+        );
+        r.blas_triangles = 0;
+        assert_eq!(
+            blas_size_line(&r).as_deref(),
+            Some("BLAS memory (fast trace): ours 2.0 KiB compacted; driver 3.0 MiB, compacted 1.5 KiB")
+        );
+        r.blas_compacted_bytes_fast_trace = None;
+        r.ours_blas_bytes = None;
+        assert_eq!(
+            blas_size_line(&r).as_deref(),
+            Some("BLAS memory (fast trace): ours — compacted; driver 3.0 MiB, compacted —")
+        );
+    }
+
+    #[test]
     fn skipped_peer_reports_why_and_measures_nothing() {
         let (device, queue) = crate::app::testing::device();
         let bench = Bench::new(device, queue, 1);
@@ -427,6 +498,14 @@ mod tests {
         print(&r);
         assert!(r.errors.is_empty(), "{:?}", r.errors);
         assert!(r.blas_build_fast_build.is_some() && r.tlas_build.is_some());
+        // The driver's compacted size of the fast-trace BLASes: some bytes, never more than the
+        // uncompacted ones.
+        let bytes = r.blas_bytes_fast_trace.expect("fast-trace BLAS bytes");
+        let compacted = r.blas_compacted_bytes_fast_trace;
+        assert!(
+            compacted.is_some_and(|c| c > 0 && c <= bytes),
+            "compacted {compacted:?} of {bytes} bytes"
+        );
         let kinds: Vec<&str> = r.rays.iter().map(|k| k.kind).collect();
         assert_eq!(kinds, ["primary", "ao", "diffuse"]);
         for k in &r.rays {

@@ -96,6 +96,8 @@ pub struct SceneReport {
     pub tlas_build_profile: Vec<PassProfile>,
     /// BVH quality of the largest geometry.
     pub sah: Option<SahReport>,
+    /// Our fast-trace BLASes' memory, as built and once compacted.
+    pub blas_memory: Option<BlasMemoryReport>,
     /// Primary, AO and diffuse batches.
     pub rays: Vec<RayBatch>,
     /// (pixels + primary hits) / (primary batch time + diffuse batch time), millions of rays per
@@ -152,6 +154,7 @@ impl SceneReport {
             tlas_build: None,
             tlas_build_profile: Vec::new(),
             sah: None,
+            blas_memory: None,
             rays: Vec::new(),
             peer_mrays_per_s: None,
             oracle: None,
@@ -240,6 +243,9 @@ pub(super) fn print_scene(r: &SceneReport, (w, h): (u32, u32)) {
     println!("  TLAS build   {}", opt(&r.tlas_build));
     if !r.tlas_build_profile.is_empty() {
         println!("    profile    {}", prof::show(&r.tlas_build_profile));
+    }
+    if let Some(m) = &r.blas_memory {
+        println!("  BLAS memory  {}", m.line());
     }
     match &r.sah {
         Some(s) => println!(
@@ -417,6 +423,18 @@ pub struct PeerReport {
     pub blas_build_fast_build: Option<TimeComparison>,
     /// Bytes of their fast-trace BLASes (uncompacted).
     pub blas_bytes_fast_trace: Option<u64>,
+    /// The driver's compacted size of the same BLASes (its compacted-size query, summed without
+    /// the 256-byte alignment padding that `blas_bytes_fast_trace` counts; the peer does not
+    /// compact them).
+    pub blas_compacted_bytes_fast_trace: Option<u64>,
+    /// Our fast-trace BLASes' bytes once compacted (triangles and nodes; the scene report's
+    /// `blas_memory`), beside theirs.
+    pub ours_blas_bytes: Option<u64>,
+    /// The triangles those BLASes hold (the scene's `geometry_triangles`; 0 without a fast-trace
+    /// build), for the printed bytes per triangle; left out of the JSON, which has them with the
+    /// scene.
+    #[serde(skip)]
+    pub blas_triangles: usize,
     /// TLAS build over the scene's instances, against our TLAS rebuild of the same instances.
     pub tlas_build: Option<TimeComparison>,
     /// Primary, AO and diffuse: the same rays, traced against their fast-trace BLASes.
@@ -477,4 +495,38 @@ pub struct TreeWork {
     pub sah_cost: f64,
     /// `(batch kind, work per ray)` for each batch.
     pub batches: Vec<(String, WorkPerRay)>,
+}
+
+/// Our BLASes' memory after the fast-trace build of every geometry
+/// (`ExecuteContext::geometry_blas_memory`, summed).
+#[derive(Debug, Clone, Serialize)]
+pub struct BlasMemoryReport {
+    /// Geometry triangles.
+    pub triangles: usize,
+    /// Triangles in leaf order: 48 bytes each.
+    pub triangle_bytes: u64,
+    /// Nodes as the builds wrote them: 64 bytes for each of a geometry's `n - 1` inner nodes.
+    pub built_node_bytes: u64,
+    /// Nodes once compacted (the nodes collapsed leaves left unreferenced given back).
+    pub node_bytes: u64,
+}
+
+impl BlasMemoryReport {
+    /// Triangles and compacted nodes.
+    pub fn total(&self) -> u64 {
+        self.triangle_bytes + self.node_bytes
+    }
+
+    /// One printed line: bytes per triangle of the nodes (built, compacted) and in all.
+    pub fn line(&self) -> String {
+        let per = |b: u64| b as f64 / self.triangles.max(1) as f64;
+        format!(
+            "{:.1} MiB, {:.1} B/tri: nodes {:.1} B/tri ({:.1} as built), triangles {:.1} B/tri",
+            self.total() as f64 / (1024.0 * 1024.0),
+            per(self.total()),
+            per(self.node_bytes),
+            per(self.built_node_bytes),
+            per(self.triangle_bytes)
+        )
+    }
 }

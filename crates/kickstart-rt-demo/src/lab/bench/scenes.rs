@@ -9,7 +9,7 @@ use kickstart_rt_renderer::upload;
 
 use super::harness::Bench;
 use super::rays::rays;
-use super::report::{SahReport, SceneReport, TlasReport, WorkPerRay};
+use super::report::{BlasMemoryReport, SahReport, SceneReport, TlasReport, WorkPerRay};
 use super::tasks::trace_tasks;
 use super::{attempt, backends, cache, options, peer, tree_work, Stats};
 use crate::app::gpu;
@@ -68,6 +68,9 @@ pub(super) fn bench_scene(
                 cpu_sah_cost,
                 ratio: gpu_sah_cost / cpu_sah_cost,
             })
+        });
+        r.blas_memory = attempt(&mut errors, "BLAS memory", || {
+            blas_memory(bench.device, &ctx, &h.geometries, r.geometry_triangles)
         });
     }
     if builds {
@@ -220,4 +223,41 @@ pub(super) fn bench_tlas(bench: &Bench, count: u32) -> TlasReport {
         refit_profile,
         errors,
     }
+}
+
+/// Our BLASes' memory once every geometry's compaction is read back (each call to the context
+/// collects what arrived; a fast-build or refittable BLAS is never compacted).
+fn blas_memory(
+    device: &wgpu::Device,
+    ctx: &ksrt::ExecuteContext,
+    geometries: &[ksrt::GeometryHandle],
+    triangles: usize,
+) -> AnyResult<BlasMemoryReport> {
+    let mut report = BlasMemoryReport {
+        triangles,
+        triangle_bytes: 0,
+        built_node_bytes: 0,
+        node_bytes: 0,
+    };
+    for &g in geometries {
+        let mut polls = 0;
+        let m = loop {
+            let m = ctx
+                .geometry_blas_memory(g)?
+                .ok_or_else(|| format!("{g:?}: its BLAS is not built"))?;
+            if m.compaction != ksrt::BlasCompaction::Pending {
+                break m;
+            }
+            polls += 1;
+            if polls > 1000 {
+                return Err(format!("{g:?}: no compaction read back after 1000 polls").into());
+            }
+            device.poll(wgpu::PollType::wait_indefinitely())?;
+        };
+        report.triangle_bytes += m.triangle_bytes;
+        report.node_bytes += m.node_bytes;
+        // As built: 64 bytes for each of n - 1 inner nodes (at least the root).
+        report.built_node_bytes += (m.triangle_bytes / 48).saturating_sub(1).max(1) * 64;
+    }
+    Ok(report)
 }

@@ -565,7 +565,12 @@ mod tests {
                 "lbvh_climb",
                 "lbvh_refit_gather",
                 "lbvh_refit_ingest",
-                "lbvh_range_refit"
+                "lbvh_range_refit",
+                "lbvh_compact_mark",
+                "lbvh_compact_count",
+                "lbvh_compact_scan",
+                "lbvh_compact_assign",
+                "lbvh_compact_scatter"
             ]
         );
     }

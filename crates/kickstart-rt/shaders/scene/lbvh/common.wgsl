@@ -102,6 +102,8 @@ fn segment_at(g: u32) -> u32 {
 @group(0) @binding(8) var<storage, read_write> bounds_out: array<vec4<u32>>;
 // The staged (re-ingested) triangles in primitive order, and the BLAS's triangles in sorted order
 // (3 vec4 each, copied as bits: the w lanes hold integers): lbvh_gather and the range refit.
+// The topology a clustered climb writes (scene/lbvh/hploc.wgsl), which the compaction reads.
+@group(0) @binding(9) var<storage, read_write> topo_out: array<u32>;
 @group(0) @binding(12) var<storage, read> refit_src: array<vec4<u32>>;
 @group(0) @binding(13) var<storage, read_write> refit_dst: array<vec4<u32>>;
 

@@ -57,8 +57,6 @@
 
 #import scene/lbvh/climb
 
-@group(0) @binding(9) var<storage, read_write> topo_out: array<u32>;
-
 // Invocations of the climb: the most clusters one merge holds.
 const HP_WG: u32 = 32u;
 // Clusters kept by a node that covers more leaves than this.

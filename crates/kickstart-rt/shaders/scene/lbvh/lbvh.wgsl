@@ -23,6 +23,10 @@
 //                  (range_refit.wgsl) the range refit of a BLAS (a Karras tree, one triangle a
 //                  leaf) from its re-ingested triangles: every node's boxes from its leaf range,
 //                  each node on its own
+//   lbvh_compact_mark, lbvh_compact_count, lbvh_compact_scan, lbvh_compact_assign,
+//   lbvh_compact_scatter
+//                  (compact.wgsl) after a clustered BLAS build's climb: the nodes its
+//                  collapsed leaves left unreferenced dropped, the rest moved to the front
 
 #import scene/lbvh/bounds
 #import scene/lbvh/morton
@@ -30,3 +34,4 @@
 #import scene/lbvh/hierarchy
 #import scene/lbvh/climb
 #import scene/lbvh/range_refit
+#import scene/lbvh/compact

@@ -49,8 +49,12 @@ pub(crate) struct BatchBuild {
 #[derive(Debug, Clone, Copy)]
 pub(crate) enum BatchKind<'a> {
     /// Clustered (`hploc climb`), leaves collapsed up to each build's `max_leaf`; order and
-    /// topology not kept.
-    FastTrace,
+    /// topology not kept. The nodes are then compacted ([`Lbvh::compact`]): build `k`'s node
+    /// count goes to word `k` of `counts` (STORAGE and COPY_SRC usage).
+    FastTrace {
+        /// The builds' node counts after the compaction.
+        counts: &'a wgpu::Buffer,
+    },
     /// The Karras tree, one triangle a leaf, its nodes by the range refit. `kept`: the buffers
     /// of sort orders and topologies every build's `kept` bases point into (its
     /// `allow_update` geometries'); `None`: the builder's scratch (no build keeps them).
@@ -163,13 +167,14 @@ impl Lbvh {
     /// whose `kept` disagrees with the batch's, or more positions than a build may have: the
     /// caller builds those one by one.
     pub fn build_batch(&mut self, rec: &mut Recorder<'_>, b: &LbvhBatch<'_>) -> bool {
-        let (clustered, kept) = match b.kind {
-            BatchKind::FastTrace => (true, None),
-            BatchKind::FastBuild { kept } => (false, kept),
+        let (compact_counts, kept) = match b.kind {
+            BatchKind::FastTrace { counts } => (Some(counts), None),
+            BatchKind::FastBuild { kept } => (None, kept),
         };
+        let clustered = compact_counts.is_some();
         let least = if clustered { 1 } else { 2 };
         let kept_agree = |x: &BatchBuild| match b.kind {
-            BatchKind::FastTrace => x.kept.is_none(),
+            BatchKind::FastTrace { .. } => x.kept.is_none(),
             BatchKind::FastBuild { kept } => x.kept.is_some() == kept.is_some(),
         };
         if b.builds.len() < 2 || b.builds.iter().any(|x| x.count < least || !kept_agree(x)) {
@@ -276,16 +281,34 @@ impl Lbvh {
             self.refit_triangles_batch(rec, &refits);
             return true;
         }
-        let bg = self.hploc.bind_group(device, "lbvh", 0, &bind);
+        if let Some(counts) = compact_counts {
+            self.record_clustered_batch(rec, &bind, (total, b.builds.len()), counts);
+        }
+        true
+    }
+
+    /// The rest of a fast-trace batch after its hierarchy: the clustered climb, the triangle
+    /// gather and the compaction, over `total` positions of `builds` builds.
+    fn record_clustered_batch(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        bind: &Buffers<'_>,
+        (total, builds): (u32, usize),
+        counts: &wgpu::Buffer,
+    ) {
+        let device = rec.device;
+        let bg = self.hploc.bind_group(device, "lbvh", 0, bind);
         rec.dispatch(
             "hploc climb",
             &self.hploc.pipeline,
             &[&bg],
             total / HPLOC_WORKGROUP,
         );
-        let bg = self.gather.bind_group(device, "lbvh", 0, &bind);
+        let bg = self.gather.bind_group(device, "lbvh", 0, bind);
         rec.dispatch("lbvh gather", &self.gather.pipeline, &[&bg], groups(total));
-        true
+        // At most MAX_COUNT / WORKGROUP builds: each takes a block of positions at least.
+        let builds = u32::try_from(builds).unwrap_or(u32::MAX);
+        self.compact(rec, bind, (total, builds), counts);
     }
 
     /// The Morton keys of a batch's `total` positions sorted within each of its `builds`

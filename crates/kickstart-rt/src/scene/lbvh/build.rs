@@ -87,6 +87,13 @@ impl Lbvh {
                 &[&bg],
                 n.div_ceil(HPLOC_WORKGROUP).max(1),
             );
+            if let Some(counts) = b.compact_counts {
+                // The new-index words (the batch clears its whole work buffer instead).
+                let inner = u64::from(n - 1);
+                rec.encoder
+                    .clear_buffer(&s.work, (BOXES_AT + 16 * inner) * 4, Some(inner * 4));
+                self.compact(rec, &bind, (n, 1), counts);
+            }
         } else {
             let bg = self.climb.bind_group(device, "lbvh", 0, &bind);
             rec.dispatch("lbvh climb", &self.climb.pipeline, &[&bg], groups(n));

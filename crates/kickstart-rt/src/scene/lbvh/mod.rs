@@ -63,6 +63,7 @@
 
 mod batch;
 mod build;
+mod compact;
 #[cfg(test)]
 mod cpu;
 mod refit;
@@ -167,6 +168,11 @@ pub(crate) struct LbvhBuild<'a> {
     /// the build computes them. The words must be ready (zeroed, then merged) before the build's
     /// passes run; the buffer needs STORAGE usage.
     pub centroid_bounds: Option<(&'a wgpu::Buffer, u32)>,
+    /// After a clustered build with collapsed leaves and no kept `topology`: compact its nodes
+    /// in place ([`Lbvh::compact`]) and write their count to word 0 of this buffer (STORAGE and
+    /// COPY_SRC usage), from which the caller learns what of its node range it may give back.
+    /// `None`: the nodes stay as the climb wrote them.
+    pub compact_counts: Option<&'a wgpu::Buffer>,
     /// Cluster the Morton-ordered primitives by PLOC (`hploc climb`) instead of taking the
     /// Karras tree as it is: a lower SAH cost for a slower build. With
     /// [`LeafRefs::PrimitiveIndex`] (the TLAS) no leaf is collapsed, whatever `max_leaf` says.
@@ -331,6 +337,8 @@ pub(crate) struct Lbvh {
     segment_keys: ReflectedPipeline,
     rekey: ReflectedPipeline,
     gather: ReflectedPipeline,
+    /// The compaction after a clustered BLAS build ([`Lbvh::compact`]).
+    compact: compact::CompactPipelines,
     sort: RadixSort,
     /// Centroid bounds, inner boxes during the climb, arrival counters; for a clustered build
     /// also the cluster counts and lists ([`clustered_work_words`]).
@@ -348,6 +356,8 @@ pub(crate) struct Lbvh {
     pyramid_boxes: Grown,
     /// A batch's sort order (its builds' orders are not kept).
     batch_order: Grown,
+    /// The compaction's per-block counts and first new indices (a word per 256 positions).
+    compact_blocks: Grown,
 }
 
 /// Invocations of a `hploc_climb` workgroup (`HP_WG` in `shaders/scene/lbvh/hploc.wgsl`).
@@ -371,9 +381,13 @@ fn work_words(n: u32) -> u64 {
 }
 
 /// Words of the work buffer of a clustered build (`shaders/scene/lbvh/hploc.wgsl`): [`work_words`], then a
-/// cluster count per Karras node, a cluster-list slot and a free-slot-list slot per primitive.
+/// cluster count per Karras node, a cluster-list slot and a free-slot-list slot per primitive;
+/// and at least what the compaction after the climb needs there (`shaders/scene/lbvh/compact.wgsl`: a
+/// copy of every inner node, 16 words, and its new index).
 fn clustered_work_words(n: u32) -> u64 {
-    work_words(n) + u64::from(n.saturating_sub(1)) + 2 * u64::from(n)
+    let inner = u64::from(n.saturating_sub(1));
+    let climb = work_words(n) + inner + 2 * u64::from(n);
+    climb.max(BOXES_AT + 17 * inner)
 }
 
 /// The `max_leaf` a dispatch uses: clamped to 1..=MAX_LEAF, and 1 for primitive-index refs
@@ -414,6 +428,7 @@ impl Lbvh {
             segment_keys: pipeline("lbvh segment keys", "lbvh_segment_keys"),
             rekey: pipeline("lbvh rekey", "lbvh_rekey"),
             gather: pipeline("lbvh gather", "lbvh_gather"),
+            compact: compact::CompactPipelines::new(&shader, device),
             sort: RadixSort::new(device),
             work: Grown::default(),
             keys: Grown::default(),
@@ -423,6 +438,7 @@ impl Lbvh {
             dummy: Grown::default(),
             pyramid_boxes: Grown::default(),
             batch_order: Grown::default(),
+            compact_blocks: Grown::default(),
         }
     }
 
@@ -449,6 +465,7 @@ impl Lbvh {
             &mut self.dummy,
             &mut self.pyramid_boxes,
             &mut self.batch_order,
+            &mut self.compact_blocks,
         ] {
             g.release();
         }
@@ -465,6 +482,7 @@ impl Lbvh {
             + self.dummy.bytes()
             + self.pyramid_boxes.bytes()
             + self.batch_order.bytes()
+            + self.compact_blocks.bytes()
             + self.sort.scratch_bytes()
     }
 

@@ -75,6 +75,7 @@ fn lbvh_three_builds_in_one_encoder_grow_scratch() {
                     centroid_bounds: None,
                     clustered: false,
                     hierarchy_only: false,
+                    compact_counts: None,
                 },
             );
         }
@@ -244,6 +245,7 @@ fn build_minimal(
                 centroid_bounds,
                 clustered: false,
                 hierarchy_only: false,
+                compact_counts: None,
             },
         );
         dispatches = rec.dispatches;

@@ -93,6 +93,16 @@ fn every_pass_module_stands_alone() {
             &["lbvh_refit_gather", "lbvh_refit_ingest", "lbvh_range_refit"],
         ),
         ("scene/lbvh/hploc", &["lbvh_climb", "hploc_climb"]),
+        (
+            "scene/lbvh/compact",
+            &[
+                "lbvh_compact_mark",
+                "lbvh_compact_count",
+                "lbvh_compact_scan",
+                "lbvh_compact_assign",
+                "lbvh_compact_scatter",
+            ],
+        ),
     ];
     for &(name, entries) in passes {
         let module = validate(name, &compose(&[name], &[]));
@@ -336,6 +346,7 @@ fn build_and_check_opts(
                 centroid_bounds: None,
                 clustered,
                 hierarchy_only: false,
+                compact_counts: None,
             },
         )
     });
