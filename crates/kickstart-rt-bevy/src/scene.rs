@@ -403,6 +403,7 @@ fn register_geometry(
                 index_buffer,
                 transform: None,
                 index_range: None,
+                opacity: None,
             }],
             ..Default::default()
         },

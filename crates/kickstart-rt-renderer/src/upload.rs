@@ -68,6 +68,7 @@ pub fn geometry_input(m: &UploadedMesh, allow_update: bool) -> ksrt::GeometryInp
             }),
             transform: None,
             index_range: None,
+            opacity: None,
         }],
         allow_update,
         ..Default::default()

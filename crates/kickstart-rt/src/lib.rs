@@ -70,6 +70,16 @@
 //! | `GeometryTask` | `…index_buffer.offset` | multiple of the index size, range inside the buffer | misaligned, past the end |
 //! | `GeometryTask` | `…index_buffer.count` | non-zero multiple of 3 | otherwise |
 //! | `GeometryTask` | `…index_range` | multiples of 3 inside the component | otherwise |
+//! | `GeometryTask` | `…opacity.micromap_level` | ≤ 6 (`ComponentOpacity::MAX_MICROMAP_LEVEL`) with a texture source | larger |
+//! | `GeometryTask` | `…opacity.source.channel` | 0..=3 | larger |
+//! | `GeometryTask` | `…opacity.source.factor` | finite, ≥ 0 | negative, NaN/∞ |
+//! | `GeometryTask` | `…opacity.source.cutoff` | [0, 1] | outside, NaN |
+//! | `GeometryTask` | `…opacity.source.texture` | `TEXTURE_BINDING`, 2D, 1 sample, float sample type | missing usage; other dimension; multisampled; depth, stencil or integer format |
+//! | `GeometryTask` | `…opacity.source.uvs.stride` | ≥ format size | smaller |
+//! | `GeometryTask` | `…opacity.source.uvs.buffer` | has `COPY_SRC`, holds `vertex_buffer.count` coordinates | lacks it; too short |
+//! | `GeometryTask` | `…opacity.source.uvs.offset` | range inside the buffer | past its end |
+//! | `GeometryTask` | `…opacity.source.buffer` (per triangle) | has `COPY_SRC`, holds a `u32` per triangle (after `index_range`) | lacks it; too short |
+//! | `GeometryTask` | `…opacity.source.offset` (per triangle) | multiple of 4, range inside the buffer | misaligned, past the end |
 //! | `InstanceTask` | `handle`, `input.geometry` | live handles; geometry registered | stale: [`Error::InvalidHandle`]; unregistered |
 //! | `InstanceTask` | `operation` | `Register` once; `Update` only after it | re-register, update of unregistered |
 //! | `InstanceTask` | `input.transform` | finite | NaN/∞ |

@@ -864,6 +864,7 @@ fn mixed_components() -> GeometryInput {
                 }),
                 transform: None,
                 index_range: None,
+                opacity: None,
             },
             GeometryComponent {
                 vertex_buffer: VertexBufferInput {
@@ -876,6 +877,7 @@ fn mixed_components() -> GeometryInput {
                 index_buffer: None,
                 transform: Some(Affine3A::from_translation(Vec3::new(2.0, 0.0, 0.0))),
                 index_range: Some((3, 3)),
+                opacity: None,
             },
             GeometryComponent {
                 vertex_buffer: VertexBufferInput {
@@ -893,6 +895,7 @@ fn mixed_components() -> GeometryInput {
                 }),
                 transform: Some(Affine3A::from_translation(Vec3::new(4.0, 0.0, 0.0))),
                 index_range: None,
+                opacity: None,
             },
         ],
         ..Default::default()
@@ -2541,5 +2544,232 @@ fn compacted_nodes_go_back_to_the_driver() {
     assert_eq!(
         ctx.read_back_blas(g).unwrap().nodes.len() as u64 * 64,
         m.node_bytes
+    );
+}
+
+/// Cards of the cutout test: the checkerboard with 32-bit, 16-bit float and 16-bit unorm
+/// coordinates (0, 3, 4), per-triangle flags (1), opaque (2).
+const CARDS: u32 = 5;
+
+/// Texels a side of the cutout tests' checkerboard.
+const CHECKER: u32 = 8;
+
+/// An `Rgba8Unorm` checkerboard of `CHECKER`² texels: alpha 255 where `(x + y)` is even, 0
+/// elsewhere (colour channels 128 everywhere).
+fn checkerboard_alpha() -> wgpu::TextureView {
+    let g = gpu();
+    let size = wgpu::Extent3d {
+        width: CHECKER,
+        height: CHECKER,
+        depth_or_array_layers: 1,
+    };
+    let texture = g.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("checkerboard alpha"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8Unorm,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let texels: Vec<u8> = (0..CHECKER * CHECKER)
+        .flat_map(|i| {
+            let (x, y) = (i % CHECKER, i / CHECKER);
+            [128, 128, 128, if (x + y) % 2 == 0 { 255 } else { 0 }]
+        })
+        .collect();
+    g.queue.write_texture(
+        texture.as_image_copy(),
+        &texels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * CHECKER),
+            rows_per_image: None,
+        },
+        size,
+    );
+    texture.create_view(&Default::default())
+}
+
+/// The CPU oracle's alpha test of the checkerboard at `uv` (the texel it falls in, repeating).
+fn checker_opaque(uv: glam::Vec2) -> bool {
+    let texel = (uv - uv.floor()) * CHECKER as f32;
+    (texel.x as u32 + texel.y as u32).is_multiple_of(2)
+}
+
+/// A unit card in the plane z = 0 over x, y in [0, 1] (two triangles), its texture coordinates
+/// its x and y.
+fn card() -> (Mesh, Vec<[f32; 2]>) {
+    let corners = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    let mesh = Mesh {
+        positions: corners.iter().map(|&[x, y]| Vec3::new(x, y, 0.0)).collect(),
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    (mesh, corners.to_vec())
+}
+
+/// Points on the cutout tests' cards (card 0..3, point on the unit square) away from texel
+/// edges (the micro-maps resolve a texel in 32 × 32 micro-triangles' worth; a texel edge crossing
+/// one is where the two may differ) and from the cards' diagonal.
+fn cutout_points() -> Vec<(u32, glam::Vec2)> {
+    let mut rng = Rng(fuzz_seed("cutout cards", 0xc0_7ca7));
+    let mut points = Vec::new();
+    while points.len() < 1500 {
+        let p = glam::Vec2::new(rng.f(), rng.f());
+        let texel = p * CHECKER as f32;
+        let edge = (texel - texel.round()).abs().min_element();
+        if edge > 0.08 && (p.x - p.y).abs() > 0.02 {
+            points.push((rng.below(CARDS), p));
+        }
+    }
+    points
+}
+
+/// The checkerboard card, its coordinates in `format` (each format vertex pulling decodes).
+fn checker_card(card_mesh: &Mesh, uvs: &[[f32; 2]], format: UvFormat) -> GeometryInput {
+    let bytes: Vec<u8> = match format {
+        UvFormat::Float32x2 => bytemuck::cast_slice(uvs).to_vec(),
+        UvFormat::Float16x2 => uvs
+            .iter()
+            .flatten()
+            // The card's coordinates are 0 and 1: f16 0x0000 and 0x3c00.
+            .flat_map(|&x| (if x == 1.0 { 0x3c00u16 } else { 0 }).to_le_bytes())
+            .collect(),
+        UvFormat::Unorm16x2 => uvs
+            .iter()
+            .flatten()
+            .flat_map(|&x| ((x * 65535.0) as u16).to_le_bytes())
+            .collect(),
+    };
+    let mut input = mesh_input("checker card", card_mesh, false);
+    input.components[0].opacity = Some(ComponentOpacity {
+        micromap_level: 5,
+        ..ComponentOpacity::texture(
+            checkerboard_alpha(),
+            UvBufferInput {
+                buffer: buffer(&bytes, wgpu::BufferUsages::COPY_SRC),
+                offset: 0,
+                stride: format.size(),
+                format,
+            },
+            1.0,
+            0.5,
+        )
+    });
+    input
+}
+
+/// Cutout geometry: rays through a checkerboard-alpha card (glTF MASK: texture alpha × factor
+/// against the cutoff) stop only on its opaque texels, for closest-hit and any-hit rays, as the
+/// CPU oracle applying the same test says (exactly, away from texel edges); a card of
+/// per-triangle flags lets rays through its transparent triangle only; an opaque copy of the
+/// card stops every ray. Behind the cards, a floor catches what passes.
+#[test]
+fn cutout_cards_let_rays_through_where_they_are_transparent() {
+    let ctx = context(2);
+    let (card_mesh, uvs) = card();
+    let flags = buffer(
+        bytemuck::cast_slice(&[7u32, 0]),
+        wgpu::BufferUsages::COPY_SRC,
+    );
+    let floor = Mesh::cuboid(Vec3::new(-1.0, -1.0, -1.2), Vec3::new(10.0, 2.0, -1.0));
+    let textured = |format| checker_card(&card_mesh, &uvs, format);
+    let mut flagged = mesh_input("flagged card", &card_mesh, false);
+    flagged.components[0].opacity = Some(ComponentOpacity::per_triangle(flags, 0));
+    let opaque = mesh_input("opaque card", &card_mesh, false);
+    let mut c = ctx.create_task_container();
+    let mut instances = Vec::new();
+    for (k, input) in [
+        textured(UvFormat::Float32x2),
+        flagged,
+        opaque,
+        textured(UvFormat::Float16x2),
+        textured(UvFormat::Unorm16x2),
+        mesh_input("floor", &floor, false),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let g = ctx.create_geometry_handle();
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: g,
+            input,
+        });
+        let i = ctx.create_instance_handle();
+        // Cards side by side along x (2 apart), the floor under all of them.
+        let x = if k < CARDS as usize {
+            2.0 * k as f32
+        } else {
+            0.0
+        };
+        register_instance(
+            &mut c,
+            i,
+            g,
+            Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)),
+        );
+        instances.push(i.index());
+    }
+    c.schedule_bvh_task(BvhBuildTask {
+        max_blas_build_count: 8,
+        ..Default::default()
+    });
+    build_submit_complete(&ctx, c);
+    let points = cutout_points();
+    let rays: Vec<GpuRay> = points
+        .iter()
+        .map(|&(card, p)| {
+            let o = Vec3::new(2.0 * card as f32 + p.x, p.y, 1.0);
+            ray(o, Vec3::NEG_Z, 0.0, 10.0)
+        })
+        .collect();
+    let closest_hits = closest(&ctx, &rays);
+    let shadow_rays: Vec<GpuRay> = rays.iter().map(|r| GpuRay { t_max: 1.5, ..*r }).collect();
+    let any_hits = trace(
+        &ctx,
+        &shadow_rays,
+        RayQuery::AnyHit,
+        InstanceInclusionMask::VISIBLE_IN_RT,
+    );
+    let mut wrong = Vec::new();
+    for (k, &(card, p)) in points.iter().enumerate() {
+        // Triangle 0 is (0,0), (1,0), (1,1): below the diagonal.
+        let stops = match card {
+            1 => p.x > p.y,
+            2 => true,
+            _ => checker_opaque(p),
+        };
+        let h = closest_hits[k];
+        let want = if stops {
+            (instances[card as usize], 1.0)
+        } else {
+            (instances[CARDS as usize], 2.0)
+        };
+        if h.instance != want.0 || (h.t - want.1).abs() > 1e-5 {
+            wrong.push(format!("card {card} at {p}: hit {h:?}, expected {want:?}"));
+        }
+        if any_hits[k].is_hit() != stops {
+            wrong.push(format!(
+                "card {card} at {p}: any hit {:?}, expected {stops}",
+                any_hits[k]
+            ));
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "{} of {} wrong, e.g. {:#?}",
+        wrong.len(),
+        2 * points.len(),
+        &wrong[..wrong.len().min(6)]
+    );
+    let through = points
+        .iter()
+        .filter(|(c, p)| matches!(c, 0 | 3 | 4) && !checker_opaque(*p))
+        .count();
+    assert!(
+        through > 300,
+        "too few rays through the checkerboard's holes: {through}"
     );
 }

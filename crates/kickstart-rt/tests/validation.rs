@@ -313,6 +313,211 @@ fn index_range_and_u16_indices_count_triangles() {
     assert_eq!(ctx.geometry_triangle_count(h).unwrap(), Some(1));
 }
 
+/// The fields of a texture opacity source, editable before it becomes a `ComponentOpacity`
+/// (an enum variant has no struct update syntax).
+struct Cutout {
+    texture: wgpu::TextureView,
+    uvs: UvBufferInput,
+    channel: u32,
+    factor: f32,
+    cutoff: f32,
+    level: u32,
+}
+
+impl Cutout {
+    /// A valid cutout of `quad`: a 4×4 `Rgba8Unorm` texture, one `Float32x2` coordinate per
+    /// vertex, alpha channel, factor 1, cutoff 0.5, level 4.
+    fn valid() -> Self {
+        let uv: [[f32; 2]; 4] = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        Cutout {
+            texture: alpha_texture(F::Rgba8Unorm, U::TEXTURE_BINDING | U::COPY_DST),
+            uvs: uv_buffer(bytemuck::cast_slice(&uv), wgpu::BufferUsages::COPY_SRC),
+            channel: 3,
+            factor: 1.0,
+            cutoff: 0.5,
+            level: ComponentOpacity::DEFAULT_MICROMAP_LEVEL,
+        }
+    }
+
+    /// The `ComponentOpacity` these fields make.
+    fn opacity(self) -> ComponentOpacity {
+        ComponentOpacity {
+            source: OpacitySource::Texture {
+                texture: self.texture,
+                uvs: self.uvs,
+                channel: self.channel,
+                factor: self.factor,
+                cutoff: self.cutoff,
+            },
+            micromap_level: self.level,
+        }
+    }
+}
+
+/// A 4×4 texture to read alpha from.
+fn alpha_texture(format: F, usage: U) -> wgpu::TextureView {
+    texture(format, 4, 4, usage)
+}
+
+/// `Float32x2` coordinates, 8 bytes apart, in a buffer holding `bytes` (`usage` | `VERTEX`).
+fn uv_buffer(bytes: &[u8], usage: wgpu::BufferUsages) -> UvBufferInput {
+    UvBufferInput {
+        buffer: buffer(bytes, usage | wgpu::BufferUsages::VERTEX),
+        offset: 0,
+        stride: 8,
+        format: UvFormat::Float32x2,
+    }
+}
+
+/// Gives `quad`'s component the texture opacity `f` makes of a valid one; expects `field`.
+fn cutout_row(field: &str, f: impl FnOnce(&mut Cutout)) {
+    let mut cutout = Cutout::valid();
+    f(&mut cutout);
+    let opacity = cutout.opacity();
+    geometry_row(field, |t| t.input.components[0].opacity = Some(opacity));
+}
+
+/// Gives `quad`'s component (2 triangles) a per-triangle opacity: `bytes` at `offset`; expects
+/// `field`.
+fn per_triangle_row(field: &str, bytes: &[u8], usage: wgpu::BufferUsages, offset: u64) {
+    let opacity = ComponentOpacity::per_triangle(buffer(bytes, usage), offset);
+    geometry_row(field, |t| t.input.components[0].opacity = Some(opacity));
+}
+
+/// The field path of `quad`'s component's opacity.
+const OPACITY: &str = "input.components[0].opacity";
+
+#[test]
+fn row_opacity_micromap_level() {
+    cutout_row(&format!("{OPACITY}.micromap_level"), |c| c.level = 7);
+}
+
+#[test]
+fn row_opacity_channel() {
+    cutout_row(&format!("{OPACITY}.source.channel"), |c| c.channel = 4);
+}
+
+#[test]
+fn row_opacity_factor() {
+    cutout_row(&format!("{OPACITY}.source.factor"), |c| c.factor = f32::NAN);
+    cutout_row(&format!("{OPACITY}.source.factor"), |c| c.factor = -0.5);
+    cutout_row(&format!("{OPACITY}.source.factor"), |c| {
+        c.factor = f32::INFINITY
+    });
+}
+
+#[test]
+fn row_opacity_cutoff() {
+    cutout_row(&format!("{OPACITY}.source.cutoff"), |c| c.cutoff = 1.5);
+    cutout_row(&format!("{OPACITY}.source.cutoff"), |c| c.cutoff = f32::NAN);
+}
+
+#[test]
+fn row_opacity_texture() {
+    let field = format!("{OPACITY}.source.texture");
+    // Without TEXTURE_BINDING the baking pass cannot read it.
+    cutout_row(&field, |c| {
+        c.texture = alpha_texture(F::Rgba8Unorm, U::COPY_DST)
+    });
+    // Depth and integer formats have no float sample type.
+    cutout_row(&field, |c| {
+        c.texture = alpha_texture(F::Depth32Float, U::TEXTURE_BINDING | U::COPY_DST)
+    });
+    cutout_row(&field, |c| {
+        c.texture = alpha_texture(F::R32Uint, U::TEXTURE_BINDING | U::COPY_DST)
+    });
+}
+
+#[test]
+fn row_opacity_uv_stride() {
+    cutout_row(&format!("{OPACITY}.source.uvs.stride"), |c| {
+        c.uvs.stride = 4
+    });
+    // 2^63 × 3 gaps (between 4 vertices) overflow u64: refused on the stride, not wrapped.
+    cutout_row(&format!("{OPACITY}.source.uvs.stride"), |c| {
+        c.uvs.stride = 1 << 63
+    });
+}
+
+#[test]
+fn row_opacity_uv_buffer() {
+    let field = format!("{OPACITY}.source.uvs.buffer");
+    // Without COPY_SRC.
+    cutout_row(&field, |c| {
+        c.uvs = uv_buffer(&[0; 32], wgpu::BufferUsages::empty())
+    });
+    // 3 coordinates for `quad`'s 4 vertices.
+    cutout_row(&field, |c| {
+        c.uvs = uv_buffer(&[0; 24], wgpu::BufferUsages::COPY_SRC)
+    });
+}
+
+#[test]
+fn row_opacity_uv_offset() {
+    cutout_row(&format!("{OPACITY}.source.uvs.offset"), |c| {
+        c.uvs.offset = 8
+    });
+}
+
+#[test]
+fn row_opacity_per_triangle_offset() {
+    let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+    let field = format!("{OPACITY}.source.offset");
+    per_triangle_row(&field, &[0; 12], usage, 2);
+    // Two flags from byte 4 of an 8-byte buffer.
+    per_triangle_row(&field, &[0; 8], usage, 4);
+}
+
+#[test]
+fn row_opacity_per_triangle_buffer() {
+    let field = format!("{OPACITY}.source.buffer");
+    // One flag for `quad`'s 2 triangles.
+    let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+    per_triangle_row(&field, &[0; 4], usage, 0);
+    per_triangle_row(&field, &[0; 8], wgpu::BufferUsages::STORAGE, 0);
+}
+
+/// Valid texture and per-triangle opacities pass validation and register: a per-triangle source
+/// ignores `micromap_level` (7 is not refused there), and the UVs may use any format whose
+/// stride fits.
+#[test]
+fn valid_opacity_registers() {
+    let ctx = context(2);
+    let mut c = ctx.create_task_container();
+    let (vb, ib) = quad(1.0);
+    let mut handles = Vec::new();
+    let mut per_triangle = ComponentOpacity::per_triangle(
+        buffer(&[1, 0, 0, 0, 0, 0, 0, 0], wgpu::BufferUsages::COPY_SRC),
+        0,
+    );
+    per_triangle.micromap_level = 7;
+    let unorm = Cutout {
+        uvs: UvBufferInput {
+            stride: 4,
+            format: UvFormat::Unorm16x2,
+            ..uv_buffer(&[0; 16], wgpu::BufferUsages::COPY_SRC)
+        },
+        texture: alpha_texture(F::R8Unorm, U::TEXTURE_BINDING | U::COPY_DST),
+        channel: 0,
+        ..Cutout::valid()
+    };
+    for opacity in [Cutout::valid().opacity(), unorm.opacity(), per_triangle] {
+        let mut input = geometry_input(vb.clone(), Some(ib.clone()));
+        input.components[0].opacity = Some(opacity);
+        let h = ctx.create_geometry_handle();
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: h,
+            input,
+        });
+        handles.push(h);
+    }
+    build_submit_complete(&ctx, c);
+    for h in handles {
+        assert_eq!(ctx.geometry_triangle_count(h).unwrap(), Some(2));
+    }
+}
+
 fn instance_row(field: &str, f: impl FnOnce(&mut InstanceInput)) {
     let ctx = context(2);
     let g = ctx.create_geometry_handle();

@@ -187,6 +187,7 @@ pub fn register_scene(
                     }),
                     transform: None,
                     index_range: None,
+                    opacity: None,
                 }],
                 ..Default::default()
             },

@@ -290,6 +290,19 @@ fn rt_triangle(sp: RtSpace, t_min: f32, t_max: f32, a: vec3<f32>, b: vec3<f32>, 
     return r;
 }
 
+// Whether the micro-map of cutout geometry lets a hit at the triangle (a, b, c) of primitive
+// `prim` count: the bit of the micro-triangle under its barycentrics. `first` is the geometry's
+// first map word in the triangle pool (GeometryGpu.opacity.x); its level is read from the
+// geometry of instance `inst` (only cutout geometry gets here).
+fn rt_opaque_at(sp: RtSpace, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, prim: u32, first: u32,
+                inst: u32) -> bool {
+    let o = rt_geometries[rt_instances[inst].geometry].opacity;
+    let m = rt_micro_index(rt_barycentrics(sp, a, b, c), o.y);
+    let word = first + prim * o.z + m / 32u;
+    let bits = bitcast<u32>(rt_triangles[word / 4u][word % 4u]);
+    return ((bits >> (m % 32u)) & 1u) != 0u;
+}
+
 // u, v of rt_triangle's hit, without its tests: after the loop the triangle is known to be hit,
 // and a test repeated in another place of the program could round differently where the compiler
 // fuses multiply-adds differently.
@@ -351,6 +364,8 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
     var node_base = 0u;
     var tri_base = 0u;
     var cur_inst = 0u;
+    // The current BLAS's first opacity map word (RT_OPAQUE_GEOMETRY: opaque, tested for free).
+    var cur_opacity = RT_OPAQUE_GEOMETRY;
     var visits = 0u;
     while sp > 0u && visits < RT_MAX_VISITS {
         visits += 1u;
@@ -391,7 +406,11 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
                 let v0 = rt_triangles[slot * 3u];
                 let v1 = rt_triangles[slot * 3u + 1u];
                 let v2 = rt_triangles[slot * 3u + 2u];
-                let h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                var h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
+                if h.hit && cur_opacity != RT_OPAQUE_GEOMETRY {
+                    h.hit = rt_opaque_at(space, v0.xyz, v1.xyz, v2.xyz, bitcast<u32>(v0.w),
+                                         cur_opacity, cur_inst);
+                }
                 if h.hit {
                     // Once a hit is kept, t_max is its distance (the triangle test never
                     // returns t > t_max). Tie rule: equal t → lowest instance, then lowest
@@ -433,6 +452,7 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
                 node_base = geo.node_base;
                 tri_base = geo.tri_base;
                 cur_inst = r.x;
+                cur_opacity = geo.opacity.x;
                 blas_sp = sp;
                 // A ref made for another build of this BLAS (TLAS update deferred past a rebuild)
                 // is entered at the root: complete, never another build's node indices.

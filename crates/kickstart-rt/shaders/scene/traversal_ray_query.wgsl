@@ -65,9 +65,25 @@ struct RtFound {
     uv: vec2<f32>,
 }
 
+// Whether a candidate triangle of cutout geometry (the driver builds only those non-opaque) lets
+// the ray stop: the bit of its opacity micro-map under the candidate's barycentrics, as the
+// software traversal's rt_opaque_at.
+fn rt_candidate_opaque(c: RayIntersection) -> bool {
+    let g = rt_geometries[rt_instances[c.instance_custom_data].geometry];
+    if g.opacity.x == RT_OPAQUE_GEOMETRY {
+        return true;
+    }
+    let prim = bitcast<u32>(rt_triangles[(g.tri_base + c.primitive_index) * 3u].w);
+    let m = rt_micro_index(c.barycentrics, g.opacity.y);
+    let word = g.opacity.x + prim * g.opacity.z + m / 32u;
+    let bits = bitcast<u32>(rt_triangles[word / 4u][word % 4u]);
+    return ((bits >> (m % 32u)) & 1u) != 0u;
+}
+
 // The committed hit of `ray` among instances whose TLAS mask shares a bit with `mask` (hidden and
 // non-participating instances are not in the TLAS); `any_hit` ends at the first hit found.
-// Every triangle is opaque and double-sided, as in the software traversal.
+// Triangles are double-sided, as in the software traversal; those of cutout geometry are
+// candidates the loop confirms by their micro-maps.
 fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
     let miss = RtFound(-1.0, RT_NO_INDEX, 0u, vec2<f32>(0.0));
     if !rt_is_finite3(ray.origin) || !rt_is_finite3(ray.dir) || all(ray.dir == vec3<f32>(0.0)) {
@@ -91,7 +107,7 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
         origin = ray.origin + ray.dir * t_min;
         shift = t_min;
     }
-    var flags = RAY_FLAG_FORCE_OPAQUE;
+    var flags = RAY_FLAG_NONE;
     if any_hit {
         flags = flags | RAY_FLAG_TERMINATE_ON_FIRST_HIT;
     }
@@ -101,8 +117,14 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
         rt_tlas,
         RayDesc(flags, mask & 0xffu, t_min - shift, t_max - shift, origin, ray.dir),
     );
-    // Opaque geometry commits every candidate inside the driver: one call runs the traversal.
-    while rayQueryProceed(&rq) {}
+    // Opaque geometry commits every candidate inside the driver: without cutout geometry one
+    // call runs the traversal.
+    while rayQueryProceed(&rq) {
+        let c = rayQueryGetCandidateIntersection(&rq);
+        if c.kind == RAY_QUERY_INTERSECTION_TRIANGLE && rt_candidate_opaque(c) {
+            rayQueryConfirmIntersection(&rq);
+        }
+    }
     let hit = rayQueryGetCommittedIntersection(&rq);
     if hit.kind != RAY_QUERY_INTERSECTION_TRIANGLE {
         return miss;

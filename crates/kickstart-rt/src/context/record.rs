@@ -20,9 +20,13 @@ use crate::gpu::recorder::Timestamps;
 use crate::gpu::Recorder;
 use crate::handles::*;
 use crate::scene::gpu_scene::{
-    DeferredIngest, GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE,
+    DeferredIngest, GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_OPACITY_AT,
+    GEOMETRY_RECORD_SIZE,
 };
-use crate::scene::ingest::{component_rows, ComponentIngest};
+use crate::scene::ingest::{component_rows, ComponentIngest, OpacityIngest};
+use crate::scene::opacity::{
+    elements as opacity_elements, geometry_level, OpacityMaps, OPAQUE_RECORD,
+};
 use crate::scene::pool::Range;
 use crate::scene::strategy::BuildStrategy;
 use crate::tasks::*;
@@ -58,8 +62,15 @@ impl Frame<'_> {
     }
 }
 
-/// One geometry task's ingestion: the task, its extents, its staged range and triangle count.
-type Ingestion<'c> = (&'c GeometryTask, &'c [ComponentExtent], Range, u32);
+/// One geometry task's ingestion: the task, its extents, its staged range, triangle count and
+/// opacity micro-maps (cutout geometry).
+type Ingestion<'c> = (
+    &'c GeometryTask,
+    &'c [ComponentExtent],
+    Range,
+    u32,
+    Option<OpacityMaps>,
+);
 
 /// Records `plan`, in the order of the data flow.
 pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>) {
@@ -80,14 +91,21 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
         s.scene.note_build_work();
     }
     clear_dead_slots(s, &mut uploads, frame.serial);
-    for (task, ..) in &ingestions {
+    for (task, .., maps) in &ingestions {
+        let record = task.handle.index as u64 * GEOMETRY_RECORD_SIZE;
         if task.operation == TaskOperation::Register {
             uploads.push(
                 &s.scene.geometry_table.buffer,
-                task.handle.index as u64 * GEOMETRY_RECORD_SIZE,
+                record,
                 bytemuck::bytes_of(&[0u32; 4]),
             );
         }
+        let opacity = maps.map_or(OPAQUE_RECORD, |m| m.record());
+        uploads.push(
+            &s.scene.geometry_table.buffer,
+            record + GEOMETRY_OPACITY_AT,
+            bytemuck::bytes_of(&opacity),
+        );
     }
     queue_instance_records(s, &plan.instances);
     frame.flush(s, uploads);
@@ -151,7 +169,20 @@ fn allocate_staged<'c>(
             Some(r) => r,
             None => s.scene.alloc_staged(frame.encoder, triangles),
         };
-        ingestions.push((*task, extents.as_slice(), staged, triangles));
+        // Micro-maps of the same size are baked again where they are; others get a new range
+        // (the old one is freed by `register_geometries`).
+        let existing = slot.data.as_ref().and_then(|d| d.gpu.opacity);
+        let maps = geometry_level(&task.input).map(|level| {
+            let need = opacity_elements(triangles, level);
+            match existing {
+                Some(m) if m.level == level && m.range.len == need => m,
+                _ => OpacityMaps {
+                    range: s.scene.alloc_opacity(frame.encoder, need),
+                    level,
+                },
+            }
+        });
+        ingestions.push((*task, extents.as_slice(), staged, triangles, maps));
     }
     ingestions
 }
@@ -231,8 +262,12 @@ fn ingest(
     let mut rec = frame.recorder("ingest");
     // Every ingestion not fused into a refit, recorded as one pass below.
     let mut plain: Vec<(Vec<ComponentIngest>, Range, u32)> = Vec::new();
-    for (i, ((task, _, staged, triangles), comps)) in ingestions.iter().zip(components).enumerate()
+    for (i, ((task, _, staged, triangles, maps), comps)) in
+        ingestions.iter().zip(components).enumerate()
     {
+        if let Some(maps) = maps {
+            s.scene.bake_opacity(&mut rec, &raw, &comps, *maps);
+        }
         // An update refit in this task decodes its own triangles (the ingestion fused into
         // the refit): deferred to step 5, and recorded after it if the refit waits for a
         // later task (max_blas_build_count).
@@ -283,7 +318,10 @@ fn copy_raw_geometry(
     let raw_bytes: u64 = ingestions
         .iter()
         .flat_map(|(_, e, ..)| e.iter())
-        .map(|e| (e.vertex_bytes.1 - e.vertex_bytes.0) + e.index_bytes.map_or(0, |(a, b)| b - a))
+        .map(|e| {
+            let span = |r: Option<(u64, u64)>| r.map_or(0, |(a, b)| b - a);
+            (e.vertex_bytes.1 - e.vertex_bytes.0) + span(e.index_bytes) + span(e.opacity_bytes)
+        })
         .sum();
     let raw = storage(frame.device, "kickstart-rt raw geometry copy", raw_bytes);
     let mut cursor = 0u64;
@@ -312,7 +350,9 @@ fn copy_raw_geometry(
                 }
                 _ => None,
             };
+            let opacity = copy_raw_opacity(frame, &raw, &mut cursor, c, e);
             comps.push(ComponentIngest {
+                opacity,
                 vertex_byte_offset,
                 vertex_stride: vb.stride,
                 vertex_format: vb.format,
@@ -328,6 +368,49 @@ fn copy_raw_geometry(
         plans.push(comps);
     }
     (raw, plans)
+}
+
+/// Copies a component's opacity source bytes (its coordinates, or its per-triangle flags) into
+/// `raw` at `cursor` (advanced), and says where they are.
+fn copy_raw_opacity(
+    frame: &mut Frame<'_>,
+    raw: &wgpu::Buffer,
+    cursor: &mut u64,
+    c: &GeometryComponent,
+    e: &ComponentExtent,
+) -> Option<OpacityIngest> {
+    let (o, (start, end)) = (c.opacity.as_ref()?, e.opacity_bytes?);
+    let (buffer, offset) = match &o.source {
+        OpacitySource::Texture { uvs, .. } => (&uvs.buffer, uvs.offset),
+        OpacitySource::PerTriangle { buffer, offset } => (buffer, *offset),
+    };
+    frame
+        .encoder
+        .copy_buffer_to_buffer(buffer, start, raw, *cursor, end - start);
+    frame.ws.held.push(buffer.clone());
+    let at = *cursor + (offset - start);
+    *cursor += end - start;
+    Some(match &o.source {
+        OpacitySource::Texture {
+            texture,
+            uvs,
+            channel,
+            factor,
+            cutoff,
+        } => {
+            // The bind group of the bake keeps the view alive while the GPU reads it.
+            OpacityIngest::Texture {
+                texture: texture.clone(),
+                uv_byte_offset: at,
+                uv_stride: uvs.stride,
+                uv_format: uvs.format,
+                channel: *channel,
+                factor: *factor,
+                cutoff: *cutoff,
+            }
+        }
+        OpacitySource::PerTriangle { .. } => OpacityIngest::PerTriangle { byte_offset: at },
+    })
 }
 
 /// The read-back of the ingestions' dropped-triangle counters (two words each).
@@ -351,7 +434,7 @@ fn dropped_readback(device: &wgpu::Device, ingestions: &[Ingestion<'_>]) -> Drop
 /// The geometries' bookkeeping after their ingestion: new ones registered, and each queued for
 /// a BLAS build or refit.
 fn register_geometries(s: &mut State, ingestions: &[Ingestion<'_>], serial: u64) {
-    for &(task, _, staged, triangles) in ingestions {
+    for &(task, _, staged, triangles, maps) in ingestions {
         let Ok(slot) = s.geometries.get_mut(task.handle) else {
             continue;
         };
@@ -372,6 +455,12 @@ fn register_geometries(s: &mut State, ingestions: &[Ingestion<'_>], serial: u64)
         });
         data.gpu.triangles = triangles;
         data.gpu.staged = Some(staged);
+        if data.gpu.opacity != maps {
+            if let Some(old) = data.gpu.opacity.take() {
+                s.scene.triangles.free_after(old.range, serial);
+            }
+            data.gpu.opacity = maps;
+        }
         if data.gpu.pending.is_none() {
             s.blas_queue.push_back(task.handle);
         }
@@ -456,7 +545,13 @@ fn build_blases(
                     built.insert(h.index, (h, blas.stamp));
                 }
                 if let (Some(hw), Some(blas)) = (s.scene.hardware.as_mut(), d.gpu.blas) {
-                    hw.build(h.index, blas.tris.start, d.gpu.triangles, d.allow_update);
+                    let cutout = d.gpu.opacity.is_some();
+                    hw.build(
+                        h.index,
+                        blas.tris.start,
+                        d.gpu.triangles,
+                        (d.allow_update, cutout),
+                    );
                 }
                 if !d.allow_update {
                     // Static geometry: its staged copy is not needed after the build.

@@ -13,6 +13,7 @@ use super::state::State;
 use crate::error::Result;
 use crate::handles::GeometryHandle;
 use crate::scene::gpu_scene::PendingBvh;
+use crate::scene::opacity::{elements as opacity_elements, geometry_level};
 use crate::scene::reserve::SceneReservation;
 use crate::tasks::*;
 
@@ -63,6 +64,19 @@ pub(super) fn check(s: &State, plan: &FramePlan<'_>) -> Result<Reserved> {
     pools.reserve_staged(staged_triangles);
     for (triangles, name) in staged {
         pools.staged(triangles, name)?;
+    }
+    // `record::allocate_staged`: cutout geometry's micro-maps, reused where the size matches.
+    for (task, extents) in &plan.geometries {
+        let (Ok(slot), Some(level)) = (s.geometries.get(task.handle), geometry_level(&task.input))
+        else {
+            continue;
+        };
+        let triangles: u32 = extents.iter().map(|e| e.triangles).sum();
+        let need = opacity_elements(triangles, level);
+        let existing = slot.data.as_ref().and_then(|d| d.gpu.opacity);
+        if !existing.is_some_and(|m| m.level == level && m.range.len == need) {
+            pools.opacity(need, &task.input.name)?;
+        }
     }
     let blas = blas_work(s, plan);
     let blas_builds: Vec<(u32, bool)> = blas

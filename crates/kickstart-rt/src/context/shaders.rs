@@ -27,6 +27,7 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
     let portable = [
         crate::gpu::radix_sort::shader_variants(),
         crate::scene::ingest::shader_variants(),
+        crate::scene::opacity::shader_variants(),
         crate::scene::prims::shader_variants(),
         crate::scene::lbvh::shader_variants(),
         crate::cache::alloc::shader_variants(),

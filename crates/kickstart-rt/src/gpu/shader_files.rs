@@ -45,6 +45,7 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "scene/lbvh/lbvh",
     "scene/lbvh/morton",
     "scene/lbvh/range_refit",
+    "scene/opacity",
     "scene/prims",
     "scene/traversal",
     "scene/traversal_ray_query",

@@ -15,18 +15,24 @@ use crate::scene::lbvh::{
     BatchBuild, BatchKind, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs,
     RawTriangles, RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
+use crate::scene::opacity::{OpacityBaker, OpacityMaps};
 use crate::scene::pool::{Move, Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
 use crate::scene::strategy::BuildStrategy;
 use crate::scene::traversal::SceneBuffers;
 use crate::staging::{StagingBuffer, StagingPool};
 
-/// Bytes of one triangle of the soup (three `vec4<f32>`).
+/// Bytes of one triangle of the soup (three `vec4<f32>`); opacity micro-maps count their
+/// pool elements in the same 12 words.
 pub(crate) const TRIANGLE_BYTES: u64 = 48;
 /// Bytes of one BVH2 node.
 pub(crate) const NODE_BYTES: u64 = 64;
 /// Bytes of one geometry table record.
-pub(crate) const GEOMETRY_RECORD_SIZE: u64 = 48;
+pub(crate) const GEOMETRY_RECORD_SIZE: u64 = 64;
+/// The geometry record in `vec4`s (its root box is the second and third: `slot * 4 + 1`).
+const GEOMETRY_RECORD_VEC4: u32 = 4;
+/// Byte offset of the opacity words in a geometry record (`GeometryGpu::opacity`).
+pub(crate) const GEOMETRY_OPACITY_AT: u64 = 48;
 /// Bytes of one instance table record.
 pub(crate) const INSTANCE_RECORD_BYTES: u64 = 128;
 /// Bytes of one primitive's AABB (two `vec4<f32>`).
@@ -114,6 +120,8 @@ pub(crate) struct GeometryGpu {
     pub staged: Option<Range>,
     pub blas: Option<BlasRanges>,
     pub pending: Option<PendingBvh>,
+    /// Opacity micro-maps of cutout geometry (in the triangle pool), baked at ingestion.
+    pub opacity: Option<OpacityMaps>,
 }
 
 impl GeometryGpu {
@@ -121,6 +129,9 @@ impl GeometryGpu {
     pub fn free_after(&mut self, scene: &mut GpuScene, last_used: u64) {
         if let Some(r) = self.staged.take() {
             scene.staged.free_after(r, last_used);
+        }
+        if let Some(m) = self.opacity.take() {
+            scene.triangles.free_after(m.range, last_used);
         }
         if let Some(b) = self.blas.take() {
             scene.triangles.free_after(b.tris, last_used);
@@ -246,6 +257,8 @@ struct Passes {
     ingest: Option<Ingest>,
     prims: Option<Prims>,
     lbvh: Option<Lbvh>,
+    /// The opacity micro-map bake (cutout geometry only).
+    opacity: Option<OpacityBaker>,
 }
 
 impl Passes {
@@ -531,6 +544,30 @@ impl GpuScene {
         Self::reserved(&mut self.staged, &self.device, encoder, triangles, max)
     }
 
+    /// Triangle-pool space for opacity micro-maps of `elements` elements (reserved by the plan:
+    /// `SceneReservation::opacity`).
+    pub fn alloc_opacity(&mut self, encoder: &mut wgpu::CommandEncoder, elements: u32) -> Range {
+        let max = self.max_binding;
+        Self::reserved(&mut self.triangles, &self.device, encoder, elements, max)
+    }
+
+    /// Bakes the opacity micro-maps `maps` of one geometry's `components` from the task's raw
+    /// copy (`shaders/scene/opacity.wgsl`).
+    pub fn bake_opacity(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        raw: &wgpu::Buffer,
+        components: &[ComponentIngest],
+        maps: OpacityMaps,
+    ) {
+        let device = &self.device;
+        let baker = self
+            .passes
+            .opacity
+            .get_or_insert_with(|| OpacityBaker::new(device));
+        baker.record(rec, raw, components, (self.triangles.buffer(), maps));
+    }
+
     /// Refuses table sizes past the device's limit (the plan's check of
     /// [`GpuScene::ensure_tables`]).
     pub fn check_tables(&self, geometry_slots: u32, instance_slots: u32) -> Result<()> {
@@ -764,7 +801,7 @@ impl GpuScene {
                 tri_src_base: d.staged.start,
                 tri_dst_base: d.tris.start,
                 node_base: d.nodes.start,
-                bounds_base: d.slot * 3 + 1,
+                bounds_base: d.slot * GEOMETRY_RECORD_VEC4 + 1,
                 max_leaf: d.strategy.max_leaf(),
                 kept: d
                     .kept
@@ -859,7 +896,7 @@ impl GpuScene {
                 topology,
                 leaf_refs: LeafRefs::SortedPosition,
                 max_leaf,
-                bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                bounds_out: Some((&self.geometry_table.buffer, slot * GEOMETRY_RECORD_VEC4 + 1)),
                 key_bits: BLAS_KEY_BITS,
                 centroid_bounds: None,
                 // Fast-trace (leaves collapsed) is also the clustered build: the two together
@@ -889,7 +926,10 @@ impl GpuScene {
                     order,
                     order_base,
                     topology,
-                    bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                    bounds_out: Some((
+                        &self.geometry_table.buffer,
+                        slot * GEOMETRY_RECORD_VEC4 + 1,
+                    )),
                 },
             ),
             None => prims.gather_triangles(
@@ -1002,7 +1042,7 @@ impl GpuScene {
                 topology: (self.topologies.buffer(), topology.start),
                 leaf_refs: LeafRefs::SortedPosition,
                 max_leaf,
-                bounds_out: Some((&self.geometry_table.buffer, slot * 3 + 1)),
+                bounds_out: Some((&self.geometry_table.buffer, slot * GEOMETRY_RECORD_VEC4 + 1)),
                 sorted_boxes: true,
             },
         );
@@ -1041,7 +1081,10 @@ impl GpuScene {
                 order: self.orders.buffer(),
                 order_base: r.order.start,
                 topology: (self.topologies.buffer(), r.topology.start),
-                bounds_out: Some((&self.geometry_table.buffer, r.slot * 3 + 1)),
+                bounds_out: Some((
+                    &self.geometry_table.buffer,
+                    r.slot * GEOMETRY_RECORD_VEC4 + 1,
+                )),
             })
             .collect();
         let (_, lbvh) = self.passes.build(&self.device);

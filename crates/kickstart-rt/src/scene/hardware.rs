@@ -79,7 +79,13 @@ impl HardwareScene {
 
     /// The geometry in `slot` was (re)built into `triangles` triangles from pool slot
     /// `first_triangle`: a new BLAS, built by the next [`HardwareScene::record`].
-    pub fn build(&mut self, slot: u32, first_triangle: u32, triangles: u32, updatable: bool) {
+    pub fn build(
+        &mut self,
+        slot: u32,
+        first_triangle: u32,
+        triangles: u32,
+        (updatable, cutout): (bool, bool),
+    ) {
         self.blases.remove(&slot);
         self.pending.retain(|p| p.geometry != slot);
         if triangles == 0 {
@@ -92,7 +98,13 @@ impl HardwareScene {
             vertex_count: triangles * 3,
             index_format: None,
             index_count: None,
-            flags: wgpu::AccelerationStructureGeometryFlags::OPAQUE,
+            // Cutout geometry's triangles are candidates the ray query confirms by their
+            // micro-maps; the others commit inside the driver.
+            flags: if cutout {
+                wgpu::AccelerationStructureGeometryFlags::empty()
+            } else {
+                wgpu::AccelerationStructureGeometryFlags::OPAQUE
+            },
         };
         let mut flags = wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE;
         if updatable {

@@ -38,6 +38,35 @@ pub(crate) struct ComponentIngest {
     pub transform: Option<glam::Affine3A>,
     /// Primitive index of its first triangle (the triangles of earlier components).
     pub primitive_base: u32,
+    /// Its opacity source in the raw copy (cutout geometry), if any.
+    pub opacity: Option<OpacityIngest>,
+}
+
+/// Where a component's opacity source sits in the task's raw copy (`ComponentIngest`).
+#[derive(Debug, Clone)]
+pub(crate) enum OpacityIngest {
+    /// The glTF MASK test of a texture channel at the component's coordinates.
+    Texture {
+        /// The texture read.
+        texture: wgpu::TextureView,
+        /// Byte offset in `raw` of vertex 0's coordinates (any alignment).
+        uv_byte_offset: u64,
+        /// Bytes between vertices' coordinates.
+        uv_stride: u64,
+        /// Their format.
+        uv_format: crate::tasks::UvFormat,
+        /// Channel holding alpha.
+        channel: u32,
+        /// Alpha factor.
+        factor: f32,
+        /// Opaque at or above it.
+        cutoff: f32,
+    },
+    /// A `u32` flag per triangle from this byte offset in `raw` (4-aligned).
+    PerTriangle {
+        /// Byte offset of triangle 0's flag.
+        byte_offset: u64,
+    },
 }
 
 /// The vertex-pulling pass (one pipeline, created once).
@@ -214,7 +243,11 @@ const COUNTER_WORD: usize = 14;
 
 /// The table row of `c` (`Component` in `scene/ingest.wgsl`), its triangles starting at `tri_start`
 /// within the dispatch; `None` when an address the shader computes would overflow `u32`.
-fn component_row(c: &ComponentIngest, out_base: u32, tri_start: u32) -> Option<[u32; ROW_WORDS]> {
+pub(crate) fn component_row(
+    c: &ComponentIngest,
+    out_base: u32,
+    tri_start: u32,
+) -> Option<[u32; ROW_WORDS]> {
     let vtx_format = match c.vertex_format {
         VertexFormat::Float32x3 => 0,
         VertexFormat::Float32x4 => 1,
@@ -590,6 +623,7 @@ mod tests {
             triangle_count,
             transform: None,
             primitive_base: 0,
+            opacity: None,
         }
     }
 

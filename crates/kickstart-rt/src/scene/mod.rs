@@ -5,6 +5,7 @@ pub(crate) mod gpu_scene;
 pub(crate) mod hardware;
 pub(crate) mod ingest;
 pub(crate) mod lbvh;
+pub(crate) mod opacity;
 pub(crate) mod pool;
 pub(crate) mod prims;
 pub(crate) mod reserve;

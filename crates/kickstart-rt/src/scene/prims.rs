@@ -404,11 +404,15 @@ mod tests {
         }
     }
 
-    /// A geometry record (12 words): build flags, triangle count and its BLAS box.
+    /// Words of a geometry record (`GeometryGpu`).
+    const GEOMETRY_WORDS: usize = 16;
+
+    /// A geometry record: build flags, triangle count and its BLAS box (opaque).
     fn geometry_words(built: u32, tri_count: u32, lo: [f32; 3], hi: [f32; 3]) -> Vec<u32> {
         let mut g = vec![0, 0, tri_count, built];
         g.extend(lo.iter().chain(&[0.0]).map(|f| f.to_bits()));
         g.extend(hi.iter().chain(&[0.0]).map(|f| f.to_bits()));
+        g.extend(crate::scene::opacity::OPAQUE_RECORD);
         g
     }
 
@@ -548,7 +552,7 @@ mod tests {
                 assert_eq!(b, EMPTY.as_flattened(), "instance {i}");
                 continue;
             }
-            let gw = &geos[12 * g as usize..12 * g as usize + 12];
+            let gw = &geos[GEOMETRY_WORDS * g as usize..GEOMETRY_WORDS * (g as usize + 1)];
             assert_bounds_transformed_corners(i, b, t, gw);
         }
         assert!(
@@ -594,8 +598,10 @@ mod tests {
         // Geometry 0 carries build stamp 5 (flags bits 8-31), which its refs record.
         let mut geos: Vec<u32> = vec![1, 0, 6, 1 | (5 << 8)];
         geos.extend([0.0f32, 0.0, 0.0, 0.0, 20.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        geos.extend(crate::scene::opacity::OPAQUE_RECORD);
         geos.extend([5, 6, 1, 1]);
         geos.extend([-1.0f32, -1.0, -1.0, 0.0, 1.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        geos.extend(crate::scene::opacity::OPAQUE_RECORD);
         (nodes, geos, [a.2, b.2, c.2, d.2, e.2, f.2])
     }
 
@@ -676,6 +682,7 @@ mod tests {
         nodes.extend(bvh2_node(r, t));
         let mut geos: Vec<u32> = vec![0, 0, 4, 1];
         geos.extend([-11.0f32, 0.0, 0.0, 0.0, 11.0, 1.0, 1.0, 0.0].map(f32::to_bits));
+        geos.extend(crate::scene::opacity::OPAQUE_RECORD);
         let prims = Prims::new(&gpu().device);
         let inst_buf = buffer_with(bytemuck::cast_slice(&instance(0.0, 0, 1)));
         let geo_buf = buffer_with(bytemuck::cast_slice(&geos));
@@ -755,6 +762,7 @@ mod tests {
         let mut rng = Rng(14);
         let mut geos: Vec<u32> = vec![0, 0, 12, 1];
         geos.extend([-1.0f32, -2.0, -3.0, 0.0, 4.0, 5.0, 6.0, 0.0].map(f32::to_bits));
+        geos.extend(crate::scene::opacity::OPAQUE_RECORD);
         let instance = |t: Affine3A, flags: u32| -> Vec<u32> {
             let m = t.matrix3;
             let mut w = Vec::new();

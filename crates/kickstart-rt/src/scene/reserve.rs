@@ -61,6 +61,19 @@ impl SceneReservation {
         reserve(&mut self.staged, triangles, self.max, what, TRIANGLE_BYTES)
     }
 
+    /// What [`GpuScene::alloc_opacity`] allocates for `elements` elements of opacity
+    /// micro-maps of geometry `name`.
+    pub fn opacity(&mut self, elements: u32, name: &str) -> Result<Range> {
+        let what = || format!("opacity micro-maps of geometry `{name}`");
+        reserve(
+            &mut self.triangles,
+            elements,
+            self.max,
+            what,
+            TRIANGLE_BYTES,
+        )
+    }
+
     /// What [`GpuScene::build_blas`] allocates for a BLAS of `n` triangles of geometry `name`
     /// (in `GpuScene::alloc_blas`'s order).
     pub fn blas(&mut self, n: u32, keep_for_refit: bool, name: &str) -> Result<()> {

@@ -101,6 +101,9 @@ pub struct GeometryComponent {
     /// `(first, count)` in indices (or vertices when non-indexed) of the part to use; `None` uses
     /// all. Both are multiples of 3.
     pub index_range: Option<(u32, u32)>,
+    /// Cutout geometry: where rays pass through this component's triangles (glTF `MASK`, or a
+    /// flag per triangle). `None`: opaque.
+    pub opacity: Option<super::ComponentOpacity>,
 }
 
 /// Layout of the direct lighting cache on a geometry's surface.

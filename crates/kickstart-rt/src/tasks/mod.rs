@@ -2,10 +2,12 @@
 
 mod bvh;
 mod denoising;
+mod opacity;
 mod preset;
 mod render;
 
 pub use bvh::*;
 pub use denoising::*;
+pub use opacity::*;
 pub use preset::*;
 pub use render::*;

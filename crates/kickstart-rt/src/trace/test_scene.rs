@@ -59,6 +59,8 @@ struct GeometryRecord {
     flags: u32,
     bounds_min: [f32; 4],
     bounds_max: [f32; 4],
+    /// Opaque: no opacity micro-maps.
+    opacity: [u32; 4],
 }
 
 #[repr(C)]
@@ -280,7 +282,7 @@ fn driver_scene(
 ) -> crate::scene::hardware::HardwareScene {
     let mut hw = crate::scene::hardware::HardwareScene::new(&testing::gpu().device);
     for (slot, g) in geometries.iter().enumerate() {
-        hw.build(slot as u32, g.tri_base, g.tri_count, false);
+        hw.build(slot as u32, g.tri_base, g.tri_count, (false, false));
     }
     for (slot, record) in instances.iter().enumerate() {
         hw.set_record(slot as u32, bytemuck::bytes_of(record));
@@ -336,6 +338,7 @@ impl TestScene {
                 flags: 1,
                 bounds_min: root.min.extend(0.0).to_array(),
                 bounds_max: root.max.extend(0.0).to_array(),
+                opacity: crate::scene::opacity::OPAQUE_RECORD,
             });
         }
         let mut items = Vec::new();

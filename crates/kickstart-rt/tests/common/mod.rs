@@ -227,6 +227,7 @@ pub fn geometry_input(vb: wgpu::Buffer, ib: Option<wgpu::Buffer>) -> kickstart_r
             }),
             transform: None,
             index_range: None,
+            opacity: None,
         }],
         ..Default::default()
     }
@@ -546,6 +547,7 @@ pub fn many_triangles(device: &wgpu::Device, triangles: u32) -> GeometryInput {
             }),
             transform: None,
             index_range: None,
+            opacity: None,
         }],
         ..Default::default()
     }

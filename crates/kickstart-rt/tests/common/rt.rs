@@ -224,6 +224,7 @@ pub fn mesh_input(name: &str, m: &Mesh, allow_update: bool) -> GeometryInput {
             }),
             transform: None,
             index_range: None,
+            opacity: None,
         }],
         allow_update,
         ..Default::default()

@@ -153,6 +153,7 @@ fn input(c: &Case) -> GeometryInput {
             }),
             transform: None,
             index_range: c.range,
+            opacity: None,
         }],
         ..GeometryInput::default()
     }

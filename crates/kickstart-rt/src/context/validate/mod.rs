@@ -21,6 +21,30 @@ pub(crate) fn copy_range(
     offset: u64,
     (count, len): (u32, u64),
 ) -> Result<(u64, u64)> {
+    copy_range_blaming(task, field, Blame::Count, buffer, offset, (count, len))
+}
+
+/// The field [`copy_range_blaming`] names when the data does not fit from offset 0 (or its
+/// unaligned end needs padding).
+#[derive(Clone, Copy)]
+enum Blame {
+    /// The input's own `count` field.
+    Count,
+    /// Its `buffer`: for inputs without a count, whose elements are counted by another field
+    /// (one texture coordinate per vertex, one flag per triangle); naming a `count` the caller
+    /// cannot find would mislead.
+    Buffer,
+}
+
+/// [`copy_range`], naming `blame` (in `field`) when the data does not fit from offset 0.
+fn copy_range_blaming(
+    task: &'static str,
+    field: &str,
+    blame: Blame,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    (count, len): (u32, u64),
+) -> Result<(u64, u64)> {
     if !buffer.usage().contains(wgpu::BufferUsages::COPY_SRC) {
         return Err(Error::input(
             task,
@@ -29,16 +53,23 @@ pub(crate) fn copy_range(
             "the SDK copies from this buffer inside your encoder: create it with BufferUsages::COPY_SRC",
         ));
     }
-    let end = offset.checked_add(len).filter(|&e| e <= buffer.size());
+    let size = buffer.size();
+    // Only built on error, so a valid input formats no field name.
+    let too_much = |reason: String| match blame {
+        Blame::Count => Error::input(task, format!("{field}.count"), count, reason),
+        Blame::Buffer => Error::input(
+            task,
+            format!("{field}.buffer"),
+            format!("{size} bytes"),
+            reason,
+        ),
+    };
+    let end = offset.checked_add(len).filter(|&e| e <= size);
     let Some(end) = end else {
-        let size = buffer.size();
         return Err(if offset == 0 {
-            Error::input(
-                task,
-                format!("{field}.count"),
-                count,
-                format!("these elements take {len} bytes, more than the buffer's {size}"),
-            )
+            too_much(format!(
+                "these {count} elements take {len} bytes, more than the buffer's {size}"
+            ))
         } else {
             Error::input(
                 task,
@@ -50,15 +81,21 @@ pub(crate) fn copy_range(
     };
     let start = offset - offset % COPY_ALIGN;
     let aligned_end = end.div_ceil(COPY_ALIGN) * COPY_ALIGN;
-    if aligned_end > buffer.size() {
-        return Err(Error::input(
-            task,
-            format!("{field}.count"),
-            count,
-            "the data ends within 4 bytes of the buffer's end at an unaligned position; pad the buffer to a multiple of 4 bytes",
+    if aligned_end > size {
+        return Err(too_much(
+            "the data ends within 4 bytes of the buffer's end at an unaligned position; pad the buffer to a multiple of 4 bytes".into(),
         ));
     }
     Ok((start, aligned_end))
+}
+
+/// Bytes `count` (≥ 1) elements of `size` bytes, `stride` apart, span; `None` past 2^64 bytes.
+/// Stride and count are the caller's: a product past u64 must be refused, not wrap to a small
+/// length a bounds check would accept.
+fn strided_span(stride: u64, count: u32, size: u64) -> Option<u64> {
+    stride
+        .checked_mul(u64::from(count) - 1)
+        .and_then(|b| b.checked_add(size))
 }
 
 // Scalar checks take the field as `prefix` + `name` and join them only on error, so validating a
@@ -115,6 +152,9 @@ pub(crate) struct ComponentExtent {
     pub vertex_bytes: (u64, u64),
     pub index_bytes: Option<(u64, u64)>,
     pub triangles: u32,
+    /// The copy range of its opacity source's buffer (the coordinates of a texture source, the
+    /// flags of a per-triangle one), when it has one.
+    pub opacity_bytes: Option<(u64, u64)>,
 }
 
 /// Validates a geometry input; returns each component's copy ranges.
@@ -175,10 +215,9 @@ pub(crate) fn geometry_input(input: &GeometryInput) -> Result<Vec<ComponentExten
     Ok(extents)
 }
 
-/// Validates one component (`f` names it); returns its copy ranges and triangles.
-fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
+/// Validates a component's vertex buffer (`f` names the component); returns its copy range.
+fn vertex_range(f: &str, vb: &VertexBufferInput) -> Result<(u64, u64)> {
     const T: &str = "GeometryTask";
-    let vb = &c.vertex_buffer;
     if vb.stride < vb.format.size() {
         return Err(Error::input(
             T,
@@ -195,12 +234,7 @@ fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
             "must be ≥ 1",
         ));
     }
-    // Stride and count are the caller's: a product past u64 must be refused here, not wrap to a
-    // small length the bounds check below would accept.
-    let vlen = vb
-        .stride
-        .checked_mul(u64::from(vb.count) - 1)
-        .and_then(|b| b.checked_add(vb.format.size()));
+    let vlen = strided_span(vb.stride, vb.count, vb.format.size());
     let Some(vlen) = vlen else {
         return Err(Error::input(
             T,
@@ -212,13 +246,20 @@ fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
             ),
         ));
     };
-    let vertex_bytes = copy_range(
+    copy_range(
         T,
         &format!("{f}.vertex_buffer"),
         &vb.buffer,
         vb.offset,
         (vb.count, vlen),
-    )?;
+    )
+}
+
+/// Validates one component (`f` names it); returns its copy ranges and triangles.
+fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
+    const T: &str = "GeometryTask";
+    let vb = &c.vertex_buffer;
+    let vertex_bytes = vertex_range(f, vb)?;
     if let Some(t) = c.transform {
         if !t.is_finite() {
             return Err(Error::input(
@@ -294,10 +335,16 @@ fn component(f: &str, c: &GeometryComponent) -> Result<ComponentExtent> {
         }
         None => total / 3,
     };
+    // Checked last: a per-triangle source holds one flag per triangle counted above.
+    let opacity_bytes = match &c.opacity {
+        Some(o) => Some(opacity::component(f, o, vb.count, triangles)?),
+        None => None,
+    };
     Ok(ComponentExtent {
         vertex_bytes,
         index_bytes,
         triangles,
+        opacity_bytes,
     })
 }
 
@@ -347,5 +394,6 @@ pub(crate) fn bvh_build(task: &BvhBuildTask) -> Result<()> {
 
 #[cfg(test)]
 mod fuzz;
+mod opacity;
 mod render;
 pub(crate) use render::render_task;

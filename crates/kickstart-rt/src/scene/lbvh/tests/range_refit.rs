@@ -207,6 +207,7 @@ pub(super) fn raw_geometry(
         triangle_count: triangles,
         transform,
         primitive_base: base,
+        opacity: None,
     };
     let transform = glam::Affine3A::from_scale_rotation_translation(
         glam::Vec3::new(0.5, 2.0, 1.0),
