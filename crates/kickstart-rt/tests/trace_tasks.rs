@@ -1340,3 +1340,103 @@ fn checkerboard_multi_shadow_at_an_odd_viewport_denoises_to_the_fraction_of_ligh
         "too few pixels away from the boundaries: {compared:?}"
     );
 }
+
+/// Pixels a side of the cutout shadow test's floor under each card.
+const CUTOUT_PIXELS: u32 = 48;
+
+/// The raw shadow of cutout geometry: a sun straight above a checkerboard-alpha card (glTF MASK)
+/// over a floor lights the floor exactly where the card's texel above is transparent (the CPU
+/// alpha test, away from texel edges), and an opaque copy of the card shadows all of its floor.
+#[test]
+fn cutout_card_casts_the_shadow_of_its_opaque_texels_only() {
+    let ctx = context(2);
+    let (card_mesh, uvs) = card();
+    let mut c = ctx.create_task_container();
+    // The cards lie flat at height 1 (card (x, y, 0) → (x + dx, 1, y)): checkerboard over
+    // x in [-1.5, -0.5], opaque over [0.5, 1.5].
+    let flat = |dx: f32| {
+        Affine3A::from_translation(Vec3::new(dx, 1.0, 0.0))
+            * Affine3A::from_rotation_x(std::f32::consts::FRAC_PI_2)
+    };
+    let placed = [
+        (checker_card(&card_mesh, &uvs, UvFormat::Float32x2), -1.5),
+        (mesh_input("opaque card", &card_mesh, false), 0.5),
+    ];
+    for (input, dx) in placed {
+        let g = ctx.create_geometry_handle();
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: g,
+            input,
+        });
+        register_instance(&mut c, ctx.create_instance_handle(), g, flat(dx));
+    }
+    add(
+        &ctx,
+        &mut c,
+        &Mesh::cuboid(Vec3::new(-3.0, -0.1, -1.0), Vec3::new(3.0, 0.0, 2.0)),
+        Affine3A::IDENTITY,
+        Vec3::ONE,
+    );
+    build(&ctx, c);
+    // The floor under both cards: columns 0..P under the checkerboard, P..2P under the opaque
+    // card, at pixel centres; (u, v) of the texel above = (x + 1.5, z) or (x - 0.5, z).
+    let (w, h) = (2 * CUTOUT_PIXELS, CUTOUT_PIXELS);
+    let at = |x: u32, y: u32| {
+        let (card, col) = (x / CUTOUT_PIXELS, x % CUTOUT_PIXELS);
+        let uv = glam::Vec2::new(
+            (col as f32 + 0.5) / CUTOUT_PIXELS as f32,
+            (y as f32 + 0.5) / CUTOUT_PIXELS as f32,
+        );
+        (card, uv)
+    };
+    let common = gbuffer_common(w, h, Vec3::new(0.0, 4.0, 0.5), |x, y| {
+        let (card, uv) = at(x, y);
+        let dx = if card == 0 { -1.5 } else { 0.5 };
+        Some((Vec3::new(dx + uv.x, 0.0, uv.y), Vec3::Y))
+    });
+    let out = output(w, h);
+    run_tasks(
+        &ctx,
+        vec![RenderTask::TraceShadow(TraceShadowTask {
+            common,
+            output: out.clone(),
+            light: LightInfo::Directional {
+                direction: Vec3::NEG_Y,
+                angular_extent: 0.0,
+            },
+            enable_first_hit_and_end_search: true,
+        })],
+    );
+    let shadow = read_rgba32(&out);
+    let mut wrong = Vec::new();
+    let mut lit_under_checker = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let (card, uv) = at(x, y);
+            let texel = uv * CHECKER as f32;
+            if card == 0 && (texel - texel.round()).abs().min_element() < 0.08 {
+                continue;
+            }
+            let shadowed = card == 1 || checker_opaque(uv);
+            let v = shadow[(y * w + x) as usize][0];
+            // Shadowed: the distance to the card (1); lit: negative.
+            if (v > 0.0) != shadowed || (shadowed && (v - 1.0).abs() > 0.01) {
+                wrong.push(format!(
+                    "pixel ({x}, {y}), uv {uv}: {v}, shadowed {shadowed}"
+                ));
+            }
+            lit_under_checker += usize::from(!shadowed);
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "{} wrong, e.g. {:#?}",
+        wrong.len(),
+        &wrong[..wrong.len().min(6)]
+    );
+    assert!(
+        lit_under_checker > 500,
+        "too few lit pixels to tell: {lit_under_checker}"
+    );
+}

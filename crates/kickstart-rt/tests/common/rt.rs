@@ -714,3 +714,95 @@ pub fn assert_agrees(a: &Agreement, what: &str) {
         a.rays
     );
 }
+
+/// Texels a side of the cutout tests' checkerboard.
+pub const CHECKER: u32 = 8;
+
+/// An `Rgba8Unorm` checkerboard of `CHECKER`² texels: alpha 255 where `(x + y)` is even, 0
+/// elsewhere (colour channels 128 everywhere).
+pub fn checkerboard_alpha() -> wgpu::TextureView {
+    let g = gpu();
+    let size = wgpu::Extent3d {
+        width: CHECKER,
+        height: CHECKER,
+        depth_or_array_layers: 1,
+    };
+    let texture = g.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("checkerboard alpha"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8Unorm,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let texels: Vec<u8> = (0..CHECKER * CHECKER)
+        .flat_map(|i| {
+            let (x, y) = (i % CHECKER, i / CHECKER);
+            [128, 128, 128, if (x + y) % 2 == 0 { 255 } else { 0 }]
+        })
+        .collect();
+    g.queue.write_texture(
+        texture.as_image_copy(),
+        &texels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * CHECKER),
+            rows_per_image: None,
+        },
+        size,
+    );
+    texture.create_view(&Default::default())
+}
+
+/// The CPU oracle's alpha test of the checkerboard at `uv` (the texel it falls in, repeating).
+pub fn checker_opaque(uv: glam::Vec2) -> bool {
+    let texel = (uv - uv.floor()) * CHECKER as f32;
+    (texel.x as u32 + texel.y as u32).is_multiple_of(2)
+}
+
+/// A unit card in the plane z = 0 over x, y in [0, 1] (two triangles), its texture coordinates
+/// its x and y.
+pub fn card() -> (Mesh, Vec<[f32; 2]>) {
+    let corners = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    let mesh = Mesh {
+        positions: corners.iter().map(|&[x, y]| Vec3::new(x, y, 0.0)).collect(),
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    (mesh, corners.to_vec())
+}
+
+/// The checkerboard card, its coordinates in `format` (each format vertex pulling decodes).
+pub fn checker_card(card_mesh: &Mesh, uvs: &[[f32; 2]], format: UvFormat) -> GeometryInput {
+    let bytes: Vec<u8> = match format {
+        UvFormat::Float32x2 => bytemuck::cast_slice(uvs).to_vec(),
+        UvFormat::Float16x2 => uvs
+            .iter()
+            .flatten()
+            // The card's coordinates are 0 and 1: f16 0x0000 and 0x3c00.
+            .flat_map(|&x| (if x == 1.0 { 0x3c00u16 } else { 0 }).to_le_bytes())
+            .collect(),
+        UvFormat::Unorm16x2 => uvs
+            .iter()
+            .flatten()
+            .flat_map(|&x| ((x * 65535.0) as u16).to_le_bytes())
+            .collect(),
+    };
+    let mut input = mesh_input("checker card", card_mesh, false);
+    input.components[0].opacity = Some(ComponentOpacity {
+        micromap_level: 5,
+        ..ComponentOpacity::texture(
+            checkerboard_alpha(),
+            UvBufferInput {
+                buffer: buffer(&bytes, wgpu::BufferUsages::COPY_SRC),
+                offset: 0,
+                stride: format.size(),
+                format,
+            },
+            1.0,
+            0.5,
+        )
+    });
+    input
+}
