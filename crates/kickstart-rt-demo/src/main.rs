@@ -116,8 +116,8 @@ struct RenderCli {
     /// A GPU primary-ray debug view instead of the CPU reference image.
     #[arg(long, value_enum)]
     debug_view: Option<DebugView>,
-    /// Scene: default, cornell, window-room, town, crowd, dragon, apartment, bunny, cornell-obj,
-    /// cornell-gltf, or a path to a .gltf/.glb/.obj file.
+    /// Scene: default, cornell, window-room, grove, town, crowd, statue, dragon, apartment, bunny,
+    /// cornell-obj, cornell-gltf, or a path to a .gltf/.glb/.obj file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
@@ -267,7 +267,9 @@ struct BenchCli {
     /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
     #[arg(long)]
     scenes: Option<PathBuf>,
-    /// Scenes to benchmark (repeatable) [default: dragon and apartment].
+    /// Scenes to benchmark (repeatable): any scene `render` takes (the built-in default, cornell,
+    /// window-room, grove (cutouts), town, crowd, statue; dragon, apartment, bunny, cornell-obj,
+    /// cornell-gltf; or a file) [default: statue and apartment].
     #[arg(long)]
     scene: Vec<String>,
     /// Also write the results as JSON to this file.

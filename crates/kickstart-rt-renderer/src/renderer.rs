@@ -146,7 +146,7 @@ impl Renderer {
             ..defaults
         };
         let ctx = ksrt::ExecuteContext::new(device, queue, settings)?;
-        let uploads = upload::upload_scene(device, scene);
+        let uploads = upload::upload_scene(device, queue, scene);
         let mut c = ctx.create_task_container();
         upload::schedule_static_scene(&ctx, &mut c, scene, &uploads);
         c.schedule_bvh_task(crate::sdk_glue::bvh_build_task(

@@ -1,12 +1,14 @@
 //! The CPU reference image of `ksrt render`: the view traced with the SDK's public CPU reference
 //! BVH (`kickstart_rt::cpu`): primary rays, a sun with
-//! ray-traced hard shadows, each mesh its colour. It stands beside the GPU debug views until the
+//! ray-traced hard shadows, each mesh its colour. Both kinds of ray pass through the
+//! transparent texels of cutouts, as the SDK's do ([`CutoutCaster`]). It stands beside the GPU debug views until the
 //! lighting cache and the trace tasks make lit GPU images; it is labelled as such in the file name
 //! and the output.
 
 use glam::Vec3;
-use kickstart_rt::cpu::{CpuBvh, Ray};
+use kickstart_rt::cpu::Ray;
 
+use kickstart_rt_renderer::scene::cutout::CutoutCaster;
 use kickstart_rt_renderer::scene::{Camera, Scene};
 
 use kickstart_rt_renderer::error::AnyResult;
@@ -52,27 +54,18 @@ fn trace_cpu_reference(
     (width, height): (u32, u32),
     bar: &indicatif::ProgressBar,
 ) -> image::RgbImage {
-    let (tris, owner) = scene.world_triangles();
-    let bvh = CpuBvh::build(&tris);
+    let caster = CutoutCaster::new(scene);
+    let tris = &caster.triangles;
     let eye = camera.eye;
     // Shadow rays start this far off the surface: relative to the scene so that tiny scenes
     // (the dragon is 0.3 units across) don't shadow themselves and big ones don't leak.
     let offset = scene.size() * 2e-4;
     let sun = Vec3::new(0.5, 1.0, 0.4).normalize();
-    // First world triangle of each instance, to find a hit's triangle within its mesh.
-    let starts: Vec<usize> = scene
-        .instances
-        .iter()
-        .scan(0, |n, i| {
-            let first = *n;
-            *n += scene.meshes[i.mesh].triangle_count();
-            Some(first)
-        })
-        .collect();
-    let shading_normal = |prim: usize, u: f32, v: f32| -> Option<Vec3> {
-        let inst = scene.instances.get(*owner.get(prim)? as usize)?;
+    let shading_normal = |prim: u32, u: f32, v: f32| -> Option<Vec3> {
+        let (instance, triangle) = caster.locate(prim)?;
+        let inst = scene.instances.get(instance)?;
         let mesh = &scene.meshes[inst.mesh];
-        let first = (prim - starts.get(*owner.get(prim)? as usize)?) * 3;
+        let first = triangle * 3;
         let idx = mesh.indices.get(first..first + 3)?;
         let n = |k: usize| Vec3::from(mesh.normals[idx[k] as usize]);
         let local = n(0) * (1.0 - u - v) + n(1) * u + n(2) * v;
@@ -86,7 +79,7 @@ fn trace_cpu_reference(
     let rows: Vec<(u32, Vec<[u8; 3]>)> = std::thread::scope(|s| {
         let jobs: Vec<_> = (0..threads as u32)
             .map(|k| {
-                let (bvh, tris, owner, shading_normal) = (&bvh, &tris, &owner, &shading_normal);
+                let (caster, shading_normal) = (&caster, &shading_normal);
                 let bar = bar.clone();
                 s.spawn(move || {
                     let mut out = Vec::new();
@@ -100,7 +93,7 @@ fn trace_cpu_reference(
                                     t_min: 0.0,
                                     t_max: f32::INFINITY,
                                 };
-                                let c = match bvh.closest_hit(tris, &ray) {
+                                let c = match caster.closest_hit(&ray) {
                                     None => Vec3::new(0.5, 0.6, 0.8),
                                     Some(h) => {
                                         let [a, b, c] = tris[h.primitive as usize];
@@ -111,7 +104,7 @@ fn trace_cpu_reference(
                                         let p = eye + dir * h.t + n * offset;
                                         // Smooth shading from the vertex normals, turned to
                                         // the side the ray sees.
-                                        let ns = shading_normal(h.primitive as usize, h.u, h.v)
+                                        let ns = shading_normal(h.primitive, h.u, h.v)
                                             .map_or(n, |s| if s.dot(n) < 0.0 { -s } else { s });
                                         let lit = ns.dot(sun).max(0.0);
                                         let shadow = Ray {
@@ -120,13 +113,13 @@ fn trace_cpu_reference(
                                             t_min: 0.0,
                                             t_max: f32::INFINITY,
                                         };
-                                        let vis = if lit > 0.0 && bvh.any_hit(tris, &shadow) {
+                                        let vis = if lit > 0.0 && caster.any_hit(&shadow) {
                                             0.0
                                         } else {
                                             1.0
                                         };
                                         scene.meshes[scene.instances
-                                            [owner[h.primitive as usize] as usize]
+                                            [caster.owner[h.primitive as usize] as usize]
                                             .mesh]
                                             .color
                                             * (0.2 + 0.8 * lit * vis)

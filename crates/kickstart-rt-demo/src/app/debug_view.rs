@@ -107,7 +107,7 @@ mod tests {
         (width, height): (u32, u32),
     ) -> AnyResult<Vec<[f32; 4]>> {
         let ctx = ksrt::ExecuteContext::new(device, queue, crate::app::gpu::init_settings())?;
-        let uploads = upload::upload_scene(device, scene);
+        let uploads = upload::upload_scene(device, queue, scene);
         let mut c = ctx.create_task_container();
         upload::schedule_static_scene(&ctx, &mut c, scene, &uploads);
         // Every BLAS in this one task, so the trace below sees the whole scene.
@@ -247,6 +247,7 @@ mod tests {
             "cornell-gltf",
             "apartment",
             "statue",
+            "grove",
         ];
         for name in names {
             let scene =

@@ -6,7 +6,7 @@ use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use crate::scene::{Light, Scene};
-use crate::upload::UploadedMesh;
+use crate::upload::{upload_texture, CutoutSource, UploadedMesh};
 
 /// Bytes between instance records in the draw buffer (the dynamic-offset alignment every device
 /// accepts).
@@ -35,6 +35,8 @@ struct DrawUniform {
     normal_matrix: [[f32; 4]; 4],
     base_color: [f32; 4],
     emissive: [f32; 4],
+    /// Metallic, roughness, and the MASK test's factor and cutoff (1 and 0 for an opaque mesh:
+    /// every texel passes).
     params: [f32; 4],
 }
 
@@ -80,7 +82,10 @@ pub struct GpuScene {
     emission_pipeline: wgpu::RenderPipeline,
     /// Per instance: whether its material emits.
     emissive: Vec<bool>,
+    /// Per instance: whether its mesh is a cutout (drawn into the shadow map with its texture).
+    cutout: Vec<bool>,
     shadow_pipeline: wgpu::RenderPipeline,
+    shadow_cutout_pipeline: wgpu::RenderPipeline,
     pub(crate) lighting_pipeline: wgpu::RenderPipeline,
     pub(crate) lights: wgpu::Buffer,
     pub(crate) shadow_view: wgpu::TextureView,
@@ -213,6 +218,7 @@ struct Pipelines {
     gbuffer: wgpu::RenderPipeline,
     emission: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
+    shadow_cutout: wgpu::RenderPipeline,
     lighting: wgpu::RenderPipeline,
 }
 
@@ -231,6 +237,13 @@ fn vertex_streams() -> [Option<wgpu::VertexBufferLayout<'static>>; 3] {
         stream(8, &UV_ATTR),
     ]
 }
+
+/// The shadow map's depth bias, against acne.
+const SHADOW_BIAS: wgpu::DepthBiasState = wgpu::DepthBiasState {
+    constant: 2,
+    slope_scale: 2.0,
+    clamp: 0.0,
+};
 
 /// A `Depth32Float` depth test (`Less`, writing) with `bias`.
 fn depth_state(bias: wgpu::DepthBiasState) -> wgpu::DepthStencilState {
@@ -254,6 +267,7 @@ impl Pipelines {
             gbuffer,
             emission,
             shadow: Self::shadow(device, layouts, &shader),
+            shadow_cutout: Self::shadow_cutout(device, layouts, &shader),
             lighting: Self::lighting(device, layouts),
         }
     }
@@ -352,13 +366,50 @@ impl Pipelines {
                 buffers: &streams[..1],
             },
             primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(depth_state(wgpu::DepthBiasState {
-                constant: 2,
-                slope_scale: 2.0,
-                clamp: 0.0,
-            })),
+            depth_stencil: Some(depth_state(SHADOW_BIAS)),
             multisample: Default::default(),
             fragment: None,
+            multiview_mask: None,
+            cache: None,
+        })
+    }
+
+    /// The shadow map pipeline of cutout meshes: the base colour texture's MASK test discards
+    /// the fragments of transparent texels, so light passes through them as the SDK's shadow
+    /// rays do. Apart from [`Self::shadow`] so that opaque meshes keep a depth-only pass.
+    fn shadow_cutout(
+        device: &wgpu::Device,
+        layouts: &Layouts,
+        shader: &wgpu::ShaderModule,
+    ) -> wgpu::RenderPipeline {
+        let streams = vertex_streams();
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("ksrt shadow cutout"),
+            bind_group_layouts: &[
+                Some(&layouts.view),
+                Some(&layouts.draw),
+                Some(&layouts.material),
+            ],
+            immediate_size: 0,
+        });
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("ksrt shadow map cutout"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: shader,
+                entry_point: Some("vs_shadow_cutout"),
+                compilation_options: Default::default(),
+                buffers: &streams,
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(depth_state(SHADOW_BIAS)),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: shader,
+                entry_point: Some("fs_shadow_cutout"),
+                compilation_options: Default::default(),
+                targets: &[],
+            }),
             multiview_mask: None,
             cache: None,
         })
@@ -416,63 +467,51 @@ impl Pipelines {
     }
 }
 
-/// Uploads one RGBA8 texture, viewable as sRGB (colours) or linear (metallic-roughness).
-fn upload_texture(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    img: &image::RgbaImage,
-    name: &str,
-) -> wgpu::Texture {
-    let size = wgpu::Extent3d {
-        width: img.width().max(1),
-        height: img.height().max(1),
-        depth_or_array_layers: 1,
-    };
-    let tex = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(name),
-        size,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba8Unorm,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[wgpu::TextureFormat::Rgba8UnormSrgb],
-    });
-    queue.write_texture(
-        tex.as_image_copy(),
-        img.as_raw(),
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(4 * img.width()),
-            rows_per_image: None,
-        },
-        size,
-    );
-    tex
-}
-
 /// The scene's textures on the GPU, a 1×1 white one for the slots without a texture, and the
 /// two material samplers.
 struct MaterialTextures {
-    textures: Vec<wgpu::Texture>,
+    /// Per [`Scene::textures`] (`None`: an image without texels).
+    textures: Vec<Option<wgpu::Texture>>,
     white: wgpu::Texture,
     linear: wgpu::Sampler,
     nearest: wgpu::Sampler,
 }
 
 impl MaterialTextures {
-    fn new(device: &wgpu::Device, queue: &wgpu::Queue, scene: &Scene) -> MaterialTextures {
+    /// Uploads the textures of `scene`, reusing those the cutouts of `uploads` already hold.
+    fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+        uploads: &[UploadedMesh],
+    ) -> MaterialTextures {
         let white = upload_texture(
             device,
             queue,
             &image::RgbaImage::from_pixel(1, 1, image::Rgba([255; 4])),
             "ksrt white",
         );
-        let textures: Vec<wgpu::Texture> = scene
+        let uploaded = |index: usize| {
+            uploads
+                .iter()
+                .find_map(|u| match u.cutout.as_ref().map(|c| &c.source) {
+                    Some(CutoutSource::Texture {
+                        texture_index,
+                        texture,
+                        ..
+                    }) if *texture_index == index => Some(texture.clone()),
+                    _ => None,
+                })
+        };
+        let textures = scene
             .textures
             .iter()
-            .filter(|t| t.image.width() > 0 && t.image.height() > 0)
-            .map(|t| upload_texture(device, queue, &t.image, &t.name))
+            .enumerate()
+            .map(|(k, t)| {
+                (t.image.width() > 0 && t.image.height() > 0).then(|| {
+                    uploaded(k).unwrap_or_else(|| upload_texture(device, queue, &t.image, &t.name))
+                })
+            })
             .collect();
         let sampler_with = |filter| {
             device.create_sampler(&wgpu::SamplerDescriptor {
@@ -496,6 +535,7 @@ impl MaterialTextures {
     fn view_of(&self, index: Option<usize>, srgb: bool) -> wgpu::TextureView {
         let tex = index
             .and_then(|i| self.textures.get(i))
+            .and_then(Option::as_ref)
             .unwrap_or(&self.white);
         tex.create_view(&wgpu::TextureViewDescriptor {
             format: Some(if srgb {
@@ -508,21 +548,27 @@ impl MaterialTextures {
     }
 }
 
-/// Per mesh: its normal and uv streams and its material bind group.
+/// Per mesh: its normal and uv streams and its material bind group. A cutout's coordinates are
+/// the buffer the SDK bakes from (`uploads`), so both test the same values.
 fn mesh_buffers(
     device: &wgpu::Device,
     scene: &Scene,
+    uploads: &[UploadedMesh],
     textures: &MaterialTextures,
     material_layout: &wgpu::BindGroupLayout,
 ) -> Vec<MeshBuffers> {
     scene
         .meshes
         .iter()
-        .map(|m| {
-            let uvs: Vec<[f32; 2]> = if m.uvs.len() == m.positions.len() {
-                m.uvs.clone()
-            } else {
-                vec![[0.0; 2]; m.positions.len()]
+        .enumerate()
+        .map(|(k, m)| {
+            let uvs = match uploads
+                .get(k)
+                .and_then(|u| u.cutout.as_ref())
+                .map(|c| &c.source)
+            {
+                Some(CutoutSource::Texture { uvs, .. }) => uvs.clone(),
+                _ => crate::upload::uv_buffer(device, m),
             };
             let buffer = |bytes: &[u8]| {
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -551,7 +597,7 @@ fn mesh_buffers(
             };
             MeshBuffers {
                 normals: buffer(bytemuck::cast_slice(&m.normals)),
-                uvs: buffer(bytemuck::cast_slice(&uvs)),
+                uvs,
                 material: device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("ksrt material"),
                     layout: material_layout,
@@ -590,7 +636,15 @@ fn draw_bind_group(
             normal_matrix: mat(normal_matrix),
             base_color: mesh.color.extend(1.0).to_array(),
             emissive: mesh.material.emissive.extend(0.0).to_array(),
-            params: [mesh.material.metallic, mesh.material.roughness, 0.0, 0.0],
+            params: {
+                let (factor, cutoff) = mesh.mask().map_or((1.0, 0.0), |t| (t.factor, t.cutoff));
+                [
+                    mesh.material.metallic,
+                    mesh.material.roughness,
+                    factor,
+                    cutoff,
+                ]
+            },
         };
         let at = k * DRAW_STRIDE as usize;
         draw_bytes[at..at + std::mem::size_of::<DrawUniform>()]
@@ -818,8 +872,8 @@ impl GpuScene {
     ) -> GpuScene {
         let layouts = Layouts::new(device);
         let pipelines = Pipelines::new(device, &layouts);
-        let textures = MaterialTextures::new(device, queue, scene);
-        let meshes = mesh_buffers(device, scene, &textures, &layouts.material);
+        let textures = MaterialTextures::new(device, queue, scene, uploads);
+        let meshes = mesh_buffers(device, scene, uploads, &textures, &layouts.material);
         let draw_bind_group = draw_bind_group(device, scene, &layouts.draw);
         let lights = SceneLights::new(scene);
         let lights_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -845,7 +899,13 @@ impl GpuScene {
                 .iter()
                 .map(|i| scene.meshes[i.mesh].material.emissive.max_element() > 0.0)
                 .collect(),
+            cutout: scene
+                .instances
+                .iter()
+                .map(|i| scene.meshes[i.mesh].mask().is_some())
+                .collect(),
             shadow_pipeline: pipelines.shadow,
+            shadow_cutout_pipeline: pipelines.shadow_cutout,
             lighting_pipeline: pipelines.lighting,
             lights: lights_buffer,
             shadow_view: shadow.view,
@@ -907,7 +967,11 @@ impl GpuScene {
         }
         pass.set_pipeline(&self.shadow_pipeline);
         pass.set_bind_group(0, &self.shadow_bind_group, &[]);
-        self.draw_all(&mut pass, false);
+        self.draw(&mut pass, false, |k| !self.cutout[k]);
+        if self.cutout.iter().any(|&c| c) {
+            pass.set_pipeline(&self.shadow_cutout_pipeline);
+            self.draw(&mut pass, true, |k| self.cutout[k]);
+        }
     }
 
     /// Records the G-buffer and lighting passes of one view into `targets` (whose view uniform

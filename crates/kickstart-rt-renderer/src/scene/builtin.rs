@@ -68,7 +68,7 @@ pub fn icosphere(subdivisions: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
 }
 
 /// A tube of radius `r` around a closed curve, `n` segments along it and `m` around it.
-fn sweep(
+pub(super) fn sweep(
     curve: impl Fn(f32) -> Vec3,
     r: f32,
     n: u32,
@@ -229,7 +229,7 @@ fn from_parts(name: &str, parts: Vec<Part>) -> Scene {
 
 /// Appends the quad `a b c d` (two triangles) to `(p, i)`, wound so that its geometric normal
 /// (counter-clockwise) points along `facing`: walls face into the room, blocks face out.
-fn push_quad(mesh: &mut (Vec<[f32; 3]>, Vec<u32>), q: [Vec3; 4], facing: Vec3) {
+pub(super) fn push_quad(mesh: &mut (Vec<[f32; 3]>, Vec<u32>), q: [Vec3; 4], facing: Vec3) {
     let n = (q[1] - q[0]).cross(q[2] - q[0]);
     let q = if n.dot(facing) < 0.0 {
         [q[0], q[3], q[2], q[1]]
@@ -244,7 +244,7 @@ fn push_quad(mesh: &mut (Vec<[f32; 3]>, Vec<u32>), q: [Vec3; 4], facing: Vec3) {
 
 /// A closed block: the footprint `corners` (x, z, counter-clockwise or not) extruded from y = 0 to
 /// `height`, six faces wound outwards.
-fn block(corners: [[f32; 2]; 4], height: f32) -> (Vec<[f32; 3]>, Vec<u32>) {
+pub(super) fn block(corners: [[f32; 2]; 4], height: f32) -> (Vec<[f32; 3]>, Vec<u32>) {
     let low = corners.map(|[x, z]| Vec3::new(x, 0.0, z));
     let high = corners.map(|[x, z]| Vec3::new(x, height, z));
     let centre = (low.iter().sum::<Vec3>() + high.iter().sum::<Vec3>()) / 8.0;

@@ -7,7 +7,9 @@
 
 pub mod builtin;
 pub mod crowd;
+pub mod cutout;
 mod framing;
+pub mod grove;
 pub mod statue;
 pub mod town;
 
@@ -37,8 +39,11 @@ pub struct Mesh {
 /// multiply the factors, as glTF specifies.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Material {
-    /// Index into [`Scene::textures`] of the sRGB base colour texture (RGB, alpha unused).
+    /// Index into [`Scene::textures`] of the sRGB base colour texture: RGB, and in A the alpha
+    /// that [`AlphaMode::Mask`] tests (unused by the other modes).
     pub base_color_texture: Option<usize>,
+    /// How the base colour's alpha is used (glTF `alphaMode`).
+    pub alpha: AlphaMode,
     /// Metalness, 0..=1.
     pub metallic: f32,
     /// Perceptual roughness, 0..=1.
@@ -57,6 +62,7 @@ impl Default for Material {
     fn default() -> Self {
         Material {
             base_color_texture: None,
+            alpha: AlphaMode::Opaque,
             metallic: 0.0,
             roughness: 0.6,
             metallic_roughness_texture: None,
@@ -64,6 +70,27 @@ impl Default for Material {
             emissive_texture: None,
         }
     }
+}
+
+/// How a material's alpha is used: glTF 2.0's `alphaMode`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum AlphaMode {
+    /// Alpha is ignored: the surface is opaque everywhere.
+    #[default]
+    Opaque,
+    /// A cutout: opaque where `factor` × the base colour texture's alpha (the texel the
+    /// coordinates fall in, mip 0, repeating; 1 without a texture) is at least `cutoff`, absent
+    /// elsewhere, for the rasteriser, the SDK's traces and the CPU reference alike
+    /// ([`cutout`]).
+    Mask {
+        /// glTF `baseColorFactor`'s alpha; finite and ≥ 0.
+        factor: f32,
+        /// glTF `alphaCutoff` (default 0.5); in 0..=1.
+        cutoff: f32,
+    },
+    /// Blended transparency: `ksrt` has no transparency pass, so it rasterises and traces such
+    /// a surface as [`AlphaMode::Opaque`] (the loader says so once per file).
+    Blend,
 }
 
 /// A decoded texture: RGBA8 texels, row 0 at the top.

@@ -1,6 +1,7 @@
 //! glTF 2.0 (`.gltf` + buffers, `.glb`) loading: the default scene's node hierarchy, every
-//! triangle primitive as a mesh, one instance per node that uses it, base colour factors, and the
-//! first perspective camera, and the `KHR_lights_punctual` lights.
+//! triangle primitive as a mesh, one instance per node that uses it, materials (factors,
+//! textures, alpha mode: `MASK` cutouts), the first perspective camera, and the
+//! `KHR_lights_punctual` lights.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -9,10 +10,11 @@ use glam::{Affine3A, Mat4, Vec3};
 use gltf::mesh::Mode;
 
 use kickstart_rt_renderer::scene::{
-    check_indices, compute_normals, drop_non_finite_triangles, Camera, Instance, Light, Material,
-    Mesh, Scene, Texture,
+    check_indices, compute_normals, drop_non_finite_triangles, AlphaMode, Camera, Instance, Light,
+    Material, Mesh, Scene, Texture,
 };
 
+use super::gltf_alpha;
 use super::SceneError;
 
 /// Loads a `.gltf` or `.glb` file.
@@ -58,19 +60,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
     // glTF mesh index → the scene meshes of its triangle primitives, converted on first use so
     // meshes no node references cost nothing.
     let mut converted: HashMap<usize, Vec<usize>> = HashMap::new();
-    let roots: Vec<gltf::Node> = match file.default_scene().or_else(|| file.scenes().next()) {
-        Some(s) => s.nodes().collect(),
-        None => {
-            // No scene: every node that is nobody's child is a root.
-            let children: std::collections::HashSet<usize> = file
-                .nodes()
-                .flat_map(|n| n.children().map(|c| c.index()).collect::<Vec<_>>())
-                .collect();
-            file.nodes()
-                .filter(|n| !children.contains(&n.index()))
-                .collect()
-        }
-    };
+    let roots = root_nodes(&file);
     let mut visited = vec![false; file.nodes().len()];
     let mut stack: Vec<(gltf::Node, Affine3A)> = roots
         .into_iter()
@@ -147,12 +137,30 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
         }
     }
     bound_light_ranges(&mut scene);
+    textures.log_blended(path);
     if scene.instances.is_empty() && skipped > 0 {
         return Err(err(format!(
             "no triangles to render: all {skipped} primitive(s) the scene uses are points or lines (or lack positions)"
         )));
     }
     Ok(scene)
+}
+
+/// The nodes the hierarchy starts from: the default scene's (else the first scene's), or, in a
+/// file without scenes, every node that is nobody's child.
+fn root_nodes(file: &gltf::Gltf) -> Vec<gltf::Node<'_>> {
+    match file.default_scene().or_else(|| file.scenes().next()) {
+        Some(s) => s.nodes().collect(),
+        None => {
+            let children: std::collections::HashSet<usize> = file
+                .nodes()
+                .flat_map(|n| n.children().map(|c| c.index()).collect::<Vec<_>>())
+                .collect();
+            file.nodes()
+                .filter(|n| !children.contains(&n.index()))
+                .collect()
+        }
+    }
 }
 
 /// The scene camera of a glTF perspective camera placed by its node's `world` transform (it
@@ -216,14 +224,31 @@ fn check_attribute_accessors(root: &gltf::json::Root) -> Result<(), String> {
 }
 
 /// The scene textures made from the file's images, each decoded once however many materials use
-/// it.
+/// it, and the `BLEND` materials met on the way.
 #[derive(Default)]
 struct TextureCache {
     /// glTF image index → index in `Scene::textures`.
     decoded: HashMap<usize, usize>,
+    /// Names of the `BLEND` materials the scene uses, for one log line.
+    blended: std::collections::BTreeSet<String>,
 }
 
 impl TextureCache {
+    /// Says once for the file that its `BLEND` materials are drawn opaque (`ksrt` has no
+    /// transparency pass), naming them.
+    fn log_blended(&self, path: &Path) {
+        if self.blended.is_empty() {
+            return;
+        }
+        let names: Vec<&str> = self.blended.iter().map(String::as_str).collect();
+        log::warn!(
+            "{}: alphaMode BLEND is rasterised and traced as opaque ({} material(s): {})",
+            path.display(),
+            names.len(),
+            names.join(", ")
+        );
+    }
+
     /// The metallic-roughness material of a glTF material, decoding the textures it references.
     fn material(
         &mut self,
@@ -241,8 +266,13 @@ impl TextureCache {
         let metallic_roughness_texture =
             texture(pbr.metallic_roughness_texture(), "metallic-roughness")?;
         let emissive_texture = texture(m.emissive_texture(), "emissive")?;
+        let alpha = gltf_alpha::alpha_mode(m).map_err(|e| SceneError::new(path, e))?;
+        if alpha == AlphaMode::Blend {
+            self.blended.insert(gltf_alpha::material_name(m));
+        }
         Ok(Material {
             base_color_texture,
+            alpha,
             metallic: pbr.metallic_factor().clamp(0.0, 1.0),
             roughness: pbr.roughness_factor().clamp(0.0, 1.0),
             metallic_roughness_texture,
@@ -506,18 +536,7 @@ fn convert_primitive(
         None => compute_normals(&positions, &indices),
     };
     let [r, g, b, _] = prim.material().pbr_metallic_roughness().base_color_factor();
-    // Every texture of a material uses one coordinate set here: the base colour's (set 0 in
-    // practice).
-    let set = prim
-        .material()
-        .pbr_metallic_roughness()
-        .base_color_texture()
-        .map_or(0, |t| t.tex_coord());
-    let uvs: Vec<[f32; 2]> = reader
-        .read_tex_coords(set)
-        .map(|t| t.into_f32().collect())
-        .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len())
-        .unwrap_or_default();
+    let uvs = read_uvs(&reader, &prim.material(), positions.len());
     Ok(Some(Mesh {
         name: prim
             .material()
@@ -530,6 +549,30 @@ fn convert_primitive(
         uvs,
         material: Material::default(),
     }))
+}
+
+/// The texture coordinates of a primitive of `material`, one per vertex (`vertices`), or none.
+/// Every texture of a material uses one coordinate set here: the one its base colour texture
+/// names (`texCoord`, or `KHR_texture_transform`'s override), with that texture's transform
+/// applied, since the base colour's alpha is what a cutout tests.
+fn read_uvs<'a, 's, F>(
+    reader: &gltf::mesh::Reader<'a, 's, F>,
+    material: &gltf::Material,
+    vertices: usize,
+) -> Vec<[f32; 2]>
+where
+    F: Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    let (set, transform) = gltf_alpha::base_color_coordinates(material);
+    let uvs: Vec<[f32; 2]> = reader
+        .read_tex_coords(set)
+        .map(|t| t.into_f32().collect())
+        .filter(|t: &Vec<[f32; 2]>| t.len() == vertices)
+        .unwrap_or_default();
+    match transform {
+        Some(t) => uvs.into_iter().map(|uv| t.apply(uv)).collect(),
+        None => uvs,
+    }
 }
 
 /// Checks that `accessor`'s elements lie inside its buffer view and the view inside its buffer,

@@ -2,6 +2,7 @@
 //! glTF 2.0 / OBJ files into the renderer's [`Scene`] (built-in scenes are the renderer's).
 
 mod gltf;
+mod gltf_alpha;
 mod guard;
 mod obj;
 mod texture;
@@ -9,7 +10,7 @@ mod texture;
 use std::path::{Path, PathBuf};
 
 use kickstart_rt_renderer::error::AnyResult;
-use kickstart_rt_renderer::scene::{builtin, crowd, statue, town, Scene};
+use kickstart_rt_renderer::scene::{builtin, crowd, grove, statue, town, Scene};
 
 /// A loading error: which file and what is wrong with it.
 #[derive(Debug, Clone)]
@@ -44,6 +45,7 @@ pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("default", None),
     ("cornell", None),
     ("window-room", None),
+    ("grove", None),
     ("town", None),
     ("crowd", None),
     ("statue", None),
@@ -95,6 +97,7 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
         "default" => return Ok(builtin::default_scene()),
         "cornell" => return Ok(builtin::cornell_box()),
         "window-room" => return Ok(builtin::window_room()),
+        "grove" => return Ok(grove::grove()),
         "town" => return Ok(town::town()),
         "crowd" => return Ok(crowd::crowd()),
         "statue" => return Ok(statue::statue()),

@@ -143,6 +143,12 @@ pub fn compare(
             return report;
         }
     };
+    // The peer builds opaque BLASes only: on cutouts it would disagree on every ray through a
+    // hole, and time another workload than ours.
+    if scene.has_cutouts() {
+        report.skipped = Some("the peer has no cutouts (alpha-tested meshes) to trace".into());
+        return report;
+    }
     report.device = Some(peer.device_name().to_string());
     report.driver = Some(peer.driver().to_string());
     let timing = vkrt::Timing {
@@ -150,14 +156,7 @@ pub fn compare(
         warm_up: Duration::from_millis(500),
     };
     let mut errors = Vec::new();
-    let meshes: Vec<vkrt::Mesh> = scene
-        .meshes
-        .iter()
-        .map(|m| vkrt::Mesh {
-            positions: &m.positions,
-            indices: &m.indices,
-        })
-        .collect();
+    let meshes = peer_meshes(scene);
     let ours_blas = ours.blas_build.as_ref().map(|s| s.median_ms);
     let uploaded = attempt(&mut errors, "peer mesh upload", || {
         Ok(peer.upload_meshes(&meshes)?)
@@ -181,21 +180,7 @@ pub fn compare(
         report.blas_triangles = ours.geometry_triangles;
         report.ours_blas_bytes = ours.blas_memory.as_ref().map(|m| m.total());
     }
-    let slots: Vec<u32> = match batches {
-        Some(b) => b.slots.clone(),
-        None => (0..scene.instances.len() as u32).collect(),
-    };
-    let instances: Vec<vkrt::Instance> = scene
-        .instances
-        .iter()
-        .zip(&slots)
-        .map(|(i, &index)| vkrt::Instance {
-            mesh: i.mesh,
-            transform: vkrt::Instance::row_major(i.transform),
-            mask: 0xff,
-            index,
-        })
-        .collect();
+    let instances = peer_instances(scene, batches);
     if report.blas_build_fast_trace.is_some() {
         let ours_tlas = attempt(&mut errors, "our TLAS build", || {
             bench.tlas_rebuild(scene, uploads)
@@ -254,6 +239,38 @@ pub fn compare(
     }
     report.errors = errors;
     report
+}
+
+/// The peer's view of `scene`'s meshes.
+fn peer_meshes(scene: &Scene) -> Vec<vkrt::Mesh<'_>> {
+    scene
+        .meshes
+        .iter()
+        .map(|m| vkrt::Mesh {
+            positions: &m.positions,
+            indices: &m.indices,
+        })
+        .collect()
+}
+
+/// The peer's instances of `scene`, each with our instance's slot index (what the hits report)
+/// where `batches` has them, else its place in the scene.
+fn peer_instances(scene: &Scene, batches: Option<&RayBatches>) -> Vec<vkrt::Instance> {
+    let slots: Vec<u32> = match batches {
+        Some(b) => b.slots.clone(),
+        None => (0..scene.instances.len() as u32).collect(),
+    };
+    scene
+        .instances
+        .iter()
+        .zip(&slots)
+        .map(|(i, &index)| vkrt::Instance {
+            mesh: i.mesh,
+            transform: vkrt::Instance::row_major(i.transform),
+            mask: 0xff,
+            index,
+        })
+        .collect()
 }
 
 /// `12.3 MiB` (`KiB` below one MiB: the small test scenes' BLASes are a few KiB).
@@ -489,7 +506,7 @@ mod tests {
         let bench = Bench::new(device, queue, 1);
         let scene = scene::builtin::cornell_box();
         let camera = scene.camera_or_default(None);
-        let uploads = kickstart_rt_renderer::upload::upload_scene(device, &scene);
+        let uploads = kickstart_rt_renderer::upload::upload_scene(device, queue, &scene);
         let mut ours = SceneReport::new("cornell", &scene, &camera);
         let batches =
             rays(&bench, &scene, &uploads, &camera, (96, 64), &mut ours).expect("our rays");

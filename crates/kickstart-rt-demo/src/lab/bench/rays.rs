@@ -254,29 +254,22 @@ pub(super) fn secondary_rays(
         .collect()
 }
 
-/// Compares about 20 000 primary hits with the CPU reference BVH over the world's triangles.
+/// Compares about 20 000 primary hits with the CPU reference BVH over the world's triangles
+/// (through the cutouts' transparent texels, as the SDK traces them).
 fn oracle_check(scene: &Scene, rays: &[GpuRay], hits: &[GpuHit]) -> OracleCheck {
-    let world: Vec<[Vec3; 3]> = scene
-        .instances
-        .iter()
-        .flat_map(|i| scene.meshes[i.mesh].triangles(i.transform))
-        .collect();
-    let bvh = ksrt::cpu::CpuBvh::build(&world);
+    let caster = kickstart_rt_renderer::scene::cutout::CutoutCaster::new(scene);
     let step = (rays.len() / 20_000).max(1);
     let mut check = OracleCheck {
         rays: 0,
         disagreements: 0,
     };
     for (r, h) in rays.iter().zip(hits).step_by(step) {
-        let cpu = bvh.closest_hit(
-            &world,
-            &ksrt::cpu::Ray {
-                origin: Vec3::from(r.origin),
-                dir: Vec3::from(r.dir),
-                t_min: r.t_min,
-                t_max: r.t_max,
-            },
-        );
+        let cpu = caster.closest_hit(&ksrt::cpu::Ray {
+            origin: Vec3::from(r.origin),
+            dir: Vec3::from(r.dir),
+            t_min: r.t_min,
+            t_max: r.t_max,
+        });
         let agree = match (cpu, h.is_hit()) {
             (None, false) => true,
             (Some(c), true) => (c.t - h.t).abs() <= 1e-3 * c.t.abs().max(1e-3),

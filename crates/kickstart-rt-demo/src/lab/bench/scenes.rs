@@ -30,7 +30,7 @@ pub(super) fn bench_scene(
 ) -> SceneReport {
     let mut r = SceneReport::new(name, scene, &camera);
     r.traversal_backend = backends::backend_of(bench, bench.backend.get()).map(|b| b.to_string());
-    let uploads = upload::upload_scene(bench.device, scene);
+    let uploads = upload::upload_scene(bench.device, bench.queue, scene);
     let mut errors = Vec::new();
     let runs = |s: options::Section| s.runs_in(&bench.sections);
     let builds = runs(options::Section::Builds);

@@ -144,7 +144,7 @@ fn compare(bench: &Bench, scene_name: &str, mesh: &Mesh, errors: &mut Vec<String
         ..Default::default()
     };
     if let Some(b) = attempt(errors, &format!("{label}: GPU build"), || {
-        let uploads = upload::upload_scene(bench.device, &single);
+        let uploads = upload::upload_scene(bench.device, bench.queue, &single);
         let (time, ctx, h) = bench.blas_build(&single, &uploads, kickstart_rt::BuildHint::Auto)?;
         let sah = glue::blas_sah_cost(&ctx, h.geometries[0])?;
         Ok(PeerBuild {

@@ -281,7 +281,7 @@ fn triangle_point(
     size: (u32, u32),
     errors: &mut Vec<String>,
 ) -> TrianglePoint {
-    let uploads = upload::upload_scene(bench.device, scene);
+    let uploads = upload::upload_scene(bench.device, bench.queue, scene);
     let mut p = TrianglePoint {
         label: label.to_string(),
         copies,
