@@ -126,15 +126,20 @@ struct Vertex {
     status: u32,
 }
 
+// The vertex index of vertex k of triangle j of component c (not range-checked).
+fn vertex_index(c: Component, j: u32, k: u32) -> u32 {
+    let n = c.first_index + 3u * j + k;
+    if c.idx_format == 1u {
+        return load_u16(c.idx_word, c.idx_shift + n * 2u);
+    } else if c.idx_format == 2u {
+        return load_u32(c.idx_word, c.idx_shift + n * 4u);
+    }
+    return n;
+}
+
 // Vertex k of triangle j of component c: index fetch, range check, decode, transform, checks.
 fn fetch_vertex(c: Component, j: u32, k: u32) -> Vertex {
-    let n = c.first_index + 3u * j + k;
-    var v = n;
-    if c.idx_format == 1u {
-        v = load_u16(c.idx_word, c.idx_shift + n * 2u);
-    } else if c.idx_format == 2u {
-        v = load_u32(c.idx_word, c.idx_shift + n * 4u);
-    }
+    let v = vertex_index(c, j, k);
     if v >= c.vtx_count {
         return Vertex(vec3<f32>(0.0), BAD_INDEX);
     }

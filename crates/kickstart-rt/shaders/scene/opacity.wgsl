@@ -39,14 +39,7 @@ const BAKE_WG: u32 = 64u;
 
 // Vertex index k of triangle j (the vertex count when the index is out of range).
 fn bake_vertex(c: Component, j: u32, k: u32) -> u32 {
-    let n = c.first_index + 3u * j + k;
-    var v = n;
-    if c.idx_format == 1u {
-        v = load_u16(c.idx_word, c.idx_shift + n * 2u);
-    } else if c.idx_format == 2u {
-        v = load_u32(c.idx_word, c.idx_shift + n * 4u);
-    }
-    return min(v, c.vtx_count);
+    return min(vertex_index(c, j, k), c.vtx_count);
 }
 
 // Texture coordinates of vertex v; non-finite ones read as 0.

@@ -3,6 +3,7 @@
 //! ingestion (`shaders/scene/opacity.wgsl`). Layout: `docs/ray-tracing-core.md`, "Cutout
 //! geometry".
 
+use crate::gpu::buffers::placeholder_texture;
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{component_row, ComponentIngest, OpacityIngest};
@@ -93,22 +94,7 @@ impl OpacityBaker {
     /// Creates the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {
         let shader = ReflectedShader::compose(&["scene/opacity"], &[]);
-        let no_texture = device
-            .create_texture(&wgpu::TextureDescriptor {
-                label: Some("kickstart-rt no opacity texture"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::R8Unorm,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-            .create_view(&Default::default());
+        let no_texture = placeholder_texture(device, "kickstart-rt no opacity texture");
         OpacityBaker {
             pipeline: shader.pipeline(device, "kickstart-rt opacity bake", "opacity_bake"),
             no_texture,

@@ -112,11 +112,10 @@ fn lbvh_compact_mark(@builtin(local_invocation_index) lid: u32,
     }
     let i = g - seg.key_base;
     let at = 4u * (seg.node_base + i);
-    let c = cp_copy_at(i);
     for (var e = 0u; e < 4u; e++) {
         let v = nodes[at + e];
         for (var k = 0u; k < 4u; k++) {
-            atomicStore(&work[c + 4u * e + k], v[k]);
+            atomicStore(&work[cp_copy_at(i) + 4u * e + k], v[k]);
         }
     }
     let refs = vec2<u32>(nodes[at].w, nodes[at + 1u].w);
@@ -203,11 +202,10 @@ fn lbvh_compact_scatter(@builtin(local_invocation_index) lid: u32,
     if to == DEAD {
         return;
     }
-    let c = cp_copy_at(i);
     var node: array<vec4<u32>, 4>;
     for (var e = 0u; e < 4u; e++) {
         for (var k = 0u; k < 4u; k++) {
-            node[e][k] = atomicLoad(&work[c + 4u * e + k]);
+            node[e][k] = atomicLoad(&work[cp_copy_at(i) + 4u * e + k]);
         }
     }
     for (var side = 0u; side < 2u; side++) {
