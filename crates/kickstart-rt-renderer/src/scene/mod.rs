@@ -5,15 +5,22 @@
 //! Meshes and instances are kept apart on purpose: the SDK registers one geometry (one BLAS) per
 //! [`Mesh`] and one instance per [`Instance`], so a glTF mesh used by several nodes is built once.
 
+pub mod animation;
 pub mod builtin;
+pub mod character;
 pub mod crowd;
 pub mod cutout;
 mod framing;
 pub mod grove;
+pub mod pose;
+pub mod rig;
 pub mod statue;
 pub mod town;
 
 use glam::{Affine3A, Vec3};
+
+use animation::Animation;
+use rig::{Deform, Node, Rig, Skin};
 
 /// One triangle mesh in its own (geometry) space: what the SDK builds one BLAS from.
 #[derive(Debug, Clone)]
@@ -33,6 +40,9 @@ pub struct Mesh {
     pub uvs: Vec<[f32; 2]>,
     /// The rest of the surface description: metallic-roughness, emission, textures.
     pub material: Material,
+    /// Joint influences and morph targets; empty for a rigid mesh. A mesh that deforms is
+    /// posed through its [`Rig`]; `positions` are its rest (bind) pose.
+    pub deform: Deform,
 }
 
 /// A metallic-roughness material (glTF 2.0's core model; OBJ/MTL maps onto it). Texture values
@@ -165,6 +175,7 @@ impl Mesh {
             color,
             uvs: Vec::new(),
             material: Material::default(),
+            deform: Deform::default(),
         })
     }
 
@@ -356,6 +367,15 @@ pub struct Scene {
     /// [`Scene::lights_or_default`] adds a sun, and [`Scene::light_the_view`] a light at the
     /// camera.
     pub lights: Vec<Light>,
+    /// The node hierarchy skins and animations refer to (a file's nodes, in its order); empty
+    /// for a scene without deformable meshes (instances carry their own transforms).
+    pub nodes: Vec<Node>,
+    /// The skins the rigs pose with.
+    pub skins: Vec<Skin>,
+    /// The deformable instances: skinned or morphing meshes, each posed every frame.
+    pub rigs: Vec<Rig>,
+    /// Keyframe animations; `ksrt` plays the first, looping ([`Scene::pose_at`]).
+    pub animations: Vec<Animation>,
 }
 
 impl Scene {
@@ -420,8 +440,8 @@ impl Scene {
                 transform: Affine3A::IDENTITY,
             }],
             camera: self.camera,
-            textures: Vec::new(),
             lights: self.lights.clone(),
+            ..Default::default()
         })
     }
 

@@ -96,6 +96,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
             color,
             uvs,
             material,
+            deform: Default::default(),
         });
     }
     Ok(scene)
