@@ -87,6 +87,13 @@
 //! | `InstanceTask` | `input.initial_tile_color` | finite, ≥ 0 | otherwise |
 //! | `GeometryTask` | `input.components` (Update) | the registered triangle count | another count (the BVH is refitted) |
 //! | `BvhBuildTask` | `max_blas_build_count` | ≥ 1 | 0 |
+//! | `SkinningTask` | `vertex_count` | ≤ 64 × `max_compute_workgroups_per_dimension` | more (split the mesh) |
+//! | `SkinningTask` | `rest_positions.format` | `Float32x3`, `Float32x4` | other formats |
+//! | `SkinningTask` | `*.offset`, `*.stride` of every attribute and the output | multiples of 4; stride ≥ the value's size; every value inside the buffer | misaligned; smaller; past the end |
+//! | `SkinningTask` | `*.buffer` | `STORAGE` usage; a window ≤ `max_storage_buffer_binding_size` | missing; larger ([`Error::OutOfDeviceMemory`]) |
+//! | `SkinningTask` | `output.buffer` | none of the task's input buffers | the same buffer |
+//! | `SkinningTask` | `joint_matrices` | finite; ≤ `MAX_JOINTS`; one at least when `influences` is set | NaN/∞; more; none |
+//! | `SkinningTask` | `morph_weights`, `morph_targets.count` | one finite weight a target; ≤ `MAX_MORPH_TARGETS` targets | another count; NaN/∞; more |
 //! | `TraceRaysTask` | `rays`, `hits` | `STORAGE` usage | missing |
 //! | `TraceRaysTask` | `rays_offset`, `hits_offset` | multiples of `min_storage_buffer_offset_alignment`; `ray_count` × 32 bytes fit | misaligned; past the end |
 //! | `TraceRaysTask` | `instance_mask` | bits 0–1 | other bits |

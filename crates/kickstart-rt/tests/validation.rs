@@ -1736,3 +1736,140 @@ proptest! {
         );
     }
 }
+
+/// A valid skinning task of 3 vertices (one joint, full weight), its buffers storage-bound.
+fn skinning_task() -> SkinningTask {
+    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+    let rest = buffer(bytemuck::cast_slice(&[0.5f32; 9]), storage);
+    let joints = buffer(bytemuck::cast_slice(&[0u16; 12]), storage);
+    let weights = buffer(bytemuck::cast_slice(&[[1.0f32, 0.0, 0.0, 0.0]; 3]), storage);
+    let out = buffer(&[0u8; 36], storage);
+    SkinningTask {
+        name: "skin".into(),
+        rest_positions: SkinAttribute {
+            buffer: rest,
+            offset: 0,
+            stride: 12,
+            format: VertexFormat::Float32x3,
+        },
+        vertex_count: 3,
+        influences: Some(SkinInfluences {
+            joints: SkinAttribute {
+                buffer: joints,
+                offset: 0,
+                stride: 8,
+                format: JointFormat::Uint16x4,
+            },
+            weights: SkinAttribute {
+                buffer: weights,
+                offset: 0,
+                stride: 16,
+                format: WeightFormat::Float32x4,
+            },
+        }),
+        joint_matrices: vec![Mat4::from_translation(Vec3::X)],
+        morph_targets: None,
+        morph_weights: Vec::new(),
+        output: SkinningOutput {
+            buffer: out,
+            offset: 0,
+            stride: 12,
+        },
+    }
+}
+
+fn skinning_row(field: &str, f: impl FnOnce(&mut SkinningTask)) {
+    let ctx = context(2);
+    let mut t = skinning_task();
+    f(&mut t);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(t);
+    expect_field(&ctx, c, "SkinningTask", field);
+}
+
+#[test]
+fn row_skinning_layouts() {
+    skinning_row("rest_positions.format", |t| {
+        t.rest_positions.format = VertexFormat::Float16x4
+    });
+    skinning_row("rest_positions.offset", |t| t.rest_positions.offset = 2);
+    skinning_row("rest_positions.offset", |t| t.rest_positions.offset = 4);
+    skinning_row("influences.joints.stride", |t| {
+        if let Some(i) = &mut t.influences {
+            i.joints.stride = 4;
+        }
+    });
+    skinning_row("influences.weights.offset", |t| {
+        if let Some(i) = &mut t.influences {
+            i.weights.offset = 16;
+        }
+    });
+    skinning_row("output.stride", |t| t.output.stride = 10);
+    skinning_row("output.offset", |t| t.output.offset = 4);
+}
+
+#[test]
+fn row_skinning_buffers() {
+    skinning_row("influences.joints.buffer", |t| {
+        if let Some(i) = &mut t.influences {
+            i.joints.buffer = buffer(&[0u8; 24], wgpu::BufferUsages::COPY_SRC);
+        }
+    });
+    skinning_row("output.buffer", |t| {
+        t.output.buffer = t.rest_positions.buffer.clone()
+    });
+}
+
+#[test]
+fn row_skinning_matrices_and_weights() {
+    skinning_row("joint_matrices[1]", |t| {
+        t.joint_matrices
+            .push(Mat4::from_translation(Vec3::new(f32::NAN, 0.0, 0.0)))
+    });
+    skinning_row("joint_matrices", |t| t.joint_matrices.clear());
+    skinning_row("morph_weights", |t| t.morph_weights.push(1.0));
+    skinning_row("morph_weights[0]", |t| {
+        t.morph_targets = Some(MorphTargetsInput {
+            buffer: t.rest_positions.buffer.clone(),
+            offset: 0,
+            stride: 12,
+            target_stride: 36,
+            count: 1,
+        });
+        t.morph_weights = vec![f32::INFINITY];
+    });
+    skinning_row("morph_targets.count", |t| {
+        t.morph_targets = Some(MorphTargetsInput {
+            buffer: t.rest_positions.buffer.clone(),
+            offset: 0,
+            stride: 12,
+            target_stride: 0,
+            count: SkinningTask::MAX_MORPH_TARGETS + 1,
+        });
+    });
+}
+
+/// A refused skinning task leaves the output it names untouched and the context usable: the
+/// same task, corrected, then poses the vertices.
+#[test]
+fn a_refused_skinning_task_writes_nothing() {
+    let ctx = context(2);
+    let mut bad = skinning_task();
+    bad.joint_matrices[0].x_axis.y = f32::NAN;
+    let out = bad.output.buffer.clone();
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(bad.clone());
+    let mut e = encoder();
+    assert!(matches!(
+        ctx.build_gpu_task(c, &mut e),
+        Err(Error::InvalidInput { .. })
+    ));
+    submit(e);
+    assert_eq!(read_buffer(&out), vec![0u8; 36]);
+    bad.joint_matrices[0] = Mat4::from_translation(Vec3::X);
+    let mut c = ctx.create_task_container();
+    c.schedule_bvh_task(bad);
+    build_submit_complete(&ctx, c);
+    let posed: Vec<f32> = bytemuck::pod_collect_to_vec(&read_buffer(&out));
+    assert_eq!(posed, [1.5, 0.5, 0.5, 1.5, 0.5, 0.5, 1.5, 0.5, 0.5]);
+}

@@ -19,6 +19,8 @@ use crate::trace::tasks::TracePasses;
 
 /// What one container asks for, checked: the record phase carries it out in this order.
 pub(super) struct FramePlan<'c> {
+    /// Skinning tasks, recorded before everything else.
+    pub skins: Vec<&'c SkinningTask>,
     /// Geometry registrations and updates, with each component's byte extents.
     pub geometries: Vec<(&'c GeometryTask, Vec<ComponentExtent>)>,
     /// Instance registrations and updates.
@@ -54,6 +56,7 @@ pub(super) fn plan<'c>(
     limits: &wgpu::Limits,
 ) -> Result<FramePlan<'c>> {
     let mut plan = FramePlan {
+        skins: Vec::new(),
         geometries: Vec::new(),
         instances: Vec::new(),
         build: None,
@@ -79,6 +82,10 @@ pub(super) fn plan<'c>(
             BvhTask::Build(t) => {
                 validate::bvh_build(t)?;
                 plan.build = Some(*t);
+            }
+            BvhTask::Skin(t) => {
+                validate::skinning_task(t, limits)?;
+                plan.skins.push(t);
             }
         }
     }

@@ -80,6 +80,11 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
         s.geometries.slot_count(),
         s.instances.slot_count(),
     );
+    if !plan.skins.is_empty() {
+        // Before the ingestions below copy the posed positions.
+        let mut rec = frame.recorder("skinning");
+        s.scene.record_skinning(&mut rec, &plan.skins);
+    }
     let ingestions = allocate_staged(frame, s, plan);
     // Only geometry tasks and queued builds use the BLAS pools' free space and the build
     // scratch: a task with neither gives them back.

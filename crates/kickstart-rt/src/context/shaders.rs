@@ -29,6 +29,7 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         crate::scene::ingest::shader_variants(),
         crate::scene::opacity::shader_variants(),
         crate::scene::prims::shader_variants(),
+        crate::scene::skinning::shader_variants(),
         crate::scene::lbvh::shader_variants(),
         crate::cache::alloc::shader_variants(),
         crate::cache::inject::resolve_shader_variants(),

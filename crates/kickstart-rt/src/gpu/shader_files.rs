@@ -47,6 +47,7 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "scene/lbvh/range_refit",
     "scene/opacity",
     "scene/prims",
+    "scene/skinning",
     "scene/traversal",
     "scene/traversal_ray_query",
     "scene/triangle_box",

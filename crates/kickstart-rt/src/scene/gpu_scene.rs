@@ -18,9 +18,11 @@ use crate::scene::lbvh::{
 use crate::scene::opacity::{OpacityBaker, OpacityMaps};
 use crate::scene::pool::{Move, Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
+use crate::scene::skinning::Skinner;
 use crate::scene::strategy::BuildStrategy;
 use crate::scene::traversal::SceneBuffers;
 use crate::staging::{StagingBuffer, StagingPool};
+use crate::tasks::SkinningTask;
 
 /// Bytes of one triangle of the soup (three `vec4<f32>`); opacity micro-maps count their
 /// pool elements in the same 12 words.
@@ -259,6 +261,8 @@ struct Passes {
     lbvh: Option<Lbvh>,
     /// The opacity micro-map bake (cutout geometry only).
     opacity: Option<OpacityBaker>,
+    /// The skinning pass (skinning tasks only).
+    skinning: Option<Skinner>,
 }
 
 impl Passes {
@@ -566,6 +570,16 @@ impl GpuScene {
             .opacity
             .get_or_insert_with(|| OpacityBaker::new(device));
         baker.record(rec, raw, components, (self.triangles.buffer(), maps));
+    }
+
+    /// Poses the meshes of a task's skinning `tasks` (`shaders/scene/skinning.wgsl`).
+    pub fn record_skinning(&mut self, rec: &mut Recorder<'_>, tasks: &[&SkinningTask]) {
+        let device = &self.device;
+        let skinner = self
+            .passes
+            .skinning
+            .get_or_insert_with(|| Skinner::new(device));
+        skinner.record(rec, tasks);
     }
 
     /// Refuses table sizes past the device's limit (the plan's check of

@@ -9,5 +9,6 @@ pub(crate) mod opacity;
 pub(crate) mod pool;
 pub(crate) mod prims;
 pub(crate) mod reserve;
+pub(crate) mod skinning;
 pub(crate) mod strategy;
 pub(crate) mod traversal;

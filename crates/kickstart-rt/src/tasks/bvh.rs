@@ -330,6 +330,8 @@ pub enum BvhTask {
     Instance(InstanceTask),
     /// See [`BvhBuildTask`].
     Build(BvhBuildTask),
+    /// See [`super::SkinningTask`]: recorded before every geometry task of its container.
+    Skin(Box<super::SkinningTask>),
 }
 
 impl From<GeometryTask> for BvhTask {
@@ -340,6 +342,11 @@ impl From<GeometryTask> for BvhTask {
 impl From<InstanceTask> for BvhTask {
     fn from(t: InstanceTask) -> Self {
         BvhTask::Instance(t)
+    }
+}
+impl From<super::SkinningTask> for BvhTask {
+    fn from(t: super::SkinningTask) -> Self {
+        BvhTask::Skin(Box::new(t))
     }
 }
 impl From<BvhBuildTask> for BvhTask {

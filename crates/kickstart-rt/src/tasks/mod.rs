@@ -5,9 +5,11 @@ mod denoising;
 mod opacity;
 mod preset;
 mod render;
+mod skinning;
 
 pub use bvh::*;
 pub use denoising::*;
 pub use opacity::*;
 pub use preset::*;
 pub use render::*;
+pub use skinning::*;

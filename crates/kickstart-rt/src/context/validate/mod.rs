@@ -396,4 +396,6 @@ pub(crate) fn bvh_build(task: &BvhBuildTask) -> Result<()> {
 mod fuzz;
 mod opacity;
 mod render;
+mod skinning;
 pub(crate) use render::render_task;
+pub(crate) use skinning::skinning_task;
