@@ -1,13 +1,14 @@
-//! `ksrt bench`: BLAS build and refit times, BVH quality (SAH cost against the CPU reference
-//! builder), TLAS build and refit times, and ray throughput, all timed on the GPU with the SDK's
-//! timestamp queries, and the trace tasks (each alone at full and checkerboard resolution, multi-light
-//! shadows against the light count, the four together). Ray generation and other CPU work between
-//! batches is not timed.
+//! `ksrt bench`: BLAS build, refit and skinned-refit times, BVH quality (SAH cost against the CPU
+//! reference builder), TLAS build and refit times, and ray throughput, all timed on the GPU with
+//! the SDK's timestamp queries, and the trace tasks (each alone at full and checkerboard
+//! resolution, multi-light shadows against the light count, the four together). Ray generation
+//! and other CPU work between batches is not timed.
 //!
 //! One job a file: this one holds the options, the statistics and [`run`]; `harness` the device
 //! state and the timing every figure goes through; `scenes` each scene's BLAS, SAH, ray, cache
-//! and trace-task figures and the TLAS figures; `rays` the ray batches; `tasks` the SDK's trace
-//! tasks; `report` the `--json` report's types and a scene's printed figures. The optional
+//! and trace-task figures and the TLAS figures; `skinned` the skinned refit (a rig generated
+//! for every mesh, posed by the SDK's skinning tasks); `rays` the ray batches; `tasks` the SDK's
+//! trace tasks; `report` the `--json` report's types and a scene's printed figures. The optional
 //! passes are in `extras`, the driver peer in `peer`, the denoiser bench (`--denoisers`) in
 //! `denoise`.
 
@@ -33,6 +34,7 @@ mod profile;
 mod rays;
 mod report;
 mod scenes;
+mod skinned;
 mod tasks;
 mod tree_work;
 
@@ -188,7 +190,7 @@ fn tlas_sweep(bench: &Bench, counts: &[u32], bar: &indicatif::ProgressBar) -> Ve
 }
 
 /// The scenes `ksrt bench` measures (none with `--skip-scenes`, the defaults when none is
-/// named), each loaded (and flattened with `--flatten`) before any GPU work, so that a wrong
+/// named), each loaded (flattened with `--flatten`, made opaque with `--opaque`) before any GPU work, so that a wrong
 /// name fails at once.
 fn load_scenes(opts: &BenchOptions) -> AnyResult<(Vec<String>, Vec<Scene>)> {
     let names: Vec<String> = if opts.extras.skip_scenes {
@@ -204,11 +206,17 @@ fn load_scenes(opts: &BenchOptions) -> AnyResult<(Vec<String>, Vec<Scene>)> {
         let loaded = crate::app::progress::with_spinner(true, format!("loading {name}"), || {
             crate::app::scenes::load(name, &opts.scenes_dir)
         })?;
-        scenes.push(if opts.extras.flatten {
+        let mut loaded = if opts.extras.flatten {
             loaded.flattened()?
         } else {
             loaded
-        });
+        };
+        if opts.extras.opaque {
+            for mesh in &mut loaded.meshes {
+                mesh.material.alpha = kickstart_rt_renderer::scene::AlphaMode::Opaque;
+            }
+        }
+        scenes.push(loaded);
         println!("loaded {name} in {:.2} s", start.elapsed().as_secs_f64());
     }
     Ok((names, scenes))

@@ -4,7 +4,7 @@
 /// A part of the default measurements (`--sections`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Section {
-    /// BLAS build (fast-trace and fast-build), refit and SAH cost.
+    /// BLAS build (fast-trace and fast-build), refit, skinned refit and SAH cost.
     Builds,
     /// Primary, AO and diffuse ray batches and the peer workload.
     Rays,

@@ -1,5 +1,5 @@
 //! The default measurements of `ksrt bench`: per scene, the BLAS build (fast-trace and
-//! fast-build), refit and SAH cost against the CPU reference builder, then the ray batches, the
+//! fast-build), refit, skinned refit and SAH cost against the CPU reference builder, then the ray batches, the
 //! peer, the lighting cache and the trace tasks; and the TLAS build and refit over random
 //! instances.
 
@@ -88,6 +88,9 @@ pub(super) fn bench_scene(
         if r.blas_refit.is_some() {
             r.blas_refit_profile = bench.last_profile();
         }
+        r.skinned_refit = attempt(&mut errors, "skinned refit", || {
+            bench.skinned_refit(scene, &uploads)
+        });
         r.tlas_build = attempt(&mut errors, "TLAS build", || {
             bench.tlas_rebuild(scene, &uploads)
         });

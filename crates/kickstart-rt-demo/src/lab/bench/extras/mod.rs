@@ -48,9 +48,15 @@ pub struct ExtraArgs {
     #[arg(long)]
     pub tree_work: bool,
     /// Bake every scene into one mesh in world space under one instance before measuring (as a
-    /// renderer with a single BVH over its whole scene would trace it).
+    /// renderer with a single BVH over its whole scene would trace it). The one mesh has one
+    /// colour and is opaque: materials, textures and cutouts are dropped.
     #[arg(long)]
     pub flatten: bool,
+    /// Trace every mesh opaque: cutout (`MASK`) materials lose their alpha test, so that a
+    /// scene's figures with and without it come from one binary and one call (the alpha
+    /// test's cost is their ratio).
+    #[arg(long)]
+    pub opaque: bool,
     /// Order of the primary rays in the ray batches (the secondary rays follow their primary
     /// hits): `rows`, row by row over the image; `tiles`, 8×8-pixel tiles row by row, pixels row
     /// by row inside a tile (the order a screen-space dispatch of 8×8 workgroups issues them, as
