@@ -92,10 +92,13 @@ impl UploadedCutout {
 }
 
 /// Uploads one mesh, opaque whatever its material (cutouts need the scene's textures:
-/// [`upload_scene`]); the SDK copies out of these buffers, hence `COPY_SRC`.
+/// [`upload_scene`]); the SDK copies out of these buffers, hence `COPY_SRC`, and a posed mesh's
+/// positions are written over its rest pose every frame (`Renderer`), hence `COPY_DST`.
 pub fn upload(device: &wgpu::Device, mesh: &Mesh) -> UploadedMesh {
-    let usage =
-        wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX | wgpu::BufferUsages::COPY_SRC;
+    let usage = wgpu::BufferUsages::VERTEX
+        | wgpu::BufferUsages::INDEX
+        | wgpu::BufferUsages::COPY_SRC
+        | wgpu::BufferUsages::COPY_DST;
     UploadedMesh {
         vertices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(mesh.name.as_str()),
@@ -327,14 +330,35 @@ pub fn schedule_scene(
     build_hint: ksrt::BuildHint,
     instances: bool,
 ) -> SceneHandles {
+    schedule_scene_with(
+        ctx,
+        container,
+        scene,
+        uploads,
+        |_| allow_update,
+        build_hint,
+        instances,
+    )
+}
+
+/// [`schedule_scene`] with `allow_update` chosen per mesh (by index into [`Scene::meshes`]).
+pub fn schedule_scene_with(
+    ctx: &ksrt::ExecuteContext,
+    container: &mut ksrt::TaskContainer,
+    scene: &Scene,
+    uploads: &[UploadedMesh],
+    allow_update: impl Fn(usize) -> bool,
+    build_hint: ksrt::BuildHint,
+    instances: bool,
+) -> SceneHandles {
     let geometries = ctx.create_geometry_handles(uploads.len());
-    for (m, &handle) in uploads.iter().zip(&geometries) {
+    for (k, (m, &handle)) in uploads.iter().zip(&geometries).enumerate() {
         container.schedule_bvh_task(ksrt::GeometryTask {
             operation: ksrt::TaskOperation::Register,
             handle,
             input: ksrt::GeometryInput {
                 build_hint,
-                ..geometry_input(m, allow_update)
+                ..geometry_input(m, allow_update(k))
             },
         });
     }
@@ -355,20 +379,38 @@ pub fn schedule_scene(
     }
 }
 
-/// Schedules the registration of every mesh and instance of `scene` as a renderer's static scene
-/// (no `allow_update`, `BuildHint::Auto`: fast-trace BLASes).
+/// The meshes of `scene` that a rig poses (by index into [`Scene::meshes`]): the ones whose
+/// vertices change every frame.
+pub fn posed_meshes(scene: &Scene) -> Vec<bool> {
+    let mut posed = vec![false; scene.meshes.len()];
+    for rig in &scene.rigs {
+        if let Some(p) = scene
+            .instances
+            .get(rig.instance)
+            .and_then(|i| posed.get_mut(i.mesh))
+        {
+            *p = true;
+        }
+    }
+    posed
+}
+
+/// Schedules the registration of every mesh and instance of `scene` as a renderer's scene
+/// (`BuildHint::Auto`): a mesh a rig poses with `allow_update` (a fast-build BLAS the renderer
+/// refits every frame), every other without (a fast-trace BLAS built once).
 pub fn schedule_static_scene(
     ctx: &ksrt::ExecuteContext,
     container: &mut ksrt::TaskContainer,
     scene: &Scene,
     uploads: &[UploadedMesh],
 ) -> SceneHandles {
-    schedule_scene(
+    let posed = posed_meshes(scene);
+    schedule_scene_with(
         ctx,
         container,
         scene,
         uploads,
-        false,
+        |k| posed.get(k).copied().unwrap_or(false),
         ksrt::BuildHint::Auto,
         true,
     )

@@ -570,11 +570,12 @@ fn mesh_buffers(
                 Some(CutoutSource::Texture { uvs, .. }) => uvs.clone(),
                 _ => crate::upload::uv_buffer(device, m),
             };
+            // `COPY_DST`: a posed mesh's normals are written every frame (`write_normals`).
             let buffer = |bytes: &[u8]| {
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some(m.name.as_str()),
                     contents: bytes,
-                    usage: wgpu::BufferUsages::VERTEX,
+                    usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
                 })
             };
             let material = &m.material;
@@ -917,6 +918,18 @@ impl GpuScene {
         }
     }
 
+    /// Writes the normals of mesh `mesh` (one a vertex, as many as it was uploaded with) for
+    /// the next submission: a posed mesh's, whose positions the caller wrote into the same
+    /// mesh's vertex buffer. Ignored for a mesh out of range or a count that differs.
+    pub fn write_normals(&self, queue: &wgpu::Queue, mesh: usize, normals: &[[f32; 3]]) {
+        if let Some(m) = self.meshes.get(mesh) {
+            let bytes: &[u8] = bytemuck::cast_slice(normals);
+            if bytes.len() as u64 == m.normals.size() {
+                queue.write_buffer(&m.normals, 0, bytes);
+            }
+        }
+    }
+
     fn draw_all(&self, pass: &mut wgpu::RenderPass<'_>, with_material: bool) {
         self.draw(pass, with_material, |_| true)
     }
@@ -945,7 +958,7 @@ impl GpuScene {
         }
     }
 
-    /// Records the sun's shadow map (the scene is static: once is enough, but it is cheap).
+    /// Records the sun's shadow map (once for a still scene; every frame the pose changes).
     pub fn record_shadow_map(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("ksrt shadow map"),
