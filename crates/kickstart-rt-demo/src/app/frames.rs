@@ -38,10 +38,10 @@ pub fn new_renderer(
     scene: &Scene,
     opts: &RendererOptions,
 ) -> AnyResult<Renderer> {
-    let (ctx, uploads) = Renderer::register(device, queue, scene, opts)?;
+    let (ctx, registered) = Renderer::register(device, queue, scene, opts)?;
     device.poll(wgpu::PollType::wait_indefinitely())?;
     Ok(Renderer::from_registered(
-        device, queue, scene, opts, ctx, uploads,
+        device, queue, scene, opts, ctx, registered,
     ))
 }
 

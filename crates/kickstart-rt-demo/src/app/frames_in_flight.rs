@@ -405,6 +405,7 @@ mod tests {
                 gpu_timing: false,
                 frames_in_flight,
                 debug_views: Vec::new(),
+                time: 0.0,
             },
         )
         .unwrap_or_else(|e| panic!("{frames_in_flight} in flight: {e}"))
@@ -493,6 +494,7 @@ mod tests {
                 gpu_timing: false,
                 frames_in_flight: 4,
                 debug_views: Vec::new(),
+                time: 0.0,
             },
         );
         assert!(bad

@@ -40,6 +40,8 @@ pub struct LitOptions {
     /// SDK debug views traced after the last frame on the same context (so the lighting
     /// cache's view shows what the frames injected), into [`LitResult::debug`].
     pub debug_views: Vec<DebugView>,
+    /// Scene time, seconds, of every frame: an animated scene's pose (`ksrt render --time`).
+    pub time: f32,
 }
 
 /// One image of the render: its file stem, texels and how to display them.
@@ -99,6 +101,7 @@ pub fn render(
     // A batch render waits for its frames anyway: only the pipelines its effects use.
     ropts.prepare_pipelines = false;
     let mut renderer = crate::app::frames::new_renderer(device, queue, scene, &ropts)?;
+    renderer.set_time(opts.time);
     let frames = opts.frames.max(1);
     let bar = crate::app::progress::bar(
         opts.progress,

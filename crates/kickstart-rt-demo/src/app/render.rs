@@ -44,8 +44,17 @@ pub struct RenderArgs {
     pub preset: kickstart_rt::Preset,
 }
 
-/// Runs `ksrt render`.
+/// Runs `ksrt render` at scene time 0.
 pub fn run(args: RenderArgs) -> AnyResult<()> {
+    run_at(args, 0.0)
+}
+
+/// Runs `ksrt render` with an animated scene posed at `time` seconds (`--time`; the first
+/// animation, looping): the frames, the debug views and the CPU reference all show that pose.
+pub fn run_at(args: RenderArgs, time: f32) -> AnyResult<()> {
+    if !time.is_finite() {
+        return Err(format!("--time {time}: must be a finite number of seconds").into());
+    }
     let effects = frame::Effects::parse(&args.effects)?;
     frames_in_flight::check_depth(args.frames_in_flight)?;
     let camera = args
@@ -95,6 +104,7 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
             gpu_timing: true,
             frames_in_flight: args.frames_in_flight,
             debug_views: views,
+            time,
         },
     )?;
     println!(
@@ -138,8 +148,10 @@ pub fn run(args: RenderArgs) -> AnyResult<()> {
         return Ok(());
     }
     if args.debug_view.is_none() {
+        // The CPU reference traces the same pose: the same CPU skinning as the renderer's.
+        let posed = (!scene.rigs.is_empty()).then(|| scene.posed(time));
         cpu_reference::render(
-            &scene,
+            posed.as_ref().unwrap_or(&scene),
             &cpu_reference::RenderOptions {
                 width,
                 height,

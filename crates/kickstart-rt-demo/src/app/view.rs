@@ -118,6 +118,9 @@ struct App {
     show: usize,
     debug: usize,
     frames: u32,
+    /// When the window's animation clock started: an animated scene plays its first animation
+    /// from it, looping, whatever the frame rate.
+    started: Instant,
 }
 
 /// Runs the viewer until the window closes (or `--frames` frames were drawn).
@@ -172,6 +175,7 @@ pub fn run(args: ViewArgs) -> AnyResult<()> {
         show: 0,
         debug: 0,
         frames: 0,
+        started: Instant::now(),
     };
     event_loop.run_app(&mut app)?;
     match app.error {
@@ -361,6 +365,12 @@ impl App {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("ksrt view frame"),
             });
+        // Wrapped in f64 first, so that an f32 time keeps its precision after hours of play.
+        let duration = f64::from(self.scene.animation_duration());
+        if duration > 0.0 {
+            let t = (now - self.started).as_secs_f64().rem_euclid(duration);
+            gpu.renderer.set_time(t as f32);
+        }
         let tasks = gpu
             .renderer
             .record_frame(&gpu.device, &gpu.queue, &mut encoder, &camera)?;

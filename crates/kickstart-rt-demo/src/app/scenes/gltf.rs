@@ -1,7 +1,8 @@
 //! glTF 2.0 (`.gltf` + buffers, `.glb`) loading: the default scene's node hierarchy, every
 //! triangle primitive as a mesh, one instance per node that uses it, materials (factors,
 //! textures, alpha mode: `MASK` cutouts), the first perspective camera, and the
-//! `KHR_lights_punctual` lights.
+//! `KHR_lights_punctual` lights; skins, morph targets and animations ([`gltf_skin`],
+//! [`gltf_anim`]) for the meshes they deform.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -14,8 +15,10 @@ use kickstart_rt_renderer::scene::{
     Material, Mesh, Scene, Texture,
 };
 
-use super::gltf_alpha;
+use kickstart_rt_renderer::scene::rig::Rig;
+
 use super::SceneError;
+use super::{gltf_alpha, gltf_anim, gltf_skin};
 
 /// Loads a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
@@ -54,12 +57,14 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
         .map(|b| load_buffer(path, &b, file.blob.as_deref()))
         .collect::<Result<Vec<_>, _>>()?;
 
-    let mut scene = Scene::default();
-    let mut textures = TextureCache::default();
-    let mut skipped = 0usize;
-    // glTF mesh index → the scene meshes of its triangle primitives, converted on first use so
-    // meshes no node references cost nothing.
-    let mut converted: HashMap<usize, Vec<usize>> = HashMap::new();
+    let mut load = Load {
+        path,
+        buffers: &buffers,
+        scene: Scene::default(),
+        textures: TextureCache::default(),
+        converted: HashMap::new(),
+        skipped: 0,
+    };
     let roots = root_nodes(&file);
     let mut visited = vec![false; file.nodes().len()];
     let mut stack: Vec<(gltf::Node, Affine3A)> = roots
@@ -85,34 +90,9 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             )));
         }
         if let Some(mesh) = node.mesh() {
-            let ids = match converted.get(&mesh.index()) {
-                Some(ids) => ids.clone(),
-                None => {
-                    let mut ids = Vec::new();
-                    for prim in mesh.primitives() {
-                        match convert_primitive(&mesh, &prim, &buffers).map_err(err)? {
-                            Some(mut m) => {
-                                m.material = textures.material(
-                                    path,
-                                    &prim.material(),
-                                    &buffers,
-                                    &mut scene,
-                                )?;
-                                ids.push(scene.meshes.len());
-                                scene.meshes.push(m);
-                            }
-                            None => skipped += 1,
-                        }
-                    }
-                    converted.insert(mesh.index(), ids.clone());
-                    ids
-                }
-            };
-            scene.instances.extend(ids.into_iter().map(|mesh| Instance {
-                mesh,
-                transform: world,
-            }));
+            load.add_mesh_node(&node, &mesh, world)?;
         }
+        let scene = &mut load.scene;
         if scene.camera.is_none() {
             if let Some(cam) = node.camera() {
                 match cam.projection() {
@@ -136,6 +116,12 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             stack.push((child, world));
         }
     }
+    let Load {
+        mut scene,
+        textures,
+        skipped,
+        ..
+    } = load;
     bound_light_ranges(&mut scene);
     textures.log_blended(path);
     if scene.instances.is_empty() && skipped > 0 {
@@ -143,7 +129,118 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, SceneError> {
             "no triangles to render: all {skipped} primitive(s) the scene uses are points or lines (or lack positions)"
         )));
     }
+    read_rigs(&file, &buffers, &mut scene).map_err(err)?;
     Ok(scene)
+}
+
+/// The node hierarchy, skins and animations of the file into `scene`, kept only where a rig
+/// (a skinned or morphing mesh) uses them, then every rig checked against its mesh and skin.
+fn read_rigs(file: &gltf::Document, buffers: &[Vec<u8>], scene: &mut Scene) -> Result<(), String> {
+    if scene.rigs.is_empty() {
+        return Ok(());
+    }
+    scene.nodes = gltf_skin::read_nodes(file)?;
+    scene.skins = gltf_skin::read_skins(file, buffers)?;
+    scene.animations = gltf_anim::read_animations(file, buffers)?;
+    scene.check_rigs()
+}
+
+/// A glTF being loaded: the scene so far and what its meshes share.
+struct Load<'a> {
+    path: &'a Path,
+    buffers: &'a [Vec<u8>],
+    scene: Scene,
+    textures: TextureCache,
+    /// glTF mesh index → the scene meshes of its triangle primitives, converted on first use
+    /// so meshes no node references cost nothing (rigid meshes only: a deformed one is posed
+    /// per node, so each node gets its own copy).
+    converted: HashMap<usize, Vec<usize>>,
+    /// Primitives without triangles.
+    skipped: usize,
+}
+
+impl Load<'_> {
+    /// The instances of glTF mesh `mesh` on `node`, placed at `world`: a rigid mesh's shared
+    /// scene meshes, or, for a node with a skin or a mesh with morph targets, a copy of each
+    /// primitive with its deformation and a rig that poses it.
+    fn add_mesh_node(
+        &mut self,
+        node: &gltf::Node,
+        mesh: &gltf::Mesh,
+        world: Affine3A,
+    ) -> Result<(), SceneError> {
+        let path = self.path;
+        let err = |what: String| SceneError::new(path, what);
+        let morphs = mesh.primitives().any(|p| p.morph_targets().len() > 0);
+        let skin = node.skin().map(|s| s.index());
+        if skin.is_none() && !morphs {
+            let ids = match self.converted.get(&mesh.index()) {
+                Some(ids) => ids.clone(),
+                None => {
+                    let ids = self.convert_mesh(mesh, None)?;
+                    self.converted.insert(mesh.index(), ids.clone());
+                    ids
+                }
+            };
+            self.scene
+                .instances
+                .extend(ids.into_iter().map(|mesh| Instance {
+                    mesh,
+                    transform: world,
+                }));
+            return Ok(());
+        }
+        // The pose is computed in the mesh's space through the inverse of this transform.
+        if world.matrix3.determinant().abs() < f32::MIN_POSITIVE {
+            return Err(err(format!(
+                "node {}: the transform of a skinned or morphing mesh is singular",
+                node.index()
+            )));
+        }
+        for id in self.convert_mesh(mesh, Some(skin.is_some()))? {
+            self.scene.instances.push(Instance {
+                mesh: id,
+                transform: world,
+            });
+            self.scene.rigs.push(Rig {
+                instance: self.scene.instances.len() - 1,
+                node: node.index(),
+                skin,
+            });
+        }
+        Ok(())
+    }
+
+    /// Converts the triangle primitives of `mesh` into scene meshes with their materials;
+    /// `deform: Some(skinned)` reads their deformation too. Returns their indices.
+    fn convert_mesh(
+        &mut self,
+        mesh: &gltf::Mesh,
+        deform: Option<bool>,
+    ) -> Result<Vec<usize>, SceneError> {
+        let path = self.path;
+        let err = |what: String| SceneError::new(path, what);
+        let mut ids = Vec::new();
+        for prim in mesh.primitives() {
+            let Some(mut m) = convert_primitive(mesh, &prim, self.buffers).map_err(err)? else {
+                self.skipped += 1;
+                continue;
+            };
+            if let Some(skinned) = deform {
+                m.deform = gltf_skin::read_deform(&m.name, mesh, &prim, self.buffers, skinned)
+                    .map_err(err)?;
+            }
+            m.material = self.textures.material(
+                self.path,
+                &prim.material(),
+                self.buffers,
+                &mut self.scene,
+            )?;
+            ids.push(self.scene.meshes.len());
+            self.scene.meshes.push(m);
+        }
+        Ok(ids)
+    }
 }
 
 /// The nodes the hierarchy starts from: the default scene's (else the first scene's), or, in a
@@ -420,7 +517,7 @@ fn percent_decode(uri: &str) -> String {
 }
 
 /// Standard base64 (RFC 4648, padding optional); `None` on any other character.
-fn decode_base64(s: &str) -> Option<Vec<u8>> {
+pub(super) fn decode_base64(s: &str) -> Option<Vec<u8>> {
     let mut out = Vec::with_capacity(s.len() * 3 / 4);
     let (mut acc, mut bits) = (0u32, 0u32);
     for c in s.bytes().filter(|&c| c != b'=') {
@@ -548,6 +645,7 @@ fn convert_primitive(
         color: Vec3::new(r, g, b),
         uvs,
         material: Material::default(),
+        deform: Default::default(),
     }))
 }
 
@@ -580,7 +678,7 @@ where
 /// `offset + stride · (count − 1) + size` unchecked, which a count of 0 or a huge count
 /// overflows. Sparse accessors and accessors without a view are left to the reader, which
 /// bounds-checks them.
-fn check_accessor(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), String> {
+pub(super) fn check_accessor(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), String> {
     let count = accessor.count();
     if count == 0 {
         return Err(format!("accessor {} has a count of 0", accessor.index()));

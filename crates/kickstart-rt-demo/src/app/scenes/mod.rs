@@ -3,6 +3,9 @@
 
 mod gltf;
 mod gltf_alpha;
+mod gltf_anim;
+mod gltf_skin;
+mod gltf_write;
 mod guard;
 mod obj;
 mod texture;
@@ -10,7 +13,7 @@ mod texture;
 use std::path::{Path, PathBuf};
 
 use kickstart_rt_renderer::error::AnyResult;
-use kickstart_rt_renderer::scene::{builtin, crowd, grove, statue, town, Scene};
+use kickstart_rt_renderer::scene::{builtin, character, crowd, grove, statue, town, Scene};
 
 /// A loading error: which file and what is wrong with it.
 #[derive(Debug, Clone)]
@@ -46,6 +49,7 @@ pub const SCENE_NAMES: &[(&str, Option<&str>)] = &[
     ("cornell", None),
     ("window-room", None),
     ("grove", None),
+    ("dancers", None),
     ("town", None),
     ("crowd", None),
     ("statue", None),
@@ -98,6 +102,7 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
         "cornell" => return Ok(builtin::cornell_box()),
         "window-room" => return Ok(builtin::window_room()),
         "grove" => return Ok(grove::grove()),
+        "dancers" => return dancers(),
         "town" => return Ok(town::town()),
         "crowd" => return Ok(crowd::crowd()),
         "statue" => return Ok(statue::statue()),
@@ -137,6 +142,21 @@ pub fn load(name_or_path: &str, scenes_dir: &Path) -> Result<Scene, SceneError> 
         ));
     }
     load_file(path)
+}
+
+/// The built-in `dancers`: the generated skinned characters ([`character::dancers`]) written
+/// as a `.gltf` by [`gltf_write::to_gltf`] and read back by the glTF loader, so that what a
+/// file's skins, morph targets and animations go through is what this scene shows; the
+/// generator's floor comes through the file too, its sun and camera are taken as generated.
+pub fn dancers() -> Result<Scene, SceneError> {
+    let path = Path::new("dancers (generated).gltf");
+    let generated = character::dancers().map_err(|e| SceneError::new(path, e))?;
+    let bytes = gltf_write::to_gltf(&generated).map_err(|e| SceneError::new(path, e))?;
+    let mut scene = gltf::load_from_bytes(path, &bytes)?;
+    scene.name = generated.name;
+    scene.lights = generated.lights;
+    scene.camera = generated.camera;
+    Ok(scene)
 }
 
 /// Loads a `.gltf`, `.glb` or `.obj` file by its extension.
@@ -186,5 +206,7 @@ pub fn load_scene(name: &str, scenes: Option<PathBuf>) -> AnyResult<Scene> {
 mod asset_tests;
 #[cfg(test)]
 mod fuzz_tests;
+#[cfg(test)]
+mod skin_tests;
 #[cfg(test)]
 mod tests;

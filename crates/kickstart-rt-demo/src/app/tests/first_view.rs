@@ -37,6 +37,7 @@ fn render(
             gpu_timing: false,
             frames_in_flight: 1,
             debug_views: views.to_vec(),
+            time: 0.0,
         },
     )
     .unwrap_or_else(|e| panic!("{}: {e}", scene.name))

@@ -266,6 +266,7 @@ fn render(scene: &Scene, camera: &Camera, size: (u32, u32), frames: u32) -> LitR
             gpu_timing: false,
             frames_in_flight: 1,
             debug_views: Vec::new(),
+            time: 0.0,
         },
     )
     .unwrap_or_else(|e| panic!("{}: {e}", scene.name))
