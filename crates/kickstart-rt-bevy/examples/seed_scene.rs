@@ -10,7 +10,8 @@
 //! ```
 //!
 //! `--out FILE.png` saves the last frame; `--effects LIST` picks the effects on at start
-//! (comma-separated from reflections, gi, ao, shadows, denoise; `none` for none).
+//! (comma-separated from reflections, gi, ao, shadows, denoise; `none` for none); `--preset
+//! performance|balanced|quality` the SDK's preset (quality by default).
 //!
 //! Keys: R reflections, G GI, O ambient occlusion, S shadows, D denoising, Space pauses the
 //! camera. The window's title shows which are on.
@@ -47,7 +48,8 @@ fn main() -> AppExit {
         Ok(o) => o,
         Err(e) => {
             eprintln!(
-                "seed_scene: {e}\nusage: seed_scene [--frames N] [--headless] [--size WxH] [--timings]"
+                "seed_scene: {e}\nusage: seed_scene [--frames N] [--headless] [--size WxH] \
+                 [--timings] [--out FILE.png] [--effects LIST] [--preset NAME]"
             );
             return AppExit::error();
         }
@@ -118,7 +120,14 @@ fn parse_args() -> Result<Options, String> {
             "--out" => options.out = Some(args.next().ok_or("--out needs a file name")?),
             "--effects" => {
                 let list = args.next().ok_or("--effects needs a list")?;
-                options.effects = parse_effects(&list)?;
+                options.effects = RayTracedLighting {
+                    preset: options.effects.preset,
+                    ..parse_effects(&list)?
+                };
+            }
+            "--preset" => {
+                let name = args.next().ok_or("--preset needs a name")?;
+                options.effects.preset = name.parse()?;
             }
             "--headless" => options.headless = true,
             "--timings" => options.timings = true,
@@ -199,12 +208,14 @@ fn toggle_effects(
         let on = |b: bool| if b { "on" } else { "off" };
         for mut window in &mut windows {
             window.title = format!(
-                "kickstart-rt — [R]eflections {} [G]I {} A[O] {} [S]hadows {} [D]enoise {}",
+                "kickstart-rt — [R]eflections {} [G]I {} A[O] {} [S]hadows {} [D]enoise {} \
+                 ({} preset)",
                 on(rt.reflections),
                 on(rt.gi),
                 on(rt.ao),
                 on(rt.shadows),
-                on(rt.denoise)
+                on(rt.denoise),
+                rt.preset.name()
             );
         }
     }

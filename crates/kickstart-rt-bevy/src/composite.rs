@@ -19,6 +19,9 @@ pub(crate) struct CompositeParams {
     pub to_sun: [f32; 4],
     pub sun: [f32; 4],
     pub effects: [u32; 4],
+    /// Per signal, where the composite reads it in each pixel's block (see `traced_pixel` in
+    /// `shaders/composite.wgsl`).
+    pub traced_pixels: [u32; 4],
 }
 
 /// The composite's pipelines, one per target format.

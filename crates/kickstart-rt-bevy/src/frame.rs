@@ -172,7 +172,7 @@ pub(crate) fn ray_traced_lighting(
         }
     }
 
-    let params = composite_params(extracted, camera, settings, scene.sun);
+    let params = composite_params(extracted, camera, settings, scene.sun, resources.frame);
     let signals = if settings.denoise {
         &resources.denoised
     } else {
@@ -205,6 +205,18 @@ struct SdkInputs<'a> {
     view: ksrt::ViewInfo,
 }
 
+/// The traced-pixel mode of each effect this frame (reflections, GI, AO, shadow): the camera's
+/// preset's, its phase following the frame; the same for a trace and its denoiser.
+pub(crate) fn rates(settings: &RayTracedLighting, frame: u32) -> [ksrt::HalfResolutionMode; 4] {
+    [
+        ksrt::Effect::Specular,
+        ksrt::Effect::Diffuse,
+        ksrt::Effect::AmbientOcclusion,
+        ksrt::Effect::Shadow,
+    ]
+    .map(|effect| settings.preset.half_resolution_mode(effect, frame))
+}
+
 /// The camera's SDK tasks: injection, then each enabled effect's trace and denoiser.
 fn tasks(
     ctx: &ksrt::ExecuteContext,
@@ -225,9 +237,10 @@ fn tasks(
     };
     let mut c = ctx.create_task_container();
     // Bevy's lit image at this point holds Bevy's own light only (the composite comes after).
-    c.schedule_render_task(ksrt::RenderTask::DirectLightingInjection(
-        ksrt::DirectLightingInjectionTask::new(depth(), inputs.lit.clone(), inputs.view),
-    ));
+    let mut injection =
+        ksrt::DirectLightingInjectionTask::new(depth(), inputs.lit.clone(), inputs.view);
+    injection.injection_resolution_stride = settings.preset.injection_resolution_stride();
+    c.schedule_render_task(ksrt::RenderTask::DirectLightingInjection(injection));
     let mut common = ksrt::TraceTaskCommon::new(depth(), normal());
     common.roughness.texture = Some(r.normal_roughness.clone());
     common.specular.texture = Some(r.specular.clone());
@@ -235,6 +248,7 @@ fn tasks(
     common.view = inputs.view;
     common.ray_offset.offset_type = ksrt::RayOffsetType::CamDistance;
     common.debug_parameters.frame_index = r.frame;
+    let rates = rates(settings, r.frame);
     let denoise = |i: usize| ksrt::DenoiseTaskCommon {
         context: r.denoisers[i],
         viewport: None,
@@ -251,92 +265,122 @@ fn tasks(
             scale: glam::Vec3::new(-1.0, -1.0, 0.0),
         }),
         view: inputs.view,
-        half_resolution_mode: ksrt::HalfResolutionMode::Off,
+        half_resolution_mode: rates[i],
         mode: if fresh[i] {
             ksrt::DenoiseMode::DiscardHistory
         } else {
             ksrt::DenoiseMode::Continue
         },
     };
+    let at_rate = |i: usize| ksrt::TraceTaskCommon {
+        half_resolution_mode: rates[i],
+        ..common.clone()
+    };
+    for trace in trace_tasks(settings, sun, r, at_rate).into_iter().flatten() {
+        c.schedule_render_task(trace);
+    }
+    if settings.denoise {
+        let on = [
+            settings.reflections,
+            settings.gi,
+            settings.ao,
+            settings.shadows && sun.is_some(),
+        ];
+        for i in (0..4).filter(|i| on[*i]) {
+            c.schedule_render_task(denoise_task(i, denoise(i), r));
+        }
+    }
+    c
+}
+
+/// The denoise task of effect `i` (reflections, GI, AO, shadow): its raw trace into its
+/// denoised texture.
+fn denoise_task(i: usize, common: ksrt::DenoiseTaskCommon, r: &ViewResources) -> ksrt::RenderTask {
+    let (input, output) = (r.traced[i].clone(), r.denoised[i].clone());
+    match i {
+        0 => ksrt::RenderTask::DenoiseSpecular(ksrt::DenoiseSpecularTask {
+            common,
+            input,
+            output,
+        }),
+        1 => ksrt::RenderTask::DenoiseDiffuse(ksrt::DenoiseDiffuseTask {
+            common,
+            input,
+            output,
+        }),
+        2 => ksrt::RenderTask::DenoiseDiffuseOcclusion(ksrt::DenoiseDiffuseOcclusionTask {
+            common,
+            input,
+            output,
+        }),
+        _ => ksrt::RenderTask::DenoiseShadow(ksrt::DenoiseShadowTask {
+            common,
+            input,
+            output,
+        }),
+    }
+}
+
+/// The trace task of each effect on (reflections, GI, AO, shadow), `at_rate(i)` its inputs.
+/// With GI and AO both on at one rate, the AO comes from the diffuse rays (one traversal for
+/// both, as `ksrt` does): the AO slot is then empty, and the GI task writes the AO output.
+fn trace_tasks(
+    settings: &RayTracedLighting,
+    sun: Option<Sun>,
+    r: &ViewResources,
+    at_rate: impl Fn(usize) -> ksrt::TraceTaskCommon,
+) -> [Option<ksrt::RenderTask>; 4] {
     let out = |i: usize| r.traced[i].clone();
-    let denoised = |i: usize| r.denoised[i].clone();
-    if settings.reflections {
-        c.schedule_render_task(ksrt::RenderTask::TraceSpecular(ksrt::TraceSpecularTask {
-            common: common.clone(),
+    let ao_from_diffuse = settings.ao
+        && settings.gi
+        && at_rate(1).half_resolution_mode == at_rate(2).half_resolution_mode;
+    let reflections = settings.reflections.then(|| {
+        ksrt::RenderTask::TraceSpecular(ksrt::TraceSpecularTask {
+            common: at_rate(0),
             output: out(0),
             demodulate_specular: false,
             demodulation_output: None,
-        }));
-        if settings.denoise {
-            c.schedule_render_task(ksrt::RenderTask::DenoiseSpecular(
-                ksrt::DenoiseSpecularTask {
-                    common: denoise(0),
-                    input: out(0),
-                    output: denoised(0),
-                },
-            ));
-        }
-    }
-    if settings.gi {
-        c.schedule_render_task(ksrt::RenderTask::TraceDiffuse(ksrt::TraceDiffuseTask {
-            common: common.clone(),
+        })
+    });
+    let gi = settings.gi.then(|| {
+        ksrt::RenderTask::TraceDiffuse(ksrt::TraceDiffuseTask {
+            common: at_rate(1),
             output: out(1),
             diffuse_brdf: ksrt::DiffuseBrdf::Lambertian,
-            ambient_occlusion: None,
-        }));
-        if settings.denoise {
-            c.schedule_render_task(ksrt::RenderTask::DenoiseDiffuse(ksrt::DenoiseDiffuseTask {
-                common: denoise(1),
-                input: out(1),
-                output: denoised(1),
-            }));
-        }
-    }
-    if settings.ao {
-        c.schedule_render_task(ksrt::RenderTask::TraceAmbientOcclusion(
-            ksrt::TraceAmbientOcclusionTask {
-                common: common.clone(),
+            ambient_occlusion: ao_from_diffuse.then(|| ksrt::DiffuseAmbientOcclusion {
                 output: out(2),
                 ao_radius: settings.ao_radius,
-            },
-        ));
-        if settings.denoise {
-            c.schedule_render_task(ksrt::RenderTask::DenoiseDiffuseOcclusion(
-                ksrt::DenoiseDiffuseOcclusionTask {
-                    common: denoise(2),
-                    input: out(2),
-                    output: denoised(2),
-                },
-            ));
-        }
-    }
-    if let (true, Some(sun)) = (settings.shadows, sun) {
-        c.schedule_render_task(ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
-            common,
+            }),
+        })
+    });
+    let ao = (settings.ao && !ao_from_diffuse).then(|| {
+        ksrt::RenderTask::TraceAmbientOcclusion(ksrt::TraceAmbientOcclusionTask {
+            common: at_rate(2),
+            output: out(2),
+            ao_radius: settings.ao_radius,
+        })
+    });
+    let shadow = match (settings.shadows, sun) {
+        (true, Some(sun)) => Some(ksrt::RenderTask::TraceShadow(ksrt::TraceShadowTask {
+            common: at_rate(3),
             output: out(3),
             light: ksrt::LightInfo::Directional {
                 direction: -glam::Vec3::from_array(sun.to_light.to_array()),
                 angular_extent: settings.sun_angular_diameter,
             },
             enable_first_hit_and_end_search: true,
-        }));
-        if settings.denoise {
-            c.schedule_render_task(ksrt::RenderTask::DenoiseShadow(ksrt::DenoiseShadowTask {
-                common: denoise(3),
-                input: out(3),
-                output: denoised(3),
-            }));
-        }
-    }
-    c
+        })),
+        _ => None,
+    };
+    [reflections, gi, ao, shadow]
 }
-
 /// The composite's uniforms for this view.
 fn composite_params(
     view: &ExtractedView,
     camera: &ExtractedCamera,
     settings: &RayTracedLighting,
     sun: Option<Sun>,
+    frame: u32,
 ) -> CompositeParams {
     let clip_from_world = view.clip_from_view * view.world_from_view.to_matrix().inverse();
     let (to_sun, sun_radiance) = match sun {
@@ -363,7 +407,21 @@ fn composite_params(
                 (true, false) => 2,
             },
         ],
+        // The denoisers fill every pixel; a raw trace at a reduced rate holds this frame's
+        // values only in each block's traced pixel (the rest are older frames').
+        traced_pixels: if settings.denoise {
+            [traced_pixel_code(ksrt::HalfResolutionMode::Off); 4]
+        } else {
+            rates(settings, frame).map(traced_pixel_code)
+        },
     }
+}
+
+/// `mode`'s block as the composite reads it: the block's side (bits 0–7), and its traced
+/// pixel's x (8–15) and y (16–23).
+fn traced_pixel_code(mode: ksrt::HalfResolutionMode) -> u32 {
+    let (x, y) = mode.traced_pixel();
+    mode.block_size() | (x << 8) | (y << 16)
 }
 
 fn size_of(size: UVec2) -> wgpu::Extent3d {

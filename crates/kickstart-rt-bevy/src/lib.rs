@@ -23,6 +23,25 @@
 //!   logged once: Bevy deforms them in its vertex shader, out of the SDK's reach (a compute
 //!   skinning pass feeding the SDK's refit would bring them in). Meshes with compressed
 //!   positions or a topology other than a triangle list are left out with a warning each.
+//! - **Cutouts:** a mesh whose [`StandardMaterial`](bevy::prelude::StandardMaterial) has
+//!   `AlphaMode::Mask(cutoff)` (or `AlphaToCoverage`, which is `Mask(0.5)` without MSAA) and a
+//!   `base_color_texture` is traced as the SDK's cutout geometry: rays pass where
+//!   `base_color.alpha() × texture alpha < cutoff`, as Bevy's raster discards, the texture read
+//!   at the mesh's `ATTRIBUTE_UV_0` (or `_1`, per `base_color_channel`) in Bevy's own vertex
+//!   buffer. The SDK bakes it into opacity micro-maps when the mesh is registered, so the plugin
+//!   registers it again when the material's texture, factor, cutoff or alpha mode changes or the
+//!   texture's texels do. A masked material without a texture is opaque or, below its cutoff,
+//!   left out. Masks are traced opaque (with a warning) where the SDK cannot follow Bevy: a
+//!   `uv_transform` other than identity, compressed UVs. `Blend`, `Premultiplied`, `Add` and
+//!   `Multiply` have no ray-traced counterpart and are traced opaque; so are meshes of other
+//!   material types. Vertex colours' alpha is not part of the traced test.
+//! - **Rates:** [`RayTracedLighting::preset`] takes the SDK's [`Preset`]s (as `ksrt render
+//!   --preset`): which pixels each effect traces a frame, the denoiser and the injection's
+//!   stride.
+//! - **Backend:** the SDK traces with hardware ray queries where Bevy's device has them, and in
+//!   compute shaders otherwise; [`RayTracingStatus`] says which it took and why (also logged).
+//!   Bevy's default renderer settings ask for ray queries wherever the adapter offers them:
+//!   [`ray_query_wgpu_settings`] and [`with_ray_queries`] pin that.
 //! - **Each frame, for each camera with [`RayTracedLighting`]**, after Bevy's deferred lighting
 //!   pass: the deferred G-buffer is unpacked into the SDK's inputs (normal, roughness, F0); Bevy's
 //!   lit image, which at that point holds only Bevy's own (direct) light, is injected into the
@@ -41,6 +60,7 @@
 //! (`shadow_maps_enabled: false`, Bevy's default), or the shadow is applied twice.
 
 mod composite;
+mod cutout;
 mod frame;
 mod gbuffer;
 mod scene;
@@ -58,13 +78,21 @@ use bevy::render::render_resource::BufferUsages;
 use bevy::render::{ExtractSchedule, Render, RenderApp, RenderSystems};
 
 pub use kickstart_rt;
-pub use sdk::SdkTimings;
+pub use kickstart_rt::Preset;
+pub use sdk::{RayTracingStatus, SdkTimings, ray_query_wgpu_settings, with_ray_queries};
 
 /// Adds ray-traced lighting to every camera with a [`RayTracedLighting`] component.
+///
+/// Once the renderer is up, the main world holds a [`RayTracingStatus`]: the traversal backend
+/// the SDK took and why, or why ray-traced lighting is off.
 #[derive(Clone, Debug)]
 pub struct KickstartRtPlugin {
-    /// Which traversal the SDK uses (hardware ray queries when the device has them, by
-    /// default; the portable compute traversal otherwise).
+    /// Which traversal the SDK uses. `Auto` (the default) takes hardware ray queries when
+    /// Bevy's device was created with them (Bevy's default settings ask for them where the
+    /// adapter has them: see [`ray_query_wgpu_settings`]) and the portable compute traversal
+    /// otherwise. `Software` always takes the compute traversal. `HardwareRayQuery` insists:
+    /// on a device without ray queries ray-traced lighting stays off, with the reason logged
+    /// and in [`RayTracingStatus::Off`].
     pub backend: kickstart_rt::BackendChoice,
     /// Collect GPU timestamps of the SDK's passes into [`SdkTimings`] (needs the device's
     /// `TIMESTAMP_QUERY` features; ignored without them).
@@ -82,6 +110,10 @@ impl Default for KickstartRtPlugin {
 
 /// The ray-traced effects of one camera. Each is traced and (with `denoise`) denoised only
 /// when on; toggling any of them at run time is free.
+///
+/// [`RayTracedLighting::performance`], [`balanced`](RayTracedLighting::balanced) and
+/// [`quality`](RayTracedLighting::quality) turn every effect on at one of the SDK's
+/// [`Preset`]s; `default()` is the quality preset.
 #[derive(Component, Clone, Debug, PartialEq, ExtractComponent, Reflect)]
 #[reflect(Component, Default, Clone)]
 #[extract_app(RenderApp)]
@@ -102,6 +134,49 @@ pub struct RayTracedLighting {
     pub ao_radius: f32,
     /// Angular diameter of the sun for soft shadows, radians.
     pub sun_angular_diameter: f32,
+    /// How many pixels each effect traces a frame, which denoiser filters them and how densely
+    /// Bevy's lit image is injected into the lighting cache: the SDK's [`Preset`], as
+    /// `ksrt render --preset` applies it ([`Preset::Quality`], every pixel, by default).
+    /// Changing it remakes the camera's denoisers (their history restarts).
+    ///
+    /// At a reduced rate the denoisers fill the pixels not traced this frame; with `denoise`
+    /// off, each pixel shows its block's traced pixel (blocks of 2×2 or 4×4 pixels).
+    // Not reflected: the SDK's type has no `Reflect`.
+    #[reflect(ignore, clone, default = "quality_preset")]
+    pub preset: Preset,
+}
+
+/// The default [`RayTracedLighting::preset`] (what reflection fills in).
+fn quality_preset() -> Preset {
+    Preset::Quality
+}
+
+impl RayTracedLighting {
+    /// Every effect, denoised, at `preset`.
+    pub fn with_preset(preset: Preset) -> Self {
+        RayTracedLighting {
+            preset,
+            ..Default::default()
+        }
+    }
+
+    /// Every effect at [`Preset::Performance`]: reflections, GI and AO trace one pixel in
+    /// 4×4, shadows one in 2×2; the fast denoiser.
+    pub fn performance() -> Self {
+        Self::with_preset(Preset::Performance)
+    }
+
+    /// Every effect at [`Preset::Balanced`]: one pixel in 2×2 for every effect; the fast
+    /// denoiser.
+    pub fn balanced() -> Self {
+        Self::with_preset(Preset::Balanced)
+    }
+
+    /// Every effect at [`Preset::Quality`] (the default): every pixel; the high-quality
+    /// denoiser.
+    pub fn quality() -> Self {
+        Self::with_preset(Preset::Quality)
+    }
 }
 
 impl Default for RayTracedLighting {
@@ -114,6 +189,7 @@ impl Default for RayTracedLighting {
             denoise: true,
             ao_radius: 1.0,
             sun_angular_diameter: 0.5f32.to_radians(),
+            preset: quality_preset(),
         }
     }
 }
@@ -124,6 +200,9 @@ impl Plugin for KickstartRtPlugin {
         // materials rendered by the deferred path write.
         app.register_type::<RayTracedLighting>()
             .insert_resource(DefaultOpaqueRendererMethod::deferred())
+            .init_resource::<scene::ChangedMaterials>()
+            // After the asset events of the update (PostUpdate), before extraction.
+            .add_systems(Last, scene::collect_changed_materials)
             .add_plugins(ExtractComponentPlugin::<RayTracedLighting>::default());
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
@@ -136,32 +215,34 @@ impl Plugin for KickstartRtPlugin {
     }
 
     fn finish(&self, app: &mut App) {
-        let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
-            return;
-        };
-        let context = match sdk::SdkContext::new(render_app.world(), self) {
-            Ok(context) => context,
+        let status = match self.start(app) {
+            Ok(report) => RayTracingStatus::Running(report),
             Err(e) => {
                 error!("kickstart-rt: ray-traced lighting is off: {e}");
-                return;
+                RayTracingStatus::Off(e)
             }
         };
-        let passes = match (
-            gbuffer::Unpack::new(render_app.world()),
-            composite::Composite::new(render_app.world()),
-        ) {
-            (Ok(unpack), Ok(composite)) => (unpack, composite),
-            (Err(e), _) | (_, Err(e)) => {
-                error!("kickstart-rt: ray-traced lighting is off: {e}");
-                return;
-            }
+        app.insert_resource(status);
+    }
+}
+
+impl KickstartRtPlugin {
+    /// Creates the SDK on Bevy's device and adds the render-world systems; returns the backend
+    /// the SDK took, or why ray-traced lighting cannot run.
+    fn start(&self, app: &mut App) -> Result<kickstart_rt::BackendReport, String> {
+        let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+            return Err("the app has no render sub-app (is Bevy's RenderPlugin missing?)".into());
         };
+        let context = sdk::SdkContext::new(render_app.world(), self)?;
+        let report = context.ctx.traversal_backend().clone();
+        let unpack = gbuffer::Unpack::new(render_app.world())?;
+        let composite = composite::Composite::new(render_app.world())?;
         let timings = SdkTimings::default();
         render_app
             .insert_resource(context)
             .insert_resource(timings.clone())
-            .insert_resource(passes.0)
-            .insert_resource(passes.1)
+            .insert_resource(unpack)
+            .insert_resource(composite)
             .init_resource::<scene::ExtractedScene>()
             .init_resource::<scene::SceneSync>()
             .init_resource::<frame::FramesInFlight>()
@@ -193,5 +274,6 @@ impl Plugin for KickstartRtPlugin {
             );
         // The render world writes the timings; the main world reads the same shared value.
         app.insert_resource(timings);
+        Ok(report)
     }
 }

@@ -1,13 +1,15 @@
 //! Keeps the SDK's geometry and instances in step with Bevy's `Mesh3d` entities.
 //!
-//! Extraction copies what changed in the main world (meshes and transforms of visible
-//! entities, and entities that lost their mesh or visibility); [`sync_scene`] turns that into
-//! one SDK task a frame — register a geometry the first time a mesh is used, register, move or
-//! remove instances, rebuild what changed — once Bevy's mesh allocator holds the mesh's data.
+//! Extraction copies what changed in the main world (meshes, materials' opacity and transforms
+//! of visible entities, and entities that lost their mesh or visibility); [`sync_scene`] turns
+//! that into one SDK task a frame — register a geometry the first time a mesh is used with an
+//! opacity (a masked material's texture and cutoff make their own geometry), register, move or
+//! remove instances, rebuild what changed — once Bevy holds the mesh's data and texture.
 
 use std::collections::{HashMap, HashSet};
 
 use bevy::asset::AssetId;
+use bevy::ecs::system::SystemParam;
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine3A;
 use bevy::mesh::{Mesh, MeshVertexAttribute, PrimitiveTopology, VertexFormat as BevyVertexFormat};
@@ -16,17 +18,53 @@ use bevy::render::Extract;
 use bevy::render::mesh::allocator::MeshAllocator;
 use bevy::render::mesh::{RenderMesh, RenderMeshBufferInfo};
 use bevy::render::render_asset::{ExtractedAssets, RenderAssets};
+use bevy::render::texture::GpuImage;
 use kickstart_rt as ksrt;
 
 use crate::RayTracedLighting;
+use crate::cutout::{self, Cutout, Opacity};
 use crate::sdk::SdkContext;
+
+/// A visible mesh entity added or changed, as extracted.
+struct ChangedEntity {
+    entity: Entity,
+    mesh: AssetId<Mesh>,
+    /// Object to world.
+    transform: Affine3A,
+    /// Deformed by skinning or morph targets (left out).
+    deformed: bool,
+    /// What its material lets through.
+    opacity: Opacity,
+}
+
+/// The `StandardMaterial`s added or modified in the main world's last update (a main-world
+/// resource): entities using them are extracted again, since their opacity may have changed.
+#[derive(Resource, Default)]
+pub(crate) struct ChangedMaterials(HashSet<AssetId<StandardMaterial>>);
+
+/// Main world, once an update: collects the materials whose asset events came since the last.
+pub(crate) fn collect_changed_materials(
+    mut events: MessageReader<AssetEvent<StandardMaterial>>,
+    mut changed: ResMut<ChangedMaterials>,
+) {
+    changed.0.clear();
+    for event in events.read() {
+        match event {
+            AssetEvent::Added { id }
+            | AssetEvent::Modified { id }
+            | AssetEvent::LoadedWithDependencies { id } => {
+                changed.0.insert(*id);
+            }
+            AssetEvent::Removed { .. } | AssetEvent::Unused { .. } => {}
+        }
+    }
+}
 
 /// What changed in the main world since the last [`sync_scene`].
 #[derive(Resource, Default)]
 pub(crate) struct ExtractedScene {
-    /// Visible mesh entities added or changed: mesh, object-to-world transform, and whether the
-    /// mesh is deformed by skinning or morph targets (left out).
-    changed: Vec<(Entity, AssetId<Mesh>, Affine3A, bool)>,
+    /// Visible mesh entities added or changed.
+    changed: Vec<ChangedEntity>,
     /// Entities to remove from the SDK's scene: despawned, hidden or without a mesh now.
     removed: Vec<Entity>,
     /// The first directional light: direction light travels, and exposed radiance scale.
@@ -47,30 +85,64 @@ type MeshEntity<'a> = (
     &'a Mesh3d,
     &'a GlobalTransform,
     &'a InheritedVisibility,
+    Option<&'a MeshMaterial3d<StandardMaterial>>,
     Has<bevy::mesh::skinning::SkinnedMesh>,
     Has<bevy::mesh::morph::MeshMorphWeights>,
 );
 
-/// A mesh entity whose mesh, transform or visibility changed (or that was just spawned).
+/// A mesh entity whose mesh, material, transform or visibility changed (or that was just
+/// spawned).
 type MeshEntityChanged = Or<(
     Changed<Mesh3d>,
+    Changed<MeshMaterial3d<StandardMaterial>>,
     Changed<GlobalTransform>,
     Changed<InheritedVisibility>,
 )>;
 
-/// Extracts mesh entities that were added, moved, re-meshed, shown or hidden, and those that
-/// were despawned or lost their mesh.
+/// Extracts mesh entities that were added, moved, re-meshed, re-materialed, shown or hidden,
+/// those whose material asset changed, and those that were despawned or lost their mesh.
 pub(crate) fn extract_mesh_instances(
     mut scene: ResMut<ExtractedScene>,
     changed: Extract<Query<MeshEntity, MeshEntityChanged>>,
+    all: Extract<Query<MeshEntity>>,
+    changed_materials: Extract<Option<Res<ChangedMaterials>>>,
+    materials: Extract<Option<Res<Assets<StandardMaterial>>>>,
     mut removed: Extract<RemovedComponents<Mesh3d>>,
+    mut warned: Local<HashSet<AssetId<StandardMaterial>>>,
 ) {
-    for (entity, mesh, transform, visibility, skinned, morphed) in &changed {
+    let opacity = |material: Option<&MeshMaterial3d<StandardMaterial>>,
+                   warned: &mut HashSet<AssetId<StandardMaterial>>| {
+        let material = material.map(|m| m.id());
+        match (material, materials.as_ref()) {
+            (Some(id), Some(assets)) => assets
+                .get(id)
+                .map_or(Opacity::Opaque, |m| cutout::material_opacity(id, m, warned)),
+            // Another material type, or none: traced opaque.
+            _ => Opacity::Opaque,
+        }
+    };
+    let material_changed = |m: Option<&MeshMaterial3d<StandardMaterial>>| {
+        let changed = changed_materials.as_ref().map(|c| &c.0);
+        m.zip(changed).is_some_and(|(m, c)| c.contains(&m.id()))
+    };
+    // Only in an update that changed a material: it scans every mesh entity.
+    let any_material_changed = changed_materials.as_ref().is_some_and(|c| !c.0.is_empty());
+    let modified = any_material_changed
+        .then(|| all.iter().filter(|e| material_changed(e.4)))
+        .into_iter()
+        .flatten();
+    for (entity, mesh, transform, visibility, material, skinned, morphed) in
+        changed.iter().chain(modified)
+    {
         if visibility.get() {
-            let affine = transform.affine();
-            scene
-                .changed
-                .push((entity, mesh.id(), affine, skinned || morphed));
+            let opacity = opacity(material, &mut warned);
+            scene.changed.push(ChangedEntity {
+                entity,
+                mesh: mesh.id(),
+                transform: transform.affine(),
+                deformed: skinned || morphed,
+                opacity,
+            });
         } else {
             scene.removed.push(entity);
         }
@@ -105,30 +177,53 @@ pub(crate) fn extract_lights(
     }
 }
 
-/// One registered geometry: a Bevy mesh asset.
+/// What one SDK geometry is made of: a Bevy mesh, and the masked material's test when its
+/// triangles are cutouts (each texture, channel, factor and cutoff bakes its own micro-maps).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct GeometryKey {
+    mesh: AssetId<Mesh>,
+    cutout: Option<Cutout>,
+}
+
+/// One registered geometry.
 struct Geometry {
     handle: ksrt::GeometryHandle,
+    /// Instances of it: a cutout's geometry goes with its last instance (a material edited
+    /// over and over would otherwise leave one behind each time); an opaque mesh's stays for
+    /// reuse until the mesh goes.
+    users: u32,
 }
 
 /// One registered instance: a mesh entity.
 struct Instance {
     handle: ksrt::InstanceHandle,
-    mesh: AssetId<Mesh>,
-    /// Its last transform (kept to re-register it when its mesh is replaced).
+    key: GeometryKey,
+    /// Its last transform (kept to re-register it when its geometry is replaced).
     transform: Affine3A,
 }
 
 /// The SDK's view of the scene: which mesh and entity has which handle.
 #[derive(Resource, Default)]
 pub(crate) struct SceneSync {
-    geometries: HashMap<AssetId<Mesh>, Geometry>,
+    geometries: HashMap<GeometryKey, Geometry>,
     instances: HashMap<Entity, Instance>,
-    /// Entities whose mesh is not uploaded yet (or was replaced), retried each frame.
-    waiting: HashMap<Entity, (AssetId<Mesh>, Affine3A)>,
+    /// Entities whose mesh or texture is not uploaded yet (or was replaced), retried each
+    /// frame.
+    waiting: HashMap<Entity, (GeometryKey, Affine3A)>,
     /// Meshes the SDK cannot trace, each logged once.
     unsupported: HashSet<AssetId<Mesh>>,
     /// Whether deformed (skinned or morphed) meshes were logged.
     warned_deformed: bool,
+}
+
+/// Bevy's render-world meshes and textures, and what changed in them this frame.
+#[derive(SystemParam)]
+pub(crate) struct RenderData<'w> {
+    meshes: Res<'w, RenderAssets<RenderMesh>>,
+    extracted_meshes: Res<'w, ExtractedAssets<RenderMesh>>,
+    allocator: Res<'w, MeshAllocator>,
+    images: Res<'w, RenderAssets<GpuImage>>,
+    extracted_images: Res<'w, ExtractedAssets<GpuImage>>,
 }
 
 /// Records this frame's scene changes as one SDK task (submitted at once: Bevy's mesh uploads,
@@ -137,32 +232,36 @@ pub(crate) fn sync_scene(
     sdk: Res<SdkContext>,
     mut sync: ResMut<SceneSync>,
     mut extracted: ResMut<ExtractedScene>,
-    meshes: Res<RenderAssets<RenderMesh>>,
-    extracted_meshes: Res<ExtractedAssets<RenderMesh>>,
-    allocator: Res<MeshAllocator>,
+    data: RenderData,
 ) {
     let ctx = &sdk.ctx;
     let mut container = ctx.create_task_container();
     let sync = &mut *sync;
-    sync.drop_meshes(
-        ctx,
-        extracted_meshes
-            .removed
-            .iter()
-            .chain(&extracted_meshes.modified),
-    );
+    let meshes: HashSet<_> = (data.extracted_meshes.removed.iter())
+        .chain(&data.extracted_meshes.modified)
+        .collect();
+    for id in &meshes {
+        sync.unsupported.remove(id);
+    }
+    // A replaced texture is baked again: the SDK copied the old one's opacity.
+    let images: HashSet<_> = (data.extracted_images.removed.iter())
+        .chain(&data.extracted_images.modified)
+        .collect();
+    sync.drop_geometries(ctx, |key| {
+        meshes.contains(&key.mesh) || key.cutout.is_some_and(|c| images.contains(&c.image))
+    });
     for entity in extracted.removed.drain(..) {
         sync.waiting.remove(&entity);
         sync.remove_instance(ctx, entity);
     }
-    for (entity, mesh, transform, deformed) in extracted.changed.drain(..) {
-        if deformed {
-            sync.leave_out_deformed(ctx, entity);
+    for changed in extracted.changed.drain(..) {
+        if changed.deformed {
+            sync.leave_out_deformed(ctx, changed.entity);
         } else {
-            sync.change(ctx, &mut container, entity, mesh, transform);
+            sync.change(ctx, &mut container, &changed);
         }
     }
-    let built = sync.register_waiting(ctx, &mut container, &meshes, &allocator);
+    let built = sync.register_waiting(ctx, &mut container, &data);
 
     if container.is_empty() {
         return;
@@ -183,40 +282,55 @@ pub(crate) fn sync_scene(
 }
 
 impl SceneSync {
-    /// Mesh assets that changed or went: their instances wait for the new data (or for their
-    /// entity to go too), and their geometries are dropped.
-    fn drop_meshes<'a>(
+    /// Drops the geometries `dropped` selects (their mesh or texture changed or went): their
+    /// instances wait for the new data (or for their entity to go too).
+    fn drop_geometries(
         &mut self,
         ctx: &ksrt::ExecuteContext,
-        ids: impl Iterator<Item = &'a AssetId<Mesh>>,
+        dropped: impl Fn(&GeometryKey) -> bool,
     ) {
-        for id in ids {
-            self.unsupported.remove(id);
-            let Some(geometry) = self.geometries.remove(id) else {
-                continue;
-            };
+        let keys: Vec<GeometryKey> = self
+            .geometries
+            .keys()
+            .filter(|k| dropped(k))
+            .copied()
+            .collect();
+        for key in keys {
             let users: Vec<Entity> = self
                 .instances
                 .iter()
-                .filter(|(_, i)| i.mesh == *id)
+                .filter(|(_, i)| i.key == key)
                 .map(|(e, _)| *e)
                 .collect();
             for entity in users {
                 if let Some(instance) = self.instances.remove(&entity) {
                     destroy_instance(ctx, instance.handle);
-                    self.waiting.insert(entity, (*id, instance.transform));
+                    self.waiting.insert(entity, (key, instance.transform));
                 }
             }
-            if let Err(e) = ctx.destroy_geometry_handle(geometry.handle) {
-                warn!("kickstart-rt: dropping a mesh's geometry: {e}");
+            if let Some(geometry) = self.geometries.remove(&key) {
+                destroy_geometry(ctx, geometry.handle);
             }
         }
     }
 
-    /// Removes `entity`'s instance from the SDK's scene, if it has one.
+    /// Removes `entity`'s instance from the SDK's scene, if it has one (and a cutout geometry
+    /// left without instances).
     fn remove_instance(&mut self, ctx: &ksrt::ExecuteContext, entity: Entity) {
-        if let Some(instance) = self.instances.remove(&entity) {
-            destroy_instance(ctx, instance.handle);
+        let Some(instance) = self.instances.remove(&entity) else {
+            return;
+        };
+        destroy_instance(ctx, instance.handle);
+        let key = instance.key;
+        let Some(geometry) = self.geometries.get_mut(&key) else {
+            return;
+        };
+        geometry.users = geometry.users.saturating_sub(1);
+        if geometry.users == 0
+            && key.cutout.is_some()
+            && let Some(geometry) = self.geometries.remove(&key)
+        {
+            destroy_geometry(ctx, geometry.handle);
         }
     }
 
@@ -235,19 +349,34 @@ impl SceneSync {
         self.remove_instance(ctx, entity);
     }
 
-    /// A mesh entity added, moved or re-meshed: an instance of the same mesh moves at once;
-    /// otherwise the entity waits for its mesh's geometry ([`Self::register_waiting`]).
+    /// A mesh entity added, moved, re-meshed or re-materialed: an instance of the same geometry
+    /// moves at once; otherwise the entity waits for its geometry ([`Self::register_waiting`]).
+    /// A fully transparent one is left out.
     fn change(
         &mut self,
         ctx: &ksrt::ExecuteContext,
         container: &mut ksrt::TaskContainer,
-        entity: Entity,
-        mesh: AssetId<Mesh>,
-        transform: Affine3A,
+        changed: &ChangedEntity,
     ) {
+        let (entity, transform) = (changed.entity, changed.transform);
+        let cutout = match changed.opacity {
+            Opacity::Opaque => None,
+            Opacity::Cutout(c) => Some(c),
+            Opacity::Invisible => {
+                // No ray hits a surface masked out everywhere: nothing to trace.
+                debug!("kickstart-rt: entity {entity}'s material masks it out entirely");
+                self.waiting.remove(&entity);
+                self.remove_instance(ctx, entity);
+                return;
+            }
+        };
+        let key = GeometryKey {
+            mesh: changed.mesh,
+            cutout,
+        };
         match self.instances.get_mut(&entity) {
-            Some(instance) if instance.mesh == mesh => {
-                let Some(geometry) = self.geometries.get(&mesh).map(|g| g.handle) else {
+            Some(instance) if instance.key == key => {
+                let Some(geometry) = self.geometries.get(&key).map(|g| g.handle) else {
                     return;
                 };
                 container.schedule_bvh_task(ksrt::InstanceTask {
@@ -259,62 +388,70 @@ impl SceneSync {
             }
             Some(_) => {
                 self.remove_instance(ctx, entity);
-                self.waiting.insert(entity, (mesh, transform));
+                self.waiting.insert(entity, (key, transform));
             }
             None => {
-                self.waiting.insert(entity, (mesh, transform));
+                self.waiting.insert(entity, (key, transform));
             }
         }
     }
 
-    /// Registers an instance for every waiting entity whose mesh Bevy has uploaded (and its
-    /// geometry, the first time the mesh is used); returns the number of new geometries.
+    /// Registers an instance for every waiting entity whose mesh (and texture) Bevy has
+    /// uploaded, and its geometry the first time it is used; returns the number of new
+    /// geometries.
     fn register_waiting(
         &mut self,
         ctx: &ksrt::ExecuteContext,
         container: &mut ksrt::TaskContainer,
-        meshes: &RenderAssets<RenderMesh>,
-        allocator: &MeshAllocator,
+        data: &RenderData,
     ) -> u32 {
         let mut built = 0;
         let waiting: Vec<_> = self.waiting.iter().map(|(e, m)| (*e, *m)).collect();
-        for (entity, (mesh, transform)) in waiting {
-            let geometry = match self.geometries.get(&mesh) {
-                Some(g) => g.handle,
-                None => match register_geometry(ctx, container, mesh, meshes, allocator) {
+        for (entity, (key, transform)) in waiting {
+            let geometry = match self.geometries.get_mut(&key) {
+                Some(g) => g,
+                None => match register_geometry(ctx, container, &key, data) {
                     Ok(Some(handle)) => {
-                        self.geometries.insert(mesh, Geometry { handle });
                         built += 1;
-                        handle
+                        self.geometries
+                            .entry(key)
+                            .or_insert(Geometry { handle, users: 0 })
                     }
                     // Not uploaded yet: try again next frame.
                     Ok(None) => continue,
                     Err(why) => {
-                        if self.unsupported.insert(mesh) {
-                            warn!("kickstart-rt: mesh {mesh:?} is not ray traced: {why}");
+                        if self.unsupported.insert(key.mesh) {
+                            warn!("kickstart-rt: mesh {:?} is not ray traced: {why}", key.mesh);
                         }
                         self.waiting.remove(&entity);
                         continue;
                     }
                 },
             };
+            geometry.users += 1;
             let handle = ctx.create_instance_handle();
             container.schedule_bvh_task(ksrt::InstanceTask {
                 operation: ksrt::TaskOperation::Register,
                 handle,
-                input: instance_input(geometry, transform, entity),
+                input: instance_input(geometry.handle, transform, entity),
             });
             self.instances.insert(
                 entity,
                 Instance {
                     handle,
-                    mesh,
+                    key,
                     transform,
                 },
             );
             self.waiting.remove(&entity);
         }
         built
+    }
+}
+
+fn destroy_geometry(ctx: &ksrt::ExecuteContext, handle: ksrt::GeometryHandle) {
+    if let Err(e) = ctx.destroy_geometry_handle(handle) {
+        warn!("kickstart-rt: dropping a mesh's geometry: {e}");
     }
 }
 
@@ -340,19 +477,20 @@ fn to_sdk_affine(t: Affine3A) -> glam::Affine3A {
     glam::Affine3A::from_cols_array(&t.to_cols_array())
 }
 
-/// Schedules the registration of `mesh` and returns its new handle; `Ok(None)` while Bevy has
-/// not uploaded it yet, `Err` for a mesh the SDK cannot trace.
+/// Schedules the registration of `key`'s geometry and returns its new handle; `Ok(None)` while
+/// Bevy has not uploaded the mesh or its texture yet, `Err` for a mesh the SDK cannot trace. A
+/// cutout the SDK cannot take is registered opaque, with a warning.
 fn register_geometry(
     ctx: &ksrt::ExecuteContext,
     container: &mut ksrt::TaskContainer,
-    mesh: AssetId<Mesh>,
-    meshes: &RenderAssets<RenderMesh>,
-    allocator: &MeshAllocator,
+    key: &GeometryKey,
+    data: &RenderData,
 ) -> Result<Option<ksrt::GeometryHandle>, String> {
-    let Some(render_mesh) = meshes.get(mesh) else {
+    let mesh = key.mesh;
+    let Some(render_mesh) = data.meshes.get(mesh) else {
         return Ok(None);
     };
-    let Some(vertices) = allocator.mesh_vertex_slice(&mesh) else {
+    let Some(vertices) = data.allocator.mesh_vertex_slice(&mesh) else {
         return Ok(None);
     };
     if render_mesh.primitive_topology() != PrimitiveTopology::TriangleList {
@@ -364,9 +502,24 @@ fn register_geometry(
     let layout = render_mesh.layout.0.layout();
     let (offset, format) = position_attribute(&render_mesh.layout.0, layout)?;
     let stride = layout.array_stride;
+    let first_vertex = vertices.range.start as u64 * stride;
+    let opacity = match &key.cutout {
+        None => None,
+        Some(c) => {
+            let buffer = &vertices.buffer;
+            match cutout::component_opacity(c, render_mesh, buffer, first_vertex, &data.images) {
+                Ok(None) => return Ok(None),
+                Ok(Some(opacity)) => Some(opacity),
+                Err(why) => {
+                    warn!("kickstart-rt: mesh {mesh:?} is masked but traced opaque: {why}");
+                    None
+                }
+            }
+        }
+    };
     let vertex_buffer = ksrt::VertexBufferInput {
         buffer: (**vertices.buffer).clone(),
-        offset: vertices.range.start as u64 * stride + offset,
+        offset: first_vertex + offset,
         stride,
         count: vertices.range.end - vertices.range.start,
         format,
@@ -377,7 +530,7 @@ fn register_geometry(
             count,
             index_format,
         } => {
-            let Some(indices) = allocator.mesh_index_slice(&mesh) else {
+            let Some(indices) = data.allocator.mesh_index_slice(&mesh) else {
                 return Ok(None);
             };
             let format = match index_format {
@@ -403,7 +556,7 @@ fn register_geometry(
                 index_buffer,
                 transform: None,
                 index_range: None,
-                opacity: None,
+                opacity,
             }],
             ..Default::default()
         },
@@ -423,21 +576,13 @@ fn position_attribute(
     {
         return Err("compressed positions (Mesh::compress_positions) are not supported".into());
     }
-    let slot = mesh_layout
-        .attribute_ids()
-        .iter()
-        .position(|id| *id == position.id)
-        .ok_or("it has no position attribute")?;
-    let attribute = layout
-        .attributes
-        .get(slot)
-        .ok_or("its layout lists fewer attributes than ids")?;
-    let format = match attribute.format {
+    let (offset, format) = cutout::attribute(mesh_layout, layout, position)?;
+    let format = match format {
         BevyVertexFormat::Float32x3 => ksrt::VertexFormat::Float32x3,
         BevyVertexFormat::Float32x4 => ksrt::VertexFormat::Float32x4,
         BevyVertexFormat::Float16x4 => ksrt::VertexFormat::Float16x4,
         BevyVertexFormat::Snorm16x4 => ksrt::VertexFormat::Snorm16x4,
         other => return Err(format!("position format {other:?}")),
     };
-    Ok((attribute.offset, format))
+    Ok((offset, format))
 }

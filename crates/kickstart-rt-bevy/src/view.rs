@@ -25,6 +25,8 @@ pub(crate) struct ViewResources {
     pub denoised: [wgpu::TextureView; 4],
     /// Denoising contexts: reflections, GI, AO, shadow.
     pub denoisers: [ksrt::DenoisingContextHandle; 4],
+    /// Their method (the camera's preset's): another preset's remakes them.
+    pub method: ksrt::DenoisingMethod,
     /// Frames traced so far (the noise pattern's index; 0 discards denoiser history).
     pub frame: u32,
     /// The effects of the last frame: a toggled effect restarts its denoiser's history.
@@ -36,7 +38,12 @@ pub(crate) struct ViewResources {
 }
 
 impl ViewResources {
-    fn new(device: &wgpu::Device, ctx: &ksrt::ExecuteContext, size: UVec2) -> ksrt::Result<Self> {
+    fn new(
+        device: &wgpu::Device,
+        ctx: &ksrt::ExecuteContext,
+        size: UVec2,
+        method: ksrt::DenoisingMethod,
+    ) -> ksrt::Result<Self> {
         let texture = |label: &str| {
             device
                 .create_texture(&wgpu::TextureDescriptor {
@@ -63,7 +70,7 @@ impl ViewResources {
                 max_width: size.x,
                 max_height: size.y,
                 signal_type,
-                method: Default::default(),
+                method,
             })
         };
         let denoisers = [
@@ -80,6 +87,7 @@ impl ViewResources {
             traced: signals.map(|s| texture(&format!("kickstart-rt {s}"))),
             denoised: signals.map(|s| texture(&format!("kickstart-rt {s} denoised"))),
             denoisers,
+            method,
             frame: 0,
             last_settings: None,
             previous: None,
@@ -107,24 +115,31 @@ pub(crate) fn release_view_resources(
     }
 }
 
-/// Creates each ray-traced camera's resources, and remakes them when its size changes.
+/// Creates each ray-traced camera's resources, and remakes them when its size or its preset's
+/// denoising method changes (a denoising context keeps the method it was made with).
 pub(crate) fn prepare_view_resources(
     mut commands: Commands,
     sdk: Res<SdkContext>,
     device: Res<RenderDevice>,
-    views: Query<(Entity, &ExtractedCamera, Option<&ViewResources>), With<RayTracedLighting>>,
+    views: Query<(
+        Entity,
+        &ExtractedCamera,
+        &RayTracedLighting,
+        Option<&ViewResources>,
+    )>,
 ) {
-    for (entity, camera, existing) in &views {
+    for (entity, camera, settings, existing) in &views {
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
             continue;
         };
-        if existing.is_some_and(|r| r.size == size) {
+        let method = settings.preset.denoising_method();
+        if existing.is_some_and(|r| r.size == size && r.method == method) {
             continue;
         }
         if let Some(old) = existing {
             old.release(&sdk.ctx);
         }
-        match ViewResources::new(device.wgpu_device(), &sdk.ctx, size) {
+        match ViewResources::new(device.wgpu_device(), &sdk.ctx, size, method) {
             Ok(resources) => {
                 commands.entity(entity).insert(resources);
             }

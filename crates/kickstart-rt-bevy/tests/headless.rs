@@ -1,6 +1,7 @@
 //! The plugin in a real Bevy app, rendered headless: the seed scene's GI carries each object's
-//! colour onto the floor beside it, shadows fall where the sun casts them, and the scene follows
-//! entities as they are despawned.
+//! colour onto the floor beside it, shadows fall where the sun casts them, the scene follows
+//! entities as they are despawned, ambient occlusion darkens the floor at an object's foot, and
+//! a mirror floor reflects a glowing box where the mirror image lies.
 //!
 //! The camera renders linear HDR (`Rgba16Float`, no tone mapping) into an image, read back
 //! with Bevy's screenshot; each check compares two renders of the same view that differ in one
@@ -9,167 +10,19 @@
 #[path = "../examples/seed/mod.rs"]
 mod seed;
 
-use std::sync::{Arc, Mutex};
+mod harness;
 
-use bevy::camera::RenderTarget;
-use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
-use bevy::render::RenderPlugin;
-use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
-use bevy::render::render_resource::TextureFormat;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
-use bevy::window::ExitCondition;
-use bevy::winit::WinitPlugin;
-use kickstart_rt_bevy::{KickstartRtPlugin, RayTracedLighting};
+use harness::{Frame, HEIGHT, Harness, SETTLE_FRAMES, Setup, WIDTH, pixel_of};
+use kickstart_rt_bevy::RayTracedLighting;
 
-const WIDTH: u32 = 320;
-const HEIGHT: u32 = 180;
-/// Frames each configuration renders before it is read: the denoisers' history fills.
-const SETTLE_FRAMES: u32 = 24;
-
-/// A linear RGB image read back from the camera's target.
-struct Frame {
-    texels: Vec<[f32; 3]>,
-}
-
-impl Frame {
-    /// Mean colour of the `radius`-pixel square around `p`.
-    fn mean(&self, (x, y): (u32, u32), radius: u32) -> Vec3 {
-        let mut sum = Vec3::ZERO;
-        let mut n = 0.0;
-        for yy in y.saturating_sub(radius)..=(y + radius).min(HEIGHT - 1) {
-            for xx in x.saturating_sub(radius)..=(x + radius).min(WIDTH - 1) {
-                sum += Vec3::from(self.texels[(yy * WIDTH + xx) as usize]);
-                n += 1.0;
-            }
-        }
-        sum / n
-    }
-}
-
-/// The app and its camera's target image.
-struct Harness {
-    app: App,
-    target: Handle<Image>,
-}
-
-impl Harness {
-    fn new(effects: RayTracedLighting) -> Harness {
-        let mut app = App::new();
-        app.add_plugins((
-            DefaultPlugins
-                .set(WindowPlugin {
-                    primary_window: None,
-                    exit_condition: ExitCondition::DontExit,
-                    close_when_requested: false,
-                    ..default()
-                })
-                .set(RenderPlugin {
-                    synchronous_pipeline_compilation: true,
-                    ..default()
-                })
-                .disable::<WinitPlugin>()
-                .disable::<PipelinedRenderingPlugin>()
-                .disable::<bevy::log::LogPlugin>(),
-            KickstartRtPlugin::default(),
-        ))
-        .insert_resource(seed::Matte)
-        .add_systems(Startup, seed::spawn);
-        let image = Image::new_target_texture(WIDTH, HEIGHT, TextureFormat::Rgba16Float, None);
-        let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
-        app.world_mut().spawn((
-            Camera3d::default(),
-            Msaa::Off,
-            Tonemapping::None,
-            RenderTarget::Image(target.clone().into()),
-            effects,
-            Transform::from_translation(seed::EYE).looking_at(seed::LOOK_AT, Vec3::Y),
-        ));
-        app.finish();
-        app.cleanup();
-        Harness { app, target }
-    }
-
-    fn run(&mut self, frames: u32) {
-        for _ in 0..frames {
-            self.app.update();
-        }
-    }
-
-    /// Renders until a screenshot of the target arrives.
-    fn capture(&mut self) -> Frame {
-        let slot: Arc<Mutex<Option<Image>>> = Arc::default();
-        let into = slot.clone();
-        self.app
-            .world_mut()
-            .spawn(Screenshot::image(self.target.clone()))
-            .observe(move |captured: On<ScreenshotCaptured>| {
-                *into.lock().unwrap() = Some(captured.image.clone());
-            });
-        for _ in 0..20 {
-            self.app.update();
-            if let Some(image) = slot.lock().unwrap().take() {
-                return decode(&image);
-            }
-        }
-        panic!("no screenshot after 20 frames");
-    }
-
-    /// The entity of coloured object `i`.
-    fn object(&mut self, i: usize) -> Entity {
-        let world = self.app.world_mut();
-        world
-            .query::<(Entity, &seed::Object)>()
-            .iter(world)
-            .find(|(_, o)| o.0 == i)
-            .map(|(e, _)| e)
-            .expect("the seed scene has three objects")
-    }
-
-    fn set_object_visibility(&mut self, i: usize, visibility: Visibility) {
-        let object = self.object(i);
-        self.app.world_mut().entity_mut(object).insert(visibility);
-    }
-}
-
-/// `Rgba16Float` texels to linear RGB.
-fn decode(image: &Image) -> Frame {
-    assert_eq!(image.texture_descriptor.format, TextureFormat::Rgba16Float);
-    let data = image.data.as_ref().expect("screenshot has data");
-    assert_eq!(data.len(), (WIDTH * HEIGHT * 8) as usize);
-    let half = |b: &[u8]| f16_to_f32(u16::from_le_bytes([b[0], b[1]]));
-    let texels = data
-        .chunks_exact(8)
-        .map(|t| [half(&t[0..2]), half(&t[2..4]), half(&t[4..6])])
-        .collect();
-    Frame { texels }
-}
-
-fn f16_to_f32(h: u16) -> f32 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exp = i32::from((h >> 10) & 0x1f);
-    let frac = f32::from(h & 0x3ff);
-    sign * match exp {
-        0 => frac * 2f32.powi(-24),
-        31 => f32::INFINITY,
-        e => (1.0 + frac / 1024.0) * 2f32.powi(e - 15),
-    }
-}
-
-/// The pixel showing world point `p` (Bevy's default perspective camera at the seed's eye).
-fn pixel_of(p: Vec3) -> (u32, u32) {
-    let view = Transform::from_translation(seed::EYE)
-        .looking_at(seed::LOOK_AT, Vec3::Y)
-        .to_matrix()
-        .inverse();
-    let projection = bevy::camera::CameraProjection::get_clip_from_view(&PerspectiveProjection {
-        aspect_ratio: WIDTH as f32 / HEIGHT as f32,
-        ..default()
-    });
-    let ndc = (projection * view).project_point3(p);
-    let x = (ndc.x * 0.5 + 0.5) * WIDTH as f32;
-    let y = (0.5 - ndc.y * 0.5) * HEIGHT as f32;
-    (x as u32, y as u32)
+/// The pixel showing world point `p` from the seed's eye.
+fn seed_pixel(p: Vec3) -> (u32, u32) {
+    pixel_of(
+        &Transform::from_translation(seed::EYE).looking_at(seed::LOOK_AT, Vec3::Y),
+        p,
+    )
 }
 
 /// Radius of a circle on the floor around each coloured object, just outside its footprint.
@@ -188,7 +41,7 @@ fn added_on_ring(i: usize, without: &Frame, with: &Frame) -> Vec3 {
         if offset.z < 0.25 || near_another {
             continue;
         }
-        let px = pixel_of(p);
+        let px = seed_pixel(p);
         sum += with.mean(px, 0) - without.mean(px, 0);
     }
     sum
@@ -289,9 +142,9 @@ fn shadows_fall_where_the_sun_casts_them_and_follow_their_object() {
     let after = h.capture();
 
     let (behind, sunlit_side) = sphere_shadow_points();
-    let lit = after.mean(pixel_of(behind), 0);
+    let lit = after.mean(seed_pixel(behind), 0);
     let lifted = |shadowed: &Frame, open: &Frame, at: Vec3| {
-        shadow_pixels_lifted(shadowed, open, pixel_of(at), 12, lit)
+        shadow_pixels_lifted(shadowed, open, seed_pixel(at), 12, lit)
     };
     let (despawned, sunward) = (
         lifted(&before, &after, behind),
@@ -349,10 +202,10 @@ fn raw_shadows_with_denoise_off_are_dark_where_the_sun_is_hidden() {
     let after = h.capture();
 
     let (behind, sunlit_side) = sphere_shadow_points();
-    let lit = after.mean(pixel_of(behind), 0);
-    let sunlit_before = before.mean(pixel_of(sunlit_side), 0);
-    let despawned = shadow_pixels_lifted(&before, &after, pixel_of(behind), 12, lit);
-    let sunward = shadow_pixels_lifted(&before, &after, pixel_of(sunlit_side), 12, lit);
+    let lit = after.mean(seed_pixel(behind), 0);
+    let sunlit_before = before.mean(seed_pixel(sunlit_side), 0);
+    let despawned = shadow_pixels_lifted(&before, &after, seed_pixel(behind), 12, lit);
+    let sunward = shadow_pixels_lifted(&before, &after, seed_pixel(sunlit_side), 12, lit);
     println!(
         "raw shadows: open floor {lit}, sunward floor with the sphere {sunlit_before}; shadow \
          pixels lifted by the despawn {despawned}, sunward {sunward}"
@@ -370,4 +223,195 @@ fn raw_shadows_with_denoise_off_are_dark_where_the_sun_is_hidden() {
         "only {despawned} raw shadow pixels behind the sphere"
     );
     assert_eq!(sunward, 0, "raw shadow pixels on the sphere's sunlit side");
+}
+
+/// Mean of `frame` over the floor points `points`, one pixel each.
+fn mean_over(frame: &Frame, points: &[Vec3]) -> Vec3 {
+    let sum: Vec3 = points.iter().map(|p| frame.mean(seed_pixel(*p), 0)).sum();
+    sum / points.len() as f32
+}
+
+/// Floor points on the camera's side of the sphere, `r` from its foot (the sphere's radius is
+/// 0.7: at 0.8 it overhangs them, well within the AO radius).
+fn ring_in_front_of_the_sphere(r: f32) -> Vec<Vec3> {
+    (0..24)
+        .map(|k| std::f32::consts::PI * (0.15 + 0.7 * k as f32 / 23.0))
+        .map(|a| seed::PLACES[0] + Vec3::new(a.cos(), 0.0, a.sin()) * r)
+        .collect()
+}
+
+/// Open floor in front of every object, further than the AO radius (1 m) from all of them.
+fn open_floor() -> Vec<Vec3> {
+    (0..24)
+        .map(|k| Vec3::new(-1.2 + 0.1 * k as f32, 0.0, 2.6))
+        .collect()
+}
+
+#[test]
+fn ambient_occlusion_darkens_the_floor_at_an_objects_foot_and_nowhere_open() {
+    let off = RayTracedLighting {
+        reflections: false,
+        gi: false,
+        ao: false,
+        shadows: false,
+        ..default()
+    };
+    let mut h = Harness::new(off.clone());
+    h.run(SETTLE_FRAMES);
+    let without = h.capture();
+    // AO alone scales the lit image; with GI, it comes from the GI's rays and scales the GI.
+    h.set_effects(RayTracedLighting {
+        ao: true,
+        ..off.clone()
+    });
+    h.run(SETTLE_FRAMES);
+    let with = h.capture();
+    h.set_effects(RayTracedLighting {
+        gi: true,
+        ..off.clone()
+    });
+    h.run(SETTLE_FRAMES);
+    let gi = h.capture();
+    h.set_effects(RayTracedLighting {
+        gi: true,
+        ao: true,
+        ..off
+    });
+    h.run(SETTLE_FRAMES);
+    let gi_ao = h.capture();
+
+    let (foot, open) = (ring_in_front_of_the_sphere(0.8), open_floor());
+    let ratio = |with: &Frame, without: &Frame, at: &[Vec3]| {
+        mean_over(with, at).length() / mean_over(without, at).length()
+    };
+    let (at_foot, in_the_open) = (ratio(&with, &without, &foot), ratio(&with, &without, &open));
+    let gi_lost = |at: &[Vec3]| (mean_over(&gi, at) - mean_over(&gi_ao, at)).length();
+    let gi_added = mean_over(&gi, &foot) - mean_over(&without, &foot);
+    println!(
+        "AO alone: the floor at the sphere's foot keeps {at_foot:.3} of its light, the open \
+         floor {in_the_open:.3}; with GI (which adds {gi_added} at the foot), AO takes {:.4} \
+         at the foot and {:.4} in the open",
+        gi_lost(&foot),
+        gi_lost(&open)
+    );
+    // The SDK's AO is the mean over cosine-weighted rays of min(hit distance / radius, 1), not
+    // the fraction of rays blocked: about a third of the rays from this ring (0.1 m outside the
+    // sphere's footprint) hit the sphere, 0.36 to 1 m away, which leaves about 0.85.
+    assert!(
+        at_foot < 0.92,
+        "AO kept {at_foot} of the light at the sphere's foot"
+    );
+    assert!(
+        (in_the_open - 1.0).abs() < 0.02,
+        "AO changed the open floor by a factor {in_the_open}"
+    );
+    // With GI, AO (from the GI's own rays) scales the GI at the foot by about what AO alone
+    // left of the light there: it takes a share of the GI near 1 − `at_foot`.
+    assert!(
+        gi_lost(&foot) > 0.5 * (1.0 - at_foot) * gi_added.length(),
+        "AO with GI took {} of the {gi_added} the GI added at the sphere's foot",
+        gi_lost(&foot)
+    );
+    assert!(
+        gi_lost(&open) < 0.01,
+        "AO with GI took {} from the open floor",
+        gi_lost(&open)
+    );
+}
+
+/// The mirror scene's camera: above and in front of the box, looking down at the floor
+/// before it.
+fn mirror_camera() -> Transform {
+    Transform::from_xyz(0.0, 1.5, 5.0).looking_at(Vec3::new(0.0, 0.3, 0.0), Vec3::Y)
+}
+
+/// A mirror floor (white metal, roughness 0) and a glowing red unit box standing on it at the
+/// origin; no light besides the box, so the floor shows only what it reflects.
+fn mirror_scene(
+    mut commands: Commands,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+) {
+    commands.insert_resource(GlobalAmbientLight::NONE);
+    commands.spawn((
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(16.0, 16.0))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: Color::linear_rgb(0.9, 0.9, 0.9),
+            metallic: 1.0,
+            perceptual_roughness: 0.0,
+            ..default()
+        })),
+    ));
+    commands.spawn((
+        Mesh3d(meshes.add(Cuboid::new(1.0, 1.0, 1.0))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: Color::BLACK,
+            emissive: LinearRgba::rgb(2.0, 0.1, 0.05),
+            ..default()
+        })),
+        Transform::from_xyz(0.0, 0.5, 0.0),
+    ));
+}
+
+#[test]
+fn a_mirror_floor_reflects_a_glowing_box_where_its_mirror_image_lies() {
+    let setup = Setup {
+        camera: mirror_camera(),
+        ..default()
+    };
+    let only_reflections = RayTracedLighting {
+        gi: false,
+        ao: false,
+        shadows: false,
+        ..default()
+    };
+    let mut h = Harness::with(setup, only_reflections.clone(), mirror_scene, false);
+    h.run(SETTLE_FRAMES);
+    let with = h.capture();
+    h.set_effects(RayTracedLighting {
+        reflections: false,
+        ..only_reflections
+    });
+    h.run(SETTLE_FRAMES);
+    let without = h.capture();
+
+    // The box's front face (z = 0.5) mirrored in the floor: the floor pixels that show it lie
+    // where the mirrored points project. Beside the box (|x| ≥ 1.2) the floor mirrors nothing.
+    let image = |x: f32, y: f32| h.pixel_of(Vec3::new(x, -y, 0.5));
+    let mirrored: Vec<_> = [(-0.25, 0.3), (0.0, 0.5), (0.25, 0.7)]
+        .map(|(x, y)| image(x, y))
+        .to_vec();
+    let beside: Vec<_> = [(-1.5, 0.5), (1.5, 0.5), (-2.0, 0.2), (2.0, 0.2)]
+        .map(|(x, y)| image(x, y))
+        .to_vec();
+    let box_face = with.mean(h.pixel_of(Vec3::new(0.0, 0.5, 0.5)), 1);
+    for (name, pixels) in [("mirror image", &mirrored), ("beside it", &beside)] {
+        for p in pixels {
+            println!(
+                "{name} {p:?}: with reflections {}, without {}",
+                with.mean(*p, 1),
+                without.mean(*p, 1)
+            );
+        }
+    }
+    println!("the box's face: {box_face}");
+    for p in &mirrored {
+        let (on, off) = (with.mean(*p, 1), without.mean(*p, 1));
+        // The box glows 2.0 in red; the white metal reflects about 0.9 of it.
+        assert!(
+            on.x > 0.25 * box_face.x && on.x > 4.0 * on.y.max(on.z),
+            "the mirror image of the red box at {p:?} is {on}"
+        );
+        assert!(
+            off.x < 0.05,
+            "the floor at {p:?} is {off} with reflections off"
+        );
+    }
+    for p in &beside {
+        let (on, off) = (with.mean(*p, 1), without.mean(*p, 1));
+        assert!(
+            on.x < 0.1 * box_face.x && (on - off).length() < 0.05,
+            "the floor beside the mirror image, at {p:?}, is {on} (without reflections {off})"
+        );
+    }
 }

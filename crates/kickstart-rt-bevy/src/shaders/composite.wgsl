@@ -16,6 +16,9 @@ struct Params {
     sun: vec4<f32>,
     // Effects on: reflections, GI, AO, shadows (shadows 2: the raw trace, denoising off).
     effects: vec4<u32>,
+    // Per signal (reflections, GI, AO, shadow): the pixel block it was traced in, and the
+    // traced pixel in the block (bits 0–7 side, 8–15 x, 16–23 y); side 1 reads every pixel.
+    traced_pixels: vec4<u32>,
 };
 
 @group(0) @binding(0) var lit: texture_2d<f32>;
@@ -66,6 +69,21 @@ fn to_viewer(ndc: vec2<f32>, world: vec3<f32>) -> vec3<f32> {
     return normalize(params.camera.xyz - world);
 }
 
+// The texel of a signal traced in blocks (`code`: see `Params::traced_pixels`) that stands for
+// pixel `p`: the traced pixel of `p`'s block, or of the block before it where that one falls
+// outside the image (the last, partial, block of a row or column).
+fn traced_pixel(p: vec2<i32>, code: u32) -> vec2<i32> {
+    let side = i32(code & 0xffu);
+    if side <= 1 {
+        return p;
+    }
+    let offset = vec2<i32>(i32((code >> 8u) & 0xffu), i32((code >> 16u) & 0xffu));
+    var q = p - p % side + offset;
+    let size = vec2<i32>(textureDimensions(lit));
+    q = select(q, q - vec2<i32>(side), q >= size);
+    return max(q, vec2<i32>(0));
+}
+
 @fragment
 fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     let p = vec2<i32>(position.xy);
@@ -85,15 +103,17 @@ fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     if on.w && params.to_sun.w > 0.0 {
         // Denoised: visibility. Raw (denoising off): the occluder's distance, negative where the
         // sun is visible.
-        let s = textureLoad(shadow, p, 0).r;
+        let s = textureLoad(shadow, traced_pixel(p, params.traced_pixels.w), 0).r;
         let visibility = select(saturate(s), select(0.0, 1.0, s < 0.0), params.effects.w == 2u);
         let n_dot_l = max(dot(n, params.to_sun.xyz), 0.0);
         let sun_diffuse = albedo / PI * params.sun.rgb * n_dot_l;
         color = max(color - sun_diffuse * (1.0 - visibility), vec3<f32>(0.0));
     }
-    let occlusion = select(1.0, saturate(textureLoad(ao, p, 0).r), on.z);
+    let ao_texel = traced_pixel(p, params.traced_pixels.z);
+    let occlusion = select(1.0, saturate(textureLoad(ao, ao_texel, 0).r), on.z);
     if on.y {
-        color += albedo * max(textureLoad(gi, p, 0).rgb, vec3<f32>(0.0)) * occlusion;
+        let gi_texel = traced_pixel(p, params.traced_pixels.y);
+        color += albedo * max(textureLoad(gi, gi_texel, 0).rgb, vec3<f32>(0.0)) * occlusion;
     } else {
         color *= occlusion;
     }
@@ -101,7 +121,8 @@ fn composite(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
         let v = to_viewer(ndc, world);
         let f0 = textureLoad(specular, p, 0).rgb;
         let brdf = environment_brdf(f0, nr.w, saturate(dot(n, v)));
-        color += max(textureLoad(reflections, p, 0).rgb, vec3<f32>(0.0)) * brdf;
+        let reflected = textureLoad(reflections, traced_pixel(p, params.traced_pixels.x), 0).rgb;
+        color += max(reflected, vec3<f32>(0.0)) * brdf;
     }
     return vec4<f32>(color, 1.0);
 }
