@@ -17,6 +17,7 @@ use kickstart_rt_renderer::scene::{
 
 use kickstart_rt_renderer::scene::rig::Rig;
 
+use super::gltf_accessor::check_accessor;
 use super::SceneError;
 use super::{gltf_alpha, gltf_anim, gltf_skin};
 
@@ -670,44 +671,6 @@ where
     match transform {
         Some(t) => uvs.into_iter().map(|uv| t.apply(uv)).collect(),
         None => uvs,
-    }
-}
-
-/// Checks that `accessor`'s elements lie inside its buffer view and the view inside its buffer,
-/// with checked arithmetic: the gltf crate computes the end of an accessor's data as
-/// `offset + stride · (count − 1) + size` unchecked, which a count of 0 or a huge count
-/// overflows. Sparse accessors and accessors without a view are left to the reader, which
-/// bounds-checks them.
-pub(super) fn check_accessor(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), String> {
-    let count = accessor.count();
-    if count == 0 {
-        return Err(format!("accessor {} has a count of 0", accessor.index()));
-    }
-    let Some(view) = accessor.view() else {
-        return Ok(());
-    };
-    if accessor.sparse().is_some() {
-        return Ok(());
-    }
-    let size = accessor.size();
-    let stride = view.stride().unwrap_or(size).max(size);
-    let end = (count - 1)
-        .checked_mul(stride)
-        .and_then(|x| x.checked_add(size))
-        .and_then(|x| x.checked_add(accessor.offset()));
-    let buffer_len = buffers.get(view.buffer().index()).map_or(0, Vec::len);
-    let view_end = view.offset().checked_add(view.length());
-    match (end, view_end) {
-        (Some(end), Some(view_end)) if end <= view.length() && view_end <= buffer_len => Ok(()),
-        _ => Err(format!(
-            "accessor {} ({count} elements of {size} bytes, stride {stride}, offset {}) does not \
-             fit its buffer view {} ({} bytes at {} of a {buffer_len}-byte buffer)",
-            accessor.index(),
-            accessor.offset(),
-            view.index(),
-            view.length(),
-            view.offset()
-        )),
     }
 }
 

@@ -12,8 +12,8 @@ use gltf::animation::{Interpolation as GltfInterpolation, Property as GltfProper
 
 use kickstart_rt_renderer::scene::animation::{Animation, Channel, Interpolation, Property};
 
-use super::gltf::check_accessor;
-use super::gltf_skin::{morph_target_count, typed};
+use super::gltf_accessor::{check_accessor, typed};
+use super::gltf_skin::morph_target_count;
 
 /// Every animation of the file.
 pub fn read_animations(

@@ -10,7 +10,7 @@ use gltf::accessor::{DataType, Dimensions};
 
 use kickstart_rt_renderer::scene::rig::{check_hierarchy, Deform, Node, Skin};
 
-use super::gltf::check_accessor;
+use super::gltf_accessor::{check_accessor, typed};
 
 /// `q` scaled to unit length, or the identity for a zero or non-finite `q`.
 fn unit_or_identity(q: Quat) -> Quat {
@@ -131,29 +131,6 @@ pub fn read_skins(file: &gltf::Document, buffers: &[Vec<u8>]) -> Result<Vec<Skin
             })
         })
         .collect()
-}
-
-/// Checks that accessor `a` holds one of `types` in `dims` (`normalized`: integer types must be
-/// normalised, as glTF requires of unorm weights).
-pub fn typed(
-    a: &gltf::Accessor,
-    types: &[DataType],
-    dims: Dimensions,
-    normalized: bool,
-) -> Result<(), String> {
-    let int_ok = !normalized || a.data_type() == DataType::F32 || a.normalized();
-    if types.contains(&a.data_type()) && a.dimensions() == dims && int_ok {
-        Ok(())
-    } else {
-        Err(format!(
-            "accessor {} holds {:?} {:?}{}, expected {types:?} {dims:?}{}",
-            a.index(),
-            a.data_type(),
-            a.dimensions(),
-            if a.normalized() { " (normalized)" } else { "" },
-            if normalized { " (normalized)" } else { "" },
-        ))
-    }
 }
 
 /// The deformation of one primitive (`name` for errors): its joint influences when `skinned`

@@ -2,6 +2,7 @@
 //! glTF 2.0 / OBJ files into the renderer's [`Scene`] (built-in scenes are the renderer's).
 
 mod gltf;
+mod gltf_accessor;
 mod gltf_alpha;
 mod gltf_anim;
 mod gltf_skin;
