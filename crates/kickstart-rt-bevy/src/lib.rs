@@ -19,10 +19,16 @@
 //!   vertex layout with `Float32x3` positions, `u16` or `u32` indices or none) is registered with
 //!   the SDK, and kept in sync as it moves, spawns, despawns, hides or changes mesh. The SDK
 //!   copies positions out of Bevy's own mesh buffers on the GPU (the plugin asks Bevy's mesh
-//!   allocator for `COPY_SRC` on them). Skinned and morphed meshes are left out, with a warning
-//!   logged once: Bevy deforms them in its vertex shader, out of the SDK's reach (a compute
-//!   skinning pass feeding the SDK's refit would bring them in). Meshes with compressed
-//!   positions or a topology other than a triangle list are left out with a warning each.
+//!   allocator for `COPY_SRC` and `STORAGE` on them). Meshes with compressed positions or a
+//!   topology other than a triangle list are left out with a warning each.
+//! - **Skinned and morphed meshes** (a [`SkinnedMesh`](bevy::mesh::skinning::SkinnedMesh), a
+//!   [`MeshMorphWeights`](bevy::mesh::morph::MeshMorphWeights)) are traced at the pose Bevy
+//!   draws: each frame the plugin computes every joint's matrix as Bevy's skinning does (the
+//!   joint entity's `GlobalTransform` × its inverse bindpose) and reads the morph weights, and
+//!   the SDK's [`SkinningTask`](kickstart_rt::SkinningTask) poses the rest positions in Bevy's
+//!   vertex buffer (morph targets first, then up to four joints a vertex) into a positions
+//!   buffer of the entity's own, from which the SDK refits the entity's BLAS. All of a frame's
+//!   deformed meshes go into one SDK task: one compute dispatch and one refit each a frame.
 //! - **Cutouts:** a mesh whose [`StandardMaterial`](bevy::prelude::StandardMaterial) has
 //!   `AlphaMode::Mask(cutoff)` (or `AlphaToCoverage`, which is `Mask(0.5)` without MSAA) and a
 //!   `base_color_texture` is traced as the SDK's cutout geometry: rays pass where
@@ -65,6 +71,7 @@ mod frame;
 mod gbuffer;
 mod scene;
 mod sdk;
+mod skin;
 mod view;
 
 use bevy::camera::Hdr;
@@ -207,11 +214,12 @@ impl Plugin for KickstartRtPlugin {
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
         };
-        // The SDK copies vertex and index data out of Bevy's mesh buffers.
+        // The SDK copies vertex and index data out of Bevy's mesh buffers, and its skinning
+        // pass reads skinned meshes' rest positions, joints and weights there in place.
         render_app
             .world_mut()
             .resource_mut::<MeshAllocatorSettings>()
-            .extra_buffer_usages |= BufferUsages::COPY_SRC;
+            .extra_buffer_usages |= BufferUsages::COPY_SRC | BufferUsages::STORAGE;
     }
 
     fn finish(&self, app: &mut App) {
@@ -248,7 +256,11 @@ impl KickstartRtPlugin {
             .init_resource::<frame::FramesInFlight>()
             .add_systems(
                 ExtractSchedule,
-                (scene::extract_mesh_instances, scene::extract_lights),
+                (
+                    scene::extract_mesh_instances,
+                    scene::extract_lights,
+                    skin::extract_poses,
+                ),
             )
             .add_systems(
                 Render,

@@ -1,10 +1,12 @@
 //! Keeps the SDK's geometry and instances in step with Bevy's `Mesh3d` entities.
 //!
 //! Extraction copies what changed in the main world (meshes, materials' opacity and transforms
-//! of visible entities, and entities that lost their mesh or visibility); [`sync_scene`] turns
-//! that into one SDK task a frame — register a geometry the first time a mesh is used with an
-//! opacity (a masked material's texture and cutoff make their own geometry), register, move or
-//! remove instances, rebuild what changed — once Bevy holds the mesh's data and texture.
+//! of visible entities, and entities that lost their mesh or visibility), and every skinned or
+//! morphed entity's pose; [`sync_scene`] turns that into one SDK task a frame — register a
+//! geometry the first time a mesh is used with an opacity (a masked material's texture and
+//! cutoff make their own geometry), register, move or remove instances, pose and refit the
+//! deformed meshes ([`crate::skin`]), rebuild what changed — once Bevy holds the mesh's data
+//! and texture.
 
 use std::collections::{HashMap, HashSet};
 
@@ -12,18 +14,22 @@ use bevy::asset::AssetId;
 use bevy::ecs::system::SystemParam;
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine3A;
+use bevy::mesh::morph::MeshMorphWeights;
+use bevy::mesh::skinning::SkinnedMesh;
 use bevy::mesh::{Mesh, MeshVertexAttribute, PrimitiveTopology, VertexFormat as BevyVertexFormat};
 use bevy::prelude::*;
 use bevy::render::Extract;
 use bevy::render::mesh::allocator::MeshAllocator;
 use bevy::render::mesh::{RenderMesh, RenderMeshBufferInfo};
 use bevy::render::render_asset::{ExtractedAssets, RenderAssets};
+use bevy::render::renderer::RenderDevice;
 use bevy::render::texture::GpuImage;
 use kickstart_rt as ksrt;
 
 use crate::RayTracedLighting;
 use crate::cutout::{self, Cutout, Opacity};
 use crate::sdk::SdkContext;
+use crate::skin::{DeformedMeshes, Pose};
 
 /// A visible mesh entity added or changed, as extracted.
 struct ChangedEntity {
@@ -31,8 +37,6 @@ struct ChangedEntity {
     mesh: AssetId<Mesh>,
     /// Object to world.
     transform: Affine3A,
-    /// Deformed by skinning or morph targets (left out).
-    deformed: bool,
     /// What its material lets through.
     opacity: Opacity,
 }
@@ -69,6 +73,8 @@ pub(crate) struct ExtractedScene {
     removed: Vec<Entity>,
     /// The first directional light: direction light travels, and exposed radiance scale.
     pub sun: Option<Sun>,
+    /// This frame's pose of every visible skinned or morphed mesh entity.
+    pub poses: Vec<Pose>,
 }
 
 /// The first directional light, as the composite and the shadow trace need it.
@@ -86,8 +92,8 @@ type MeshEntity<'a> = (
     &'a GlobalTransform,
     &'a InheritedVisibility,
     Option<&'a MeshMaterial3d<StandardMaterial>>,
-    Has<bevy::mesh::skinning::SkinnedMesh>,
-    Has<bevy::mesh::morph::MeshMorphWeights>,
+    Has<SkinnedMesh>,
+    Has<MeshMorphWeights>,
 );
 
 /// A mesh entity whose mesh, material, transform or visibility changed (or that was just
@@ -99,15 +105,25 @@ type MeshEntityChanged = Or<(
     Changed<InheritedVisibility>,
 )>;
 
+/// Components whose removal [`extract_mesh_instances`] follows.
+#[derive(SystemParam)]
+pub(crate) struct Removed<'w, 's> {
+    meshes: Extract<'w, 's, RemovedComponents<'static, 'static, Mesh3d>>,
+    skins: Extract<'w, 's, RemovedComponents<'static, 'static, SkinnedMesh>>,
+    morphs: Extract<'w, 's, RemovedComponents<'static, 'static, MeshMorphWeights>>,
+}
+
 /// Extracts mesh entities that were added, moved, re-meshed, re-materialed, shown or hidden,
-/// those whose material asset changed, and those that were despawned or lost their mesh.
+/// those whose material asset changed or that stopped being skinned or morphed, and those that
+/// were despawned or lost their mesh. Skinned and morphed entities are left to
+/// [`crate::skin::extract_poses`].
 pub(crate) fn extract_mesh_instances(
     mut scene: ResMut<ExtractedScene>,
     changed: Extract<Query<MeshEntity, MeshEntityChanged>>,
     all: Extract<Query<MeshEntity>>,
     changed_materials: Extract<Option<Res<ChangedMaterials>>>,
     materials: Extract<Option<Res<Assets<StandardMaterial>>>>,
-    mut removed: Extract<RemovedComponents<Mesh3d>>,
+    mut removed: Removed,
     mut warned: Local<HashSet<AssetId<StandardMaterial>>>,
 ) {
     let opacity = |material: Option<&MeshMaterial3d<StandardMaterial>>,
@@ -131,23 +147,29 @@ pub(crate) fn extract_mesh_instances(
         .then(|| all.iter().filter(|e| material_changed(e.4)))
         .into_iter()
         .flatten();
+    // An entity that is no longer deformed is traced as a static mesh again.
+    let undeformed: Vec<Entity> = removed.skins.read().chain(removed.morphs.read()).collect();
+    let undeformed = undeformed.into_iter().filter_map(|e| all.get(e).ok());
     for (entity, mesh, transform, visibility, material, skinned, morphed) in
-        changed.iter().chain(modified)
+        changed.iter().chain(modified).chain(undeformed)
     {
+        if skinned || morphed {
+            // Posed every frame by `skin::extract_poses`.
+            continue;
+        }
         if visibility.get() {
             let opacity = opacity(material, &mut warned);
             scene.changed.push(ChangedEntity {
                 entity,
                 mesh: mesh.id(),
                 transform: transform.affine(),
-                deformed: skinned || morphed,
                 opacity,
             });
         } else {
             scene.removed.push(entity);
         }
     }
-    scene.removed.extend(removed.read());
+    scene.removed.extend(removed.meshes.read());
 }
 
 /// Extracts the first directional light, and warns once when Bevy's ambient light would add to
@@ -212,22 +234,24 @@ pub(crate) struct SceneSync {
     waiting: HashMap<Entity, (GeometryKey, Affine3A)>,
     /// Meshes the SDK cannot trace, each logged once.
     unsupported: HashSet<AssetId<Mesh>>,
-    /// Whether deformed (skinned or morphed) meshes were logged.
-    warned_deformed: bool,
+    /// The skinned and morphed entities, posed every frame.
+    deformed: DeformedMeshes,
 }
 
 /// Bevy's render-world meshes and textures, and what changed in them this frame.
 #[derive(SystemParam)]
 pub(crate) struct RenderData<'w> {
-    meshes: Res<'w, RenderAssets<RenderMesh>>,
+    pub meshes: Res<'w, RenderAssets<RenderMesh>>,
     extracted_meshes: Res<'w, ExtractedAssets<RenderMesh>>,
-    allocator: Res<'w, MeshAllocator>,
-    images: Res<'w, RenderAssets<GpuImage>>,
+    pub allocator: Res<'w, MeshAllocator>,
+    pub images: Res<'w, RenderAssets<GpuImage>>,
     extracted_images: Res<'w, ExtractedAssets<GpuImage>>,
+    pub device: Res<'w, RenderDevice>,
 }
 
-/// Records this frame's scene changes as one SDK task (submitted at once: Bevy's mesh uploads,
-/// queued earlier in the frame, run before it).
+/// Records this frame's scene changes and poses as one SDK task (submitted at once: Bevy's mesh
+/// uploads, queued earlier in the frame, run before it): the skinning passes, then the new
+/// geometries' builds and the deformed ones' refits, then the TLAS.
 pub(crate) fn sync_scene(
     sdk: Res<SdkContext>,
     mut sync: ResMut<SceneSync>,
@@ -253,27 +277,32 @@ pub(crate) fn sync_scene(
     for entity in extracted.removed.drain(..) {
         sync.waiting.remove(&entity);
         sync.remove_instance(ctx, entity);
+        sync.deformed.remove(ctx, entity);
+    }
+    for pose in &extracted.poses {
+        // Newly skinned or morphed: its static instance goes.
+        sync.waiting.remove(&pose.entity);
+        sync.remove_instance(ctx, pose.entity);
     }
     for changed in extracted.changed.drain(..) {
-        if changed.deformed {
-            sync.leave_out_deformed(ctx, changed.entity);
-        } else {
-            sync.change(ctx, &mut container, &changed);
-        }
+        sync.change(ctx, &mut container, &changed);
     }
     let built = sync.register_waiting(ctx, &mut container, &data);
+    let poses = std::mem::take(&mut extracted.poses);
+    let posed = (sync.deformed).pose(ctx, &mut container, &poses, &meshes, &data);
 
     if container.is_empty() {
         return;
     }
     debug!(
-        "kickstart-rt: scene update: {} new geometries, {} instances, {} waiting",
-        built,
+        "kickstart-rt: scene update: {built} new geometries, {posed} posed, {} instances, {} \
+         waiting",
         sync.instances.len(),
         sync.waiting.len()
     );
     container.schedule_bvh_task(ksrt::BvhBuildTask {
-        max_blas_build_count: built.max(1),
+        // Every deformed mesh is refit this frame: its pose would lag otherwise.
+        max_blas_build_count: (built + posed).max(1),
         ..Default::default()
     });
     if let Err(e) = ctx.invoke_gpu_task(container) {
@@ -332,21 +361,6 @@ impl SceneSync {
         {
             destroy_geometry(ctx, geometry.handle);
         }
-    }
-
-    /// A skinned or morphed mesh entity: left out of the scene (logged the first time).
-    fn leave_out_deformed(&mut self, ctx: &ksrt::ExecuteContext, entity: Entity) {
-        // Bevy skins and morphs in its vertex shader, out of the SDK's reach: tracing the
-        // rest pose would cast shadows and bounce light where the mesh is not.
-        if !self.warned_deformed {
-            warn!(
-                "kickstart-rt: skinned and morphed meshes are left out of ray tracing (Bevy \
-                 deforms them in its vertex shader); entity {entity} is the first"
-            );
-            self.warned_deformed = true;
-        }
-        self.waiting.remove(&entity);
-        self.remove_instance(ctx, entity);
     }
 
     /// A mesh entity added, moved, re-meshed or re-materialed: an instance of the same geometry
@@ -462,7 +476,7 @@ fn destroy_instance(ctx: &ksrt::ExecuteContext, handle: ksrt::InstanceHandle) {
 }
 
 /// The SDK instance of `entity`: `geometry` placed by `transform`.
-fn instance_input(
+pub(crate) fn instance_input(
     geometry: ksrt::GeometryHandle,
     transform: Affine3A,
     entity: Entity,
@@ -565,7 +579,7 @@ fn register_geometry(
 }
 
 /// Byte offset and SDK format of the position attribute in a Bevy vertex layout.
-fn position_attribute(
+pub(crate) fn position_attribute(
     mesh_layout: &bevy::mesh::MeshVertexBufferLayout,
     layout: &bevy::mesh::VertexBufferLayout,
 ) -> Result<(u64, ksrt::VertexFormat), String> {

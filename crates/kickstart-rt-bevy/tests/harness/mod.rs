@@ -58,6 +58,8 @@ pub struct Setup {
     pub render_creation: RenderCreation,
     /// The camera's placement.
     pub camera: Transform,
+    /// The camera's projection (its aspect ratio follows the target).
+    pub projection: PerspectiveProjection,
 }
 
 impl Default for Setup {
@@ -67,6 +69,7 @@ impl Default for Setup {
             render_creation: RenderCreation::default(),
             camera: Transform::from_translation(crate::seed::EYE)
                 .looking_at(crate::seed::LOOK_AT, Vec3::Y),
+            projection: PerspectiveProjection::default(),
         }
     }
 }
@@ -76,6 +79,7 @@ pub struct Harness {
     pub app: App,
     pub target: Handle<Image>,
     pub camera: Transform,
+    pub projection: PerspectiveProjection,
 }
 
 impl Harness {
@@ -124,6 +128,7 @@ impl Harness {
             RenderTarget::Image(target.clone().into()),
             effects,
             setup.camera,
+            Projection::Perspective(setup.projection.clone()),
         ));
         app.finish();
         app.cleanup();
@@ -131,6 +136,7 @@ impl Harness {
             app,
             target,
             camera: setup.camera,
+            projection: setup.projection,
         }
     }
 
@@ -171,7 +177,7 @@ impl Harness {
 
     /// The pixel showing world point `p`.
     pub fn pixel_of(&self, p: Vec3) -> (u32, u32) {
-        pixel_of(&self.camera, p)
+        pixel_through(&self.camera, &self.projection, p)
     }
 
     /// The entity of the seed scene's coloured object `i`.
@@ -218,10 +224,19 @@ fn f16_to_f32(h: u16) -> f32 {
 /// The pixel showing world point `p` to a camera placed by `camera` (Bevy's default
 /// perspective projection).
 pub fn pixel_of(camera: &Transform, p: Vec3) -> (u32, u32) {
+    pixel_through(camera, &PerspectiveProjection::default(), p)
+}
+
+/// The pixel showing world point `p` to a camera placed by `camera`, through `projection`.
+pub fn pixel_through(
+    camera: &Transform,
+    projection: &PerspectiveProjection,
+    p: Vec3,
+) -> (u32, u32) {
     let view = camera.to_matrix().inverse();
     let projection = bevy::camera::CameraProjection::get_clip_from_view(&PerspectiveProjection {
         aspect_ratio: WIDTH as f32 / HEIGHT as f32,
-        ..default()
+        ..projection.clone()
     });
     let ndc = (projection * view).project_point3(p);
     let x = (ndc.x * 0.5 + 0.5) * WIDTH as f32;
