@@ -15,12 +15,12 @@
 //! ```
 //!
 //! # What the plugin does
-//! - **Scene:** every entity with a [`Mesh3d`](bevy::prelude::Mesh3d) (triangle lists, any
-//!   vertex layout with `Float32x3` positions, `u16` or `u32` indices or none) is registered with
-//!   the SDK, and kept in sync as it moves, spawns, despawns, hides or changes mesh. The SDK
-//!   copies positions out of Bevy's own mesh buffers on the GPU (the plugin asks Bevy's mesh
-//!   allocator for `COPY_SRC` and `STORAGE` on them). Meshes with compressed positions or a
-//!   topology other than a triangle list are left out with a warning each.
+//! - **Scene:** every entity with a [`Mesh3d`] (triangle lists, any vertex layout with
+//!   `Float32x3` positions, `u16` or `u32` indices or none) is registered with the SDK, and kept
+//!   in sync as it moves, spawns, despawns, hides or changes mesh. The SDK copies positions out
+//!   of Bevy's own mesh buffers on the GPU (the plugin asks Bevy's mesh allocator for `COPY_SRC`
+//!   and `STORAGE` on them). Meshes with compressed positions or a topology other than a
+//!   triangle list are left out with a warning each.
 //! - **Skinned and morphed meshes** (a [`SkinnedMesh`](bevy::mesh::skinning::SkinnedMesh), a
 //!   [`MeshMorphWeights`](bevy::mesh::morph::MeshMorphWeights)) are traced at the pose Bevy
 //!   draws: each frame the plugin computes every joint's matrix as Bevy's skinning does (the
@@ -29,18 +29,18 @@
 //!   vertex buffer (morph targets first, then up to four joints a vertex) into a positions
 //!   buffer of the entity's own, from which the SDK refits the entity's BLAS. All of a frame's
 //!   deformed meshes go into one SDK task: one compute dispatch and one refit each a frame.
-//! - **Cutouts:** a mesh whose [`StandardMaterial`](bevy::prelude::StandardMaterial) has
-//!   `AlphaMode::Mask(cutoff)` (or `AlphaToCoverage`, which is `Mask(0.5)` without MSAA) and a
-//!   `base_color_texture` is traced as the SDK's cutout geometry: rays pass where
-//!   `base_color.alpha() × texture alpha < cutoff`, as Bevy's raster discards, the texture read
-//!   at the mesh's `ATTRIBUTE_UV_0` (or `_1`, per `base_color_channel`) in Bevy's own vertex
-//!   buffer. The SDK bakes it into opacity micro-maps when the mesh is registered, so the plugin
-//!   registers it again when the material's texture, factor, cutoff or alpha mode changes or the
-//!   texture's texels do. A masked material without a texture is opaque or, below its cutoff,
-//!   left out. Masks are traced opaque (with a warning) where the SDK cannot follow Bevy: a
-//!   `uv_transform` other than identity, compressed UVs. `Blend`, `Premultiplied`, `Add` and
-//!   `Multiply` have no ray-traced counterpart and are traced opaque; so are meshes of other
-//!   material types. Vertex colours' alpha is not part of the traced test.
+//! - **Cutouts:** a mesh whose [`StandardMaterial`] has `AlphaMode::Mask(cutoff)` (or
+//!   `AlphaToCoverage`, which is `Mask(0.5)` without MSAA) and a `base_color_texture` is traced as
+//!   the SDK's cutout geometry: rays pass where `base_color.alpha() × texture alpha < cutoff`, as
+//!   Bevy's raster discards, the texture read at the mesh's `ATTRIBUTE_UV_0` (or `_1`, per
+//!   `base_color_channel`) in Bevy's own vertex buffer. The SDK bakes it into opacity micro-maps
+//!   when the mesh is registered, so the plugin registers it again when the material's texture,
+//!   factor, cutoff or alpha mode changes or the texture's texels do. A masked material without a
+//!   texture is opaque or, below its cutoff, left out. Masks are traced opaque (with a warning)
+//!   where the SDK cannot follow Bevy: a `uv_transform` other than identity, compressed UVs.
+//!   `Blend`, `Premultiplied`, `Add` and `Multiply` have no ray-traced counterpart and are traced
+//!   opaque; so are meshes of other material types. Vertex colours' alpha is not part of the traced
+//!   test.
 //! - **Rates:** [`RayTracedLighting::preset`] takes the SDK's [`Preset`]s (as `ksrt render
 //!   --preset`): which pixels each effect traces a frame, the denoiser and the injection's
 //!   stride.
