@@ -116,8 +116,8 @@ struct RenderCli {
     /// A GPU primary-ray debug view instead of the CPU reference image.
     #[arg(long, value_enum)]
     debug_view: Option<DebugView>,
-    /// Scene: default, cornell, window-room, grove, town, crowd, statue, dragon, apartment, bunny,
-    /// cornell-obj, cornell-gltf, or a path to a .gltf/.glb/.obj file.
+    /// Scene: default, cornell, window-room, grove, dancers, town, crowd, statue, dragon,
+    /// apartment, bunny, cornell-obj, cornell-gltf, or a path to a .gltf/.glb/.obj file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Scenes folder [default: $KSRT_SCENES, else the repository's scenes/].
@@ -162,6 +162,9 @@ struct RenderCli {
     /// (one per 4×4 for reflections, GI and AO, per 2×2 for shadows; the fast denoiser).
     #[arg(long, default_value = "quality")]
     preset: kickstart_rt::Preset,
+    /// Scene time, seconds, of an animated scene's pose (its first animation, looping).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    time: f32,
 }
 
 // `ksrt view`'s options (no doc comment: the variant's is the help text).
@@ -268,8 +271,8 @@ struct BenchCli {
     #[arg(long)]
     scenes: Option<PathBuf>,
     /// Scenes to benchmark (repeatable): any scene `render` takes (the built-in default, cornell,
-    /// window-room, grove (cutouts), town, crowd, statue; dragon, apartment, bunny, cornell-obj,
-    /// cornell-gltf; or a file) [default: statue and apartment].
+    /// window-room, grove (cutouts), dancers (skinned), town, crowd, statue; dragon, apartment,
+    /// bunny, cornell-obj, cornell-gltf; or a file) [default: statue and apartment].
     #[arg(long)]
     scene: Vec<String>,
     /// Also write the results as JSON to this file.
@@ -314,23 +317,26 @@ fn run(command: Command) -> AnyResult<()> {
     match command {
         Command::Info => app::gpu::info(),
         Command::Shaders(c) => app::shaders::run(c.dump.as_deref()),
-        Command::Render(c) => app::render::run(app::render::RenderArgs {
-            size: c.size,
-            out: c.out,
-            debug_view: c.debug_view,
-            scene: c.scene,
-            scenes: c.scenes,
-            camera: c.camera,
-            frames: c.frames,
-            effects: c.effects,
-            seed: c.seed,
-            hdr: c.hdr,
-            no_reference: c.no_reference,
-            json: c.json,
-            memory_csv: c.memory_csv,
-            frames_in_flight: c.frames_in_flight,
-            preset: c.preset,
-        }),
+        Command::Render(c) => app::render::run_at(
+            app::render::RenderArgs {
+                size: c.size,
+                out: c.out,
+                debug_view: c.debug_view,
+                scene: c.scene,
+                scenes: c.scenes,
+                camera: c.camera,
+                frames: c.frames,
+                effects: c.effects,
+                seed: c.seed,
+                hdr: c.hdr,
+                no_reference: c.no_reference,
+                json: c.json,
+                memory_csv: c.memory_csv,
+                frames_in_flight: c.frames_in_flight,
+                preset: c.preset,
+            },
+            c.time,
+        ),
         Command::View(c) => app::view::run(app::view::ViewArgs {
             scene: c.scene,
             scenes_dir: app::scenes::scenes_dir(c.scenes),
@@ -506,6 +512,19 @@ mod tests {
             soak.map(|c| c.command),
             Ok(Command::Soak(SoakCli { frames: 2, .. }))
         ));
+    }
+
+    #[test]
+    fn render_takes_the_pose_time() {
+        let time = |args: &[&str]| match Cli::try_parse_from(args).map(|c| c.command) {
+            Ok(Command::Render(c)) => Ok(c.time),
+            Ok(_) => Err("not render".to_string()),
+            Err(e) => Err(e.to_string()),
+        };
+        assert_eq!(time(&["ksrt", "render"]), Ok(0.0));
+        assert_eq!(time(&["ksrt", "render", "--time", "1.25"]), Ok(1.25));
+        assert_eq!(time(&["ksrt", "render", "--time", "-0.5"]), Ok(-0.5));
+        assert!(time(&["ksrt", "render", "--time", "soon"]).is_err());
     }
 
     #[test]
