@@ -1,7 +1,8 @@
 //! The renderer `ksrt` draws with, on wgpu and kickstart-rt's public API:
 //!
-//! - [`scene`]: the scene model (meshes, instances, materials, textures, lights, cameras) and the
-//!   built-in scenes (`default`, `cornell`, `window-room`, `grove`, `town`, `crowd`, `statue`);
+//! - [`scene`]: the scene model (meshes, instances, materials, textures, lights, cameras; nodes,
+//!   skins, rigs and animations) and the built-in scenes (`default`, `cornell`, `window-room`,
+//!   `grove`, the `dancers`' generated character, `town`, `crowd`, `statue`);
 //! - [`upload`] and [`sdk_glue`]: a scene's buffers and its registration with the SDK, and the
 //!   SDK calls in one place;
 //! - [`raster`]: a small deferred rasteriser (G-buffer, sun shadow map, direct lighting);
