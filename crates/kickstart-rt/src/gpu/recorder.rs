@@ -136,6 +136,36 @@ impl<'a> Recorder<'a> {
         pass.dispatch_workgroups(x, y, 1);
     }
 
+    /// One compute pass with one 1-D dispatch per `(bind group 0, workgroups)` of `groups`, in
+    /// order: many small independent dispatches (one per caller mesh) share one pass, so the GPU
+    /// may overlap them and a timed frame writes one timestamp pair instead of one per dispatch
+    /// (each pair makes the GPU drain). wgpu still orders dispatches that share a written buffer.
+    pub fn dispatch_each(
+        &mut self,
+        label: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        groups: &[(wgpu::BindGroup, u32)],
+    ) {
+        if groups.iter().all(|(_, n)| *n == 0) {
+            return;
+        }
+        self.dispatches += 1;
+        let scope = self.scope;
+        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes,
+            });
+        pass.set_pipeline(pipeline);
+        for (group, workgroups) in groups.iter().filter(|(_, n)| *n > 0) {
+            pass.set_bind_group(0, Some(group), &[]);
+            let (x, y) = split_workgroups(*workgroups);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+    }
+
     /// One compute pass with one 2-D dispatch of `(x, y)` workgroups (image passes).
     pub fn dispatch_2d(
         &mut self,

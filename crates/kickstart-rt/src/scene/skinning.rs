@@ -116,12 +116,14 @@ impl Skinner {
         }
     }
 
-    /// Records one dispatch a task of `tasks` (validated: every range lies in its buffer, every
-    /// window fits the device's binding size, vertex counts fit one dispatch).
+    /// Records one dispatch a task of `tasks`, all in one compute pass (validated: every range
+    /// lies in its buffer, every window fits the device's binding size, vertex counts fit one
+    /// dispatch).
     pub fn record(&self, rec: &mut Recorder<'_>, tasks: &[&SkinningTask]) {
         let align = u64::from(rec.device.limits().min_storage_buffer_offset_alignment);
         let (pose, at) = pose_data(tasks);
         let pose = rec.storage_init("kickstart-rt skinning pose", bytemuck::cast_slice(&pose));
+        let mut groups = Vec::with_capacity(tasks.len());
         for (t, (first_matrix, first_weight)) in tasks.iter().zip(at) {
             if t.vertex_count == 0 {
                 continue;
@@ -153,13 +155,9 @@ impl Skinner {
                     ("posed", bind(inputs[4])),
                 ],
             );
-            rec.dispatch(
-                "skinning",
-                &self.pipeline.pipeline,
-                &[&group],
-                t.vertex_count.div_ceil(WORKGROUP),
-            );
+            groups.push((group, t.vertex_count.div_ceil(WORKGROUP)));
         }
+        rec.dispatch_each("skinning", &self.pipeline.pipeline, &groups);
     }
 }
 
