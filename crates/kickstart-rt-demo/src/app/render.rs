@@ -44,11 +44,6 @@ pub struct RenderArgs {
     pub preset: kickstart_rt::Preset,
 }
 
-/// Runs `ksrt render` at scene time 0.
-pub fn run(args: RenderArgs) -> AnyResult<()> {
-    run_at(args, 0.0)
-}
-
 /// Runs `ksrt render` with an animated scene posed at `time` seconds (`--time`; the first
 /// animation, looping): the frames, the debug views and the CPU reference all show that pose.
 pub fn run_at(args: RenderArgs, time: f32) -> AnyResult<()> {

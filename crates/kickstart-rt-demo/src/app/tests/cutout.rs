@@ -26,7 +26,7 @@ const SIZE: (u32, u32) = (160, 90);
 #[test]
 fn render_command_writes_every_image_of_the_grove() {
     let out = testing::temp_dir("grove-render");
-    crate::app::render::run(crate::app::render::RenderArgs {
+    let args = crate::app::render::RenderArgs {
         size: Some("160x90".into()),
         out: out.clone(),
         debug_view: None,
@@ -42,8 +42,9 @@ fn render_command_writes_every_image_of_the_grove() {
         memory_csv: None,
         frames_in_flight: 1,
         preset: ksrt::Preset::Quality,
-    })
-    .unwrap_or_else(|e| panic!("ksrt render --scene grove: {e}"));
+    };
+    crate::app::render::run_at(args, 0.0)
+        .unwrap_or_else(|e| panic!("ksrt render --scene grove: {e}"));
     for name in [
         "final",
         "shadow",
