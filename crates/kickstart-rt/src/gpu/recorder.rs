@@ -107,6 +107,26 @@ impl<'a> Recorder<'a> {
         }
     }
 
+    /// Begins a compute pass named `label` (timed when GPU timing is on) with `pipeline` set:
+    /// what every dispatch method starts with.
+    fn begin_pass(
+        &mut self,
+        label: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+    ) -> wgpu::ComputePass<'_> {
+        self.dispatches += 1;
+        let scope = self.scope;
+        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes,
+            });
+        pass.set_pipeline(pipeline);
+        pass
+    }
+
     /// One compute pass with one dispatch of `workgroups` (1-D, split into 2-D when large).
     /// `bind_groups[i]` binds to group `i`.
     pub fn dispatch(
@@ -119,16 +139,7 @@ impl<'a> Recorder<'a> {
         if workgroups == 0 {
             return;
         }
-        self.dispatches += 1;
-        let scope = self.scope;
-        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
-        let mut pass = self
-            .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes,
-            });
-        pass.set_pipeline(pipeline);
+        let mut pass = self.begin_pass(label, pipeline);
         for (i, bg) in bind_groups.iter().enumerate() {
             pass.set_bind_group(i as u32, Some(*bg), &[]);
         }
@@ -149,16 +160,7 @@ impl<'a> Recorder<'a> {
         if groups.iter().all(|(_, n)| *n == 0) {
             return;
         }
-        self.dispatches += 1;
-        let scope = self.scope;
-        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
-        let mut pass = self
-            .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes,
-            });
-        pass.set_pipeline(pipeline);
+        let mut pass = self.begin_pass(label, pipeline);
         for (group, workgroups) in groups.iter().filter(|(_, n)| *n > 0) {
             pass.set_bind_group(0, Some(group), &[]);
             let (x, y) = split_workgroups(*workgroups);
@@ -177,16 +179,7 @@ impl<'a> Recorder<'a> {
         if x == 0 || y == 0 {
             return;
         }
-        self.dispatches += 1;
-        let scope = self.scope;
-        let timestamp_writes = self.timestamps.as_mut().and_then(|t| t.next(scope, label));
-        let mut pass = self
-            .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes,
-            });
-        pass.set_pipeline(pipeline);
+        let mut pass = self.begin_pass(label, pipeline);
         for (i, bg) in bind_groups.iter().enumerate() {
             pass.set_bind_group(i as u32, Some(*bg), &[]);
         }
