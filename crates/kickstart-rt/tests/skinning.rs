@@ -13,6 +13,7 @@ const STORAGE_COPY: wgpu::BufferUsages =
     wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC);
 
 /// One mesh's skinning data on the CPU.
+#[derive(Clone)]
 struct Pose {
     rest: Vec<Vec3>,
     joints: Vec<[u32; 4]>,
@@ -356,6 +357,180 @@ fn morph_targets_are_added_before_skinning() {
             assert!(moved.count() > 300);
         }
     }
+}
+
+/// Meshes whose data share one rest, one influence and one output buffer (as an engine that
+/// pools its vertex data passes them).
+struct Pooled {
+    rest: wgpu::Buffer,
+    influences: wgpu::Buffer,
+    out: wgpu::Buffer,
+    /// Per mesh: its first byte in the rest, influence and output buffers.
+    at: Vec<(u64, u64, u64)>,
+}
+
+/// Packs `poses` (Float32x3 rest positions, Uint32x4 joints then Float32x4 weights a vertex)
+/// into pooled buffers, each mesh `gap` bytes after the last (gap: a multiple of 4, not of the
+/// storage offset alignment); the output buffer is filled with 0xCD.
+fn pooled(poses: &[Pose], gap: u64) -> Pooled {
+    let (mut rest, mut inf, mut at) = (Vec::new(), Vec::new(), Vec::new());
+    let mut out_len = 0u64;
+    for p in poses {
+        rest.resize(rest.len() + gap as usize, 0xAB);
+        inf.resize(inf.len() + gap as usize, 0xAB);
+        out_len += gap;
+        at.push((rest.len() as u64, inf.len() as u64, out_len));
+        rest.extend(
+            p.rest
+                .iter()
+                .flat_map(|v| bytemuck::cast::<[f32; 3], [u8; 12]>(v.to_array())),
+        );
+        for (j, w) in p.joints.iter().zip(&p.weights) {
+            inf.extend(bytemuck::cast_slice(j));
+            inf.extend(bytemuck::cast_slice(w));
+        }
+        out_len += 12 * p.rest.len() as u64;
+    }
+    Pooled {
+        rest: buffer(&rest, STORAGE_COPY),
+        influences: buffer(&inf, STORAGE_COPY),
+        out: buffer(&vec![0xCD; out_len as usize + 16], STORAGE_COPY),
+        at,
+    }
+}
+
+/// The task posing mesh `k` of `pool` by `pose`'s matrices from `rest` (buffer, byte offset)
+/// into `out` (buffer, byte offset).
+fn pooled_task(
+    pool: &Pooled,
+    k: usize,
+    pose: &Pose,
+    rest: (&wgpu::Buffer, u64),
+    out: (&wgpu::Buffer, u64),
+) -> SkinningTask {
+    let inf = pool.at[k].1;
+    fn attribute<F>(pool: &Pooled, offset: u64, format: F) -> SkinAttribute<F> {
+        SkinAttribute {
+            buffer: pool.influences.clone(),
+            offset,
+            stride: 32,
+            format,
+        }
+    }
+    SkinningTask {
+        name: format!("pooled mesh {k}"),
+        rest_positions: SkinAttribute {
+            buffer: rest.0.clone(),
+            offset: rest.1,
+            stride: 12,
+            format: VertexFormat::Float32x3,
+        },
+        vertex_count: pose.rest.len() as u32,
+        influences: Some(SkinInfluences {
+            joints: attribute(pool, inf, JointFormat::Uint32x4),
+            weights: attribute(pool, inf + 16, WeightFormat::Float32x4),
+        }),
+        joint_matrices: pose.matrices.clone(),
+        morph_targets: None,
+        morph_weights: Vec::new(),
+        output: SkinningOutput {
+            buffer: out.0.clone(),
+            offset: out.1,
+            stride: 12,
+        },
+    }
+}
+
+/// The posed positions at byte `at` of `bytes`.
+fn positions_at(bytes: &[u8], at: u64, n: usize) -> Vec<Vec3> {
+    (0..n)
+        .map(|v| {
+            let i = at as usize + 12 * v;
+            Vec3::from(bytemuck::pod_read_unaligned::<[f32; 3]>(&bytes[i..i + 12]))
+        })
+        .collect()
+}
+
+fn assert_near(got: &[Vec3], want: &[Vec3], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}");
+    for (v, (g, w)) in got.iter().zip(want).enumerate() {
+        let tol = 1e-5 * (1.0 + w.abs().max_element());
+        assert!(
+            (*g - *w).abs().max_element() <= tol,
+            "{what}: vertex {v}: {g} != {w}"
+        );
+    }
+}
+
+#[test]
+fn meshes_in_pooled_buffers_are_posed_together_and_dependent_tasks_in_order() {
+    let mut rng = Rng(fuzz_seed("pooled skinning", 47));
+    // Sizes around the 64-vertex workgroup: each mesh must find its own workgroups.
+    let sizes = [1, 63, 64, 65, 200, 7];
+    let poses: Vec<Pose> = sizes
+        .iter()
+        .map(|&n| random_pose(&mut rng, n, 6, 0))
+        .collect();
+    let pool = pooled(&poses, 20);
+    let second = buffer(&vec![0xCD; 12 * 64 + 8], STORAGE_COPY);
+    // Mesh 2's output read back as the rest pose of another mesh (into `second`), then mesh 2
+    // posed again, differently: the reader must see the first pose, the buffer the second.
+    // Both use mesh 2's influences (the pooled buffer's), with matrices of their own.
+    let again = Pose {
+        matrices: random_pose(&mut rng, 1, 6, 0).matrices,
+        ..poses[2].clone()
+    };
+    let reader = Pose {
+        rest: poses[2].posed(true),
+        matrices: random_pose(&mut rng, 1, 6, 0).matrices,
+        ..poses[2].clone()
+    };
+    let ctx = context(2);
+    let mut c = ctx.create_task_container();
+    for (k, pose) in poses.iter().enumerate() {
+        let (rest, _, out) = pool.at[k];
+        c.schedule_bvh_task(pooled_task(
+            &pool,
+            k,
+            pose,
+            (&pool.rest, rest),
+            (&pool.out, out),
+        ));
+    }
+    let mesh2_out = (&pool.out, pool.at[2].2);
+    c.schedule_bvh_task(pooled_task(&pool, 2, &reader, mesh2_out, (&second, 8)));
+    let (rest2, ..) = pool.at[2];
+    c.schedule_bvh_task(pooled_task(
+        &pool,
+        2,
+        &again,
+        (&pool.rest, rest2),
+        mesh2_out,
+    ));
+    build_submit_complete(&ctx, c);
+
+    let bytes = read_buffer(&pool.out);
+    for (k, pose) in poses.iter().enumerate() {
+        // The later task wins.
+        let want = if k == 2 { &again } else { pose }.posed(true);
+        let got = positions_at(&bytes, pool.at[k].2, pose.rest.len());
+        assert_near(&got, &want, &format!("mesh {k} of {}", sizes[k]));
+    }
+    // Nothing between the meshes changed.
+    for k in 0..poses.len() {
+        let end = pool.at[k].2 as usize;
+        let start = end - 20;
+        assert!(
+            bytes[start..end].iter().all(|&b| b == 0xCD),
+            "the gap before mesh {k}"
+        );
+    }
+    let read = positions_at(&read_buffer(&second), 8, 64);
+    assert_near(
+        &read,
+        &reader.posed(true),
+        "the task reading mesh 2's first pose",
+    );
 }
 
 /// A bar along x from 0 to 2 (a thin box of 12 triangles a segment, 4 segments), skinned to

@@ -1,5 +1,6 @@
-// Skinning and morph targets (crate::SkinningTask): one mesh a dispatch, one invocation a
-// vertex. The position is the rest position plus the weighted morph deltas, then blended by
+// Skinning and morph targets (crate::SkinningTask): one dispatch a batch of meshes that share
+// their buffers, one invocation a vertex; each mesh has whole workgroups of its own, from its
+// `first_group`. The position is the rest position plus the weighted morph deltas, then blended by
 // up to four joints' matrices; a vertex whose usable weights are all zero keeps the morphed
 // rest position, and a joint index past the task's matrices is ignored.
 //
@@ -26,11 +27,12 @@ struct Skin {
     out_word: u32,        // output: first word, words between vertices
     out_stride: u32,
     joint_base: u32,      // index into `pose` of the task's first matrix (12 floats each)
-    _pad0: u32,
-    _pad1: u32,
+    first_group: u32,     // the batch's first workgroup of this mesh
+    _pad: u32,
 }
 
-@group(0) @binding(0) var<uniform> skin: Skin;
+// The batch's meshes, in the order of their workgroups.
+@group(0) @binding(0) var<storage, read> skins: array<Skin>;
 @group(0) @binding(1) var<storage, read> rest: array<u32>;
 @group(0) @binding(2) var<storage, read> joints: array<u32>;
 @group(0) @binding(3) var<storage, read> weights: array<u32>;
@@ -40,6 +42,25 @@ struct Skin {
 @group(0) @binding(6) var<storage, read_write> posed: array<f32>;
 
 const SKIN_WG: u32 = 64u;
+
+// The mesh this invocation poses (set first by skin_vertices; the helpers read it).
+var<private> skin: Skin;
+
+// The index in `skins` of the mesh owning workgroup g: the last whose first workgroup is at or
+// before it.
+fn skin_of_group(g: u32) -> u32 {
+    var lo = 0u;
+    var hi = arrayLength(&skins);
+    while hi - lo > 1u {
+        let mid = (lo + hi) / 2u;
+        if skins[mid].first_group <= g {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
 
 // The four joint indices of vertex v.
 fn skin_joints(v: u32) -> vec4<u32> {
@@ -82,8 +103,15 @@ fn skin_transform(j: u32, p: vec3<f32>) -> vec3<f32> {
 }
 
 @compute @workgroup_size(64)
-fn skin_vertices(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let v = gid.x;
+fn skin_vertices(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
+    @builtin(local_invocation_index) lane: u32,
+) {
+    // The dispatch may be split into 2-D (crate::gpu::recorder::split_workgroups).
+    let g = wid.y * nwg.x + wid.x;
+    skin = skins[skin_of_group(g)];
+    let v = (g - skin.first_group) * SKIN_WG + lane;
     if v >= skin.vertex_count {
         return;
     }

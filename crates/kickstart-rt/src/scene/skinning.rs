@@ -3,6 +3,7 @@
 //! input is read in place from the caller's buffers (no copies: a frame of characters would
 //! otherwise stage their rest data every frame).
 
+use super::skin_batch::{batches, Limit, Posing, Span};
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 use crate::tasks::{JointFormat, SkinningTask, VertexFormat, WeightFormat};
@@ -12,11 +13,11 @@ pub(crate) const WORKGROUP: u32 = 64;
 /// Floats of one joint matrix in the pose buffer (three rows of four).
 const MATRIX_FLOATS: usize = 12;
 
-/// `Skin` in `shaders/scene/skinning.wgsl`.
+/// `Skin` in `shaders/scene/skinning.wgsl`: one task of a batch.
 #[repr(C)]
 #[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
-struct Skin {
-    vertex_count: u32,
+pub(crate) struct Skin {
+    pub(crate) vertex_count: u32,
     rest_word: u32,
     rest_stride: u32,
     joint_word: u32,
@@ -34,7 +35,26 @@ struct Skin {
     out_word: u32,
     out_stride: u32,
     joint_base: u32,
-    _pad: [u32; 2],
+    /// The batch's first workgroup of this task.
+    first_group: u32,
+    _pad: u32,
+}
+
+impl Skin {
+    /// The task placed in its batch: the word offsets of its rest positions, joints, weights,
+    /// morph deltas and output within the batch's windows, and its first workgroup.
+    pub(crate) fn placed(self, words: [u32; 5], first_group: u32) -> Skin {
+        let [rest_word, joint_word, weight_word, morph_word, out_word] = words;
+        Skin {
+            rest_word,
+            joint_word,
+            weight_word,
+            morph_word,
+            out_word,
+            first_group,
+            ..self
+        }
+    }
 }
 
 /// A byte range of a caller's buffer bound as a storage window: it starts at an offset the
@@ -104,9 +124,6 @@ pub(crate) fn shader_variants() -> Vec<(String, String)> {
     vec![("scene/skinning".into(), shader.source().to_string())]
 }
 
-/// One bound input of a task: its buffer and window.
-type Bound<'a> = (&'a wgpu::Buffer, Window);
-
 impl Skinner {
     /// Creates the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {
@@ -116,53 +133,63 @@ impl Skinner {
         }
     }
 
-    /// Records one dispatch a task of `tasks`, all in one compute pass (validated: every range
-    /// lies in its buffer, every window fits the device's binding size, vertex counts fit one
-    /// dispatch).
+    /// Records `tasks` in one compute pass: one dispatch a batch of tasks that read and write
+    /// the same buffers ([`batches`]), so a frame of characters whose buffers the engine pools
+    /// is posed by one dispatch, and what reads the posed positions next waits on one barrier
+    /// instead of one a mesh. Validated: every range lies in its buffer, every window fits the
+    /// device's binding size, vertex counts fit one dispatch.
     pub fn record(&self, rec: &mut Recorder<'_>, tasks: &[&SkinningTask]) {
-        let align = u64::from(rec.device.limits().min_storage_buffer_offset_alignment);
+        let limits = rec.device.limits();
+        let align = u64::from(limits.min_storage_buffer_offset_alignment);
         let (pose, at) = pose_data(tasks);
         let pose = rec.storage_init("kickstart-rt skinning pose", bytemuck::cast_slice(&pose));
-        let mut groups = Vec::with_capacity(tasks.len());
-        for (t, (first_matrix, first_weight)) in tasks.iter().zip(at) {
-            if t.vertex_count == 0 {
+        let posings = tasks
+            .iter()
+            .zip(at)
+            .filter(|(t, _)| t.vertex_count > 0)
+            .filter_map(|(t, (first_matrix, first_weight))| {
+                let (skin, spans) = params(t, first_weight)?;
+                let skin = Skin {
+                    joint_base: first_matrix,
+                    ..skin
+                };
+                Some(Posing::new(skin, spans))
+            });
+        let limit = Limit {
+            align,
+            binding: limits.max_storage_buffer_binding_size,
+        };
+        let mut groups = Vec::new();
+        for batch in batches(posings, limit) {
+            let Some((skins, windows)) = batch.skins(align) else {
                 continue;
-            }
-            let Some((skin, inputs)) = params(t, align, first_weight) else {
-                continue;
             };
-            let skin = Skin {
-                joint_base: first_matrix,
-                ..skin
-            };
-            let uniform = rec.uniform("kickstart-rt skinning params", &skin);
-            let pose_window = wgpu::BufferBinding {
-                buffer: &pose,
-                offset: 0,
-                size: None,
-            };
+            let skins =
+                rec.storage_init("kickstart-rt skinning tasks", bytemuck::cast_slice(&skins));
+            let bound = batch.buffers();
+            let bind = |i: usize| bind((bound[i], windows[i]));
             let group = self.pipeline.bind_resources(
                 rec.device,
                 "kickstart-rt skinning",
                 0,
                 &[
-                    ("skin", uniform.as_entire_binding()),
-                    ("rest", bind(inputs[0])),
-                    ("joints", bind(inputs[1])),
-                    ("weights", bind(inputs[2])),
-                    ("morphs", bind(inputs[3])),
-                    ("pose", wgpu::BindingResource::Buffer(pose_window)),
-                    ("posed", bind(inputs[4])),
+                    ("skins", skins.as_entire_binding()),
+                    ("rest", bind(0)),
+                    ("joints", bind(1)),
+                    ("weights", bind(2)),
+                    ("morphs", bind(3)),
+                    ("pose", pose.as_entire_binding()),
+                    ("posed", bind(4)),
                 ],
             );
-            groups.push((group, t.vertex_count.div_ceil(WORKGROUP)));
+            groups.push((group, batch.workgroups));
         }
         rec.dispatch_each("skinning", &self.pipeline.pipeline, &groups);
     }
 }
 
 /// The binding of an input's window.
-fn bind<'a>((buffer, w): Bound<'a>) -> wgpu::BindingResource<'a> {
+fn bind<'a>((buffer, w): (&'a wgpu::Buffer, Window)) -> wgpu::BindingResource<'a> {
     wgpu::BindingResource::Buffer(wgpu::BufferBinding {
         buffer,
         offset: w.start,
@@ -170,58 +197,55 @@ fn bind<'a>((buffer, w): Bound<'a>) -> wgpu::BindingResource<'a> {
     })
 }
 
-/// The parameters and bound windows (rest, joints, weights, morphs, output) of task `t`, whose
-/// morph weights start at `first_weight` of the pose buffer; `None` when an address does not
-/// fit 32-bit arithmetic (the validation refuses those tasks first).
-fn params(t: &SkinningTask, align: u64, first_weight: u32) -> Option<(Skin, [Bound<'_>; 5])> {
+/// The parameters and byte spans (rest, joints, weights, morphs, output) of task `t`, whose
+/// morph weights start at `first_weight` of the pose buffer; the word offsets are left for the
+/// batch to set ([`Batch::skins`]). `None` when an address does not fit 32-bit arithmetic (the
+/// validation refuses those tasks first).
+fn params(t: &SkinningTask, first_weight: u32) -> Option<(Skin, [Span<'_>; 5])> {
     let n = t.vertex_count;
     let rest_size = match t.rest_positions.format {
         VertexFormat::Float32x4 => 16,
         _ => 12,
     };
     let rp = &t.rest_positions;
-    let rest = window(
+    let rest = Span::new(
+        &rp.buffer,
         rp.offset,
         strided_end(rp.offset, rp.stride, n, rest_size)?,
-        align,
-    )?;
+    );
     let out = &t.output;
-    let posed = window(
+    let posed = Span::new(
+        &out.buffer,
         out.offset,
         strided_end(out.offset, out.stride, n, 12)?,
-        align,
-    )?;
+    );
     let mut skin = Skin {
         vertex_count: n,
-        rest_word: rest.word,
         rest_stride: u32::try_from(rp.stride / 4).ok()?,
-        out_word: posed.word,
         out_stride: u32::try_from(out.stride / 4).ok()?,
         morph_weight_at: first_weight,
         ..Skin::default()
     };
-    let mut joints = (&rp.buffer, rest);
-    let mut weights = (&rp.buffer, rest);
+    // A task without influences or targets binds its rest positions in their place (unread).
+    let (mut joints, mut weights, mut morphs) = (rest, rest, rest);
     if let Some(inf) = &t.influences {
         let (j, w) = (&inf.joints, &inf.weights);
-        let jw = window(
+        joints = Span::new(
+            &j.buffer,
             j.offset,
             strided_end(j.offset, j.stride, n, j.format.size())?,
-            align,
-        )?;
-        let ww = window(
+        );
+        weights = Span::new(
+            &w.buffer,
             w.offset,
             strided_end(w.offset, w.stride, n, w.format.size())?,
-            align,
-        )?;
-        skin.joint_word = jw.word;
+        );
         skin.joint_stride = u32::try_from(j.stride / 4).ok()?;
         skin.joint_format = match j.format {
             JointFormat::Uint8x4 => 0,
             JointFormat::Uint16x4 => 1,
             JointFormat::Uint32x4 => 2,
         };
-        skin.weight_word = ww.word;
         skin.weight_stride = u32::try_from(w.stride / 4).ok()?;
         skin.weight_format = match w.format {
             WeightFormat::Float32x4 => 0,
@@ -229,29 +253,15 @@ fn params(t: &SkinningTask, align: u64, first_weight: u32) -> Option<(Skin, [Bou
             WeightFormat::Unorm16x4 => 2,
         };
         skin.joint_count = u32::try_from(t.joint_matrices.len()).ok()?;
-        joints = (&j.buffer, jw);
-        weights = (&w.buffer, ww);
     }
-    let mut morphs = (&rp.buffer, rest);
     if let Some(m) = t.morph_targets.as_ref().filter(|m| m.count > 0) {
         let last_target = m.target_stride.checked_mul(u64::from(m.count - 1))?;
         let end = strided_end(m.offset.checked_add(last_target)?, m.stride, n, 12)?;
-        // Targets may be stored in any order: the window covers the lowest to the highest.
-        let mw = window(m.offset, end, align)?;
-        skin.morph_word = mw.word;
+        // Targets may be stored in any order: the span covers the lowest to the highest.
+        morphs = Span::new(&m.buffer, m.offset, end);
         skin.morph_stride = u32::try_from(m.stride / 4).ok()?;
         skin.morph_target_stride = u32::try_from(m.target_stride / 4).ok()?;
         skin.morph_count = m.count;
-        morphs = (&m.buffer, mw);
     }
-    Some((
-        skin,
-        [
-            (&rp.buffer, rest),
-            joints,
-            weights,
-            morphs,
-            (&out.buffer, posed),
-        ],
-    ))
+    Some((skin, [rest, joints, weights, morphs, posed]))
 }

@@ -191,18 +191,23 @@ pub struct SkinnedRefitReport {
     pub profile: Vec<PassProfile>,
     /// The last pose read back from one BLAS and compared with a CPU skinning.
     pub check: PoseCheck,
+    /// The same span with a rest-pose, influence and posed buffer per mesh instead of pooled
+    /// buffers (one skinning dispatch and one barrier a mesh).
+    pub per_mesh_buffers: Stats,
 }
 
 impl SkinnedRefitReport {
     /// The printed figure.
     pub fn line(&self) -> String {
         format!(
-            "skinning + refit {} (skinning {:.3} ms, {:.0} %; {} vertices, {} joints a mesh)",
+            "skinning + refit {} (skinning {:.3} ms, {:.0} %; {} vertices, {} joints a mesh; \
+             pooled buffers, {:.3} ms with a buffer set a mesh)",
             self.time.show(),
             self.skinning.median_ms,
             self.skinning_share * 100.0,
             self.vertices,
-            self.joints
+            self.joints,
+            self.per_mesh_buffers.median_ms
         )
     }
 }

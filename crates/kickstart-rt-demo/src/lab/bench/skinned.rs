@@ -11,6 +11,7 @@ use kickstart_rt as ksrt;
 use wgpu::util::DeviceExt;
 
 use super::harness::Bench;
+use super::profile::PassProfile;
 use super::report::{PoseCheck, SkinnedRefitReport};
 use super::Stats;
 use crate::app::gpu;
@@ -116,80 +117,159 @@ fn angle(iteration: u32, mesh: usize) -> f32 {
     (2.0 + 1.5 * (1.0 + phase.sin())).to_radians()
 }
 
-/// A buffer holding `bytes` (at least 16: a mesh without vertices still binds one).
-fn buffer(
-    device: &wgpu::Device,
-    label: &str,
-    bytes: &[u8],
-    usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    let mut contents = bytes.to_vec();
-    contents.resize(contents.len().max(16), 0);
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some(label),
-        contents: &contents,
-        usage,
-    })
+/// How the bench lays out the meshes' skinning buffers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum SkinBuffers {
+    /// One rest-pose, one influence and one posed buffer for every mesh, each mesh at its own
+    /// offset (how an engine that pools its vertex data hands them over): the SDK poses them
+    /// all in one dispatch.
+    Pooled,
+    /// A buffer of each kind per mesh: one dispatch and one barrier a mesh.
+    PerMesh,
 }
 
-/// One mesh ready to skin: its rig, its rest pose and influences on the GPU, and the posed
-/// positions the geometry reads.
+/// Byte alignment of each mesh's data in a pooled buffer (the largest storage offset alignment
+/// a device may ask for).
+const POOL_ALIGN: usize = 256;
+
+/// Buffers of one kind being filled: the chunks of the current buffer and where each went.
+struct PoolBuilder {
+    layout: SkinBuffers,
+    label: &'static str,
+    usage: wgpu::BufferUsages,
+    bytes: Vec<u8>,
+    /// Per chunk: its buffer (an index into `finished`, or the pooled buffer) and offset.
+    placed: Vec<(usize, u64)>,
+    finished: Vec<Vec<u8>>,
+}
+
+impl PoolBuilder {
+    fn new(layout: SkinBuffers, label: &'static str, usage: wgpu::BufferUsages) -> Self {
+        PoolBuilder {
+            layout,
+            label,
+            usage,
+            bytes: Vec::new(),
+            placed: Vec::new(),
+            finished: Vec::new(),
+        }
+    }
+
+    /// Adds one mesh's chunk.
+    fn push(&mut self, chunk: &[u8]) {
+        match self.layout {
+            SkinBuffers::Pooled => {
+                self.bytes
+                    .resize(self.bytes.len().next_multiple_of(POOL_ALIGN), 0);
+                self.placed.push((0, self.bytes.len() as u64));
+                self.bytes.extend_from_slice(chunk);
+            }
+            SkinBuffers::PerMesh => {
+                self.placed.push((self.finished.len(), 0));
+                self.finished.push(chunk.to_vec());
+            }
+        }
+    }
+
+    /// Uploads the buffers; returns each chunk's buffer and offset, in order.
+    fn upload(mut self, device: &wgpu::Device) -> Vec<(wgpu::Buffer, u64)> {
+        if self.layout == SkinBuffers::Pooled {
+            self.finished = vec![std::mem::take(&mut self.bytes)];
+        }
+        let buffers: Vec<wgpu::Buffer> = self
+            .finished
+            .iter()
+            .map(|bytes| {
+                // At least 16 bytes: a mesh without vertices still binds one.
+                let mut contents = bytes.clone();
+                contents.resize(contents.len().max(16), 0);
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(self.label),
+                    contents: &contents,
+                    usage: self.usage,
+                })
+            })
+            .collect();
+        self.placed
+            .iter()
+            .map(|&(b, offset)| (buffers[b].clone(), offset))
+            .collect()
+    }
+}
+
+/// One mesh ready to skin: its rig, and where its rest pose, influences and posed positions
+/// lie on the GPU (buffer, byte offset).
 struct SkinnedMesh {
     rig: Rig,
     vertex_count: u32,
-    rest: wgpu::Buffer,
-    influences: wgpu::Buffer,
+    rest: (wgpu::Buffer, u64),
+    influences: (wgpu::Buffer, u64),
     /// The posed positions (`Float32x3`), first the rest pose: the geometry registers from it.
-    posed: wgpu::Buffer,
+    posed: (wgpu::Buffer, u64),
 }
 
-impl SkinnedMesh {
-    /// Uploads `mesh`'s rig; the rest positions get a buffer of their own, since the scene's
-    /// upload lacks the `STORAGE` usage that the skinning pass reads through.
-    fn new(device: &wgpu::Device, mesh: &Mesh) -> SkinnedMesh {
-        let rig = Rig::new(&mesh.positions);
+/// Rigs `meshes` and uploads their skinning buffers laid out as `layout`. The rest positions
+/// get buffers of their own, since the scene's upload lacks the `STORAGE` usage that the
+/// skinning pass reads through.
+fn skinned_meshes(device: &wgpu::Device, meshes: &[Mesh], layout: SkinBuffers) -> Vec<SkinnedMesh> {
+    let storage = wgpu::BufferUsages::STORAGE;
+    let mut rest = PoolBuilder::new(layout, "ksrt bench rest pose", storage);
+    let mut influences = PoolBuilder::new(layout, "ksrt bench influences", storage);
+    let posed_usage = storage | wgpu::BufferUsages::COPY_SRC;
+    let mut posed = PoolBuilder::new(layout, "ksrt bench posed", posed_usage);
+    let rigs: Vec<Rig> = meshes.iter().map(|m| Rig::new(&m.positions)).collect();
+    for (mesh, rig) in meshes.iter().zip(&rigs) {
         let bytes: &[u8] = bytemuck::cast_slice(&mesh.positions);
-        let influences: Vec<u8> = rig
+        let packed: Vec<u8> = rig
             .influences
             .iter()
             .flat_map(|(j, w)| j.iter().chain(w).copied())
             .collect();
-        let storage = wgpu::BufferUsages::STORAGE;
-        SkinnedMesh {
-            vertex_count: mesh.positions.len() as u32,
-            rest: buffer(device, "ksrt bench rest pose", bytes, storage),
-            influences: buffer(device, "ksrt bench influences", &influences, storage),
-            posed: buffer(
-                device,
-                "ksrt bench posed",
-                bytes,
-                storage | wgpu::BufferUsages::COPY_SRC,
-            ),
-            rig,
-        }
+        rest.push(bytes);
+        influences.push(&packed);
+        posed.push(bytes);
     }
+    let (rest, influences, posed) = (
+        rest.upload(device),
+        influences.upload(device),
+        posed.upload(device),
+    );
+    rigs.into_iter()
+        .zip(meshes)
+        .zip(rest.into_iter().zip(influences).zip(posed))
+        .map(|((rig, mesh), ((rest, influences), posed))| SkinnedMesh {
+            rig,
+            vertex_count: mesh.positions.len() as u32,
+            rest,
+            influences,
+            posed,
+        })
+        .collect()
+}
 
+impl SkinnedMesh {
     /// The skinning task of mesh `k` at repetition `iteration`.
     fn task(&self, k: usize, iteration: u32) -> ksrt::SkinningTask {
+        let (influences, at) = &self.influences;
         ksrt::SkinningTask {
             name: format!("ksrt bench mesh {k}"),
             rest_positions: ksrt::SkinAttribute {
-                buffer: self.rest.clone(),
-                offset: 0,
+                buffer: self.rest.0.clone(),
+                offset: self.rest.1,
                 stride: 12,
                 format: ksrt::VertexFormat::Float32x3,
             },
             vertex_count: self.vertex_count,
             influences: Some(ksrt::SkinInfluences {
                 joints: ksrt::SkinAttribute {
-                    buffer: self.influences.clone(),
-                    offset: 0,
+                    buffer: influences.clone(),
+                    offset: *at,
                     stride: INFLUENCE_STRIDE,
                     format: ksrt::JointFormat::Uint8x4,
                 },
                 weights: ksrt::SkinAttribute {
-                    buffer: self.influences.clone(),
-                    offset: 4,
+                    buffer: influences.clone(),
+                    offset: at + 4,
                     stride: INFLUENCE_STRIDE,
                     format: ksrt::WeightFormat::Unorm8x4,
                 },
@@ -198,8 +278,8 @@ impl SkinnedMesh {
             morph_targets: None,
             morph_weights: Vec::new(),
             output: ksrt::SkinningOutput {
-                buffer: self.posed.clone(),
-                offset: 0,
+                buffer: self.posed.0.clone(),
+                offset: self.posed.1,
                 stride: 12,
             },
         }
@@ -214,20 +294,23 @@ pub(super) struct SkinnedScene {
 }
 
 impl SkinnedScene {
-    /// Rigs and uploads every mesh of `scene` (`uploads` are its meshes on the GPU, in order).
-    pub(super) fn new(device: &wgpu::Device, scene: &Scene, uploads: &[UploadedMesh]) -> Self {
-        let meshes: Vec<SkinnedMesh> = scene
-            .meshes
-            .iter()
-            .map(|m| SkinnedMesh::new(device, m))
-            .collect();
+    /// Rigs and uploads every mesh of `scene` (`uploads` are its meshes on the GPU, in order),
+    /// their skinning buffers laid out as `layout`.
+    pub(super) fn new(
+        device: &wgpu::Device,
+        scene: &Scene,
+        uploads: &[UploadedMesh],
+        layout: SkinBuffers,
+    ) -> Self {
+        let meshes = skinned_meshes(device, &scene.meshes, layout);
         let inputs = uploads
             .iter()
             .zip(&meshes)
             .map(|(u, s)| {
                 // The scene's input (indices, cutout opacity) with the posed positions.
                 let mut input = upload::geometry_input(u, true);
-                input.components[0].vertex_buffer.buffer = s.posed.clone();
+                let vertices = &mut input.components[0].vertex_buffer;
+                (vertices.buffer, vertices.offset) = s.posed.clone();
                 input
             })
             .collect();
@@ -288,16 +371,48 @@ impl SkinnedScene {
     }
 }
 
+/// One layout's run of the skinned refit: the span, the skinning passes' time, where the last
+/// repetition's time went, and the pose check.
+struct SkinnedRun {
+    time: Stats,
+    skinning: Stats,
+    profile: Vec<PassProfile>,
+    check: PoseCheck,
+    vertices: u64,
+}
+
 impl Bench<'_> {
     /// (b′) Every mesh skinned to a new pose, its geometry updated and every BLAS refit, in one
-    /// task (`skinning` + `ingest` + `blas refit` passes); the skinning passes' own time beside
-    /// it; then the check that the last pose reached the BLAS ([`check_pose`]).
+    /// task (`skinning` + `ingest` + `blas refit` passes), with the skinning buffers pooled;
+    /// the skinning passes' own time beside it; the same with a buffer set per mesh; each
+    /// checked: the last pose reached the BLAS ([`check_pose`]).
     pub(super) fn skinned_refit(
         &self,
         scene: &Scene,
         uploads: &[UploadedMesh],
     ) -> AnyResult<SkinnedRefitReport> {
-        let skinned = SkinnedScene::new(self.device, scene, uploads);
+        let pooled = self.skinned_run(scene, uploads, SkinBuffers::Pooled)?;
+        let per_mesh = self.skinned_run(scene, uploads, SkinBuffers::PerMesh)?;
+        Ok(SkinnedRefitReport {
+            joints: JOINTS,
+            vertices: pooled.vertices,
+            skinning_share: pooled.skinning.median_ms / pooled.time.median_ms,
+            time: pooled.time,
+            skinning: pooled.skinning,
+            profile: pooled.profile,
+            check: pooled.check,
+            per_mesh_buffers: per_mesh.time,
+        })
+    }
+
+    /// The skinned refit with the skinning buffers laid out as `layout`.
+    fn skinned_run(
+        &self,
+        scene: &Scene,
+        uploads: &[UploadedMesh],
+        layout: SkinBuffers,
+    ) -> AnyResult<SkinnedRun> {
+        let skinned = SkinnedScene::new(self.device, scene, uploads, layout);
         let ctx = self.context()?;
         let handles = skinned.register(self, &ctx)?;
         // Every repetition, warm-ups included, takes the next pose: each refit moves vertices.
@@ -320,15 +435,12 @@ impl Bench<'_> {
         })?;
         let profile = self.last_profile();
         let check = check_pose(&ctx, scene, &skinned, &handles, iteration)?;
-        let skinning = Stats::new(skinning);
-        Ok(SkinnedRefitReport {
-            joints: JOINTS,
-            vertices: skinned.vertices(),
-            skinning_share: skinning.median_ms / time.median_ms,
+        Ok(SkinnedRun {
             time,
-            skinning,
+            skinning: Stats::new(skinning),
             profile,
             check,
+            vertices: skinned.vertices(),
         })
     }
 }
@@ -515,7 +627,7 @@ mod tests {
             ..Default::default()
         };
         let uploads = upload::upload_scene(device, queue, &scene);
-        let skinned = SkinnedScene::new(device, &scene, &uploads);
+        let skinned = SkinnedScene::new(device, &scene, &uploads, SkinBuffers::Pooled);
         let ctx = bench.context().unwrap();
         let handles = skinned.register(&bench, &ctx).unwrap();
         // Before any skinning the BLAS holds the rest pose, which the check refuses.
