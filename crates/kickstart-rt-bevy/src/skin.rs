@@ -4,9 +4,9 @@
 //! plugin extracts every such entity's pose as Bevy's own skinning computes it (each joint's
 //! `GlobalTransform` × its inverse bindpose; the morph weights of `MeshMorphWeights`), and
 //! [`DeformedMeshes::pose`] schedules one SDK `SkinningTask` per entity into the frame's scene
-//! task: it poses the rest positions from Bevy's vertex buffer into a positions buffer of the
-//! entity's own, from which the SDK refits the entity's `allow_update` geometry in the same
-//! task.
+//! task: it poses the rest positions from Bevy's vertex buffer into the entity's range of one
+//! positions buffer shared by every deformed entity, from which the SDK refits the entity's
+//! `allow_update` geometry in the same task.
 
 use std::collections::{HashMap, HashSet};
 
@@ -131,18 +131,55 @@ struct Posed {
     opacity: Opacity,
     geometry: ksrt::GeometryHandle,
     instance: ksrt::InstanceHandle,
-    /// The posed positions (`Float32x3`), which the geometry reads.
-    output: wgpu::Buffer,
     /// The cutout it was registered with, given again with each update.
     cutout: Option<ksrt::ComponentOpacity>,
     /// The instance's transform.
     transform: Affine3A,
 }
 
+/// The posed positions (`Float32x3`) of every deformed entity, one after another in one buffer
+/// laid out again each frame: the SDK poses the entities that share Bevy's vertex buffer in one
+/// dispatch, and its refits then wait on one barrier, not one an entity. Every entity is posed
+/// anew each frame, so a new layout or a bigger buffer moves no data.
+#[derive(Default)]
+struct PosedPool {
+    buffer: Option<wgpu::Buffer>,
+}
+
+impl PosedPool {
+    /// A buffer of at least `bytes` (fewer where the device's largest buffer is smaller): the
+    /// current one, or a new one of the next power of two.
+    fn reserve(&mut self, device: &wgpu::Device, bytes: u64) -> wgpu::Buffer {
+        let max = device.limits().max_buffer_size;
+        let want = bytes
+            .max(16)
+            .checked_next_power_of_two()
+            .unwrap_or(max)
+            .min(max);
+        match &self.buffer {
+            Some(b) if b.size() >= bytes.min(max) => b.clone(),
+            _ => {
+                let b = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("kickstart-rt posed positions"),
+                    size: want,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                self.buffer = Some(b.clone());
+                b
+            }
+        }
+    }
+}
+
+/// Where one entity's posed positions go this frame: the pool and the byte offset.
+type Output<'a> = (&'a wgpu::Buffer, u64);
+
 /// The skinned and morphed entities the SDK traces.
 #[derive(Default)]
 pub(crate) struct DeformedMeshes {
     entries: HashMap<Entity, Posed>,
+    pool: PosedPool,
     /// Meshes that cannot be posed, each logged once.
     unsupported: HashSet<AssetId<Mesh>>,
 }
@@ -205,17 +242,13 @@ impl DeformedMeshes {
         for id in replaced {
             self.unsupported.remove(*id);
         }
-        let mut posed = 0;
+        let mut ready = Vec::new();
         for pose in poses {
             if self.unsupported.contains(&pose.mesh) || pose.opacity == Opacity::Invisible {
                 continue;
             }
             match mesh_buffers(pose.mesh, data) {
-                Ok(Some(mesh)) => {
-                    if self.pose_one(ctx, container, pose, &mesh, data) {
-                        posed += 1;
-                    }
-                }
+                Ok(Some(mesh)) => ready.push((pose, mesh)),
                 // Not uploaded yet: next frame.
                 Ok(None) => {}
                 Err(why) => {
@@ -225,6 +258,24 @@ impl DeformedMeshes {
                     );
                     self.unsupported.insert(pose.mesh);
                 }
+            }
+        }
+        let bytes = |m: &MeshBuffers| u64::from(m.vertex_count.max(1)) * 12;
+        let total = ready.iter().map(|(_, m)| bytes(m)).sum();
+        let pool = self.pool.reserve(data.device.wgpu_device(), total);
+        let (mut posed, mut offset) = (0, 0);
+        for (pose, mesh) in ready {
+            if offset + bytes(&mesh) > pool.size() {
+                warn!(
+                    "kickstart-rt: deformed mesh {:?} is not ray traced this frame: the posed \
+                     positions of every deformed mesh pass the device's largest buffer",
+                    pose.mesh
+                );
+                continue;
+            }
+            if self.pose_one(ctx, container, pose, &mesh, data, (&pool, offset)) {
+                posed += 1;
+                offset += bytes(&mesh);
             }
         }
         posed
@@ -239,6 +290,7 @@ impl DeformedMeshes {
         pose: &Pose,
         mesh: &MeshBuffers,
         data: &RenderData,
+        output: Output<'_>,
     ) -> bool {
         let skinned =
             mesh.influences.is_some() && pose.joints.as_ref().is_some_and(|j| !j.is_empty());
@@ -250,11 +302,11 @@ impl DeformedMeshes {
             pose.transform
         };
         if let Some(d) = self.entries.get_mut(&pose.entity) {
-            container.schedule_bvh_task(skinning_task(pose, mesh, skinned, &d.output));
+            container.schedule_bvh_task(skinning_task(pose, mesh, skinned, output));
             container.schedule_bvh_task(ksrt::GeometryTask {
                 operation: ksrt::TaskOperation::Update,
                 handle: d.geometry,
-                input: geometry_input(pose, mesh, &d.output, d.cutout.clone()),
+                input: geometry_input(pose, mesh, output, d.cutout.clone()),
             });
             if d.transform != transform {
                 container.schedule_bvh_task(ksrt::InstanceTask {
@@ -287,23 +339,14 @@ impl DeformedMeshes {
             }
             _ => None,
         };
-        let output = data
-            .device
-            .wgpu_device()
-            .create_buffer(&wgpu::BufferDescriptor {
-                label: Some("kickstart-rt posed positions"),
-                size: u64::from(mesh.vertex_count.max(1)) * 12,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
         let (geometry, instance) = (ctx.create_geometry_handle(), ctx.create_instance_handle());
         // The skinning task is recorded before the registration, which copies the posed
         // positions.
-        container.schedule_bvh_task(skinning_task(pose, mesh, skinned, &output));
+        container.schedule_bvh_task(skinning_task(pose, mesh, skinned, output));
         container.schedule_bvh_task(ksrt::GeometryTask {
             operation: ksrt::TaskOperation::Register,
             handle: geometry,
-            input: geometry_input(pose, mesh, &output, cutout.clone()),
+            input: geometry_input(pose, mesh, output, cutout.clone()),
         });
         container.schedule_bvh_task(ksrt::InstanceTask {
             operation: ksrt::TaskOperation::Register,
@@ -317,7 +360,6 @@ impl DeformedMeshes {
                 opacity: pose.opacity,
                 geometry,
                 instance,
-                output,
                 cutout,
                 transform,
             },
@@ -330,7 +372,7 @@ impl DeformedMeshes {
 fn geometry_input(
     pose: &Pose,
     mesh: &MeshBuffers,
-    output: &wgpu::Buffer,
+    (output, offset): Output<'_>,
     opacity: Option<ksrt::ComponentOpacity>,
 ) -> ksrt::GeometryInput {
     ksrt::GeometryInput {
@@ -338,7 +380,7 @@ fn geometry_input(
         components: vec![ksrt::GeometryComponent {
             vertex_buffer: ksrt::VertexBufferInput {
                 buffer: output.clone(),
-                offset: 0,
+                offset,
                 stride: 12,
                 count: mesh.vertex_count,
                 format: ksrt::VertexFormat::Float32x3,
@@ -368,7 +410,7 @@ fn skinning_task(
     pose: &Pose,
     mesh: &MeshBuffers,
     skinned: bool,
-    output: &wgpu::Buffer,
+    (output, offset): Output<'_>,
 ) -> ksrt::SkinningTask {
     let influences = mesh.influences.filter(|_| skinned).map(
         |(joints, joint_format, weights, weight_format)| ksrt::SkinInfluences {
@@ -407,7 +449,7 @@ fn skinning_task(
         morph_weights,
         output: ksrt::SkinningOutput {
             buffer: output.clone(),
-            offset: 0,
+            offset,
             stride: 12,
         },
     }
