@@ -10,6 +10,7 @@ pub(crate) mod pool;
 pub(crate) mod prims;
 pub(crate) mod reserve;
 pub(crate) mod skin_batch;
+pub(crate) mod skin_layout;
 pub(crate) mod skinning;
 pub(crate) mod strategy;
 pub(crate) mod traversal;

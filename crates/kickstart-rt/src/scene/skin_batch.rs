@@ -5,7 +5,7 @@
 //! the order of their writes cannot matter: a task never joins a batch (or moves ahead of a
 //! later one) whose ranges its output overlaps, or whose outputs its inputs overlap.
 
-use super::skinning::{window, Skin, Window, WORKGROUP};
+use super::skin_layout::{window, Skin, Window, WORKGROUP};
 use crate::gpu::recorder::MAX_DISPATCH_DIM;
 
 /// A byte range `start..end` of a buffer that a task reads or writes.

@@ -4,88 +4,13 @@
 //! otherwise stage their rest data every frame).
 
 use super::skin_batch::{batches, Limit, Posing, Span};
+use super::skin_layout::{strided_end, Skin, Window};
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
 use crate::tasks::{JointFormat, SkinningTask, VertexFormat, WeightFormat};
 
-/// Invocations of a skinning workgroup (`SKIN_WG`).
-pub(crate) const WORKGROUP: u32 = 64;
 /// Floats of one joint matrix in the pose buffer (three rows of four).
 const MATRIX_FLOATS: usize = 12;
-
-/// `Skin` in `shaders/scene/skinning.wgsl`: one task of a batch.
-#[repr(C)]
-#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct Skin {
-    pub(crate) vertex_count: u32,
-    rest_word: u32,
-    rest_stride: u32,
-    joint_word: u32,
-    joint_stride: u32,
-    joint_format: u32,
-    weight_word: u32,
-    weight_stride: u32,
-    weight_format: u32,
-    joint_count: u32,
-    morph_word: u32,
-    morph_stride: u32,
-    morph_target_stride: u32,
-    morph_count: u32,
-    morph_weight_at: u32,
-    out_word: u32,
-    out_stride: u32,
-    joint_base: u32,
-    /// The batch's first workgroup of this task.
-    first_group: u32,
-    _pad: u32,
-}
-
-impl Skin {
-    /// The task placed in its batch: the word offsets of its rest positions, joints, weights,
-    /// morph deltas and output within the batch's windows, and its first workgroup.
-    pub(crate) fn placed(self, words: [u32; 5], first_group: u32) -> Skin {
-        let [rest_word, joint_word, weight_word, morph_word, out_word] = words;
-        Skin {
-            rest_word,
-            joint_word,
-            weight_word,
-            morph_word,
-            out_word,
-            first_group,
-            ..self
-        }
-    }
-}
-
-/// A byte range of a caller's buffer bound as a storage window: it starts at an offset the
-/// device can bind at, and `word` is the range's first word within it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Window {
-    /// Bytes from the buffer's start to the window's.
-    pub start: u64,
-    /// Bytes the window spans (a multiple of 4).
-    pub size: u64,
-    /// Words from the window's start to the range's.
-    pub word: u32,
-}
-
-/// The window binding bytes `offset..end` (`end > offset`, both multiples of 4) at the device's
-/// storage offset alignment `align`; `None` when the word offset does not fit `u32`.
-pub(crate) fn window(offset: u64, end: u64, align: u64) -> Option<Window> {
-    let start = offset - offset % align.max(4);
-    Some(Window {
-        start,
-        size: end.checked_sub(start)?.next_multiple_of(4),
-        word: u32::try_from((offset - start) / 4).ok()?,
-    })
-}
-
-/// The end of `count` strided values of `size` bytes from `offset` (`count > 0`; validated to
-/// lie inside the buffer).
-pub(crate) fn strided_end(offset: u64, stride: u64, count: u32, size: u64) -> Option<u64> {
-    let last = stride.checked_mul(u64::from(count.checked_sub(1)?))?;
-    offset.checked_add(last)?.checked_add(size)
-}
 
 /// The pose buffer's contents for `tasks`: each task's joint matrices (three rows of four floats
 /// each), then its morph weights; returns the contents and each task's

@@ -3,7 +3,7 @@
 //! is recorded, so the pass reads and writes only inside the caller's ranges.
 
 use crate::error::{Error, Result};
-use crate::scene::skinning::{strided_end, window, WORKGROUP};
+use crate::scene::skin_layout::{strided_end, window, WORKGROUP};
 use crate::tasks::{SkinningTask, VertexFormat};
 
 /// The task named in errors.
