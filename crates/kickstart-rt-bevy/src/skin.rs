@@ -139,8 +139,8 @@ struct Posed {
 
 /// The posed positions (`Float32x3`) of every deformed entity, one after another in one buffer
 /// laid out again each frame: the SDK poses the entities that share Bevy's vertex buffer in one
-/// dispatch, and its refits then wait on one barrier, not one an entity. Every entity is posed
-/// anew each frame, so a new layout or a bigger buffer moves no data.
+/// dispatch, and no buffer is created an entity. Every entity is posed anew each frame, so a
+/// new layout or a bigger buffer moves no data.
 #[derive(Default)]
 struct PosedPool {
     buffer: Option<wgpu::Buffer>,

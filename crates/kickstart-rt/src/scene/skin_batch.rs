@@ -1,9 +1,8 @@
 //! Batching of a task's skinning: tasks that read and write the same buffers are posed by one
-//! dispatch. wgpu places a barrier before each command that first reads a buffer a shader
-//! wrote; with one output buffer a mesh, the ingestion's copies of the posed positions each
-//! waited on one, and those barriers cost more than the skinning itself. Tasks batch only where
-//! the order of their writes cannot matter: a task never joins a batch (or moves ahead of a
-//! later one) whose ranges its output overlaps, or whose outputs its inputs overlap.
+//! dispatch, one `Skin` record each in one storage buffer, instead of a dispatch and a uniform
+//! buffer a task. Tasks batch only where the order of their writes cannot matter: a task never
+//! joins a batch (or moves ahead of a later one) whose ranges its output overlaps, or whose
+//! outputs its inputs overlap.
 
 use super::skin_layout::{window, Skin, Window, WORKGROUP};
 use crate::gpu::recorder::MAX_DISPATCH_DIM;

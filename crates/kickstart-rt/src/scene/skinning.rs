@@ -60,9 +60,8 @@ impl Skinner {
 
     /// Records `tasks` in one compute pass: one dispatch a batch of tasks that read and write
     /// the same buffers ([`batches`]), so a frame of characters whose buffers the engine pools
-    /// is posed by one dispatch, and what reads the posed positions next waits on one barrier
-    /// instead of one a mesh. Validated: every range lies in its buffer, every window fits the
-    /// device's binding size, vertex counts fit one dispatch.
+    /// is posed by one dispatch. Validated: every range lies in its buffer, every window fits
+    /// the device's binding size, vertex counts fit one dispatch.
     pub fn record(&self, rec: &mut Recorder<'_>, tasks: &[&SkinningTask]) {
         let limits = rec.device.limits();
         let align = u64::from(limits.min_storage_buffer_offset_alignment);

@@ -119,13 +119,11 @@ pub struct SkinningOutput {
 /// `output` refits the geometry at this frame's pose. Schedule all of a frame's characters in
 /// one container: their refits then share one BVH build.
 ///
-/// Pool the buffers: tasks whose rest positions, joints, weights, morph deltas and outputs lie
-/// in the same five buffers (at offsets of their own, as an engine's vertex allocator places
-/// meshes) are posed by one dispatch, and the geometry tasks reading their outputs wait on one
-/// GPU barrier. With an output buffer a mesh, each geometry's copy of its posed positions waits
-/// on a barrier of its own, which for a crowd of small meshes costs more than the skinning.
-/// Tasks still run in their order where it matters: a task whose output overlaps what an
-/// earlier task reads or writes is posed after it.
+/// Tasks whose rest positions, joints, weights, morph deltas and outputs lie in the same five
+/// buffers (at offsets of their own, as an engine's vertex allocator places meshes) are posed
+/// by one dispatch; others by a dispatch each, in the same compute pass. Tasks still run in
+/// their order where it matters: a task whose output overlaps what an earlier task reads or
+/// writes is posed after it.
 ///
 /// Positions are in the mesh's own space: a joint matrix is the one a vertex shader would use,
 /// `inverse(mesh world) · joint world · inverse bind matrix`. Only positions are posed (tracing
