@@ -77,3 +77,18 @@ suites_ran() {
         return 1
     fi
 }
+
+# modules_ran LOG MODULE...: fails unless every MODULE (a test module of a merged test binary)
+# had at least one test pass in LOG; empty names are ignored.
+modules_ran() {
+    local log="$1" name missing=0
+    shift
+    for name in "$@"; do
+        [ -n "$name" ] || continue
+        if ! grep -qE "^test ${name}::.* \.\.\. ok$" "$log"; then
+            echo "ci: FAILED: no test of the suite '$name' ran and passed" >&2
+            missing=1
+        fi
+    done
+    return "$missing"
+}

@@ -233,15 +233,20 @@ pub fn glb_bytes() -> Vec<u8> {
 /// run repeats the last one and a failure in CI replays here.
 const PROPTEST_SEED: u64 = 0x6b73_7274_5f66_757a;
 
-/// A property test's configuration: `cases` cases from a fixed seed (`PROPTEST_RNG_SEED`
-/// overrides it; the seed used is printed, shown with a failure's output), and no failure
-/// files written into the source tree.
+/// A property test's configuration: `cases` cases (`PROPTEST_CASES` overrides it) from a fixed
+/// seed (`PROPTEST_RNG_SEED` overrides it; the seed used is printed, shown with a failure's
+/// output), and no failure files written into the source tree.
 pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
     let seed = std::env::var("PROPTEST_RNG_SEED")
         .ok()
         .and_then(|s| s.trim().parse().ok())
         .unwrap_or(PROPTEST_SEED);
     eprintln!("property test seed {seed} (PROPTEST_RNG_SEED={seed} replays it)");
+    // proptest's own knob for a longer (or shorter) search than the test's default.
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(cases);
     proptest::test_runner::Config {
         cases,
         rng_seed: proptest::test_runner::RngSeed::Fixed(seed),

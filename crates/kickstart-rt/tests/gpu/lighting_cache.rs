@@ -3,7 +3,7 @@
 //! against the documented formulas, allocation from a short pool, transfer, and exact
 //! accumulation.
 
-mod common;
+use crate::common;
 use common::cache::*;
 use common::rt::Mesh;
 use common::*;

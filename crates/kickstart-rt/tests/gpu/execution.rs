@@ -1,6 +1,6 @@
 //! The execution model: handles, working sets, lazy destruction, threading, GPU data.
 
-mod common;
+use crate::common;
 use common::*;
 use glam::{Affine3A, Vec3};
 use kickstart_rt::*;

@@ -1,4 +1,4 @@
-//! Shared GPU test device and helpers. One device per test binary (device creation is slow on
+//! Shared GPU test device and helpers. One device for the test binary (device creation is slow on
 //! lavapipe). `KSRT_TEST_MINIMAL_DEVICE=1` creates it with `Features::empty()` and
 //! `Limits::default()` (CI runs the suite both ways). A missing adapter fails the test: a GPU
 //! test is never skipped. `KSRT_TEST_BACKEND=hardware` creates it with hardware ray queries

@@ -2,7 +2,7 @@
 //! attribute format, morph targets, interleaved layouts and unaligned offsets; and a skinned
 //! mesh refitted in the same task traced at its new pose (both traversal backends).
 
-mod common;
+use crate::common;
 
 use common::rt::*;
 use common::*;

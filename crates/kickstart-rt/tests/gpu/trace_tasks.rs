@@ -3,7 +3,7 @@
 //! reference/instance-id-bug-report.ko.md, ambient occlusion of an open plane, and the bad
 //! inputs the trace tasks name.
 
-mod common;
+use crate::common;
 use common::cache::{cast, Rect};
 use common::rt::*;
 use common::trace::*;

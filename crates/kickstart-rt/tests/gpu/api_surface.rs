@@ -3,7 +3,7 @@
 //! engine drops before its encoder is submitted, the injection task's viewport, and a denoiser
 //! whose input and output are one texture.
 
-mod common;
+use crate::common;
 
 use common::cache as lc;
 use common::denoise as dn;

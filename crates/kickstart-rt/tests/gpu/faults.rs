@@ -2,7 +2,7 @@
 //! `Device::destroy`, which wgpu reports like a removed or reset device) while a context has work
 //! registered and in flight.
 
-mod common;
+use crate::common;
 use common::*;
 use glam::{Affine3A, Vec3};
 use kickstart_rt::*;

@@ -5,7 +5,7 @@
 //! filtering could each lose the holes: the card would then act as opaque, which every test here
 //! tells apart from the CPU's alpha test (`checker_opaque`) of the same card.
 
-mod common;
+use crate::common;
 use common::rt::*;
 use common::trace::*;
 use common::*;

@@ -1,7 +1,7 @@
 //! The ray tracing core through the public API: geometry ingestion, GPU BLAS/TLAS builds and
 //! refits, and traversal, checked ray by ray against the CPU oracle (`kickstart_rt::cpu`).
 
-mod common;
+use crate::common;
 use common::rt::*;
 use common::*;
 use glam::{Affine3A, Quat, Vec3};

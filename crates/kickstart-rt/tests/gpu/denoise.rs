@@ -4,7 +4,7 @@
 //! objects, keep hard and soft shadows, take checkerboard input; plus the contexts' memory and
 //! validation.
 
-mod common;
+use crate::common;
 
 use common::denoise::*;
 use common::rt::Rng;

@@ -1,7 +1,7 @@
 //! One test per row of the crate docs' validation table: a bad value must return
 //! `Error::InvalidInput` naming the field, record nothing, and leave the context usable.
 
-mod common;
+use crate::common;
 use common::*;
 use glam::{Affine3A, Mat4, Vec3, Vec4};
 use kickstart_rt::*;

@@ -1,7 +1,7 @@
 //! Primary-ray debug views (HitT, Barycentrics, RandomMeshColor) through a trace task's debug
 //! parameters, checked pixel by pixel against an analytic camera and the CPU triangle test.
 
-mod common;
+use crate::common;
 use common::rt::*;
 use common::*;
 use glam::{Affine3A, Mat4, Vec3, Vec4};
