@@ -13,6 +13,7 @@
 // both sides round identically and their signs stay exactly opposite.
 
 #import scene/types
+#import scene/cutout_test
 
 struct RtRay {
     origin: vec3<f32>,
@@ -365,6 +366,7 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
     var tri_base = 0u;
     var cur_inst = 0u;
     // The current BLAS's first opacity map word (RT_OPAQUE_GEOMETRY: opaque, tested for free).
+    // Never read where RT_CUTOUTS is false (a scene without cutout geometry).
     var cur_opacity = RT_OPAQUE_GEOMETRY;
     var visits = 0u;
     while sp > 0u && visits < RT_MAX_VISITS {
@@ -407,7 +409,7 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
                 let v1 = rt_triangles[slot * 3u + 1u];
                 let v2 = rt_triangles[slot * 3u + 2u];
                 var h = rt_triangle(space, t_min, t_max, v0.xyz, v1.xyz, v2.xyz);
-                if h.hit && cur_opacity != RT_OPAQUE_GEOMETRY {
+                if RT_CUTOUTS && h.hit && cur_opacity != RT_OPAQUE_GEOMETRY {
                     h.hit = rt_opaque_at(space, v0.xyz, v1.xyz, v2.xyz, bitcast<u32>(v0.w),
                                          cur_opacity, cur_inst);
                 }
@@ -452,7 +454,9 @@ fn rt_find(ray: RtRay, mask: u32, any_hit: bool) -> RtFound {
                 node_base = geo.node_base;
                 tri_base = geo.tri_base;
                 cur_inst = r.x;
-                cur_opacity = geo.opacity.x;
+                if RT_CUTOUTS {
+                    cur_opacity = geo.opacity.x;
+                }
                 blas_sp = sp;
                 // A ref made for another build of this BLAS (TLAS update deferred past a rebuild)
                 // is entered at the root: complete, never another build's node indices.

@@ -14,6 +14,7 @@ use crate::gpu::buffers::storage;
 use crate::gpu::reflect::{ReflectedLayout, ShaderReflection};
 use crate::gpu::Recorder;
 use crate::scene::pool::{Pool, Range};
+use crate::scene::traversal::LeafTest;
 
 /// Words per instance header and per triangle record in `meta`.
 pub(crate) const HEADER_WORDS: u32 = 8;
@@ -393,10 +394,10 @@ impl DirectLightingCache {
         })
     }
 
-    /// Creates the pipelines now.
-    pub fn prepare_pipelines(&mut self) {
+    /// Creates the pipelines now, the injection's tracing with the traversal build `leaf`.
+    pub fn prepare_pipelines(&mut self, leaf: LeafTest) {
         self.pipelines();
-        self.injector.prepare(&self.device);
+        self.injector.prepare(&self.device, leaf);
         self.transferer.prepare(&self.device);
     }
 

@@ -18,7 +18,7 @@ use crate::gpu::buffers::storage;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedPipeline, ReflectedShader};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{self, SceneBuffers};
+use crate::scene::traversal::{self, LeafTest, PerLeafTest, SceneBuffers};
 use crate::tasks::{DepthType, DirectLightingInjectionTask, Viewport};
 
 const TASK: &str = "DirectLightingInjectionTask";
@@ -59,8 +59,8 @@ struct InjectPipeline {
 pub(crate) struct Injector {
     /// The traversal the visibility rays use.
     backend: TraversalBackend,
-    /// Index 0: a depth-format depth texture; 1: a float texture.
-    inject: [Option<InjectPipeline>; 2],
+    /// Index 0: a depth-format depth texture; 1: a float texture; each per traversal build.
+    inject: [PerLeafTest<InjectPipeline>; 2],
     resolve: Option<ReflectedPipeline>,
     /// Surfel → slot map (one word per surfel of the pool), then 8 words per slot.
     accum: Option<(wgpu::Buffer, u32, u32)>,
@@ -68,8 +68,8 @@ pub(crate) struct Injector {
 }
 
 /// The WGSL of the injection pass reading depth of a depth format (`depth_format`) or a float
-/// texture.
-fn inject_shader(backend: TraversalBackend, depth_format: bool) -> ReflectedShader {
+/// texture, with the traversal's leaf test `leaf`.
+fn inject_shader(backend: TraversalBackend, leaf: LeafTest, depth_format: bool) -> ReflectedShader {
     let depth = if depth_format {
         "cache/inject_depth/depth_format"
     } else {
@@ -77,20 +77,27 @@ fn inject_shader(backend: TraversalBackend, depth_format: bool) -> ReflectedShad
     };
     traversal::compose(
         backend,
+        leaf,
         &["cache/inject", depth],
         &super::sample_params(1, false),
     )
 }
 
-/// The WGSL of the injection passes (both depth inputs) tracing with `backend`, labelled.
+/// The WGSL of the injection passes (both depth inputs, each traversal build) tracing with
+/// `backend`, labelled.
 pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
-    let inject = |depth_format: bool| {
-        (
-            format!("injection (depth format: {depth_format})"),
-            inject_shader(backend, depth_format).source().to_string(),
-        )
-    };
-    vec![inject(true), inject(false)]
+    let mut out = Vec::new();
+    for &leaf in LeafTest::all(backend) {
+        for depth_format in [true, false] {
+            out.push((
+                format!("injection (depth format: {depth_format}, {leaf:?})"),
+                inject_shader(backend, leaf, depth_format)
+                    .source()
+                    .to_string(),
+            ));
+        }
+    }
+    out
 }
 
 /// The WGSL of the injection's resolve pass (it traces nothing), labelled.
@@ -109,9 +116,10 @@ fn resolve_shader() -> ReflectedShader {
 fn inject_pipeline(
     device: &wgpu::Device,
     backend: TraversalBackend,
+    leaf: LeafTest,
     depth_format: bool,
 ) -> InjectPipeline {
-    let shader = inject_shader(backend, depth_format);
+    let shader = inject_shader(backend, leaf, depth_format);
     let scene = SceneBuffers::layout(device, backend);
     let layout = |label, group| {
         ReflectedLayout::of_entry_point(device, label, shader.reflection(), "inject", group)
@@ -176,18 +184,18 @@ impl Injector {
     pub fn new(backend: TraversalBackend) -> Self {
         Injector {
             backend,
-            inject: [None, None],
+            inject: Default::default(),
             resolve: None,
             accum: None,
             tasks: 0,
         }
     }
 
-    /// Creates the pipelines now.
-    pub fn prepare(&mut self, device: &wgpu::Device) {
+    /// Creates the pipelines now, tracing with the traversal build `leaf`.
+    pub fn prepare(&mut self, device: &wgpu::Device, leaf: LeafTest) {
         let backend = self.backend;
-        for (i, p) in self.inject.iter_mut().enumerate() {
-            p.get_or_insert_with(|| inject_pipeline(device, backend, i == 0));
+        for (i, p) in self.inject.iter().enumerate() {
+            p.get_or_init(leaf, || inject_pipeline(device, backend, leaf, i == 0));
         }
         self.resolve(device);
     }
@@ -275,8 +283,10 @@ impl Injector {
         );
         let index = if depth_is_depth { 0 } else { 1 };
         let backend = self.backend;
-        let p = self.inject[index]
-            .get_or_insert_with(|| inject_pipeline(device, backend, depth_is_depth));
+        let leaf = scene.leaf_test();
+        let p = self.inject[index].get_or_init(leaf, || {
+            inject_pipeline(device, backend, leaf, depth_is_depth)
+        });
         let [scene_group, cache_group, io_group] =
             inject_groups(device, p, scene, (meta, &accum), &params, task);
         let pipeline = p.pipeline.clone();
@@ -369,9 +379,23 @@ mod wgsl_tests {
     fn both_injection_variants_validate_and_match_the_rust_layout() {
         for depth_format in [true, false] {
             let label = format!("injection (depth format: {depth_format})");
+            validate(
+                &label,
+                inject_shader(
+                    TraversalBackend::Software,
+                    LeafTest::OpaqueOnly,
+                    depth_format,
+                )
+                .source(),
+            );
             let module = validate(
                 &label,
-                inject_shader(TraversalBackend::Software, depth_format).source(),
+                inject_shader(
+                    TraversalBackend::Software,
+                    LeafTest::WithCutouts,
+                    depth_format,
+                )
+                .source(),
             );
             assert!(module.entry_points.iter().any(|e| e.name == "inject"));
             assert_wgsl_layout!(

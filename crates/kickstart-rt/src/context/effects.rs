@@ -6,7 +6,7 @@ use crate::cache::DirectLightingCache;
 use crate::denoise::{DenoiseJob, Denoisers};
 use crate::device::TraversalBackend;
 use crate::gpu::Recorder;
-use crate::scene::traversal::SceneBuffers;
+use crate::scene::traversal::{LeafTest, SceneBuffers};
 use crate::tasks::*;
 use crate::trace::debug_view::{DebugView, DebugViewPass};
 use crate::trace::rays::RayTracer;
@@ -70,13 +70,19 @@ impl Effects {
         }
     }
 
-    /// Creates every effect's pipelines now.
-    pub fn prepare_pipelines(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+    /// Creates every effect's pipelines now, tracing with the traversal build `leaf`.
+    pub fn prepare_pipelines(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        leaf: LeafTest,
+    ) {
         let backend = self.backend;
         self.rays
-            .get_or_insert_with(|| RayTracer::new(device, backend));
+            .get_or_insert_with(|| RayTracer::new(device, backend))
+            .prepare(device, leaf);
         self.debug_views(device);
-        self.traces(device, queue).prepare(device);
+        self.traces(device, queue).prepare(device, leaf);
         self.denoisers.prepare_pipelines();
     }
 

@@ -503,11 +503,18 @@ impl ExecuteContext {
     }
 
     /// Creates every compute pipeline now, so the first frame that needs one does not stall.
+    ///
+    /// The software traversal has two builds: one that tests cutout geometry's opacity, and one
+    /// without the test, which traces while the scene holds no cutout geometry (so opaque scenes
+    /// pay nothing for cutouts). This prepares the build the scene needs as registered now: call
+    /// it once the level's geometry is registered. The other build is created on first use,
+    /// when the scene gains its first cutout geometry or loses its last.
     pub fn prepare_pipelines(&self) {
         let mut s = self.state();
+        let leaf = s.scene.leaf_test();
         s.scene.prepare_pipelines();
-        s.effects.prepare_pipelines(&self.device, &self.queue);
-        s.cache.prepare_pipelines();
+        s.effects.prepare_pipelines(&self.device, &self.queue, leaf);
+        s.cache.prepare_pipelines(leaf);
     }
 
     /// The GPU time of each SDK pass of `task` (built with [`InitSettings::gpu_timing`]).

@@ -13,7 +13,9 @@ use super::compaction::NodeCountReadback;
 use super::effects::{Inputs, Route};
 use super::plan::FramePlan;
 use super::settings::INSTANCE_RECORD_SIZE;
-use super::state::{instance_record, DroppedReadback, GeometryData, State, WorkingSet};
+use super::state::{
+    geometry_task_work, instance_record, DroppedReadback, GeometryData, State, WorkingSet,
+};
 use super::validate::ComponentExtent;
 use crate::gpu::buffers::storage;
 use crate::gpu::recorder::Timestamps;
@@ -29,6 +31,7 @@ use crate::scene::opacity::{
 };
 use crate::scene::pool::Range;
 use crate::scene::strategy::BuildStrategy;
+use crate::scene::traversal::LeafTest;
 use crate::tasks::*;
 
 /// The encoder and what one GPU task's recording carries from step to step.
@@ -439,15 +442,13 @@ fn dropped_readback(device: &wgpu::Device, ingestions: &[Ingestion<'_>]) -> Drop
 /// The geometries' bookkeeping after their ingestion: new ones registered, and each queued for
 /// a BLAS build or refit.
 fn register_geometries(s: &mut State, ingestions: &[Ingestion<'_>], serial: u64) {
+    let hardware = s.scene.hardware.is_some();
     for &(task, _, staged, triangles, maps) in ingestions {
         let Ok(slot) = s.geometries.get_mut(task.handle) else {
             continue;
         };
         slot.last_used = serial;
-        let pending = match (&slot.data, task.operation) {
-            (Some(d), TaskOperation::Update) if d.gpu.blas.is_some() => PendingBvh::Refit,
-            _ => PendingBvh::Build,
-        };
+        let pending = geometry_task_work(slot.data.as_ref(), task, hardware);
         let data = slot.data.get_or_insert_with(|| GeometryData {
             name: task.input.name.clone(),
             allow_update: task.input.allow_update,
@@ -461,6 +462,8 @@ fn register_geometries(s: &mut State, ingestions: &[Ingestion<'_>], serial: u64)
         data.gpu.triangles = triangles;
         data.gpu.staged = Some(staged);
         if data.gpu.opacity != maps {
+            s.scene
+                .note_cutout_geometry(data.gpu.opacity.is_some(), maps.is_some());
             if let Some(old) = data.gpu.opacity.take() {
                 s.scene.triangles.free_after(old.range, serial);
             }
@@ -723,6 +726,13 @@ fn record_render_task(frame: &mut Frame<'_>, s: &mut State, route: &Route<'_>) {
             .map_or(0, |d| d.triangles),
         _ => 0,
     };
+    let tracing = matches!(
+        route,
+        Route::RayBatch(_) | Route::Injection(_) | Route::Trace(_)
+    );
+    if tracing && s.scene.leaf_test() == LeafTest::OpaqueOnly {
+        s.counts.opaque_only_traces += 1;
+    }
     let inputs = Inputs {
         scene: s.scene.scene_buffers(),
         cache: &mut s.cache,

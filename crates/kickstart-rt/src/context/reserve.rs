@@ -9,7 +9,7 @@
 use std::collections::hash_map::{Entry, HashMap};
 
 use super::plan::{FramePlan, Reserved};
-use super::state::State;
+use super::state::{geometry_task_work, State};
 use crate::error::Result;
 use crate::handles::GeometryHandle;
 use crate::scene::gpu_scene::PendingBvh;
@@ -131,11 +131,7 @@ fn blas_work<'a>(s: &'a State, plan: &'a FramePlan<'_>) -> Vec<BlasStep<'a>> {
         let Ok(slot) = s.geometries.get(task.handle) else {
             continue;
         };
-        let built = slot.data.as_ref().is_some_and(|d| d.gpu.blas.is_some());
-        let work = match task.operation {
-            TaskOperation::Update if built => PendingBvh::Refit,
-            _ => PendingBvh::Build,
-        };
+        let work = geometry_task_work(slot.data.as_ref(), task, s.scene.hardware.is_some());
         let fresh = Queued {
             handle: task.handle,
             pending: None,

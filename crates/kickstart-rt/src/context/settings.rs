@@ -85,4 +85,9 @@ pub struct RecordedTaskCounts {
     pub instance_tasks: u64,
     /// GPU tasks built.
     pub gpu_tasks: u64,
+    /// Tracing passes (ray batches, trace tasks, lighting-cache injections) recorded with the
+    /// software traversal built without the opacity test: the build taken while the scene holds
+    /// no cutout geometry, so that opaque scenes pay nothing for cutouts. Debug views always
+    /// trace with the test; the hardware backend has one build.
+    pub opaque_only_traces: u64,
 }

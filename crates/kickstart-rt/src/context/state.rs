@@ -12,6 +12,7 @@ use crate::error::Error;
 use crate::handles::*;
 use crate::logging::{Logger, Severity};
 use crate::scene::gpu_scene::{GeometryGpu, GpuScene, PendingBvh, Uploads, GEOMETRY_RECORD_SIZE};
+use crate::scene::opacity::geometry_level;
 use crate::scene::pool::Move;
 use crate::scene::strategy::BuildStrategy;
 use crate::staging::{StagingBuffer, StagingPool};
@@ -322,5 +323,26 @@ impl State {
                 );
             }
         }
+    }
+}
+
+/// The BVH work a geometry task leaves its geometry (`data`: as registered before the task): a
+/// refit for an update of a built geometry, else a build. The driver's BLAS keeps the opaque
+/// flag it was built with, so on the hardware backend an update that makes a geometry cutout or
+/// opaque rebuilds it; the software traversal reads the new opacity words in the geometry record.
+/// The plan predicts with it what recording then does (`reserve`, `record`).
+pub(super) fn geometry_task_work(
+    data: Option<&GeometryData>,
+    task: &GeometryTask,
+    hardware: bool,
+) -> PendingBvh {
+    let cutout = geometry_level(&task.input).is_some();
+    match (data, task.operation) {
+        (Some(d), TaskOperation::Update)
+            if d.gpu.blas.is_some() && !(hardware && d.gpu.opacity.is_some() != cutout) =>
+        {
+            PendingBvh::Refit
+        }
+        _ => PendingBvh::Build,
     }
 }

@@ -33,6 +33,8 @@ pub(crate) const MODULES: &[(&str, &str)] = modules![
     "gpu/radix_sort_small",
     "gpu/uniform_branch",
     "scene/centroid_bounds",
+    "scene/cutout_test",
+    "scene/cutout_test_off",
     "scene/ingest",
     "scene/ingest_decode",
     "scene/lbvh/bounds",

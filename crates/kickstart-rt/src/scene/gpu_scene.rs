@@ -20,7 +20,7 @@ use crate::scene::pool::{Move, Pool, Range};
 use crate::scene::prims::{Prims, MAX_REFS_PER_INSTANCE};
 use crate::scene::skinning::Skinner;
 use crate::scene::strategy::BuildStrategy;
-use crate::scene::traversal::SceneBuffers;
+use crate::scene::traversal::{LeafTest, SceneBuffers};
 use crate::staging::{StagingBuffer, StagingPool};
 use crate::tasks::SkinningTask;
 
@@ -134,6 +134,7 @@ impl GeometryGpu {
         }
         if let Some(m) = self.opacity.take() {
             scene.triangles.free_after(m.range, last_used);
+            scene.note_cutout_geometry(true, false);
         }
         if let Some(b) = self.blas.take() {
             scene.triangles.free_after(b.tris, last_used);
@@ -325,6 +326,9 @@ pub(crate) struct GpuScene {
     pub hardware: Option<HardwareScene>,
     /// Whether the build memory was given back since the last task with BLAS work.
     build_memory_released: bool,
+    /// Geometries holding opacity micro-maps (cutout geometry): while there are none, the
+    /// software traversal traces with the build without the opacity test (`LeafTest`).
+    cutout_geometries: usize,
 }
 
 impl GpuScene {
@@ -380,6 +384,7 @@ impl GpuScene {
             passes: Passes::default(),
             hardware: hardware.then(|| HardwareScene::new(device)),
             build_memory_released: true,
+            cutout_geometries: 0,
         }
     }
 
@@ -1225,6 +1230,20 @@ impl GpuScene {
         }
     }
 
+    /// Counts a geometry whose opacity micro-maps went from `had` to `has` (present or not).
+    pub fn note_cutout_geometry(&mut self, had: bool, has: bool) {
+        match (had, has) {
+            (false, true) => self.cutout_geometries += 1,
+            (true, false) => self.cutout_geometries = self.cutout_geometries.saturating_sub(1),
+            _ => {}
+        }
+    }
+
+    /// The traversal build that traces the scene as registered now.
+    pub fn leaf_test(&self) -> LeafTest {
+        self.scene_buffers().leaf_test()
+    }
+
     /// The scene as every tracing pass binds it.
     pub fn scene_buffers(&self) -> SceneBuffers<'_> {
         SceneBuffers {
@@ -1234,6 +1253,7 @@ impl GpuScene {
             blas_nodes: self.nodes.buffer(),
             triangles: self.triangles.buffer(),
             tlas: self.hardware.as_ref().map(HardwareScene::tlas),
+            cutouts: self.cutout_geometries > 0,
         }
     }
 

@@ -18,7 +18,72 @@ const TRAVERSAL_MODULE: &str = "scene/traversal";
 /// The hardware backend's module of the same interface.
 const RAY_QUERY_MODULE: &str = "scene/traversal_ray_query";
 
-/// The SDK's shader modules with `backend`'s traversal behind `#import scene/traversal`.
+/// The module that says whether the software leaf loop tests opacity micro-maps.
+const CUTOUT_TEST_MODULE: &str = "scene/cutout_test";
+/// Its stand-in for scenes without cutout geometry (the test compiled away).
+const CUTOUT_TEST_OFF_MODULE: &str = "scene/cutout_test_off";
+
+/// Which build of the traversal a tracing pass binds. Opaque geometry must pay nothing for
+/// cutouts: while the scene holds no cutout geometry, the software backend traces with a leaf
+/// loop compiled without the opacity test ([`LeafTest::OpaqueOnly`]). The hardware backend has
+/// one build: the driver confirms only triangles its BLAS marks non-opaque.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(crate) enum LeafTest {
+    /// Tests cutout geometry's opacity micro-maps (correct for every scene).
+    WithCutouts,
+    /// No opacity test (correct only while the scene holds no cutout geometry).
+    OpaqueOnly,
+}
+
+impl LeafTest {
+    /// The build that traces a scene with (`cutouts`) or without cutout geometry on `backend`.
+    pub fn of(backend: TraversalBackend, cutouts: bool) -> Self {
+        match backend {
+            TraversalBackend::Software if !cutouts => LeafTest::OpaqueOnly,
+            _ => LeafTest::WithCutouts,
+        }
+    }
+
+    /// The builds a pass on `backend` may bind.
+    pub fn all(backend: TraversalBackend) -> &'static [LeafTest] {
+        match backend {
+            TraversalBackend::Software => &[LeafTest::WithCutouts, LeafTest::OpaqueOnly],
+            TraversalBackend::HardwareRayQuery => &[LeafTest::WithCutouts],
+        }
+    }
+
+    /// `library` with this build's leaf test behind `#import scene/cutout_test`.
+    pub fn apply(self, library: &mut ShaderLibrary) {
+        if self == LeafTest::OpaqueOnly {
+            library.substitute(CUTOUT_TEST_MODULE, CUTOUT_TEST_OFF_MODULE);
+        }
+    }
+}
+
+/// One value per traversal build (a pass's pipeline), each made on first use.
+pub(crate) struct PerLeafTest<T>([OnceLock<T>; 2]);
+
+impl<T> Default for PerLeafTest<T> {
+    fn default() -> Self {
+        PerLeafTest([OnceLock::new(), OnceLock::new()])
+    }
+}
+
+impl<T> PerLeafTest<T> {
+    /// The value of build `leaf`, made by `make` if there is none yet.
+    pub fn get_or_init(&self, leaf: LeafTest, make: impl FnOnce() -> T) -> &T {
+        self.0[leaf as usize].get_or_init(make)
+    }
+
+    /// The value of build `leaf`, if made.
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub fn get(&self, leaf: LeafTest) -> Option<&T> {
+        self.0[leaf as usize].get()
+    }
+}
+
+/// The SDK's shader modules with `backend`'s traversal behind `#import scene/traversal`, testing
+/// cutouts (see [`LeafTest`] for the build without).
 pub(crate) fn library(backend: TraversalBackend) -> ShaderLibrary {
     let mut library = ShaderLibrary::builtin();
     if backend == TraversalBackend::HardwareRayQuery {
@@ -27,13 +92,17 @@ pub(crate) fn library(backend: TraversalBackend) -> ShaderLibrary {
     library
 }
 
-/// A tracing pass's modules `roots` composed for `backend` (see [`library`]).
+/// A tracing pass's modules `roots` composed for `backend` with the leaf test `leaf` (see
+/// [`library`]).
 pub(crate) fn compose(
     backend: TraversalBackend,
+    leaf: LeafTest,
     roots: &[&str],
     params: &[(&str, &str)],
 ) -> ReflectedShader {
-    ReflectedShader::compose_in(&library(backend), roots, params)
+    let mut library = library(backend);
+    leaf.apply(&mut library);
+    ReflectedShader::compose_in(&library, roots, params)
 }
 
 /// The private arrays a traversal pass of `backend` never reads before writing (the software
@@ -54,7 +123,7 @@ fn scene_bindings(backend: TraversalBackend) -> &'static [ShaderBinding] {
         TraversalBackend::HardwareRayQuery => &HARDWARE,
     };
     cell.get_or_init(|| {
-        compose(backend, &[TRAVERSAL_MODULE], &[])
+        compose(backend, LeafTest::WithCutouts, &[TRAVERSAL_MODULE], &[])
             .reflection()
             .group_bindings(0)
     })
@@ -76,6 +145,8 @@ pub(crate) struct SceneBuffers<'a> {
     pub triangles: &'a wgpu::Buffer,
     /// The driver's TLAS (`rt_tlas`) on the hardware backend; `None` on the software one.
     pub tlas: Option<&'a wgpu::Tlas>,
+    /// Whether some geometry of the scene is cutout geometry (has opacity micro-maps).
+    pub cutouts: bool,
 }
 
 impl SceneBuffers<'_> {
@@ -85,6 +156,11 @@ impl SceneBuffers<'_> {
             Some(_) => TraversalBackend::HardwareRayQuery,
             None => TraversalBackend::Software,
         }
+    }
+
+    /// The traversal build that traces these buffers correctly and fastest.
+    pub fn leaf_test(&self) -> LeafTest {
+        LeafTest::of(self.backend(), self.cutouts)
     }
 
     /// The explicit layout of the `@group(0)` scene bindings, as the traversal module declares

@@ -18,7 +18,7 @@ use crate::device::TraversalBackend;
 use crate::error::{Error, Result};
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
-use crate::scene::traversal::{self, SceneBuffers};
+use crate::scene::traversal::{self, LeafTest, SceneBuffers};
 use crate::tasks::{DebugOutputType, InstanceInclusionMask, ViewInfo, WRITABLE_OUTPUT_FORMATS};
 use bytemuck::{Pod, Zeroable};
 
@@ -60,8 +60,10 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
 fn debug_view_shader(backend: TraversalBackend, format_name: &str) -> ReflectedShader {
     // The lighting cache's sampling module at group 2 (the DirectLightingCache view reads it).
     let [group, access] = crate::cache::sample_params(2, false);
+    // One build for every scene: a debug view's speed does not matter, its pipelines' count does.
     traversal::compose(
         backend,
+        LeafTest::WithCutouts,
         &["trace/debug_view"],
         &[group, access, ("OUTPUT_FORMAT", format_name)],
     )

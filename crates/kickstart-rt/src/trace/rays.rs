@@ -2,10 +2,11 @@
 //! hits written to a buffer. Also holds the scene bindings every tracing pass shares.
 
 use crate::device::TraversalBackend;
+use crate::gpu::layout::BoundLayout;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedShader};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{self, SceneBuffers};
+use crate::scene::traversal::{self, LeafTest, PerLeafTest, SceneBuffers};
 use bytemuck::{Pod, Zeroable};
 use std::num::NonZeroU64;
 
@@ -19,17 +20,22 @@ pub(crate) const RECORD_SIZE: u64 = 32;
 #[allow(unused_imports)] // GpuHit and GpuRay are this module's tests' vocabulary
 pub(crate) use crate::tasks::{GpuHit, GpuRay, RayQuery};
 
-/// The ray batch pass's shader for `backend`.
-fn trace_rays_shader(backend: TraversalBackend) -> ReflectedShader {
-    traversal::compose(backend, &["trace/rays"], &[])
+/// The ray batch pass's shader for `backend` with the leaf test `leaf`.
+fn trace_rays_shader(backend: TraversalBackend, leaf: LeafTest) -> ReflectedShader {
+    traversal::compose(backend, leaf, &["trace/rays"], &[])
 }
 
-/// The WGSL of the ray batch pass with `backend`, labelled.
+/// The WGSL of the ray batch pass with `backend` (each traversal build), labelled.
 pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
-    vec![(
-        "trace rays".into(),
-        trace_rays_shader(backend).source().to_string(),
-    )]
+    LeafTest::all(backend)
+        .iter()
+        .map(|&leaf| {
+            (
+                format!("trace rays ({leaf:?})"),
+                trace_rays_shader(backend, leaf).source().to_string(),
+            )
+        })
+        .collect()
 }
 
 /// `size` bytes of a buffer from a byte offset, as a binding.
@@ -51,54 +57,81 @@ struct TraceParams {
     pad: u32,
 }
 
-/// The ray batch pass (`trace rays`).
-pub(crate) struct RayTracer {
+/// One build of the ray batch pipeline.
+struct RayPipeline {
     pipeline: wgpu::ComputePipeline,
-    /// The layout of `@group(1)` (parameters, rays, hits) as the shader declares it.
-    io_layout: ReflectedLayout,
     /// Whether the pipeline came from our own SPIR-V (no stack zero fill).
     #[cfg_attr(not(test), allow(dead_code))] // tests: a silent fallback to WGSL must fail them
     own_spirv: bool,
 }
 
+/// The ray batch pass (`trace rays`).
+pub(crate) struct RayTracer {
+    backend: TraversalBackend,
+    scene_layout: BoundLayout,
+    /// The layout of `@group(1)` (parameters, rays, hits) as the shader declares it.
+    io_layout: ReflectedLayout,
+    /// One pipeline per traversal build, created on first use (one for both queries: the query
+    /// is a uniform, so one bind group layout serves every batch).
+    pipelines: PerLeafTest<RayPipeline>,
+}
+
 impl RayTracer {
-    /// Creates the pipeline (one for both queries: the query is a uniform, so one bind group
-    /// layout serves every batch).
+    /// Creates the layouts; the pipeline of each traversal build comes on first use.
     pub fn new(device: &wgpu::Device, backend: TraversalBackend) -> Self {
-        let shader = trace_rays_shader(backend);
-        let scene_layout = SceneBuffers::layout(device, backend);
-        let io_layout =
-            ReflectedLayout::new(device, "kickstart-rt trace rays io", shader.reflection(), 1);
-        let layouts = [scene_layout.group(), io_layout.group()];
-        // SAFETY: the pass is bounded by construction, so naga's checks only cost time:
-        // - the ray and hit bindings hold exactly `count` records and `main` returns for
-        //   i >= count;
-        // - the traversal's stack index is checked against RT_STACK_SIZE before every push and
-        //   is > 0 before every pop; its loop stops after RT_MAX_VISITS node visits;
-        // - every scene index comes from data the SDK built (node refs and leaf ranges from its
-        //   BVH builders, the TLAS's ref table from its build, instance and geometry tables from
-        //   validated handles), never from the user's buffers; a ref made for another build of
-        //   its BLAS (a TLAS update deferred past a rebuild) is entered at the BLAS root, so it
-        //   never indexes nodes of another build;
-        // - the traversal has no other loop (a leaf's triangles are one per iteration);
-        // - `rt_stack` is read only below the stack pointer, and every entry there was written
-        //   first (a push stores, then raises the pointer), so it needs no zero fill.
-        let (pipeline, own_spirv) = unsafe {
-            traversal_pipeline(
-                device,
-                "kickstart-rt trace rays",
-                shader.source(),
-                "main",
-                &layouts,
-                wgpu::ShaderRuntimeChecks::unchecked(),
-                traversal::uninitialized(backend),
-            )
-        };
+        let shader = trace_rays_shader(backend, LeafTest::WithCutouts);
         RayTracer {
-            pipeline,
-            io_layout,
-            own_spirv,
+            backend,
+            scene_layout: SceneBuffers::layout(device, backend),
+            io_layout: ReflectedLayout::new(
+                device,
+                "kickstart-rt trace rays io",
+                shader.reflection(),
+                1,
+            ),
+            pipelines: PerLeafTest::default(),
         }
+    }
+
+    /// Creates the pipeline of the traversal build `leaf` now.
+    pub fn prepare(&self, device: &wgpu::Device, leaf: LeafTest) {
+        self.pipeline(device, leaf);
+    }
+
+    /// The pipeline of build `leaf`, created on first use.
+    fn pipeline(&self, device: &wgpu::Device, leaf: LeafTest) -> &RayPipeline {
+        self.pipelines.get_or_init(leaf, || {
+            let shader = trace_rays_shader(self.backend, leaf);
+            let layouts = [self.scene_layout.group(), self.io_layout.group()];
+            // SAFETY: the pass is bounded by construction, so naga's checks only cost time:
+            // - the ray and hit bindings hold exactly `count` records and `main` returns for
+            //   i >= count;
+            // - the traversal's stack index is checked against RT_STACK_SIZE before every push
+            //   and is > 0 before every pop; its loop stops after RT_MAX_VISITS node visits;
+            // - every scene index comes from data the SDK built (node refs and leaf ranges from
+            //   its BVH builders, the TLAS's ref table from its build, instance and geometry
+            //   tables from validated handles), never from the user's buffers; a ref made for
+            //   another build of its BLAS (a TLAS update deferred past a rebuild) is entered at
+            //   the BLAS root, so it never indexes nodes of another build;
+            // - the traversal has no other loop (a leaf's triangles are one per iteration);
+            // - `rt_stack` is read only below the stack pointer, and every entry there was
+            //   written first (a push stores, then raises the pointer), so it needs no zero fill.
+            let (pipeline, own_spirv) = unsafe {
+                traversal_pipeline(
+                    device,
+                    "kickstart-rt trace rays",
+                    shader.source(),
+                    "main",
+                    &layouts,
+                    wgpu::ShaderRuntimeChecks::unchecked(),
+                    traversal::uninitialized(self.backend),
+                )
+            };
+            RayPipeline {
+                pipeline,
+                own_spirv,
+            }
+        })
     }
 
     /// Records tracing `count` rays read from `rays` (buffer, byte offset) into `hits` (buffer,
@@ -131,7 +164,8 @@ impl RayTracer {
                 pad: 0,
             },
         );
-        let scene_group = scene.bind_group(rec.device, &self.pipeline);
+        let pipeline = &self.pipeline(rec.device, scene.leaf_test()).pipeline;
+        let scene_group = scene.bind_group(rec.device, pipeline);
         let io_group = self.io_layout.bind_group(
             rec.device,
             &[
@@ -142,7 +176,7 @@ impl RayTracer {
         );
         rec.dispatch(
             "trace rays",
-            &self.pipeline,
+            pipeline,
             &[&scene_group, &io_group],
             count.div_ceil(WORKGROUP_SIZE),
         );
@@ -155,7 +189,7 @@ mod tests {
     //! software traversal in every test pass: these are its exact rules (watertight shared
     //! edges, the tie rule, the inclusive `t` range), which the driver's triangle test does not
     //! promise. The hardware backend's agreement, with its tolerances, is tested through the
-    //! context in `tests/ray_tracing.rs`.
+    //! context in `tests/gpu/ray_tracing.rs`.
     //!
     //! Agreement rule (GPUs may contract a*b+c into an FMA, so results can differ in the last
     //! ulp): a GPU hit agrees with the CPU when it reports the same (instance, primitive) with
@@ -180,9 +214,14 @@ mod tests {
     #[test]
     fn the_wgsl_validates_and_matches_the_rust_layouts() {
         use crate::gpu::wgsl_check::{assert_wgsl_layout, storage_stride, validate};
+        // Both traversal builds are valid; their layouts are the same module's.
+        validate(
+            "trace rays (OpaqueOnly)",
+            trace_rays_shader(TraversalBackend::Software, LeafTest::OpaqueOnly).source(),
+        );
         let module = validate(
             "trace rays",
-            trace_rays_shader(TraversalBackend::Software).source(),
+            trace_rays_shader(TraversalBackend::Software, LeafTest::WithCutouts).source(),
         );
         assert!(module.entry_points.iter().any(|e| e.name == "main"));
         assert_wgsl_layout!(
@@ -228,10 +267,12 @@ mod tests {
         let g = crate::gpu::testing::gpu();
         let tracer = RayTracer::new(&g.device, TraversalBackend::Software);
         // Expected from the test device's backend and features, not from the decision itself.
-        assert_eq!(
-            tracer.own_spirv,
-            crate::gpu::spirv::test_device_takes_own_spirv(&g.device)
-        );
+        let expected = crate::gpu::spirv::test_device_takes_own_spirv(&g.device);
+        for &leaf in LeafTest::all(TraversalBackend::Software) {
+            tracer.prepare(&g.device, leaf);
+            let built = tracer.pipelines.get(leaf).map(|p| p.own_spirv);
+            assert_eq!(built, Some(expected), "{leaf:?}");
+        }
     }
 
     fn ray(origin: Vec3, dir: Vec3) -> Ray {

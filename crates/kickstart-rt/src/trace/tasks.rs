@@ -19,7 +19,7 @@ use crate::gpu::layout::BoundLayout;
 use crate::gpu::reflect::{ReflectedLayout, ReflectedShader, ShaderReflection};
 use crate::gpu::shader::traversal_pipeline;
 use crate::gpu::Recorder;
-use crate::scene::traversal::{self, SceneBuffers};
+use crate::scene::traversal::{self, LeafTest, SceneBuffers};
 use crate::tasks::InstanceInclusionMask;
 use crate::tasks::*;
 use bytemuck::{Pod, Zeroable};
@@ -120,6 +120,8 @@ fn wgsl_format(format: wgpu::TextureFormat) -> Option<&'static str> {
 struct Pipeline {
     kind: TraceKind,
     formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+    /// The traversal build it traces with.
+    leaf: LeafTest,
     pipeline: wgpu::ComputePipeline,
     /// Group 2 (parameters, textures, outputs) as the entry point uses it.
     io_layout: ReflectedLayout,
@@ -185,8 +187,9 @@ impl TracePasses {
     }
 
     /// Creates the pipelines of every kind for the common output formats (Rgba16Float, and
-    /// R32Float for the single-channel outputs), so the first frame does not stall.
-    pub fn prepare(&mut self, device: &wgpu::Device) {
+    /// R32Float for the single-channel outputs) with the traversal build `leaf`, so the first
+    /// frame does not stall.
+    pub fn prepare(&mut self, device: &wgpu::Device, leaf: LeafTest) {
         use wgpu::TextureFormat as F;
         for (kind, f0, f1) in [
             (TraceKind::AmbientOcclusion, F::Rgba16Float, None),
@@ -201,25 +204,29 @@ impl TracePasses {
             (TraceKind::Diffuse, F::Rgba16Float, Some(F::R32Float)),
         ] {
             // Every format listed has a WGSL name, so this cannot fail.
-            let _ = self.pipeline(device, kind, (f0, f1));
+            let _ = self.pipeline(device, kind, (f0, f1), leaf);
         }
     }
 
-    /// The pipeline of `kind` writing `formats`, created on first use.
+    /// The pipeline of `kind` writing `formats` with the traversal build `leaf`, created on
+    /// first use.
     fn pipeline(
         &mut self,
         device: &wgpu::Device,
         kind: TraceKind,
         formats: (wgpu::TextureFormat, Option<wgpu::TextureFormat>),
+        leaf: LeafTest,
     ) -> Result<usize> {
         if let Some(i) = self
             .pipelines
             .iter()
-            .position(|p| p.kind == kind && p.formats == formats)
+            .position(|p| p.kind == kind && p.formats == formats && p.leaf == leaf)
         {
             return Ok(i);
         }
-        let (source, entry) = trace_wgsl(&self.library, kind, formats)?;
+        let mut library = self.library.clone();
+        leaf.apply(&mut library);
+        let (source, entry) = trace_wgsl(&library, kind, formats)?;
         let reflection = ShaderReflection::new(&source)
             .unwrap_or_else(|e| panic!("{}: composed WGSL is invalid: {e}", kind.label()));
         // Group 2 as the entry point uses it (a shadow pass declares output1 it may not write).
@@ -245,6 +252,7 @@ impl TracePasses {
         self.pipelines.push(Pipeline {
             kind,
             formats,
+            leaf,
             pipeline,
             io_layout: io,
             own_spirv,
@@ -364,7 +372,7 @@ impl TracePasses {
         );
         // validate::render_task admits only WRITABLE_OUTPUT_FORMATS, which all have WGSL names.
         let index = self
-            .pipeline(rec.device, job.kind, formats)
+            .pipeline(rec.device, job.kind, formats, scene.leaf_test())
             .expect("a validated output format has a pipeline");
         let inputs = GBufferInputs::of_trace(c, job.out0);
         let vp = inputs.viewport;
@@ -547,17 +555,21 @@ fn second_outputs(kind: TraceKind) -> Vec<Option<wgpu::TextureFormat>> {
     }
 }
 
-/// The WGSL of every trace pass the SDK can create with `backend` (kind × output formats),
-/// labelled.
+/// The WGSL of every trace pass the SDK can create with `backend` (kind × output formats ×
+/// traversal build), labelled.
 pub(crate) fn shader_variants(backend: TraversalBackend) -> Vec<(String, String)> {
-    let library = traversal::library(backend);
     let mut out = Vec::new();
-    for kind in KINDS {
-        for f0 in WRITABLE_OUTPUT_FORMATS {
-            for f1 in second_outputs(kind) {
-                // Every writable format has a WGSL name, so this cannot fail.
-                if let Ok((source, _)) = trace_wgsl(&library, kind, (f0, f1)) {
-                    out.push((format!("{} ({f0:?}, {f1:?})", kind.label()), source));
+    for &leaf in LeafTest::all(backend) {
+        let mut library = traversal::library(backend);
+        leaf.apply(&mut library);
+        for kind in KINDS {
+            for f0 in WRITABLE_OUTPUT_FORMATS {
+                for f1 in second_outputs(kind) {
+                    // Every writable format has a WGSL name, so this cannot fail.
+                    if let Ok((source, _)) = trace_wgsl(&library, kind, (f0, f1)) {
+                        let label = format!("{} ({f0:?}, {f1:?}, {leaf:?})", kind.label());
+                        out.push((label, source));
+                    }
                 }
             }
         }

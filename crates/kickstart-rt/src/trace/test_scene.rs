@@ -425,6 +425,8 @@ impl TestScene {
             blas_nodes: &self.blas_nodes,
             triangles: &self.triangles,
             tlas: self.hardware.as_ref().map(|h| h.tlas()),
+            // Every test scene is opaque.
+            cutouts: false,
         }
     }
 

@@ -307,7 +307,8 @@ fn eight_threads_fill_containers_then_several_build_each_task_once() {
         RecordedTaskCounts {
             geometry_tasks: 40,
             instance_tasks: 40,
-            gpu_tasks: 8
+            gpu_tasks: 8,
+            opaque_only_traces: 0,
         }
     );
     for h in &handles {

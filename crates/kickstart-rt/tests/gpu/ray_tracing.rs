@@ -2681,3 +2681,157 @@ fn cutout_cards_let_rays_through_where_they_are_transparent() {
         "too few rays through the checkerboard's holes: {through}"
     );
 }
+
+/// Points on the unit card away from its diagonal, where its triangle 0 (below the diagonal)
+/// meets triangle 1.
+fn flag_card_points() -> Vec<glam::Vec2> {
+    let mut rng = Rng(fuzz_seed("opacity build", 0x0b_5e7));
+    std::iter::repeat_with(|| glam::Vec2::new(rng.f(), rng.f()))
+        .filter(|p| (p.x - p.y).abs() > 0.02)
+        .take(200)
+        .collect()
+}
+
+/// Rays straight down onto `points` of the card (at z = 0, the floor at z = -1).
+fn flag_card_rays(points: &[glam::Vec2]) -> Vec<GpuRay> {
+    points
+        .iter()
+        .map(|p| ray(Vec3::new(p.x, p.y, 1.0), Vec3::NEG_Z, 0.0, 10.0))
+        .collect()
+}
+
+/// Traces rays onto `points` of the card of per-triangle flags (opaque triangle 0, transparent
+/// triangle 1) over the floor, registered with its flags (`cutout`) or without: each must stop
+/// on the card, or on the floor through the transparent triangle; and the trace must take the
+/// software traversal's build without the opacity test exactly when the scene has no cutouts.
+fn assert_flag_card_traced(ctx: &ExecuteContext, points: &[glam::Vec2], step: &str, cutout: bool) {
+    let before = ctx.recorded_task_counts().opaque_only_traces;
+    let hits = closest(ctx, &flag_card_rays(points));
+    let opaque_only = ctx.recorded_task_counts().opaque_only_traces - before;
+    let software = backend() == TraversalBackend::Software;
+    assert_eq!(
+        opaque_only,
+        u64::from(software && !cutout),
+        "{step}: builds"
+    );
+    let wrong: Vec<String> = points
+        .iter()
+        .zip(&hits)
+        .filter(|(p, h)| {
+            let want_t = if !cutout || p.x > p.y { 1.0 } else { 2.0 };
+            !h.is_hit() || (h.t - want_t).abs() > 1e-5
+        })
+        .map(|(p, h)| format!("at {p}: {h:?}"))
+        .collect();
+    assert!(
+        wrong.is_empty(),
+        "{step}: {} of {} rays wrong, e.g. {:?}",
+        wrong.len(),
+        points.len(),
+        &wrong[..wrong.len().min(4)]
+    );
+}
+
+/// The software traversal drops its opacity test while the scene holds no cutout geometry (so
+/// opaque scenes pay nothing for cutouts), and takes it again as soon as it holds some: through
+/// every change of a scene's cutout geometry, a card of per-triangle flags lets rays through its
+/// transparent triangle exactly while it is registered with them, and the context reports which
+/// build traced (`RecordedTaskCounts::opaque_only_traces`; the hardware backend has one build).
+/// Destroying opaque geometry, or updating the card with the same flags, must not make the scene
+/// look opaque.
+#[test]
+fn the_opacity_test_follows_the_scenes_cutout_geometry() {
+    let ctx = context(2);
+    let software = backend() == TraversalBackend::Software;
+    let (card_mesh, _) = card();
+    let flags = buffer(
+        bytemuck::cast_slice(&[7u32, 0]),
+        wgpu::BufferUsages::COPY_SRC,
+    );
+    let card_input = |cutout: bool| {
+        let mut input = mesh_input("flagged card", &card_mesh, true);
+        if cutout {
+            input.components[0].opacity = Some(ComponentOpacity::per_triangle(flags.clone(), 0));
+        }
+        input
+    };
+    let floor = Mesh::cuboid(Vec3::new(-1.0, -1.0, -1.2), Vec3::new(4.0, 2.0, -1.0));
+    let far_box = Mesh::cuboid(Vec3::new(20.0, 0.0, 0.0), Vec3::new(21.0, 1.0, 1.0));
+    let points = flag_card_points();
+    let schedule = |c: &mut TaskContainer, operation, g: GeometryHandle, input| {
+        c.schedule_bvh_task(GeometryTask {
+            operation,
+            handle: g,
+            input,
+        });
+    };
+    let register = |c: &mut TaskContainer, g, input| schedule(c, TaskOperation::Register, g, input);
+    let update = |c: &mut TaskContainer, g, input| schedule(c, TaskOperation::Update, g, input);
+    let build = |mut c: TaskContainer| {
+        c.schedule_bvh_task(BvhBuildTask {
+            max_blas_build_count: 8,
+            ..Default::default()
+        });
+        build_submit_complete(&ctx, c);
+    };
+    let check = |step: &str, cutout: bool| assert_flag_card_traced(&ctx, &points, step, cutout);
+    let (card_g, floor_g, box_g) = (
+        ctx.create_geometry_handle(),
+        ctx.create_geometry_handle(),
+        ctx.create_geometry_handle(),
+    );
+    let box_i = ctx.create_instance_handle();
+    let mut c = ctx.create_task_container();
+    register(&mut c, floor_g, mesh_input("floor", &floor, false));
+    register(&mut c, box_g, mesh_input("far box", &far_box, false));
+    register_instance(
+        &mut c,
+        ctx.create_instance_handle(),
+        floor_g,
+        Affine3A::IDENTITY,
+    );
+    register_instance(&mut c, box_i, box_g, Affine3A::IDENTITY);
+    register(&mut c, card_g, card_input(false));
+    let card_i = ctx.create_instance_handle();
+    register_instance(&mut c, card_i, card_g, Affine3A::IDENTITY);
+    build(c);
+    check("an opaque scene", false);
+    let mut c = ctx.create_task_container();
+    update(&mut c, card_g, card_input(true));
+    build(c);
+    check("the card updated with its flags", true);
+    ctx.destroy_instance_handle(box_i).unwrap();
+    ctx.destroy_geometry_handle(box_g).unwrap();
+    build(ctx.create_task_container());
+    check("opaque geometry destroyed", true);
+    let mut c = ctx.create_task_container();
+    update(&mut c, card_g, card_input(true));
+    build(c);
+    check("the card updated again with the same flags", true);
+    let mut c = ctx.create_task_container();
+    update(&mut c, card_g, card_input(false));
+    build(c);
+    check("the card updated without flags", false);
+    let mut c = ctx.create_task_container();
+    update(&mut c, card_g, card_input(true));
+    build(c);
+    check("the card updated with its flags again", true);
+    // The last cutout geometry destroyed: the opaque build again, and only the floor left.
+    ctx.destroy_instance_handle(card_i).unwrap();
+    ctx.destroy_geometry_handle(card_g).unwrap();
+    build(ctx.create_task_container());
+    let before = ctx.recorded_task_counts().opaque_only_traces;
+    let hits = closest(&ctx, &flag_card_rays(&points));
+    let opaque_only = ctx.recorded_task_counts().opaque_only_traces - before;
+    assert_eq!(
+        opaque_only,
+        u64::from(software),
+        "the card destroyed: builds"
+    );
+    assert!(
+        hits.iter().all(|h| h.is_hit() && (h.t - 2.0).abs() <= 1e-5),
+        "the card destroyed: {:?}",
+        hits.iter()
+            .find(|h| !h.is_hit() || (h.t - 2.0).abs() > 1e-5)
+    );
+}

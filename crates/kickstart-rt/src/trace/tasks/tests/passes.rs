@@ -7,19 +7,23 @@ use super::*;
 fn every_pipeline_compiles_including_prepared_ones() {
     let g = testing::gpu();
     let mut passes = TracePasses::new(&g.device, &g.queue, testing::backend());
-    passes.prepare(&g.device);
-    // Eight kinds × formats, and the diffuse pass writing AO in two formats.
-    assert_eq!(passes.pipelines.len(), 10);
+    let builds = LeafTest::all(testing::backend());
+    for &leaf in builds {
+        passes.prepare(&g.device, leaf);
+    }
+    // Eight kinds × formats, and the diffuse pass writing AO in two formats, per build.
+    assert_eq!(passes.pipelines.len(), 10 * builds.len());
     for f in crate::tasks::WRITABLE_OUTPUT_FORMATS {
         passes
-            .pipeline(&g.device, TraceKind::AmbientOcclusion, (f, None))
+            .pipeline(&g.device, TraceKind::AmbientOcclusion, (f, None), builds[0])
             .unwrap();
     }
     assert!(passes
         .pipeline(
             &g.device,
             TraceKind::Shadow,
-            (wgpu::TextureFormat::Rgba8Unorm, None)
+            (wgpu::TextureFormat::Rgba8Unorm, None),
+            builds[0]
         )
         .is_err());
     // Where the device takes our SPIR-V, every pass must come from it (a pass that silently fell
@@ -29,7 +33,8 @@ fn every_pipeline_compiles_including_prepared_ones() {
     let expected = crate::gpu::spirv::test_device_takes_own_spirv(&g.device)
         && testing::backend() == crate::device::TraversalBackend::Software;
     for p in &passes.pipelines {
-        assert_eq!(p.own_spirv, expected, "{} {:?}", p.kind.label(), p.formats);
+        let (kind, formats, leaf) = (p.kind.label(), p.formats, p.leaf);
+        assert_eq!(p.own_spirv, expected, "{kind} {formats:?} {leaf:?}");
     }
 }
 
