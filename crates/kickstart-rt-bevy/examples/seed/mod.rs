@@ -2,7 +2,7 @@
 //! knot and a blue tube on a light grey floor, lit by a low sun, with no ambient light (the GI
 //! is the only indirect light).
 //!
-//! Included by `examples/seed_scene.rs` and `tests/headless.rs` (`#[path]`).
+//! Included by `examples/seed_scene.rs` and the tests (`tests/plugin/main.rs`, `#[path]`).
 
 #![allow(dead_code)] // each includer uses a different part
 

@@ -8,10 +8,7 @@
 //! hardware backend, for a run on a driver with ray queries (Mesa 25's lavapipe:
 //! `.ci/lavapipe-rt`).
 
-#[path = "../examples/seed/mod.rs"]
-mod seed;
-
-mod harness;
+use crate::harness;
 
 use bevy::prelude::*;
 use bevy::render::renderer::RenderDevice;

@@ -6,10 +6,7 @@
 //! The camera looks straight down at the shadow, the card out of its way; the effects are the
 //! raw shadow alone (no denoiser blurring the cells' edges).
 
-#[path = "../examples/seed/mod.rs"]
-mod seed;
-
-mod harness;
+use crate::harness;
 
 use bevy::asset::RenderAssetUsages;
 use bevy::image::ImageSampler;

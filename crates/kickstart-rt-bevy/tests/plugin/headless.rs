@@ -7,10 +7,7 @@
 //! with Bevy's screenshot; each check compares two renders of the same view that differ in one
 //! thing.
 
-#[path = "../examples/seed/mod.rs"]
-mod seed;
-
-mod harness;
+use crate::{harness, seed};
 
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;

@@ -4,10 +4,7 @@
 //! changes inside one, and does inside blocks twice as large.
 //! Denoised, a reduced rate still puts the shadow where the sun casts it.
 
-#[path = "../examples/seed/mod.rs"]
-mod seed;
-
-mod harness;
+use crate::{harness, seed};
 
 use bevy::prelude::*;
 use harness::{Frame, HEIGHT, Harness, SETTLE_FRAMES, WIDTH};

@@ -10,10 +10,7 @@
 //! test asks for it: the SDK traces every visible entity whatever the camera's layers, so the
 //! floor under them shows their whole shadow.
 
-#[path = "../examples/seed/mod.rs"]
-mod seed;
-
-mod harness;
+use crate::harness;
 
 use bevy::camera::visibility::{NoFrustumCulling, RenderLayers};
 use bevy::light::GlobalAmbientLight;

@@ -2,7 +2,7 @@
 //! camera's linear HDR (`Rgba16Float`, no tone mapping) into an image read back with Bevy's
 //! screenshot.
 //!
-//! Included by each test file (`mod harness;`); each uses a different part.
+//! A module of the test binary (`main.rs`); each suite uses a different part.
 
 #![allow(dead_code)]
 
