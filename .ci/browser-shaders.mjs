@@ -8,7 +8,7 @@
 // browser considers the page loaded (asynchronous WebGPU work outlives `--dump-dom`).
 //
 // Usage: node .ci/browser-shaders.mjs DIR [--browser PATH] [--timeout SECONDS]
-//                                          [--skip-pipeline ENTRY]...
+//                                          [--skip-pipeline ENTRY]... [--modules-only TEXT]...
 // Exit status: 0 when every shader compiles, 1 when one does not (each failure printed with the
 // compiler's messages), 2 when the browser gives no WebGPU adapter or never reports.
 
@@ -34,6 +34,11 @@ const timeoutSeconds = Number(option("--timeout", "600"));
 // entry points, an entry point's name that one), for pipelines the browser's software backend
 // cannot build; their module is still compiled and validated.
 const skipPipelines = args.flatMap((a, i) => (a === "--skip-pipeline" ? [args[i + 1]] : []));
+// Shaders whose name contains TEXT (`--modules-only TEXT`, repeatable): compiled and validated,
+// their pipelines not built. For variants whose WGSL differs from a variant built in full only
+// by a constant (the software backend's two builds of each tracing pass), where the
+// software-rendered pipeline build would only take the step's time.
+const modulesOnly = args.flatMap((a, i) => (a === "--modules-only" ? [args[i + 1]] : []));
 
 // index.txt: "file<TAB>variant name<TAB>native features" per line; the third column is empty for
 // portable WGSL. A variant that needs a native feature WebGPU lacks (the hardware ray-query
@@ -68,6 +73,7 @@ try {
                            description: info.description });
   const shaders = await (await fetch("/shaders.json")).json();
   const skip = await (await fetch("/skip.json")).json();
+  const modulesOnly = await (await fetch("/modules-only.json")).json();
   for (const s of shaders) {
     const code = await (await fetch("/shader/" + encodeURIComponent(s.file))).text();
     const result = { name: s.name, file: s.file, messages: [], pipelines: [] };
@@ -80,7 +86,8 @@ try {
     const entries = [...code.matchAll(/@compute[^]*?fn\\s+([A-Za-z_][A-Za-z0-9_]*)\\s*\\(/g)]
       .map((m) => m[1]);
     for (const entryPoint of entries) {
-      if (skip.includes(entryPoint) || skip.includes(s.name)) {
+      if (skip.includes(entryPoint) || skip.includes(s.name)
+          || modulesOnly.some((m) => s.name.includes(m))) {
         result.pipelines.push({ entryPoint, ok: true, skipped: true });
         continue;
       }
@@ -117,6 +124,8 @@ const server = createServer((req, res) => {
     const url = decodeURIComponent(req.url);
     if (req.method === "GET" && url === "/") {
       res.writeHead(200, { "content-type": "text/html" }).end(page);
+    } else if (req.method === "GET" && url === "/modules-only.json") {
+      res.writeHead(200, { "content-type": "application/json" }).end(JSON.stringify(modulesOnly));
     } else if (req.method === "GET" && url === "/skip.json") {
       res.writeHead(200, { "content-type": "application/json" }).end(JSON.stringify(skipPipelines));
     } else if (req.method === "GET" && url === "/shaders.json") {
