@@ -129,7 +129,7 @@ impl ExecuteContext {
                 in_flight: BTreeMap::new(),
                 invoked: Vec::new(),
                 staging: StagingPool::default(),
-                scene: GpuScene::new(device, backend.backend),
+                scene: GpuScene::new(device, backend.backend, id),
                 effects: Effects::new(device, backend.backend),
                 blas_queue: VecDeque::new(),
                 dead_instance_slots: Vec::new(),
@@ -354,7 +354,7 @@ impl ExecuteContext {
             ..Default::default()
         };
         if sc.hardware.is_some() {
-            a.driver_acceleration_structures = driver_structure_bytes(&self.device);
+            a.driver_acceleration_structures = driver_structure_bytes(&self.device, self.id);
         }
         a.staging = s.staging.bytes()
             + s.in_flight
@@ -698,14 +698,12 @@ impl DeviceErrorScopes {
 /// Bytes of the driver acceleration structures the hardware backend made, by wgpu's allocator
 /// report (their sizes are the driver's; wgpu does not tell them otherwise). 0 where wgpu has no
 /// report.
-fn driver_structure_bytes(device: &wgpu::Device) -> u64 {
+fn driver_structure_bytes(device: &wgpu::Device, context_id: u32) -> u64 {
+    let prefix = crate::scene::hardware::driver_label_prefix(context_id);
     device.generate_allocator_report().map_or(0, |r| {
         r.allocations
             .iter()
-            .filter(|a| {
-                a.name
-                    .starts_with(crate::scene::hardware::DRIVER_STRUCTURE_LABEL)
-            })
+            .filter(|a| a.name.starts_with(&prefix))
             .map(|a| a.size)
             .sum()
     })

@@ -333,7 +333,7 @@ pub(crate) struct GpuScene {
 
 impl GpuScene {
     /// An empty scene for `backend`.
-    pub fn new(device: &wgpu::Device, backend: TraversalBackend) -> Self {
+    pub fn new(device: &wgpu::Device, backend: TraversalBackend, context_id: u32) -> Self {
         let hardware = backend == TraversalBackend::HardwareRayQuery;
         // The driver's BLASes are built from the triangle pool.
         let triangle_usage = if hardware {
@@ -382,7 +382,7 @@ impl GpuScene {
             scratch_topology: Grown::default(),
             counters: storage(device, "kickstart-rt ingestion counters", 8),
             passes: Passes::default(),
-            hardware: hardware.then(|| HardwareScene::new(device)),
+            hardware: hardware.then(|| HardwareScene::new(device, context_id)),
             build_memory_released: true,
             cutout_geometries: 0,
         }

@@ -12,13 +12,13 @@ use std::collections::HashMap;
 
 use crate::gpu::Recorder;
 
-/// The start of every driver acceleration structure's label (the SDK's memory count finds them
-/// in wgpu's allocator report by it).
-pub(crate) const DRIVER_STRUCTURE_LABEL: &str = "kickstart-rt driver ";
-/// Label of the driver's BLASes.
-const DRIVER_BLAS_LABEL: &str = "kickstart-rt driver BLAS";
-/// Label of the driver's TLAS.
-const DRIVER_TLAS_LABEL: &str = "kickstart-rt driver TLAS";
+/// The start of the labels of one context's driver acceleration structures: the SDK's memory
+/// count finds them in wgpu's allocator report by it. The report is the device's, so the label
+/// names the context: another context on the same device (or a test beside it) must not be
+/// counted as this one's. The trailing space keeps context 1 from matching context 12.
+pub(crate) fn driver_label_prefix(context_id: u32) -> String {
+    format!("kickstart-rt driver (context {context_id}) ")
+}
 
 /// Words of one instance record (128 bytes, the instance table's record; the context writes
 /// them: `instance_record`). Words 0–11: the object-to-world rows; 12–23: the world-to-object
@@ -48,6 +48,10 @@ struct PendingBlas {
 /// The driver's acceleration structures of one context.
 pub(crate) struct HardwareScene {
     device: wgpu::Device,
+    /// Label of this context's driver BLASes.
+    blas_label: String,
+    /// Label of this context's driver TLAS.
+    tlas_label: String,
     /// By geometry slot.
     blases: HashMap<u32, GeometryBlas>,
     /// Builds and updates waiting for the next [`HardwareScene::record`].
@@ -60,14 +64,23 @@ pub(crate) struct HardwareScene {
 }
 
 impl HardwareScene {
-    /// No BLASes, and an empty TLAS to be built by the first [`HardwareScene::record`].
-    pub fn new(device: &wgpu::Device) -> Self {
+    /// No BLASes, and an empty TLAS to be built by the first [`HardwareScene::record`]; the
+    /// structures are labelled as `context_id`'s (see [`driver_label_prefix`]).
+    pub fn new(device: &wgpu::Device, context_id: u32) -> Self {
+        let prefix = driver_label_prefix(context_id);
+        let tlas_label = format!("{prefix}TLAS");
         HardwareScene {
             device: device.clone(),
+            blas_label: format!("{prefix}BLAS"),
+            tlas: create_tlas(
+                device,
+                64.min(device.limits().max_tlas_instance_count),
+                &tlas_label,
+            ),
+            tlas_label,
             blases: HashMap::new(),
             pending: Vec::new(),
             records: Vec::new(),
-            tlas: create_tlas(device, 64.min(device.limits().max_tlas_instance_count)),
             tlas_dirty: true,
         }
     }
@@ -112,7 +125,7 @@ impl HardwareScene {
         }
         let blas = self.device.create_blas(
             &wgpu::CreateBlasDescriptor {
-                label: Some(DRIVER_BLAS_LABEL),
+                label: Some(&self.blas_label),
                 flags,
                 update_mode: if updatable {
                     wgpu::AccelerationStructureUpdateMode::PreferUpdate
@@ -206,7 +219,7 @@ impl HardwareScene {
                 .next_power_of_two()
                 .max(64)
                 .min(limit);
-            self.tlas = create_tlas(&self.device, capacity);
+            self.tlas = create_tlas(&self.device, capacity, &self.tlas_label);
         }
         let capacity = self.tlas.get().len();
         for (i, instance) in instances.into_iter().enumerate() {
@@ -292,9 +305,9 @@ impl HardwareScene {
 }
 
 /// An unbuilt TLAS of `capacity` instances.
-fn create_tlas(device: &wgpu::Device, capacity: u32) -> wgpu::Tlas {
+fn create_tlas(device: &wgpu::Device, capacity: u32, label: &str) -> wgpu::Tlas {
     device.create_tlas(&wgpu::CreateTlasDescriptor {
-        label: Some(DRIVER_TLAS_LABEL),
+        label: Some(label),
         max_instances: capacity,
         flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
         update_mode: wgpu::AccelerationStructureUpdateMode::Build,

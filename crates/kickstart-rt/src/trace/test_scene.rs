@@ -280,7 +280,7 @@ fn driver_scene(
     instances: &[InstanceRecord],
     triangles: &wgpu::Buffer,
 ) -> crate::scene::hardware::HardwareScene {
-    let mut hw = crate::scene::hardware::HardwareScene::new(&testing::gpu().device);
+    let mut hw = crate::scene::hardware::HardwareScene::new(&testing::gpu().device, 0);
     for (slot, g) in geometries.iter().enumerate() {
         hw.build(slot as u32, g.tri_base, g.tri_count, (false, false));
     }

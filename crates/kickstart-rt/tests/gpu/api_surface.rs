@@ -956,6 +956,52 @@ fn wgpu_allocations_come_back_after_destroying_and_releasing_everything() {
     }
 }
 
+/// wgpu's allocator report is the device's, yet each context counts only its own driver
+/// structures: a second context on the same device keeps its count while the first builds a
+/// scene, and the two counts add up to every driver structure the report holds.
+#[test]
+fn driver_structures_are_counted_for_their_own_context_only() {
+    let (device, queue) = own_test_device(gpu().device.limits(), "kickstart-rt two contexts");
+    let make = || {
+        let settings = InitSettings {
+            backend: pass_backend_choice(),
+            ..InitSettings::default()
+        };
+        let ctx = ExecuteContext::new(&device, &queue, settings)
+            .unwrap_or_else(|e| panic!("context: {e}"));
+        assert_pass_backend(&ctx);
+        ctx
+    };
+    let (scene, bystander) = (make(), make());
+    let driver = |ctx: &ExecuteContext| ctx.resource_allocations().driver_acceleration_structures;
+    let quiet = driver(&bystander);
+    let _held = quads_on(&device, &queue, &scene, 8);
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
+    assert_eq!(
+        driver(&bystander),
+        quiet,
+        "the bystander counted the scene's BLASes"
+    );
+    let every = device.generate_allocator_report().map_or(0, |r| {
+        r.allocations
+            .iter()
+            .filter(|a| a.name.starts_with("kickstart-rt driver"))
+            .map(|a| a.size)
+            .sum::<u64>()
+    });
+    assert_eq!(driver(&scene) + driver(&bystander), every);
+    match backend() {
+        TraversalBackend::HardwareRayQuery => assert!(
+            driver(&scene) > quiet,
+            "the scene's BLASes uncounted: {} against an empty context's {quiet}",
+            driver(&scene)
+        ),
+        TraversalBackend::Software => assert_eq!((driver(&scene), every), (0, 0)),
+    }
+}
+
 /// Once a scene's builds are done, the next GPU task gives back what only builds use: the
 /// build scratch, the vertex copies' pool and the BLAS pools' free space (their ranges in use
 /// moved into smaller buffers). Rays traced after hit exactly what they hit before, and agree

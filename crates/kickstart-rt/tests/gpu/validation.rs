@@ -1172,6 +1172,12 @@ fn refused_changes_nothing(
         register_instance(c, instance, geometry, Affine3A::IDENTITY);
         c.schedule_bvh_task(BvhBuildTask::default());
     };
+    // wgpu frees what a finished submission used at its next maintenance: settle that first, so
+    // the refused task's own submission below cannot change the driver's bytes by itself.
+    gpu()
+        .device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .expect("poll");
     let before = observe(&ctx, &[first, geometry]);
     let mut c = ctx.create_task_container();
     schedule(&mut c);
