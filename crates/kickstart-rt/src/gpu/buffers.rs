@@ -83,6 +83,15 @@ pub(crate) fn map_and_wait(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Resu
     Ok(data)
 }
 
+/// Bytes of the largest storage buffer `device` can bind whole: its storage binding limit, or
+/// its buffer size limit where that is smaller.
+pub(crate) fn max_binding(device: &wgpu::Device) -> u64 {
+    let limits = device.limits();
+    limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+}
+
 /// A scratch buffer that only grows (recorded commands keep older buffers alive).
 #[derive(Default)]
 pub(crate) struct Grown {
@@ -103,10 +112,13 @@ impl Grown {
                 return b.clone();
             }
         }
-        // Round up so that slowly growing scenes do not reallocate on every build.
+        // Round up so that slowly growing scenes do not reallocate on every build, but never
+        // past the largest binding: the buffer is bound whole, and a request that fits must
+        // stay bindable.
+        let rounded = size.next_power_of_two().min(max_binding(device)).max(size);
         let b = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
-            size: size.next_power_of_two(),
+            size: rounded,
             usage: wgpu::BufferUsages::STORAGE
                 | wgpu::BufferUsages::COPY_SRC
                 | wgpu::BufferUsages::COPY_DST,

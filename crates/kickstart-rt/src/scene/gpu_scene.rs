@@ -12,8 +12,8 @@ use crate::gpu::buffers::{read_back, storage, Grown};
 use crate::gpu::Recorder;
 use crate::scene::ingest::{ComponentIngest, Ingest};
 use crate::scene::lbvh::{
-    BatchBuild, BatchKind, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit, LeafRefs,
-    RawTriangles, RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
+    batch_runs, BatchBuild, BatchKind, Lbvh, LbvhBatch, LbvhBuild, LbvhRefit, LbvhTriangleRefit,
+    LeafRefs, RawTriangles, RefitSource, BLAS_KEY_BITS, TLAS_KEY_BITS,
 };
 use crate::scene::opacity::{OpacityBaker, OpacityMaps};
 use crate::scene::pool::{Move, Pool, Range};
@@ -341,10 +341,7 @@ impl GpuScene {
         } else {
             wgpu::BufferUsages::empty()
         };
-        let limits = device.limits();
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let max_binding = crate::gpu::buffers::max_binding(device);
         let tlas_nodes = empty_root(device);
         GpuScene {
             device: device.clone(),
@@ -791,8 +788,8 @@ impl GpuScene {
         counts
     }
 
-    /// Records deferred builds of one kind (one strategy, all kept or none) as a batch, or one
-    /// by one.
+    /// Records deferred builds of one kind (one strategy, all kept or none) as batches whose
+    /// scratch fits the device's largest binding ([`batch_runs`]), or one by one.
     fn record_batch_of(
         &mut self,
         rec: &mut Recorder<'_>,
@@ -802,17 +799,8 @@ impl GpuScene {
         let Some(first) = batch.first() else {
             return;
         };
-        let count_buffer = node_count_buffer(&self.device, batch.len());
-        let kind = match (first.strategy, first.kept) {
-            (BuildStrategy::FastTrace, _) => BatchKind::FastTrace {
-                counts: &count_buffer,
-            },
-            (BuildStrategy::FastBuild, Some(_)) => BatchKind::FastBuild {
-                kept: Some((self.orders.buffer(), self.topologies.buffer())),
-            },
-            (BuildStrategy::FastBuild, None) => BatchKind::FastBuild { kept: None },
-        };
-        let first_is_fast_trace = first.strategy == BuildStrategy::FastTrace;
+        let strategy = first.strategy;
+        let clustered = strategy == BuildStrategy::FastTrace;
         let builds: Vec<BatchBuild> = batch
             .iter()
             .map(|d| BatchBuild {
@@ -827,6 +815,47 @@ impl GpuScene {
                     .map(|(order, topology)| (order.start, topology.start)),
             })
             .collect();
+        let mut alone = Vec::new();
+        for run in batch_runs(&builds, clustered, self.max_binding) {
+            let slots: Vec<u32> = batch[run.clone()].iter().map(|d| d.slot).collect();
+            let run_builds = (&builds[run.clone()], slots.as_slice());
+            if !self.record_batch_run(rec, strategy, run_builds, counts) {
+                alone.extend(run);
+            }
+        }
+        for d in alone.into_iter().filter_map(|i| batch.get(i)) {
+            self.record_blas_passes(
+                rec,
+                (d.slot, d.staged),
+                d.count,
+                (d.tris, d.nodes, d.kept),
+                (d.strategy, Some(&mut *counts)),
+            );
+        }
+    }
+
+    /// Records one run of [`GpuScene::record_batch_of`]'s builds (of `strategy`, of geometry
+    /// `slots`) as a batch; `false`, recording nothing, where the batch cannot take them.
+    fn record_batch_run(
+        &mut self,
+        rec: &mut Recorder<'_>,
+        strategy: BuildStrategy,
+        (builds, slots): (&[BatchBuild], &[u32]),
+        counts: &mut NodeCounts,
+    ) -> bool {
+        let Some(first) = builds.first() else {
+            return true;
+        };
+        let count_buffer = node_count_buffer(&self.device, builds.len());
+        let kind = match (strategy, first.kept) {
+            (BuildStrategy::FastTrace, _) => BatchKind::FastTrace {
+                counts: &count_buffer,
+            },
+            (BuildStrategy::FastBuild, Some(_)) => BatchKind::FastBuild {
+                kept: Some((self.orders.buffer(), self.topologies.buffer())),
+            },
+            (BuildStrategy::FastBuild, None) => BatchKind::FastBuild { kept: None },
+        };
         let (_, lbvh) = self.passes.build(&self.device);
         let batched = lbvh.build_batch(
             rec,
@@ -835,24 +864,15 @@ impl GpuScene {
                 triangles: self.triangles.buffer(),
                 nodes: self.nodes.buffer(),
                 bounds_out: &self.geometry_table.buffer,
-                builds: &builds,
+                builds,
                 kind,
             },
         );
-        if !batched {
-            for d in batch {
-                self.record_blas_passes(
-                    rec,
-                    (d.slot, d.staged),
-                    d.count,
-                    (d.tris, d.nodes, d.kept),
-                    (d.strategy, Some(&mut *counts)),
-                );
-            }
-        } else if first_is_fast_trace {
-            counts.parts.push((count_buffer, batch.len()));
-            counts.slots.extend(batch.iter().map(|d| d.slot));
+        if batched && strategy == BuildStrategy::FastTrace {
+            counts.parts.push((count_buffer, builds.len()));
+            counts.slots.extend_from_slice(slots);
         }
+        batched
     }
 
     /// The passes of one BLAS build into its allocated ranges. A fast-trace build that keeps

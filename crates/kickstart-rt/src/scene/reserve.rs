@@ -88,6 +88,16 @@ impl SceneReservation {
         )?;
         let nodes = Lbvh::node_count(n);
         reserve(&mut self.nodes, nodes, max, what("BLAS nodes"), NODE_BYTES)?;
+        // The build's scratch is bound whole too (a batch of builds is split to fit; one
+        // build cannot be).
+        let scratch = Lbvh::largest_build_binding_bytes(n);
+        if scratch > max {
+            return Err(Error::OutOfDeviceMemory {
+                what: what("BLAS build scratch")(),
+                bytes: scratch,
+                limit: max,
+            });
+        }
         if keep_for_refit {
             reserve(&mut self.orders, n, max, what("sort order"), 4)?;
             let words = Lbvh::topology_words(n);

@@ -1413,8 +1413,8 @@ fn small_binding_context(bytes: u64) -> (wgpu::Device, wgpu::Queue, ExecuteConte
 }
 
 /// The record phase allocates as it goes (staged triangles, then the BLAS's triangles and
-/// nodes, ...). A task whose allocation past the first would exceed the device's binding size
-/// must be refused by the plan, before the earlier ones changed anything: the context is as it
+/// nodes, then its build's scratch ...). A task whose allocation past the first would exceed the
+/// device's binding size must be refused by the plan, before the earlier ones changed anything: the context is as it
 /// was, then accepts a task that fits, and the next frame traces the scene as it should.
 #[test]
 fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
@@ -1460,6 +1460,19 @@ fn a_task_past_the_devices_memory_limit_is_refused_and_changes_nothing() {
             assert_eq!(what, "BLAS nodes of geometry `2200000 triangles`");
             assert_eq!(limit, LIMIT);
             assert!(bytes > LIMIT, "{bytes}");
+        }
+        other => panic!("expected OutOfDeviceMemory, got {other:?}"),
+    }
+    submit(e);
+    assert_eq!(observe(&ctx, &[first.0, handles.0]), before);
+    // 2M triangles: their nodes (128.0 MB) fit, their build's scratch (68 bytes a triangle,
+    // 136 MB, bound whole) does not.
+    let c = register_and_build(&ctx, handles, many_triangles(&device, 2_000_000));
+    let mut e = encoder();
+    match ctx.build_gpu_task(c, &mut e) {
+        Err(Error::OutOfDeviceMemory { what, bytes, limit }) => {
+            assert_eq!(what, "BLAS build scratch of geometry `2000000 triangles`");
+            assert_eq!((bytes, limit), (135_999_964, LIMIT));
         }
         other => panic!("expected OutOfDeviceMemory, got {other:?}"),
     }

@@ -90,6 +90,57 @@ struct Layout {
     topology_words: u64,
 }
 
+/// What one build adds to a batch's scratch: positions (its count padded to whole
+/// workgroups), words of `work`, and words of the Karras topology (none when the build keeps
+/// its own).
+fn footprint(b: &BatchBuild, clustered: bool) -> (u64, u64, u64) {
+    let workgroup = u64::from(WORKGROUP);
+    let positions = u64::from(b.count).div_ceil(workgroup) * workgroup;
+    let work = if clustered {
+        clustered_work_words(b.count)
+    } else {
+        BOXES_AT
+    };
+    let topology = match b.kept {
+        Some(_) => 0,
+        None => u64::from(Lbvh::topology_words(b.count)),
+    };
+    (positions, work, topology)
+}
+
+/// Splits `builds` into runs of consecutive builds whose batch scratch fits bindings of
+/// `max_binding` bytes: every buffer a batch binds whole (its keys, values and order, a word a
+/// position; its `work`; its topology) must stay within the device's largest storage binding,
+/// and a scene's builds together easily pass it. A build too large to share a batch is a run
+/// of its own (the caller builds it alone; the plan checked it fits by itself).
+pub(crate) fn batch_runs(
+    builds: &[BatchBuild],
+    clustered: bool,
+    max_binding: u64,
+) -> Vec<std::ops::Range<usize>> {
+    let max_words = max_binding / 4;
+    let mut runs = Vec::new();
+    let (mut start, mut sums) = (0, (0u64, 0u64, 0u64));
+    for (i, b) in builds.iter().enumerate() {
+        let (p, w, t) = footprint(b, clustered);
+        let grown = (sums.0 + p, sums.1 + w, sums.2 + t);
+        let fits = grown.0 <= max_words.min(u64::from(MAX_COUNT))
+            && grown.1 <= max_words
+            && grown.2 <= max_words;
+        if i > start && !fits {
+            runs.push(start..i);
+            start = i;
+            sums = (p, w, t);
+        } else {
+            sums = grown;
+        }
+    }
+    if start < builds.len() {
+        runs.push(start..builds.len());
+    }
+    runs
+}
+
 /// Sort key bits of the build index of `builds` builds (at least 1).
 fn segment_bits(builds: usize) -> u32 {
     (usize::BITS - builds.saturating_sub(1).leading_zeros()).max(1)
@@ -104,7 +155,6 @@ impl Layout {
         let (mut positions, mut work, mut topology) = (0u64, 0u64, 0u64);
         for b in builds {
             let n = b.count;
-            let words = u64::from(Lbvh::topology_words(n));
             let (order_base, topo_base) = match b.kept {
                 Some(kept) => kept,
                 None => (
@@ -140,15 +190,10 @@ impl Layout {
                 row_base: 0,
                 pad: 0,
             });
-            positions += u64::from(n.div_ceil(WORKGROUP) * WORKGROUP);
-            work += if clustered {
-                clustered_work_words(n)
-            } else {
-                BOXES_AT
-            };
-            if b.kept.is_none() {
-                topology += words;
-            }
+            let (p, w, t) = footprint(b, clustered);
+            positions += p;
+            work += w;
+            topology += t;
         }
         let positions = u32::try_from(positions).ok().filter(|&p| p <= MAX_COUNT)?;
         Some(Layout {
@@ -158,6 +203,14 @@ impl Layout {
             topology_words: topology,
         })
     }
+
+    /// Bytes of the largest buffer the batch binds whole ([`batch_runs`] keeps it within the
+    /// device's largest storage binding).
+    fn largest_binding_bytes(&self) -> u64 {
+        4 * u64::from(self.positions)
+            .max(self.work_words)
+            .max(self.topology_words)
+    }
 }
 
 impl Lbvh {
@@ -165,7 +218,8 @@ impl Lbvh {
     /// nothing, when the batch has fewer than two builds, a build of no triangle (of fewer than
     /// two in a fast-build batch: a range refit's tree has inner nodes), a fast-build build
     /// whose `kept` disagrees with the batch's, or more positions than a build may have: the
-    /// caller builds those one by one.
+    /// caller builds those one by one. So does a batch whose scratch would pass the device's
+    /// largest storage binding ([`batch_runs`] splits a scene's builds into batches that fit).
     pub fn build_batch(&mut self, rec: &mut Recorder<'_>, b: &LbvhBatch<'_>) -> bool {
         let (compact_counts, kept) = match b.kind {
             BatchKind::FastTrace { counts } => (Some(counts), None),
@@ -184,6 +238,9 @@ impl Lbvh {
             return false;
         };
         let device = rec.device;
+        if layout.largest_binding_bytes() > crate::gpu::buffers::max_binding(device) {
+            return false;
+        }
         let total = layout.positions;
         let work = self
             .work
@@ -378,6 +435,58 @@ mod tests {
         assert_eq!(segment_bits(256), 8);
         assert_eq!(segment_bits(257), 9);
         assert_eq!(segment_bits(1000), 10);
+    }
+
+    /// A build of `count` triangles, keeping its order and topology or not.
+    fn build_of(count: u32, kept: bool) -> BatchBuild {
+        BatchBuild {
+            count,
+            tri_src_base: 0,
+            tri_dst_base: 0,
+            node_base: 0,
+            bounds_base: 0,
+            max_leaf: 4,
+            kept: kept.then_some((0, 0)),
+        }
+    }
+
+    #[test]
+    fn a_scenes_builds_split_into_batches_whose_scratch_fits_the_binding() {
+        // Clustered work is the largest buffer: 5091 words for 300 triangles.
+        assert_eq!(clustered_work_words(300), 5091);
+        let builds = vec![build_of(300, false); 5];
+        // Room for two builds' work (and more than their keys and topologies) a batch.
+        let max = 4 * 2 * 5091 + 100;
+        let runs = batch_runs(&builds, true, max);
+        assert_eq!(runs, [0..2, 2..4, 4..5]);
+        for run in &runs {
+            let layout = Layout::of(&builds[run.clone()], true).unwrap();
+            assert!(layout.largest_binding_bytes() <= max, "{run:?}");
+        }
+        // Everything in one batch where it fits, and nothing lost or repeated.
+        assert_eq!(batch_runs(&builds, true, 1 << 27), vec![0..5]);
+        assert_eq!(batch_runs(&[], true, 1 << 27), []);
+        // A build too large to share a batch is a run of its own, between batches that fit.
+        let mixed = [
+            build_of(300, false),
+            build_of(300, false),
+            build_of(4000, false),
+            build_of(300, false),
+        ];
+        assert_eq!(batch_runs(&mixed, true, max), [0..2, 2..3, 3..4]);
+    }
+
+    #[test]
+    fn fast_build_batches_count_positions_and_topologies_not_clustered_work() {
+        // A fast-build build's work is its bounds only: its keys (a word a padded position) and
+        // topology (5n - 4 words, in the scratch unless kept) are what fill a batch.
+        let scratch = vec![build_of(256, false); 4];
+        let max = 4 * (2 * (5 * 256 - 4));
+        assert_eq!(batch_runs(&scratch, false, max), [0..2, 2..4]);
+        // Kept topologies are the pool's: only the positions count.
+        let kept = vec![build_of(256, true); 4];
+        assert_eq!(batch_runs(&kept, false, 4 * 2 * 256), [0..2, 2..4]);
+        assert_eq!(batch_runs(&kept, false, 4 * 4 * 256), vec![0..4]);
     }
 
     #[test]

@@ -73,7 +73,7 @@ mod tests;
 use crate::gpu::radix_sort::RadixSort;
 use crate::gpu::reflect::{ReflectedPipeline, ReflectedShader};
 use crate::gpu::Recorder;
-pub(crate) use batch::{BatchBuild, BatchKind, LbvhBatch};
+pub(crate) use batch::{batch_runs, BatchBuild, BatchKind, LbvhBatch};
 use bytemuck::{Pod, Zeroable};
 
 // The builder's scratch that only grows (gpu layer); the scene's tables use it too.
@@ -452,6 +452,15 @@ impl Lbvh {
     /// buffer is never empty.
     pub fn topology_words(count: u32) -> u32 {
         (5 * count).saturating_sub(4).max(1)
+    }
+
+    /// Bytes of the largest scratch buffer a build of `count` triangles binds whole, whatever
+    /// its strategy: a clustered build's `work` (the largest, about 68 bytes a triangle). A
+    /// build whose scratch passes the device's largest storage binding cannot run.
+    pub fn largest_build_binding_bytes(count: u32) -> u64 {
+        4 * clustered_work_words(count)
+            .max(work_words(count))
+            .max(u64::from(Self::topology_words(count)))
     }
 
     /// Drops every scratch buffer (the next build allocates what it needs).
