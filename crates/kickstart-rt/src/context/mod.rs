@@ -9,6 +9,7 @@
 mod compaction;
 mod effects;
 mod plan;
+mod raw_copy;
 mod record;
 mod reserve;
 mod settings;

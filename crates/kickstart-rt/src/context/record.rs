@@ -12,6 +12,7 @@ use std::sync::Arc;
 use super::compaction::NodeCountReadback;
 use super::effects::{Inputs, Route};
 use super::plan::FramePlan;
+use super::raw_copy::RawCopy;
 use super::settings::INSTANCE_RECORD_SIZE;
 use super::state::{
     geometry_task_work, instance_record, DroppedReadback, GeometryData, State, WorkingSet,
@@ -317,51 +318,58 @@ fn ingest(
     deferred
 }
 
-/// Copies every ingested component's bytes into one raw buffer; returns it and each
-/// ingestion's components as the decoder reads them there.
+/// Copies the bytes every ingestion reads (vertices, indices, opacity sources) into one raw
+/// buffer ([`RawCopy`]: ranges of one buffer copied once) and plans each component's decode
+/// from it.
 fn copy_raw_geometry(
     frame: &mut Frame<'_>,
     ingestions: &[Ingestion<'_>],
 ) -> (wgpu::Buffer, Vec<Vec<ComponentIngest>>) {
-    let raw_bytes: u64 = ingestions
-        .iter()
-        .flat_map(|(_, e, ..)| e.iter())
-        .map(|e| {
-            let span = |r: Option<(u64, u64)>| r.map_or(0, |(a, b)| b - a);
-            (e.vertex_bytes.1 - e.vertex_bytes.0) + span(e.index_bytes) + span(e.opacity_bytes)
-        })
-        .sum();
-    let raw = storage(frame.device, "kickstart-rt raw geometry copy", raw_bytes);
-    let mut cursor = 0u64;
+    let mut copy = RawCopy::default();
+    // Per component: its request for vertices, indices and opacity bytes.
+    let mut asked = Vec::new();
+    for (task, extents, ..) in ingestions {
+        for (c, e) in task.input.components.iter().zip(extents.iter()) {
+            let vertices = copy.request(&c.vertex_buffer.buffer, e.vertex_bytes);
+            let indices = match (&c.index_buffer, e.index_bytes) {
+                (Some(ib), Some(range)) => Some(copy.request(&ib.buffer, range)),
+                _ => None,
+            };
+            let opacity = match (&c.opacity, e.opacity_bytes) {
+                (Some(o), Some(range)) => Some(copy.request(opacity_source(o).0, range)),
+                _ => None,
+            };
+            asked.push((vertices, indices, opacity));
+        }
+    }
+    let (raw, offsets) = copy.record(frame.device, frame.encoder, &mut frame.ws.held);
+    let mut asked = asked.into_iter();
     let mut plans = Vec::new();
     for (task, extents, ..) in ingestions {
         let mut comps = Vec::new();
         let mut prim_base = 0u32;
         for (c, e) in task.input.components.iter().zip(extents.iter()) {
+            let Some((vertices, indices, opacity)) = asked.next() else {
+                break;
+            };
             let vb = &c.vertex_buffer;
-            let (vs, ve) = e.vertex_bytes;
-            frame
-                .encoder
-                .copy_buffer_to_buffer(&vb.buffer, vs, &raw, cursor, ve - vs);
-            frame.ws.held.push(vb.buffer.clone());
-            let vertex_byte_offset = cursor + (vb.offset - vs);
-            cursor += ve - vs;
-            let index = match (&c.index_buffer, e.index_bytes) {
-                (Some(ib), Some((is, ie))) => {
-                    frame
-                        .encoder
-                        .copy_buffer_to_buffer(&ib.buffer, is, &raw, cursor, ie - is);
-                    frame.ws.held.push(ib.buffer.clone());
-                    let off = cursor + (ib.offset - is);
-                    cursor += ie - is;
-                    Some((off, ib.format))
+            // Where a range's first byte landed, plus the field's distance from it.
+            let raw_at = |request: usize, (start, _): (u64, u64), offset: u64| {
+                offsets[request] + (offset - start)
+            };
+            let index = match (&c.index_buffer, e.index_bytes, indices) {
+                (Some(ib), Some(range), Some(k)) => Some((raw_at(k, range, ib.offset), ib.format)),
+                _ => None,
+            };
+            let opacity = match (&c.opacity, e.opacity_bytes, opacity) {
+                (Some(o), Some(range), Some(k)) => {
+                    Some(opacity_ingest(o, raw_at(k, range, opacity_source(o).1)))
                 }
                 _ => None,
             };
-            let opacity = copy_raw_opacity(frame, &raw, &mut cursor, c, e);
             comps.push(ComponentIngest {
                 opacity,
-                vertex_byte_offset,
+                vertex_byte_offset: raw_at(vertices, e.vertex_bytes, vb.offset),
                 vertex_stride: vb.stride,
                 vertex_format: vb.format,
                 vertex_count: vb.count,
@@ -378,27 +386,19 @@ fn copy_raw_geometry(
     (raw, plans)
 }
 
-/// Copies a component's opacity source bytes (its coordinates, or its per-triangle flags) into
-/// `raw` at `cursor` (advanced), and says where they are.
-fn copy_raw_opacity(
-    frame: &mut Frame<'_>,
-    raw: &wgpu::Buffer,
-    cursor: &mut u64,
-    c: &GeometryComponent,
-    e: &ComponentExtent,
-) -> Option<OpacityIngest> {
-    let (o, (start, end)) = (c.opacity.as_ref()?, e.opacity_bytes?);
-    let (buffer, offset) = match &o.source {
+/// The buffer a component's opacity source reads (its coordinates, or its per-triangle flags)
+/// and the byte offset of its first element.
+fn opacity_source(o: &ComponentOpacity) -> (&wgpu::Buffer, u64) {
+    match &o.source {
         OpacitySource::Texture { uvs, .. } => (&uvs.buffer, uvs.offset),
         OpacitySource::PerTriangle { buffer, offset } => (buffer, *offset),
-    };
-    frame
-        .encoder
-        .copy_buffer_to_buffer(buffer, start, raw, *cursor, end - start);
-    frame.ws.held.push(buffer.clone());
-    let at = *cursor + (offset - start);
-    *cursor += end - start;
-    Some(match &o.source {
+    }
+}
+
+/// How the ingestion reads a component's opacity source, whose bytes start at `at` in the raw
+/// copy.
+fn opacity_ingest(o: &ComponentOpacity, at: u64) -> OpacityIngest {
+    match &o.source {
         OpacitySource::Texture {
             texture,
             uvs,
@@ -418,7 +418,7 @@ fn copy_raw_opacity(
             }
         }
         OpacitySource::PerTriangle { .. } => OpacityIngest::PerTriangle { byte_offset: at },
-    })
+    }
 }
 
 /// The read-back of the ingestions' dropped-triangle counters (two words each).
