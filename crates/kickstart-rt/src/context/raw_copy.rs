@@ -42,7 +42,11 @@ impl<'a> RawCopy<'a> {
         held: &mut Vec<wgpu::Buffer>,
     ) -> (wgpu::Buffer, Vec<u64>) {
         let (runs, offsets) = self.plan();
-        let size = runs.iter().map(|(_, r)| r.end - r.start).sum::<u64>().max(4);
+        let size = runs
+            .iter()
+            .map(|(_, r)| r.end - r.start)
+            .sum::<u64>()
+            .max(4);
         let raw = crate::gpu::buffers::storage(device, "kickstart-rt raw geometry copy", size);
         let mut last: Option<&wgpu::Buffer> = None;
         for (buffer, run) in runs {
@@ -80,7 +84,14 @@ impl<'a> RawCopy<'a> {
                     }
                 }
             } else {
-                runs.push((buffer, Run { start, end, at: size }));
+                runs.push((
+                    buffer,
+                    Run {
+                        start,
+                        end,
+                        at: size,
+                    },
+                ));
                 size += end - start;
             }
             if let Some((_, r)) = runs.last() {
@@ -97,12 +108,14 @@ mod tests {
     use crate::gpu::testing;
 
     fn buffer(size: u64) -> wgpu::Buffer {
-        testing::gpu().device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("raw copy test source"),
-            size,
-            usage: wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        })
+        testing::gpu()
+            .device
+            .create_buffer(&wgpu::BufferDescriptor {
+                label: Some("raw copy test source"),
+                size,
+                usage: wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
     }
 
     /// Overlapping, touching and near ranges of one buffer become one copy; a range past the
@@ -115,16 +128,18 @@ mod tests {
         let asked = [
             (&a, (1000, 2000)),
             (&b, (0, 400)),
-            (&a, (0, 1000)),             // touches the first
-            (&a, (1500, 1800)),          // inside the first
-            (&a, (2000 + 256, 3000)),    // within the gap
-            (&a, (3000 + 260, 4000)),    // past the gap: a run of its own
-            (&b, (400, 800)),            // touches b's first
+            (&a, (0, 1000)),          // touches the first
+            (&a, (1500, 1800)),       // inside the first
+            (&a, (2000 + 256, 3000)), // within the gap
+            (&a, (3000 + 260, 4000)), // past the gap: a run of its own
+            (&b, (400, 800)),         // touches b's first
         ];
         let ids: Vec<usize> = asked.iter().map(|&(buf, r)| copy.request(buf, r)).collect();
         let (runs, offsets) = copy.plan();
-        let shape: Vec<(bool, u64, u64)> =
-            runs.iter().map(|(buf, r)| (**buf == a, r.start, r.end)).collect();
+        let shape: Vec<(bool, u64, u64)> = runs
+            .iter()
+            .map(|(buf, r)| (**buf == a, r.start, r.end))
+            .collect();
         let mut want = vec![(true, 0, 3000), (true, 3260, 4000), (false, 0, 800)];
         if b < a {
             want.rotate_left(2);

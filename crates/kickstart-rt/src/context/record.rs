@@ -18,7 +18,6 @@ use super::state::{
     geometry_task_work, instance_record, DroppedReadback, GeometryData, State, WorkingSet,
 };
 use super::validate::ComponentExtent;
-use crate::gpu::buffers::storage;
 use crate::gpu::recorder::Timestamps;
 use crate::gpu::Recorder;
 use crate::handles::*;
