@@ -99,22 +99,7 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
         s.scene.note_build_work();
     }
     clear_dead_slots(s, &mut uploads, frame.serial);
-    for (task, .., maps) in &ingestions {
-        let record = task.handle.index as u64 * GEOMETRY_RECORD_SIZE;
-        if task.operation == TaskOperation::Register {
-            uploads.push(
-                &s.scene.geometry_table.buffer,
-                record,
-                bytemuck::bytes_of(&[0u32; 4]),
-            );
-        }
-        let opacity = maps.map_or(OPAQUE_RECORD, |m| m.record());
-        uploads.push(
-            &s.scene.geometry_table.buffer,
-            record + GEOMETRY_OPACITY_AT,
-            bytemuck::bytes_of(&opacity),
-        );
-    }
+    queue_geometry_records(s, &ingestions, &mut uploads);
     queue_instance_records(s, &plan.instances);
     frame.flush(s, uploads);
     let deferred = ingest(frame, s, plan, &ingestions);
@@ -134,6 +119,39 @@ pub(super) fn record(frame: &mut Frame<'_>, s: &mut State, plan: &FramePlan<'_>)
     allocate_caches(frame, s);
     for route in &plan.render {
         record_render_task(frame, s, route);
+    }
+}
+
+/// The geometry-table words of each ingestion: a registration's record cleared, and its opacity
+/// words where they change.
+fn queue_geometry_records(s: &State, ingestions: &[Ingestion<'_>], uploads: &mut Uploads) {
+    for (task, .., maps) in ingestions {
+        let record = task.handle.index as u64 * GEOMETRY_RECORD_SIZE;
+        if task.operation == TaskOperation::Register {
+            uploads.push(
+                &s.scene.geometry_table.buffer,
+                record,
+                bytemuck::bytes_of(&[0u32; 4]),
+            );
+        }
+        // An update that keeps the geometry's micro-maps where they are leaves its record's
+        // opacity words as they are: every upload is a copy command of its own (the records are
+        // apart), each with a fixed cost, which an animated scene would pay for every refit
+        // geometry every frame.
+        let kept = task.operation == TaskOperation::Update
+            && s.geometries
+                .get(task.handle)
+                .ok()
+                .and_then(|g| g.data.as_ref())
+                .is_some_and(|d| d.gpu.opacity == *maps);
+        if !kept {
+            let opacity = maps.map_or(OPAQUE_RECORD, |m| m.record());
+            uploads.push(
+                &s.scene.geometry_table.buffer,
+                record + GEOMETRY_OPACITY_AT,
+                bytemuck::bytes_of(&opacity),
+            );
+        }
     }
 }
 
