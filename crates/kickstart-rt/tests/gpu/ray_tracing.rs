@@ -2835,3 +2835,94 @@ fn the_opacity_test_follows_the_scenes_cutout_geometry() {
             .find(|h| !h.is_hit() || (h.t - 2.0).abs() > 1e-5)
     );
 }
+
+/// A cutout geometry deformed by updates (a skinned or morphed character's alpha-tested parts):
+/// each refit keeps the opacity of every triangle where the triangle went. The card of
+/// per-triangle flags, `allow_update`, is mirrored (x ↦ 1 − x) and lifted to z = 0.25 with the
+/// same flags: its transparent triangle now covers x + y > 1, where rays reach the floor, and
+/// the rest stop on the card at its new height; then it goes back.
+#[test]
+fn a_deformed_cutout_geometry_keeps_its_holes_on_its_triangles() {
+    let ctx = context(2);
+    let (card_mesh, _) = card();
+    let flags = buffer(
+        bytemuck::cast_slice(&[7u32, 0]),
+        wgpu::BufferUsages::COPY_SRC,
+    );
+    let card_input = |mesh: &Mesh| {
+        let mut input = mesh_input("deformed card", mesh, true);
+        input.components[0].opacity = Some(ComponentOpacity::per_triangle(flags.clone(), 0));
+        input
+    };
+    let deformed = Mesh {
+        positions: card_mesh
+            .positions
+            .iter()
+            .map(|p| Vec3::new(1.0 - p.x, p.y, 0.25))
+            .collect(),
+        indices: card_mesh.indices.clone(),
+    };
+    let floor = Mesh::cuboid(Vec3::new(-1.0, -1.0, -1.2), Vec3::new(4.0, 2.0, -1.0));
+    let (card_g, floor_g) = (ctx.create_geometry_handle(), ctx.create_geometry_handle());
+    let mut c = ctx.create_task_container();
+    for (g, input) in [
+        (floor_g, mesh_input("floor", &floor, false)),
+        (card_g, card_input(&card_mesh)),
+    ] {
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Register,
+            handle: g,
+            input,
+        });
+    }
+    for g in [floor_g, card_g] {
+        register_instance(&mut c, ctx.create_instance_handle(), g, Affine3A::IDENTITY);
+    }
+    c.schedule_bvh_task(BvhBuildTask::default());
+    build_submit_complete(&ctx, c);
+    let points: Vec<glam::Vec2> = flag_card_points()
+        .into_iter()
+        .filter(|p| (p.x + p.y - 1.0).abs() > 0.02)
+        .collect();
+    // Where a ray down onto `p` stops: the card at `card_t`, or the floor (t = 2) through the
+    // transparent triangle.
+    let check = |step: &str, transparent: &dyn Fn(glam::Vec2) -> bool, card_t: f32| {
+        let hits = closest(&ctx, &flag_card_rays(&points));
+        let wrong: Vec<String> = points
+            .iter()
+            .zip(&hits)
+            .filter(|(p, h)| {
+                let want_t = if transparent(**p) { 2.0 } else { card_t };
+                !h.is_hit() || (h.t - want_t).abs() > 1e-5
+            })
+            .map(|(p, h)| format!("at {p}: {h:?}"))
+            .collect();
+        assert!(
+            wrong.is_empty(),
+            "{step}: {} of {} rays wrong, e.g. {:?}",
+            wrong.len(),
+            points.len(),
+            &wrong[..wrong.len().min(4)]
+        );
+    };
+    check("as built", &|p| p.x < p.y, 1.0);
+    for (step, mesh, transparent, card_t) in [
+        (
+            "mirrored and lifted",
+            &deformed,
+            &(|p: glam::Vec2| p.x + p.y > 1.0) as &dyn Fn(glam::Vec2) -> bool,
+            0.75,
+        ),
+        ("back", &card_mesh, &|p: glam::Vec2| p.x < p.y, 1.0),
+    ] {
+        let mut c = ctx.create_task_container();
+        c.schedule_bvh_task(GeometryTask {
+            operation: TaskOperation::Update,
+            handle: card_g,
+            input: card_input(mesh),
+        });
+        c.schedule_bvh_task(BvhBuildTask::default());
+        build_submit_complete(&ctx, c);
+        check(step, transparent, card_t);
+    }
+}
